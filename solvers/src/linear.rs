@@ -1,0 +1,468 @@
+//! Block-sparse normal equations, assembled directly from factor Jacobians
+//! (never a full sparse Jacobian), with optional Schur elimination of
+//! landmark-like variables and sparse (faer) or dense (nalgebra) Cholesky.
+//!
+//! The sparsity pattern of the reduced system and the symbolic factorization
+//! (with faer's fill-reducing ordering) are computed once per graph structure;
+//! each iteration only refills numbers.
+
+use crate::error::SolveError;
+use crate::graph::WhitenedLinearization;
+use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
+use faer::Side;
+use nalgebra::{DMatrix, DVector};
+use std::collections::{BTreeSet, HashMap};
+
+/// Role of a variable in the linear system.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Role {
+    /// Held constant: no column.
+    Const,
+    /// Kept in the reduced system, as block `b`.
+    Kept(usize),
+    /// Eliminated first by the Schur complement, as eliminated block `e`.
+    Elim(usize),
+}
+
+/// Which factorization solves the reduced system.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum LinearSolver {
+    /// Dense Cholesky up to 200 unknowns, sparse above.
+    #[default]
+    Auto,
+    /// Always faer's sparse Cholesky (supernodal or simplicial, faer decides).
+    SparseCholesky,
+    /// Always nalgebra's dense Cholesky.
+    DenseCholesky,
+}
+
+/// Unknowns below which [`LinearSolver::Auto`] goes dense.
+pub const DENSE_THRESHOLD: usize = 200;
+
+/// Per-factor scatter plan into the block system.
+#[derive(Clone, Debug, Default)]
+struct FactorPlan {
+    /// (position p, position q, pair id) for kept positions with blk(p) ≥ blk(q).
+    pairs: Vec<(usize, usize, usize)>,
+    /// Kept positions and their block.
+    kept: Vec<(usize, usize)>,
+    /// Eliminated position, its eliminated block, and for each kept position its slot.
+    elim: Option<(usize, usize, Vec<(usize, usize)>)>,
+}
+
+/// Sparsity structure: the lower triangle of the reduced system, in CSC.
+pub(crate) struct Structure {
+    pub kept_dims: Vec<usize>,
+    pub kept_offsets: Vec<usize>,
+    pub n: usize,
+    pub elim_dims: Vec<usize>,
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    /// Per pair: (row block, col block, index into `bases`).
+    pairs: Vec<(usize, usize, usize)>,
+    bases: Vec<usize>,
+    diag_positions: Vec<usize>,
+    plans: Vec<FactorPlan>,
+    /// Per eliminated block: the kept blocks it touches, in slot order.
+    elim_cams: Vec<Vec<usize>>,
+    /// Per eliminated block: (slot a, slot b, pair) with blk(a) ≥ blk(b).
+    elim_pairs: Vec<Vec<(usize, usize, usize)>>,
+    dense: bool,
+    symbolic: Option<SymbolicLlt<usize>>,
+}
+
+/// Numeric content of the normal equations `H δ = −g` at one linearization.
+pub(crate) struct System {
+    /// Lower-triangular CSC values of H over kept blocks.
+    pub h: Vec<f64>,
+    /// Gradient over kept blocks.
+    pub g: Vec<f64>,
+    /// Per eliminated block: H_ll, g_l, H_cl per slot (d_cam × d_l).
+    pub elim: Vec<(DMatrix<f64>, DVector<f64>, Vec<DMatrix<f64>>)>,
+}
+
+impl Structure {
+    /// Build the structure. `factor_roles[f]` gives the role of each key position of factor f.
+    pub fn new(kept_dims: Vec<usize>, elim_dims: Vec<usize>, factor_roles: &[Vec<Role>], solver: LinearSolver) -> Result<Self, SolveError> {
+        let nk = kept_dims.len();
+        let mut kept_offsets = Vec::with_capacity(nk + 1);
+        let mut n = 0;
+        for d in &kept_dims {
+            kept_offsets.push(n);
+            n += d;
+        }
+        kept_offsets.push(n);
+
+        // Block pattern: col block → set of row blocks ≥ col.
+        let mut cols: Vec<BTreeSet<usize>> = (0..nk).map(|b| BTreeSet::from([b])).collect();
+        let mut elim_cams: Vec<Vec<usize>> = vec![Vec::new(); elim_dims.len()];
+        for (fi, roles) in factor_roles.iter().enumerate() {
+            let kept: Vec<usize> = roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }).collect();
+            for &a in &kept {
+                for &b in &kept {
+                    if a > b {
+                        cols[b].insert(a);
+                    }
+                }
+            }
+            let elims: Vec<usize> = roles.iter().filter_map(|r| if let Role::Elim(e) = r { Some(*e) } else { None }).collect();
+            if elims.len() > 1 {
+                return Err(SolveError::Config(format!(
+                    "factor {fi} connects {} eliminated (landmark) variables; Schur elimination needs at most one per factor",
+                    elims.len()
+                )));
+            }
+            if let Some(&e) = elims.first() {
+                for &a in &kept {
+                    if !elim_cams[e].contains(&a) {
+                        elim_cams[e].push(a);
+                    }
+                }
+            }
+        }
+        for cams in &elim_cams {
+            for &a in cams {
+                for &b in cams {
+                    if a > b {
+                        cols[b].insert(a);
+                    }
+                }
+            }
+        }
+
+        // Scalar CSC pattern and per-pair bases.
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx = Vec::new();
+        let mut pair_id: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut pairs = Vec::new();
+        let mut bases = Vec::new();
+        let mut diag_positions = vec![0; n];
+        for (j, rows) in cols.iter().enumerate() {
+            for &i in rows {
+                pair_id.insert((i, j), pairs.len());
+                pairs.push((i, j, bases.len()));
+                bases.extend(std::iter::repeat_n(0, kept_dims[j]));
+            }
+            for c in 0..kept_dims[j] {
+                col_ptr.push(row_idx.len());
+                for &i in rows {
+                    let pid = pair_id[&(i, j)];
+                    let base_slot = pairs[pid].2 + c;
+                    if i == j {
+                        bases[base_slot] = row_idx.len();
+                        diag_positions[kept_offsets[j] + c] = row_idx.len();
+                        row_idx.extend(kept_offsets[j] + c..kept_offsets[j + 1]);
+                    } else {
+                        bases[base_slot] = row_idx.len();
+                        row_idx.extend(kept_offsets[i]..kept_offsets[i + 1]);
+                    }
+                }
+            }
+        }
+        col_ptr.push(row_idx.len());
+
+        let mut plans = Vec::with_capacity(factor_roles.len());
+        for roles in factor_roles {
+            let mut plan = FactorPlan::default();
+            for (p, r) in roles.iter().enumerate() {
+                if let Role::Kept(b) = r {
+                    plan.kept.push((p, *b));
+                }
+            }
+            for &(p, bp) in &plan.kept {
+                for &(q, bq) in &plan.kept {
+                    if bp >= bq {
+                        plan.pairs.push((p, q, pair_id[&(bp, bq)]));
+                    }
+                }
+            }
+            for (p, r) in roles.iter().enumerate() {
+                if let Role::Elim(e) = r {
+                    let slots = plan.kept.iter().map(|&(q, bq)| (q, elim_cams[*e].iter().position(|&c| c == bq).unwrap_or(0))).collect();
+                    plan.elim = Some((p, *e, slots));
+                }
+            }
+            plans.push(plan);
+        }
+        let elim_pairs = elim_cams
+            .iter()
+            .map(|cams| {
+                let mut v = Vec::new();
+                for (sa, &a) in cams.iter().enumerate() {
+                    for (sb, &b) in cams.iter().enumerate() {
+                        if a >= b {
+                            v.push((sa, sb, pair_id[&(a, b)]));
+                        }
+                    }
+                }
+                v
+            })
+            .collect();
+        let dense = match solver {
+            LinearSolver::DenseCholesky => true,
+            LinearSolver::SparseCholesky => false,
+            LinearSolver::Auto => n <= DENSE_THRESHOLD,
+        };
+        Ok(Structure {
+            kept_dims,
+            kept_offsets,
+            n,
+            elim_dims,
+            col_ptr,
+            row_idx,
+            pairs,
+            bases,
+            diag_positions,
+            plans,
+            elim_cams,
+            elim_pairs,
+            dense,
+            symbolic: None,
+        })
+    }
+
+    /// Number of stored entries of the lower triangle of the reduced system.
+    pub fn nnz(&self) -> usize {
+        self.row_idx.len()
+    }
+
+    #[inline]
+    fn add_block(&self, h: &mut [f64], pair: usize, m: &DMatrix<f64>, sign: f64) {
+        let (i, j, b0) = self.pairs[pair];
+        let dc = self.kept_dims[j];
+        if i == j {
+            for c in 0..dc {
+                let base = self.bases[b0 + c];
+                for r in c..dc {
+                    h[base + r - c] += sign * m[(r, c)];
+                }
+            }
+        } else {
+            for c in 0..dc {
+                let base = self.bases[b0 + c];
+                for r in 0..self.kept_dims[i] {
+                    h[base + r] += sign * m[(r, c)];
+                }
+            }
+        }
+    }
+
+    /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
+    pub fn assemble(&self, lins: &[WhitenedLinearization]) -> System {
+        let mut h = vec![0.0; self.nnz()];
+        let mut g = vec![0.0; self.n];
+        let mut elim: Vec<(DMatrix<f64>, DVector<f64>, Vec<DMatrix<f64>>)> = self
+            .elim_dims
+            .iter()
+            .zip(&self.elim_cams)
+            .map(|(&d, cams)| {
+                (DMatrix::zeros(d, d), DVector::zeros(d), cams.iter().map(|&c| DMatrix::zeros(self.kept_dims[c], d)).collect())
+            })
+            .collect();
+        for (plan, wl) in self.plans.iter().zip(lins) {
+            let (r, js) = (&wl.lin.residual, &wl.lin.jacobians);
+            for &(p, b) in &plan.kept {
+                let gp = js[p].tr_mul(r);
+                let o = self.kept_offsets[b];
+                for (k, v) in gp.iter().enumerate() {
+                    g[o + k] += v;
+                }
+            }
+            for &(p, q, pair) in &plan.pairs {
+                let m = js[p].tr_mul(&js[q]);
+                self.add_block(&mut h, pair, &m, 1.0);
+            }
+            if let Some((p, e, slots)) = &plan.elim {
+                let (hll, gl, hcl) = &mut elim[*e];
+                *hll += js[*p].tr_mul(&js[*p]);
+                *gl += js[*p].tr_mul(r);
+                for &(q, s) in slots {
+                    hcl[s] += js[q].tr_mul(&js[*p]);
+                }
+            }
+        }
+        System { h, g, elim }
+    }
+
+    /// Diagonal of H over kept unknowns followed by eliminated ones.
+    pub fn diagonal(&self, sys: &System) -> Vec<f64> {
+        let mut d: Vec<f64> = self.diag_positions.iter().map(|&p| sys.h[p]).collect();
+        for (hll, _, _) in &sys.elim {
+            d.extend(hll.diagonal().iter());
+        }
+        d
+    }
+
+    /// Solve `(H + diag(damping)) δ = −g`; δ over kept unknowns then eliminated ones.
+    /// Returns `(δ, factorize_seconds, solve_seconds, build_seconds)`.
+    pub fn solve(&mut self, sys: &System, damping: Option<&[f64]>) -> Result<(Vec<f64>, f64, f64, f64), SolveError> {
+        let t_build = std::time::Instant::now();
+        let mut h = sys.h.clone();
+        let mut g = sys.g.clone();
+        if let Some(d) = damping {
+            for (k, &p) in self.diag_positions.iter().enumerate() {
+                h[p] += d[k];
+            }
+        }
+        // Schur complement of the eliminated blocks.
+        let mut elim_inv = Vec::with_capacity(sys.elim.len());
+        let mut off = self.n;
+        for (e, (hll, gl, hcl)) in sys.elim.iter().enumerate() {
+            let mut a = hll.clone();
+            if let Some(d) = damping {
+                for k in 0..a.nrows() {
+                    a[(k, k)] += d[off + k];
+                }
+            }
+            off += a.nrows();
+            let inv = nalgebra::Cholesky::new(a)
+                .ok_or_else(|| SolveError::Singular(format!("eliminated block {e} is not positive definite")))?
+                .inverse();
+            let w: Vec<DMatrix<f64>> = hcl.iter().map(|m| m * &inv).collect();
+            for &(sa, sb, pair) in &self.elim_pairs[e] {
+                let m = &w[sa] * hcl[sb].transpose();
+                self.add_block(&mut h, pair, &m, -1.0);
+            }
+            for (s, &c) in self.elim_cams[e].iter().enumerate() {
+                let v = &w[s] * gl;
+                let o = self.kept_offsets[c];
+                for (k, x) in v.iter().enumerate() {
+                    g[o + k] -= x;
+                }
+            }
+            elim_inv.push(inv);
+        }
+        let build_s = t_build.elapsed().as_secs_f64();
+
+        let t_fact = std::time::Instant::now();
+        let mut x: Vec<f64> = g.iter().map(|v| -v).collect();
+        let fact_s;
+        let t_solve;
+        if self.n == 0 {
+            fact_s = 0.0;
+            t_solve = std::time::Instant::now();
+        } else if self.dense {
+            let mut m = DMatrix::zeros(self.n, self.n);
+            for c in 0..self.n {
+                for k in self.col_ptr[c]..self.col_ptr[c + 1] {
+                    let r = self.row_idx[k];
+                    m[(r, c)] = h[k];
+                    m[(c, r)] = h[k];
+                }
+            }
+            let ch = nalgebra::Cholesky::new(m).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
+            fact_s = t_fact.elapsed().as_secs_f64();
+            t_solve = std::time::Instant::now();
+            let sol = ch.solve(&DVector::from_vec(x));
+            x = sol.as_slice().to_vec();
+        } else {
+            let sym = SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
+            if self.symbolic.is_none() {
+                self.symbolic = Some(
+                    SymbolicLlt::try_new(sym, Side::Lower).map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?,
+                );
+            }
+            let mat = SparseColMatRef::new(sym, &h);
+            let llt = Llt::try_new_with_symbolic(self.symbolic.clone().expect("symbolic set above"), mat, Side::Lower)
+                .map_err(|e| SolveError::Singular(format!("sparse Cholesky: {e:?}")))?;
+            fact_s = t_fact.elapsed().as_secs_f64();
+            t_solve = std::time::Instant::now();
+            let mut rhs = faer::Mat::<f64>::from_fn(self.n, 1, |i, _| x[i]);
+            use faer::linalg::solvers::SolveCore;
+            llt.solve_in_place_with_conj(faer::Conj::No, rhs.as_mut());
+            for (i, xi) in x.iter_mut().enumerate() {
+                *xi = rhs[(i, 0)];
+            }
+        }
+        // Back-substitution for eliminated blocks: δ_l = −H_ll⁻¹ (g_l + Σ H_lc δ_c).
+        for (e, (_, gl, hcl)) in sys.elim.iter().enumerate() {
+            let mut rhs = gl.clone();
+            for (s, &c) in self.elim_cams[e].iter().enumerate() {
+                let o = self.kept_offsets[c];
+                let dc = DVector::from_column_slice(&x[o..o + self.kept_dims[c]]);
+                rhs += hcl[s].tr_mul(&dc);
+            }
+            let dl = -(&elim_inv[e] * rhs);
+            x.extend(dl.iter());
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(SolveError::Singular("non-finite step".into()));
+        }
+        Ok((x, fact_s, t_solve.elapsed().as_secs_f64(), build_s))
+    }
+
+    /// `Hδ` for the predicted decrease, over kept then eliminated unknowns (undamped H).
+    pub fn h_times(&self, sys: &System, x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; x.len()];
+        for c in 0..self.n {
+            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
+                let r = self.row_idx[k];
+                y[r] += sys.h[k] * x[c];
+                if r != c {
+                    y[c] += sys.h[k] * x[r];
+                }
+            }
+        }
+        let mut off = self.n;
+        for (e, (hll, _, hcl)) in sys.elim.iter().enumerate() {
+            let d = hll.nrows();
+            let xl = DVector::from_column_slice(&x[off..off + d]);
+            let mut yl = hll * &xl;
+            for (s, &c) in self.elim_cams[e].iter().enumerate() {
+                let o = self.kept_offsets[c];
+                let dc = self.kept_dims[c];
+                let xc = DVector::from_column_slice(&x[o..o + dc]);
+                yl += hcl[s].tr_mul(&xc);
+                let yc = &hcl[s] * &xl;
+                for k in 0..dc {
+                    y[o + k] += yc[k];
+                }
+            }
+            for k in 0..d {
+                y[off + k] += yl[k];
+            }
+            off += d;
+        }
+        y
+    }
+
+    /// Dense copy of the full (unreduced) H is not needed by the solver; this
+    /// returns selected columns of H⁻¹ over kept unknowns (no eliminated blocks).
+    pub fn inverse_columns(&mut self, sys: &System, cols: &[usize]) -> Result<DMatrix<f64>, SolveError> {
+        if !sys.elim.is_empty() {
+            return Err(SolveError::Config("covariance recovery needs a system without eliminated blocks".into()));
+        }
+        let mut out = DMatrix::zeros(self.n, cols.len());
+        if self.dense || self.n == 0 {
+            let mut m = DMatrix::zeros(self.n, self.n);
+            for c in 0..self.n {
+                for k in self.col_ptr[c]..self.col_ptr[c + 1] {
+                    let r = self.row_idx[k];
+                    m[(r, c)] = sys.h[k];
+                    m[(c, r)] = sys.h[k];
+                }
+            }
+            let ch = nalgebra::Cholesky::new(m).ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
+            for (j, &c) in cols.iter().enumerate() {
+                let mut e = DVector::zeros(self.n);
+                e[c] = 1.0;
+                out.set_column(j, &ch.solve(&e));
+            }
+            return Ok(out);
+        }
+        let sym = SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
+        let symbolic = SymbolicLlt::try_new(sym, Side::Lower).map_err(|e| SolveError::Singular(format!("{e:?}")))?;
+        let llt = Llt::try_new_with_symbolic(symbolic, SparseColMatRef::new(sym, &sys.h), Side::Lower)
+            .map_err(|_| SolveError::Singular("information matrix is singular (unobservable variables?)".into()))?;
+        let mut rhs = faer::Mat::<f64>::from_fn(self.n, cols.len(), |i, j| if i == cols[j] { 1.0 } else { 0.0 });
+        use faer::linalg::solvers::SolveCore;
+        llt.solve_in_place_with_conj(faer::Conj::No, rhs.as_mut());
+        for j in 0..cols.len() {
+            for i in 0..self.n {
+                out[(i, j)] = rhs[(i, j)];
+            }
+        }
+        Ok(out)
+    }
+}

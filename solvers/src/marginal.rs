@@ -1,0 +1,231 @@
+//! Marginalization (Schur complement into a linear prior) and covariance recovery.
+
+use crate::error::{FactorError, SolveError};
+use crate::factor::{Factor, Linearization, Vars};
+use crate::graph::{FactorEntry, Graph};
+use crate::key::Key;
+use crate::linear::LinearSolver;
+use crate::noise::NoiseModel;
+use crate::optimizer::{linearize_all, Layout};
+use crate::values::Values;
+use crate::variable::DynVariable;
+use nalgebra::{DMatrix, DVector};
+use std::collections::HashMap;
+
+/// A linear prior on a set of variables left by marginalization:
+/// `r(x) = R · [x_k ⊟_{x0_k}]_k + e`, already whitened (use [`NoiseModel::Unit`]).
+///
+/// The Jacobians are held at the linearization point (first-estimate Jacobians),
+/// as VINS-Mono and Basalt do, so the prior stays consistent.
+#[derive(Clone, Debug)]
+pub struct MarginalPrior {
+    keys: Vec<Key>,
+    dims: Vec<usize>,
+    anchors: Vec<Box<dyn DynVariable>>,
+    /// Square-root information `R` (rank × Σ dims).
+    pub sqrt_information: DMatrix<f64>,
+    /// Offset `e` (rank).
+    pub offset: DVector<f64>,
+}
+
+impl MarginalPrior {
+    /// Information matrix RᵀR of the prior, over the stacked tangents of its keys.
+    pub fn information(&self) -> DMatrix<f64> {
+        self.sqrt_information.tr_mul(&self.sqrt_information)
+    }
+}
+
+impl Factor for MarginalPrior {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        self.offset.len()
+    }
+    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+        let n: usize = self.dims.iter().sum();
+        let mut dx = DVector::zeros(n);
+        let mut off = 0;
+        for (i, a) in self.anchors.iter().enumerate() {
+            let d = a.local_dyn(vars.get_dyn(i)).ok_or(FactorError::WrongVariableType {
+                index: i,
+                expected: a.type_name(),
+                got: vars.get_dyn(i).type_name(),
+            })?;
+            dx.rows_mut(off, d.len()).copy_from_slice(&d);
+            off += d.len();
+        }
+        Ok(&self.sqrt_information * dx + &self.offset)
+    }
+    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+        let residual = self.residual(vars)?;
+        let mut jacobians = Vec::with_capacity(self.dims.len());
+        let mut off = 0;
+        for &d in &self.dims {
+            jacobians.push(self.sqrt_information.columns(off, d).into_owned());
+            off += d;
+        }
+        Ok(Linearization { residual, jacobians })
+    }
+}
+
+/// Result of [`marginalize`].
+pub struct Marginalization {
+    /// The prior on the separator variables (add it with [`NoiseModel::Unit`]).
+    pub prior: MarginalPrior,
+    /// Indices (in the input graph) of the factors it replaces.
+    pub removed_factors: Vec<usize>,
+}
+
+/// Eigenvalues below this (relative to the largest) are dropped from the prior.
+pub const PRIOR_RANK_TOLERANCE: f64 = 1e-10;
+
+/// Marginalize `keys` out of `graph` at `values`: the factors touching them are
+/// linearized, the marginalized variables eliminated by the Schur complement,
+/// and the result returned as a [`MarginalPrior`] on the remaining variables of
+/// those factors. The caller removes `removed_factors` and the marginalized
+/// values, and adds the prior.
+///
+/// ```
+/// use tumble_solvers::{Graph, Values, NoiseModel, marginalize, X};
+/// use tumble_solvers::testing::LinearFactor;
+/// use nalgebra::{DMatrix, DVector, Vector1};
+/// let mut g = Graph::new();
+/// let i = DMatrix::identity(1, 1);
+/// g.add(LinearFactor::new(vec![X(0)], vec![i.clone()], DVector::zeros(1)), NoiseModel::Unit);
+/// g.add(LinearFactor::new(vec![X(0), X(1)], vec![-i.clone(), i.clone()], DVector::zeros(1)), NoiseModel::Unit);
+/// let mut v = Values::new();
+/// v.insert(X(0), Vector1::new(0.0));
+/// v.insert(X(1), Vector1::new(0.0));
+/// let m = marginalize(&g, &v, &[X(0)]).unwrap();
+/// assert!((m.prior.information()[(0, 0)] - 0.5).abs() < 1e-12);
+/// ```
+pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Marginalization, SolveError> {
+    let removed: Vec<usize> =
+        (0..graph.len()).filter(|&i| graph.entries()[i].factor.keys().iter().any(|k| keys.contains(k))).collect();
+    // Ordered variables: marginalized first, then the separator.
+    let mut order: Vec<Key> = keys.to_vec();
+    for &i in &removed {
+        for k in graph.entries()[i].factor.keys() {
+            if !order.contains(k) {
+                order.push(*k);
+            }
+        }
+    }
+    let mut offsets = HashMap::new();
+    let mut n = 0;
+    let mut dims = Vec::new();
+    for k in &order {
+        let d = values.get_dyn(*k)?.dim();
+        offsets.insert(*k, n);
+        dims.push(d);
+        n += d;
+    }
+    let nm: usize = dims[..keys.len()].iter().sum();
+    let mut h = DMatrix::zeros(n, n);
+    let mut g = DVector::zeros(n);
+    for &fi in &removed {
+        let e: &FactorEntry = &graph.entries()[fi];
+        let vars: Vec<&dyn DynVariable> = e.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>()?;
+        let wl = e.linearize_whitened(Vars::new(&vars)).map_err(|source| SolveError::Factor { factor: fi, source })?;
+        for (a, ka) in e.factor.keys().iter().enumerate() {
+            let oa = offsets[ka];
+            let ja = &wl.lin.jacobians[a];
+            let mut ga = g.rows_mut(oa, ja.ncols());
+            ga += ja.tr_mul(&wl.lin.residual);
+            for (b, kb) in e.factor.keys().iter().enumerate() {
+                let ob = offsets[kb];
+                let jb = &wl.lin.jacobians[b];
+                let mut blk = h.view_mut((oa, ob), (ja.ncols(), jb.ncols()));
+                blk += ja.tr_mul(jb);
+            }
+        }
+    }
+    let hmm = h.view((0, 0), (nm, nm)).into_owned();
+    let hms = h.view((0, nm), (nm, n - nm)).into_owned();
+    let hss = h.view((nm, nm), (n - nm, n - nm)).into_owned();
+    let gm = g.rows(0, nm).into_owned();
+    let gs = g.rows(nm, n - nm).into_owned();
+    // Pseudo-inverse of H_mm through its eigen-decomposition (robust to gauge freedom).
+    let eig = nalgebra::SymmetricEigen::new((&hmm + hmm.transpose()) * 0.5);
+    let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
+    let inv_vals = eig.eigenvalues.map(|l| if l > PRIOR_RANK_TOLERANCE * lmax { 1.0 / l } else { 0.0 });
+    let hmm_inv = &eig.eigenvectors * DMatrix::from_diagonal(&inv_vals) * eig.eigenvectors.transpose();
+    let hstar = &hss - hms.transpose() * &hmm_inv * &hms;
+    let gstar = &gs - hms.transpose() * &hmm_inv * &gm;
+    let eig = nalgebra::SymmetricEigen::new((&hstar + hstar.transpose()) * 0.5);
+    let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
+    let kept: Vec<usize> = (0..eig.eigenvalues.len()).filter(|&i| eig.eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
+    let mut r = DMatrix::zeros(kept.len(), n - nm);
+    let mut e = DVector::zeros(kept.len());
+    for (row, &i) in kept.iter().enumerate() {
+        let l = eig.eigenvalues[i];
+        let v = eig.eigenvectors.column(i);
+        r.row_mut(row).copy_from(&(v.transpose() * l.sqrt()));
+        e[row] = v.dot(&gstar) / l.sqrt();
+    }
+    let sep_keys: Vec<Key> = order[keys.len()..].to_vec();
+    let anchors = sep_keys.iter().map(|k| values.get_dyn(*k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
+    Ok(Marginalization {
+        prior: MarginalPrior { keys: sep_keys, dims: dims[keys.len()..].to_vec(), anchors, sqrt_information: r, offset: e },
+        removed_factors: removed,
+    })
+}
+
+/// Marginal covariances of chosen variables at a solution, in their tangent spaces.
+#[derive(Clone, Debug)]
+pub struct Covariances {
+    keys: Vec<Key>,
+    offsets: Vec<usize>,
+    joint: DMatrix<f64>,
+}
+
+impl Covariances {
+    /// Marginal covariance of one requested key.
+    pub fn get(&self, key: Key) -> Option<DMatrix<f64>> {
+        self.block(key, key)
+    }
+    /// Cross-covariance block between two requested keys.
+    pub fn block(&self, a: Key, b: Key) -> Option<DMatrix<f64>> {
+        let ia = self.keys.iter().position(|k| *k == a)?;
+        let ib = self.keys.iter().position(|k| *k == b)?;
+        let (oa, da) = (self.offsets[ia], self.offsets[ia + 1] - self.offsets[ia]);
+        let (ob, db) = (self.offsets[ib], self.offsets[ib + 1] - self.offsets[ib]);
+        Some(self.joint.view((oa, ob), (da, db)).into_owned())
+    }
+}
+
+/// Covariance blocks (inverse of the Gauss–Newton information JᵀJ, robust
+/// weights included) of `keys` at `values`. Constant variables are conditioned on.
+pub fn covariances(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Covariances, SolveError> {
+    let layout = Layout::new(graph, values, &[])?;
+    let vars: Vec<Box<dyn DynVariable>> = layout.keys.iter().map(|&k| values.get_dyn(k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
+    let mut structure = layout.structure(&vars, LinearSolver::Auto)?;
+    let (lins, _) = linearize_all(graph.entries(), &layout, &vars)?;
+    let sys = structure.assemble(&lins);
+    let mut cols = Vec::new();
+    let mut offsets = vec![0];
+    for k in keys {
+        let vi = layout.keys.iter().position(|x| x == k).ok_or(SolveError::Config(format!("key {k} is in no factor")))?;
+        let b = match layout.roles[vi] {
+            crate::linear::Role::Kept(b) => b,
+            _ => return Err(SolveError::Config(format!("key {k} is held constant"))),
+        };
+        let o = structure.kept_offsets[b];
+        cols.extend(o..o + structure.kept_dims[b]);
+        offsets.push(cols.len());
+    }
+    let full = structure.inverse_columns(&sys, &cols)?;
+    let mut joint = DMatrix::zeros(cols.len(), cols.len());
+    for (i, &r) in cols.iter().enumerate() {
+        for j in 0..cols.len() {
+            joint[(i, j)] = full[(r, j)];
+        }
+    }
+    Ok(Covariances { keys: keys.to_vec(), offsets, joint })
+}
+
+/// Noise model for a prior built from a marginal covariance.
+pub fn noise_from_covariance(cov: &DMatrix<f64>) -> Result<NoiseModel, SolveError> {
+    NoiseModel::from_covariance(cov).map_err(|e| SolveError::Config(e.to_string()))
+}

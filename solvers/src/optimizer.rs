@@ -1,0 +1,465 @@
+//! Levenberg–Marquardt (trust region with Nielsen's damping update, as in
+//! Ceres) and Gauss–Newton over a [`Graph`], returning a [`Summary`].
+
+use crate::error::SolveError;
+use crate::factor::Vars;
+use crate::graph::{FactorEntry, Graph, WhitenedLinearization};
+use crate::key::Key;
+use crate::linear::{LinearSolver, Role, Structure, System};
+use crate::values::Values;
+use crate::variable::DynVariable;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::fmt;
+use std::time::Instant;
+
+/// Which nonlinear method to run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Method {
+    /// Levenberg–Marquardt with a trust-region damping update.
+    #[default]
+    LevenbergMarquardt,
+    /// Undamped Gauss–Newton: every step is taken.
+    GaussNewton,
+}
+
+/// Options of the optimizer. Defaults follow Ceres.
+#[derive(Clone, Debug)]
+pub struct LmOptions {
+    /// Nonlinear method.
+    pub method: Method,
+    /// Maximum number of iterations (linearizations).
+    pub max_iterations: usize,
+    /// Stop when |Δcost| / cost < this.
+    pub function_tolerance: f64,
+    /// Stop when the largest gradient entry is below this.
+    pub gradient_tolerance: f64,
+    /// Stop when ‖δ‖ < this · (‖x‖ + this).
+    pub parameter_tolerance: f64,
+    /// Initial damping λ (1 / trust-region radius).
+    pub initial_lambda: f64,
+    /// Damping is λ · clamp(diag H, min_diagonal, max_diagonal).
+    pub min_diagonal: f64,
+    /// See `min_diagonal`.
+    pub max_diagonal: f64,
+    /// Give up when λ exceeds this.
+    pub max_lambda: f64,
+    /// Linear solver for the (reduced) normal equations.
+    pub linear_solver: LinearSolver,
+    /// Key tags (e.g. `['l']`) of variables to eliminate first by the Schur
+    /// complement (landmarks in bundle adjustment). Each factor may touch at
+    /// most one of them.
+    pub eliminate: Vec<char>,
+    /// Record one [`IterationLog`] per iteration.
+    pub log_iterations: bool,
+}
+
+impl Default for LmOptions {
+    fn default() -> Self {
+        LmOptions {
+            method: Method::LevenbergMarquardt,
+            max_iterations: 100,
+            function_tolerance: 1e-6,
+            gradient_tolerance: 1e-10,
+            parameter_tolerance: 1e-8,
+            initial_lambda: 1e-4,
+            min_diagonal: 1e-6,
+            max_diagonal: 1e32,
+            max_lambda: 1e16,
+            linear_solver: LinearSolver::Auto,
+            eliminate: Vec::new(),
+            log_iterations: true,
+        }
+    }
+}
+
+/// Why the optimizer stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Termination {
+    /// Relative cost decrease below `function_tolerance`.
+    FunctionTolerance,
+    /// Gradient below `gradient_tolerance`.
+    GradientTolerance,
+    /// Step below `parameter_tolerance`.
+    ParameterTolerance,
+    /// `max_iterations` reached.
+    MaxIterations,
+    /// Damping grew past `max_lambda` without finding a decrease.
+    NoProgress,
+    /// The graph has no free variable.
+    NothingToOptimize,
+}
+
+/// One row of the iteration log.
+#[derive(Clone, Debug)]
+pub struct IterationLog {
+    /// Iteration number (from 1).
+    pub iteration: usize,
+    /// Cost after the iteration.
+    pub cost: f64,
+    /// Damping used for the accepted (or last tried) step.
+    pub lambda: f64,
+    /// Norm of the step.
+    pub step_norm: f64,
+    /// Gain ratio actual / predicted decrease.
+    pub gain_ratio: f64,
+    /// Whether the step was accepted.
+    pub accepted: bool,
+}
+
+/// What a user reads after a solve (cf. Ceres' `Solver::Summary`).
+#[derive(Clone, Debug)]
+pub struct Summary {
+    /// Cost ½ Σ ρ(‖W r‖²) at the start.
+    pub initial_cost: f64,
+    /// Cost at the end.
+    pub final_cost: f64,
+    /// Number of linearizations after the first.
+    pub iterations: usize,
+    /// Number of linear solves (accepted and rejected steps).
+    pub linear_solves: usize,
+    /// Why it stopped.
+    pub termination: Termination,
+    /// Free variables.
+    pub variables: usize,
+    /// Factors.
+    pub factors: usize,
+    /// Unknowns of the reduced system.
+    pub reduced_dim: usize,
+    /// Unknowns eliminated by the Schur complement.
+    pub eliminated_dim: usize,
+    /// Stored nonzeros of the lower triangle of the reduced system.
+    pub reduced_nnz: usize,
+    /// Seconds evaluating factors (residuals and Jacobians).
+    pub time_linearize: f64,
+    /// Seconds assembling normal equations, damping and Schur complement.
+    pub time_build: f64,
+    /// Seconds in numeric (and the first symbolic) factorization.
+    pub time_factorize: f64,
+    /// Seconds in triangular solves and back-substitution.
+    pub time_solve: f64,
+    /// Total seconds.
+    pub time_total: f64,
+    /// Per-iteration log (when enabled).
+    pub log: Vec<IterationLog>,
+}
+
+impl fmt::Display for Summary {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(f, "tumble solver summary")?;
+        writeln!(f, "  variables {:>10}   factors {:>10}", self.variables, self.factors)?;
+        writeln!(f, "  reduced system {} unknowns, {} nonzeros; {} eliminated", self.reduced_dim, self.reduced_nnz, self.eliminated_dim)?;
+        writeln!(f, "  initial cost {:.6e}", self.initial_cost)?;
+        writeln!(f, "  final cost   {:.6e}", self.final_cost)?;
+        writeln!(f, "  iterations {} ({} linear solves), termination: {:?}", self.iterations, self.linear_solves, self.termination)?;
+        writeln!(
+            f,
+            "  time [s]: linearize {:.4}  build {:.4}  factorize {:.4}  solve {:.4}  total {:.4}",
+            self.time_linearize, self.time_build, self.time_factorize, self.time_solve, self.time_total
+        )
+    }
+}
+
+/// Variables and factors laid out for the linear algebra.
+pub(crate) struct Layout {
+    /// All variables referenced by factors, ascending.
+    pub keys: Vec<Key>,
+    pub roles: Vec<Role>,
+    /// Variable index of each key position of each factor.
+    pub factor_vars: Vec<Vec<usize>>,
+    pub kept_vars: Vec<usize>,
+    pub elim_vars: Vec<usize>,
+}
+
+impl Layout {
+    pub fn new(graph: &Graph, values: &Values, eliminate: &[char]) -> Result<Self, SolveError> {
+        let mut index: HashMap<Key, usize> = HashMap::new();
+        let mut keys: Vec<Key> = Vec::new();
+        for (fi, e) in graph.entries().iter().enumerate() {
+            let ks = e.factor.keys();
+            for (a, k) in ks.iter().enumerate() {
+                if ks[..a].contains(k) {
+                    return Err(SolveError::BadFactor { factor: fi, what: format!("key {k} appears twice") });
+                }
+                if !values.contains(*k) {
+                    return Err(SolveError::MissingVariable { factor: fi, key: *k });
+                }
+                if !index.contains_key(k) {
+                    index.insert(*k, 0);
+                    keys.push(*k);
+                }
+            }
+            if let Some(d) = e.noise.dim() {
+                if d != e.factor.residual_dim() {
+                    return Err(SolveError::BadFactor {
+                        factor: fi,
+                        what: format!("noise model of dimension {d} on a residual of dimension {}", e.factor.residual_dim()),
+                    });
+                }
+            }
+        }
+        keys.sort();
+        for (i, k) in keys.iter().enumerate() {
+            index.insert(*k, i);
+        }
+        let mut roles = Vec::with_capacity(keys.len());
+        let (mut kept_vars, mut elim_vars) = (Vec::new(), Vec::new());
+        for (i, k) in keys.iter().enumerate() {
+            if values.is_constant(*k) {
+                roles.push(Role::Const);
+            } else if eliminate.contains(&k.chr()) {
+                roles.push(Role::Elim(elim_vars.len()));
+                elim_vars.push(i);
+            } else {
+                roles.push(Role::Kept(kept_vars.len()));
+                kept_vars.push(i);
+            }
+        }
+        let factor_vars = graph.entries().iter().map(|e| e.factor.keys().iter().map(|k| index[k]).collect()).collect();
+        Ok(Layout { keys, roles, factor_vars, kept_vars, elim_vars })
+    }
+
+    pub fn structure(&self, vars: &[Box<dyn DynVariable>], solver: LinearSolver) -> Result<Structure, SolveError> {
+        let kept_dims = self.kept_vars.iter().map(|&v| vars[v].dim()).collect();
+        let elim_dims = self.elim_vars.iter().map(|&v| vars[v].dim()).collect();
+        let factor_roles: Vec<Vec<Role>> = self.factor_vars.iter().map(|fv| fv.iter().map(|&v| self.roles[v]).collect()).collect();
+        Structure::new(kept_dims, elim_dims, &factor_roles, solver)
+    }
+}
+
+fn gather<'a>(vars: &'a [Box<dyn DynVariable>], idx: &[usize]) -> Vec<&'a dyn DynVariable> {
+    idx.iter().map(|&i| vars[i].as_ref()).collect()
+}
+
+/// Linearize every factor (in parallel, result order fixed) → linearizations and cost.
+pub(crate) fn linearize_all(
+    entries: &[FactorEntry],
+    layout: &Layout,
+    vars: &[Box<dyn DynVariable>],
+) -> Result<(Vec<WhitenedLinearization>, f64), SolveError> {
+    let lins: Vec<WhitenedLinearization> = entries
+        .par_iter()
+        .zip(layout.factor_vars.par_iter())
+        .enumerate()
+        .map(|(fi, (e, fv))| {
+            let v = gather(vars, fv);
+            let wl = e.linearize_whitened(Vars::new(&v)).map_err(|source| SolveError::Factor { factor: fi, source })?;
+            if wl.lin.jacobians.len() != fv.len()
+                || wl.lin.residual.len() != e.factor.residual_dim()
+                || wl.lin.jacobians.iter().zip(&v).any(|(j, x)| j.nrows() != wl.lin.residual.len() || j.ncols() != x.dim())
+            {
+                return Err(SolveError::BadFactor { factor: fi, what: "Jacobian or residual has the wrong shape".into() });
+            }
+            Ok(wl)
+        })
+        .collect::<Result<_, _>>()?;
+    let cost = 0.5 * lins.iter().map(|l| l.rho).sum::<f64>();
+    Ok((lins, cost))
+}
+
+/// Cost ½ Σ ρ at `vars` (parallel, deterministic summation order).
+fn evaluate_cost(entries: &[FactorEntry], layout: &Layout, vars: &[Box<dyn DynVariable>]) -> Result<f64, SolveError> {
+    let rhos: Vec<f64> = entries
+        .par_iter()
+        .zip(layout.factor_vars.par_iter())
+        .enumerate()
+        .map(|(fi, (e, fv))| {
+            let v = gather(vars, fv);
+            e.evaluate(Vars::new(&v)).map(|x| x.1).map_err(|source| SolveError::Factor { factor: fi, source })
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(0.5 * rhos.iter().sum::<f64>())
+}
+
+/// Nonlinear least-squares optimizer over a [`Graph`].
+///
+/// ```
+/// use tumble_solvers::{Graph, Values, NoiseModel, Optimizer, LmOptions, AutoDiff, AutoDiffResidual, Real, Key, X};
+/// use nalgebra::Vector2;
+/// struct Rosenbrock(Vec<Key>);
+/// impl AutoDiffResidual<2> for Rosenbrock {
+///     fn keys(&self) -> &[Key] { &self.0 }
+///     fn residual_dim(&self) -> usize { 2 }
+///     fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+///         vec![T::from(1.0) - p[0][0], (p[0][1] - p[0][0] * p[0][0]) * 10.0]
+///     }
+/// }
+/// let mut graph = Graph::new();
+/// graph.add(AutoDiff::new(Rosenbrock(vec![X(0)])), NoiseModel::Unit);
+/// let mut values = Values::new();
+/// values.insert(X(0), Vector2::new(-1.2, 1.0));
+/// let (sol, summary) = Optimizer::new(LmOptions::default()).optimize(&graph, &values).unwrap();
+/// let x: &Vector2<f64> = sol.get(X(0)).unwrap();
+/// assert!((x - Vector2::new(1.0, 1.0)).norm() < 1e-6);
+/// println!("{summary}");
+/// ```
+pub struct Optimizer {
+    /// Options in force.
+    pub options: LmOptions,
+}
+
+impl Optimizer {
+    /// Optimizer with these options.
+    pub fn new(options: LmOptions) -> Self {
+        Optimizer { options }
+    }
+
+    /// Minimize the graph's cost starting from `initial`; returns the solution
+    /// (all of `initial`'s values, the free ones updated) and a [`Summary`].
+    pub fn optimize(&self, graph: &Graph, initial: &Values) -> Result<(Values, Summary), SolveError> {
+        let o = &self.options;
+        let t0 = Instant::now();
+        let layout = Layout::new(graph, initial, &o.eliminate)?;
+        let mut vars: Vec<Box<dyn DynVariable>> =
+            layout.keys.iter().map(|&k| initial.get_dyn(k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
+        let mut structure = layout.structure(&vars, o.linear_solver)?;
+        let entries = graph.entries();
+        let mut summary = Summary {
+            initial_cost: 0.0,
+            final_cost: 0.0,
+            iterations: 0,
+            linear_solves: 0,
+            termination: Termination::MaxIterations,
+            variables: layout.kept_vars.len() + layout.elim_vars.len(),
+            factors: entries.len(),
+            reduced_dim: structure.n,
+            eliminated_dim: structure.elim_dims.iter().sum(),
+            reduced_nnz: structure.nnz(),
+            time_linearize: 0.0,
+            time_build: 0.0,
+            time_factorize: 0.0,
+            time_solve: 0.0,
+            time_total: 0.0,
+            log: Vec::new(),
+        };
+        let t = Instant::now();
+        let (mut lins, mut cost) = linearize_all(entries, &layout, &vars)?;
+        summary.time_linearize += t.elapsed().as_secs_f64();
+        summary.initial_cost = cost;
+        if summary.variables == 0 {
+            summary.termination = Termination::NothingToOptimize;
+        }
+        let mut lambda = o.initial_lambda;
+        let mut nu = 2.0;
+        let gn = o.method == Method::GaussNewton;
+        let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
+
+        'outer: while summary.termination != Termination::NothingToOptimize {
+            if summary.iterations >= o.max_iterations {
+                summary.termination = Termination::MaxIterations;
+                break;
+            }
+            let t = Instant::now();
+            let sys: System = structure.assemble(&lins);
+            summary.time_build += t.elapsed().as_secs_f64();
+            let gmax = sys.g.iter().chain(sys.elim.iter().flat_map(|e| e.1.iter())).fold(0.0f64, |m, v| m.max(v.abs()));
+            if gmax <= o.gradient_tolerance {
+                summary.termination = Termination::GradientTolerance;
+                break;
+            }
+            let g_all: Vec<f64> = sys.g.iter().copied().chain(sys.elim.iter().flat_map(|e| e.1.iter().copied())).collect();
+            let diag: Vec<f64> = structure.diagonal(&sys).iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
+            summary.iterations += 1;
+            loop {
+                let damping: Option<Vec<f64>> = if gn { None } else { Some(diag.iter().map(|d| d * lambda).collect()) };
+                summary.linear_solves += 1;
+                let step = structure.solve(&sys, damping.as_deref());
+                let (delta, fs, ss, bs) = match step {
+                    Ok(s) => s,
+                    Err(e) => {
+                        if gn {
+                            return Err(e);
+                        }
+                        lambda *= nu;
+                        nu *= 2.0;
+                        if lambda > o.max_lambda {
+                            summary.termination = Termination::NoProgress;
+                            break 'outer;
+                        }
+                        continue;
+                    }
+                };
+                summary.time_factorize += fs;
+                summary.time_solve += ss;
+                summary.time_build += bs;
+                let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
+                let x_norm = free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
+                let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
+                // Retract.
+                let t = Instant::now();
+                let mut trial = vars.clone();
+                let mut off = 0;
+                for &v in &free {
+                    let d = vars[v].dim();
+                    trial[v] = vars[v].retract_dyn(&delta[off..off + d]);
+                    off += d;
+                }
+                let new_cost = evaluate_cost(entries, &layout, &trial);
+                summary.time_linearize += t.elapsed().as_secs_f64();
+                // Predicted decrease: −gᵀδ − ½ δᵀHδ.
+                let hd = structure.h_times(&sys, &delta);
+                let predicted: f64 =
+                    -delta.iter().zip(&g_all).map(|(a, b)| a * b).sum::<f64>() - 0.5 * delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>();
+                let (new_cost, accepted, rho) = match new_cost {
+                    Ok(c) => {
+                        let rho = if predicted > 0.0 { (cost - c) / predicted } else { -1.0 };
+                        (c, gn || (c < cost && rho > 0.0), rho)
+                    }
+                    Err(_) => (f64::INFINITY, false, -1.0),
+                };
+                if o.log_iterations {
+                    summary.log.push(IterationLog {
+                        iteration: summary.iterations,
+                        cost: if accepted { new_cost } else { cost },
+                        lambda,
+                        step_norm,
+                        gain_ratio: rho,
+                        accepted,
+                    });
+                }
+                if accepted {
+                    let decrease = cost - new_cost;
+                    vars = trial;
+                    let t = Instant::now();
+                    let (l, c) = linearize_all(entries, &layout, &vars)?;
+                    summary.time_linearize += t.elapsed().as_secs_f64();
+                    lins = l;
+                    cost = c;
+                    if !gn {
+                        lambda *= (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3));
+                        lambda = lambda.max(1e-16);
+                        nu = 2.0;
+                    }
+                    if small_step {
+                        summary.termination = Termination::ParameterTolerance;
+                        break 'outer;
+                    }
+                    if decrease.abs() <= o.function_tolerance * cost.max(f64::MIN_POSITIVE) || cost == 0.0 {
+                        summary.termination = Termination::FunctionTolerance;
+                        break 'outer;
+                    }
+                    break;
+                }
+                if small_step {
+                    summary.termination = Termination::ParameterTolerance;
+                    break 'outer;
+                }
+                lambda *= nu;
+                nu *= 2.0;
+                if lambda > o.max_lambda {
+                    summary.termination = Termination::NoProgress;
+                    break 'outer;
+                }
+            }
+        }
+        summary.final_cost = cost;
+        let mut out = initial.clone();
+        for (i, k) in layout.keys.iter().enumerate() {
+            if layout.roles[i] != Role::Const {
+                out.insert_dyn(*k, vars[i].clone_box());
+            }
+        }
+        summary.time_total = t0.elapsed().as_secs_f64();
+        Ok((out, summary))
+    }
+}
