@@ -1,1 +1,14 @@
-pub fn x(){}
+//! # tumble
+//!
+//! Turntable-free IMU calibration, Allan-variance noise identification and
+//! visual-inertial bias estimation, all as factor graphs on one sparse
+//! Levenberg–Marquardt engine ([`tumble_solvers`]) with the factors of
+//! [`tumble_factors`]. This crate holds the pipelines, data I/O and the CLI.
+
+pub mod error;
+pub mod io;
+pub mod posegraph;
+
+pub use error::InputError;
+pub use tumble_factors as factors;
+pub use tumble_solvers as solvers;

@@ -1,1 +1,141 @@
-fn main(){}
+//! The `tumble` command-line tool.
+
+use clap::{Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use tumble::io::{bal, g2o};
+use tumble_solvers::{LmOptions, Method, Optimizer, Summary};
+
+#[derive(Parser)]
+#[command(
+    name = "tumble",
+    version,
+    about = "Turntable-free IMU calibration, Allan noise identification and visual-inertial bias estimation"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum MethodArg {
+    Lm,
+    Gn,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run the main job on embedded default data. (Temporary: until the
+    /// calibration pipeline exists, this solves a simulated SE(3) pose graph
+    /// with known truth and prints the solver summary.)
+    Demo,
+    /// Solve a g2o pose graph (.g2o) or a Bundle Adjustment in the Large file (other extensions).
+    Solve {
+        /// Input file.
+        file: PathBuf,
+        /// Nonlinear method.
+        #[arg(long, value_enum, default_value = "lm")]
+        method: MethodArg,
+        /// Maximum iterations.
+        #[arg(long, default_value_t = 100)]
+        max_iterations: usize,
+        /// Relative cost-decrease tolerance.
+        #[arg(long, default_value_t = 1e-6)]
+        function_tolerance: f64,
+        /// g2o: replace non-positive-definite information matrices by the nearest
+        /// positive-definite ones (with a warning each) instead of refusing the file.
+        #[arg(long)]
+        repair_information: bool,
+        /// Print the per-iteration log.
+        #[arg(long)]
+        verbose: bool,
+    },
+}
+
+fn print_log(s: &Summary) {
+    println!("{:>5} {:>16} {:>10} {:>12} {:>9} {:>8}", "iter", "cost", "lambda", "|step|", "gain", "accepted");
+    for l in &s.log {
+        println!(
+            "{:>5} {:>16.8e} {:>10.2e} {:>12.4e} {:>9.3} {:>8}",
+            l.iteration, l.cost, l.lambda, l.step_norm, l.gain_ratio, l.accepted
+        );
+    }
+}
+
+fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
+    match cli.command {
+        Command::Demo => {
+            println!("tumble demo (temporary): simulated SE(3) helix pose graph, 3 laps × 200 poses, known truth");
+            let sim = tumble::posegraph::simulate_helix(200, 3, 5.0, 0.01, 0.05, 7);
+            let (sol, summary) = Optimizer::new(LmOptions::default()).optimize(&sim.graph, &sim.initial)?;
+            print_log(&summary);
+            println!("{summary}");
+            let err = |v: &tumble_solvers::Values| -> f64 {
+                use tumble_solvers::sophus_lie::prelude::*;
+                let mut s = 0.0;
+                for i in 0..sim.poses as u64 {
+                    let a: &tumble_solvers::sophus_lie::Isometry3F64 = v.get(tumble_solvers::X(i)).expect("pose");
+                    let b: &tumble_solvers::sophus_lie::Isometry3F64 =
+                        sim.truth.get(tumble_solvers::X(i)).expect("pose");
+                    s += (a.translation() - b.translation()).norm_squared();
+                }
+                (s / sim.poses as f64).sqrt()
+            };
+            println!("position RMS error vs truth: initial {:.3} m -> optimized {:.3} m", err(&sim.initial), err(&sol));
+        }
+        Command::Solve { file, method, max_iterations, function_tolerance, repair_information, verbose } => {
+            let options = LmOptions {
+                method: match method {
+                    MethodArg::Lm => Method::LevenbergMarquardt,
+                    MethodArg::Gn => Method::GaussNewton,
+                },
+                max_iterations,
+                function_tolerance,
+                ..LmOptions::default()
+            };
+            let is_g2o = file.extension().is_some_and(|e| e.eq_ignore_ascii_case("g2o"));
+            let (graph, values, options) = if is_g2o {
+                let opts = g2o::G2oOptions {
+                    bad_information: if repair_information {
+                        g2o::BadInformation::Repair
+                    } else {
+                        g2o::BadInformation::Refuse
+                    },
+                };
+                let pg = g2o::read_g2o(&file, &opts)?;
+                for w in &pg.warnings {
+                    eprintln!("warning: {w}");
+                }
+                println!("{}: {:?} pose graph, {} vertices, {} edges", file.display(), pg.kind, pg.vertices, pg.edges);
+                (pg.graph, pg.values, options)
+            } else {
+                let p = bal::read_bal(&file)?;
+                println!(
+                    "{}: BAL problem, {} cameras, {} points, {} observations",
+                    file.display(),
+                    p.cameras,
+                    p.points,
+                    p.observations
+                );
+                (p.graph, p.values, LmOptions { eliminate: vec!['l'], ..options })
+            };
+            let (_, summary) = Optimizer::new(options).optimize(&graph, &values)?;
+            if verbose {
+                print_log(&summary);
+            }
+            println!("{summary}");
+            println!("final chi2 {:.6}", 2.0 * summary.final_cost);
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -26,7 +26,8 @@ impl SnavelyReprojection {
 /// form near zero as Ceres' `AngleAxisRotatePoint`).
 pub fn angle_axis_rotate<T: Real>(w: [T; 3], p: [T; 3]) -> [T; 3] {
     let theta2 = w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
-    let cross = |a: [T; 3], b: [T; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let cross =
+        |a: [T; 3], b: [T; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
     if theta2.re() > f64::EPSILON {
         let theta = theta2.sqrt();
         let (s, c) = theta.sin_cos();

@@ -112,7 +112,7 @@ impl<R: AutoDiffResidual<N>, const N: usize> Factor for AutoDiff<R, N> {
         finite(&residual)?;
         let mut full = DMatrix::zeros(m, N);
         for (r, d) in out.iter().enumerate() {
-            let eps = d.eps.clone().unwrap_generic(nalgebra::Const::<N>, nalgebra::Const::<1>);
+            let eps = d.eps.unwrap_generic(nalgebra::Const::<N>, nalgebra::Const::<1>);
             for c in 0..N {
                 full[(r, c)] = eps[c];
             }

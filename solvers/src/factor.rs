@@ -154,11 +154,7 @@ pub fn check_jacobians<F: Factor + ?Sized>(f: &F, vars: &[&dyn DynVariable]) -> 
     let (mut worst_block, mut worst) = (0, 0.0);
     for (k, (a, n)) in analytic.jacobians.iter().zip(&numeric.jacobians).enumerate() {
         if a.shape() != n.shape() {
-            return Err(FactorError::Other(format!(
-                "Jacobian block {k} is {:?}, expected {:?}",
-                a.shape(),
-                n.shape()
-            )));
+            return Err(FactorError::Other(format!("Jacobian block {k} is {:?}, expected {:?}", a.shape(), n.shape())));
         }
         let abs = (a - n).amax();
         let rel = abs / n.amax().max(1.0);

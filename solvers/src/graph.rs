@@ -46,7 +46,8 @@ impl FactorEntry {
         for j in lin.jacobians.iter_mut() {
             self.noise.whiten_jacobian(j);
         }
-        if lin.residual.iter().any(|v| !v.is_finite()) || lin.jacobians.iter().any(|j| j.iter().any(|v| !v.is_finite())) {
+        if lin.residual.iter().any(|v| !v.is_finite()) || lin.jacobians.iter().any(|j| j.iter().any(|v| !v.is_finite()))
+        {
             return Err(FactorError::NonFinite);
         }
         let rho = match &self.loss {
@@ -89,7 +90,12 @@ impl Graph {
         self.add_entry(FactorEntry { factor: Box::new(factor), noise, loss: None })
     }
     /// Add a factor with a noise model and a robust loss; returns its index.
-    pub fn add_robust<F: Factor + 'static, L: RobustLoss + 'static>(&mut self, factor: F, noise: NoiseModel, loss: L) -> usize {
+    pub fn add_robust<F: Factor + 'static, L: RobustLoss + 'static>(
+        &mut self,
+        factor: F,
+        noise: NoiseModel,
+        loss: L,
+    ) -> usize {
         self.add_entry(FactorEntry { factor: Box::new(factor), noise, loss: Some(Arc::new(loss)) })
     }
     /// Add a prepared entry; returns its index.

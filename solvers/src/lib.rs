@@ -46,13 +46,13 @@ pub use error::{FactorError, NoiseError, SolveError, ValueError};
 pub use factor::{check_jacobians, numeric_linearize, Factor, JacobianCheck, Linearization, Vars};
 pub use graph::{FactorEntry, Graph};
 pub use key::{Key, B, C, L, P, V, X};
+pub use lie::LieGroup;
 pub use linear::LinearSolver;
 pub use loss::{Cauchy, Huber, RobustLoss, Tukey};
 pub use marginal::{covariances, marginalize, Covariances, MarginalPrior, Marginalization};
 pub use noise::NoiseModel;
 pub use optimizer::{IterationLog, LmOptions, Method, Optimizer, Summary, Termination};
 pub use values::Values;
-pub use lie::LieGroup;
 pub use variable::{se2, se3_from_quaternion, DynVariable, Variable};
 
 pub use nalgebra;

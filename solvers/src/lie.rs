@@ -72,7 +72,8 @@ fn se3_q(w: &Vector3<f64>, v: &Vector3<f64>) -> Matrix3<f64> {
         let c = (2.0 * t - 3.0 * s + t * co) / (2.0 * t2 * t2 * t);
         (a, b, c)
     };
-    vx * 0.5 + (wx * vx + vx * wx + wx * vx * wx) * a
+    vx * 0.5
+        + (wx * vx + vx * wx + wx * vx * wx) * a
         + (wx * wx * vx + vx * wx * wx - wx * vx * wx * 3.0) * b
         + (wx * vx * wx * wx + wx * wx * vx * wx) * c
 }
@@ -111,58 +112,6 @@ pub fn se3_adjoint(r: &Matrix3<f64>, t: &Vector3<f64>) -> Matrix6<f64> {
     m.fixed_view_mut::<3, 3>(3, 3).copy_from(r);
     m.fixed_view_mut::<3, 3>(3, 0).copy_from(&(hat(t) * r));
     m
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use approx::assert_relative_eq;
-
-    fn se3_exp(xi: &Vector6<f64>) -> (Matrix3<f64>, Vector3<f64>) {
-        let w = xi.fixed_rows::<3>(0).into_owned();
-        let v = xi.fixed_rows::<3>(3).into_owned();
-        // V = Jl(w) = Jr(−w)
-        (so3_exp(&w), so3_right_jacobian(&(-w)) * v)
-    }
-    fn se3_log(r: &Matrix3<f64>, t: &Vector3<f64>) -> Vector6<f64> {
-        let w = so3_log(r);
-        let v = so3_right_jacobian(&(-w)).try_inverse().unwrap() * t;
-        Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
-    }
-
-    #[test]
-    fn so3_right_jacobian_numeric() {
-        for w in [Vector3::new(0.3, -0.2, 0.9), Vector3::new(1e-7, 2e-7, 0.0)] {
-            let jr = so3_right_jacobian(&w);
-            assert_relative_eq!(jr * so3_right_jacobian_inv(&w), Matrix3::identity(), epsilon = 1e-10);
-            let r0 = so3_exp(&w);
-            for i in 0..3 {
-                let mut d = Vector3::zeros();
-                d[i] = 1e-6;
-                let num = so3_log(&(r0.transpose() * so3_exp(&(w + d)))) / 1e-6;
-                assert_relative_eq!(num, jr.column(i).into_owned(), epsilon = 1e-5);
-            }
-        }
-    }
-
-    #[test]
-    fn se3_right_jacobian_numeric() {
-        for xi in [Vector6::new(0.3, -0.2, 0.9, 1.0, -2.0, 0.5), Vector6::new(1e-9, 0.0, 2e-9, 1.0, 2.0, 3.0)] {
-            let jr = se3_right_jacobian(&xi);
-            assert_relative_eq!(jr * se3_right_jacobian_inv(&xi), Matrix6::identity(), epsilon = 1e-9);
-            let (r0, t0) = se3_exp(&xi);
-            for i in 0..6 {
-                let mut d = Vector6::zeros();
-                d[i] = 1e-6;
-                let (r1, t1) = se3_exp(&(xi + d));
-                // (R0,t0)^-1 (R1,t1)
-                let rr = r0.transpose() * r1;
-                let tt = r0.transpose() * (t1 - t0);
-                let num = se3_log(&rr, &tt) / 1e-6;
-                assert_relative_eq!(num, jr.column(i).into_owned(), epsilon = 1e-5);
-            }
-        }
-    }
 }
 
 /// Group operations and right-Jacobian algebra a factor needs, for the
@@ -246,7 +195,12 @@ pub fn se2_right_jacobian(xi: &Vector3<f64>) -> Matrix3<f64> {
         (1.0 - th * th / 6.0, th / 2.0, -r2 / 2.0 + r1 * th / 6.0, r1 / 2.0 + r2 * th / 6.0)
     } else {
         let (s, co) = th.sin_cos();
-        (s / th, (1.0 - co) / th, (th * r1 - r2 + r2 * co - r1 * s) / (th * th), (r1 + th * r2 - r1 * co - r2 * s) / (th * th))
+        (
+            s / th,
+            (1.0 - co) / th,
+            (th * r1 - r2 + r2 * co - r1 * s) / (th * th),
+            (r1 + th * r2 - r1 * co - r2 * s) / (th * th),
+        )
     };
     // Rows/cols in [θ, ρx, ρy] order.
     Matrix3::new(1.0, 0.0, 0.0, c13, a, b, c23, -b, a)
@@ -265,11 +219,67 @@ impl LieGroup for sophus_lie::Isometry2F64 {
     fn adjoint_mat(&self) -> nalgebra::DMatrix<f64> {
         let r = self.rotation().matrix();
         let t = self.translation();
-        nalgebra::DMatrix::from_row_slice(3, 3, &[1.0, 0.0, 0.0, t[1], r[(0, 0)], r[(0, 1)], -t[0], r[(1, 0)], r[(1, 1)]])
+        nalgebra::DMatrix::from_row_slice(
+            3,
+            3,
+            &[1.0, 0.0, 0.0, t[1], r[(0, 0)], r[(0, 1)], -t[0], r[(1, 0)], r[(1, 1)]],
+        )
     }
     fn right_jacobian_inv(xi: &nalgebra::DVector<f64>) -> nalgebra::DMatrix<f64> {
         let jr = se2_right_jacobian(&Vector3::new(xi[0], xi[1], xi[2]));
         let inv = jr.try_inverse().unwrap_or_else(Matrix3::identity);
         nalgebra::DMatrix::from_column_slice(3, 3, inv.as_slice())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn se3_exp(xi: &Vector6<f64>) -> (Matrix3<f64>, Vector3<f64>) {
+        let w = xi.fixed_rows::<3>(0).into_owned();
+        let v = xi.fixed_rows::<3>(3).into_owned();
+        // V = Jl(w) = Jr(−w)
+        (so3_exp(&w), so3_right_jacobian(&(-w)) * v)
+    }
+    fn se3_log(r: &Matrix3<f64>, t: &Vector3<f64>) -> Vector6<f64> {
+        let w = so3_log(r);
+        let v = so3_right_jacobian(&(-w)).try_inverse().unwrap() * t;
+        Vector6::new(w.x, w.y, w.z, v.x, v.y, v.z)
+    }
+
+    #[test]
+    fn so3_right_jacobian_numeric() {
+        for w in [Vector3::new(0.3, -0.2, 0.9), Vector3::new(1e-7, 2e-7, 0.0)] {
+            let jr = so3_right_jacobian(&w);
+            assert_relative_eq!(jr * so3_right_jacobian_inv(&w), Matrix3::identity(), epsilon = 1e-10);
+            let r0 = so3_exp(&w);
+            for i in 0..3 {
+                let mut d = Vector3::zeros();
+                d[i] = 1e-6;
+                let num = so3_log(&(r0.transpose() * so3_exp(&(w + d)))) / 1e-6;
+                assert_relative_eq!(num, jr.column(i).into_owned(), epsilon = 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn se3_right_jacobian_numeric() {
+        for xi in [Vector6::new(0.3, -0.2, 0.9, 1.0, -2.0, 0.5), Vector6::new(1e-9, 0.0, 2e-9, 1.0, 2.0, 3.0)] {
+            let jr = se3_right_jacobian(&xi);
+            assert_relative_eq!(jr * se3_right_jacobian_inv(&xi), Matrix6::identity(), epsilon = 1e-9);
+            let (r0, t0) = se3_exp(&xi);
+            for i in 0..6 {
+                let mut d = Vector6::zeros();
+                d[i] = 1e-6;
+                let (r1, t1) = se3_exp(&(xi + d));
+                // (R0,t0)^-1 (R1,t1)
+                let rr = r0.transpose() * r1;
+                let tt = r0.transpose() * (t1 - t0);
+                let num = se3_log(&rr, &tt) / 1e-6;
+                assert_relative_eq!(num, jr.column(i).into_owned(), epsilon = 1e-5);
+            }
+        }
     }
 }

@@ -47,8 +47,29 @@ struct FactorPlan {
     pairs: Vec<(usize, usize, usize)>,
     /// Kept positions and their block.
     kept: Vec<(usize, usize)>,
-    /// Eliminated position, its eliminated block, and for each kept position its slot.
-    elim: Option<(usize, usize, Vec<(usize, usize)>)>,
+    /// The factor's eliminated variable, if any.
+    elim: Option<ElimPlan>,
+}
+
+/// Where a factor's eliminated variable goes.
+#[derive(Clone, Debug)]
+struct ElimPlan {
+    /// Position in the factor's key list.
+    pos: usize,
+    /// Eliminated block index.
+    block: usize,
+    /// For each kept position of the factor: (position, slot among the block's kept neighbours).
+    slots: Vec<(usize, usize)>,
+}
+
+/// Normal-equation blocks of one eliminated variable l.
+pub(crate) struct ElimBlock {
+    /// H_ll.
+    pub hll: DMatrix<f64>,
+    /// g_l.
+    pub gl: DVector<f64>,
+    /// H_cl (d_cam × d_l) per neighbouring kept block, in slot order.
+    pub hcl: Vec<DMatrix<f64>>,
 }
 
 /// Sparsity structure: the lower triangle of the reduced system, in CSC.
@@ -78,13 +99,18 @@ pub(crate) struct System {
     pub h: Vec<f64>,
     /// Gradient over kept blocks.
     pub g: Vec<f64>,
-    /// Per eliminated block: H_ll, g_l, H_cl per slot (d_cam × d_l).
-    pub elim: Vec<(DMatrix<f64>, DVector<f64>, Vec<DMatrix<f64>>)>,
+    /// Per eliminated block.
+    pub elim: Vec<ElimBlock>,
 }
 
 impl Structure {
     /// Build the structure. `factor_roles[f]` gives the role of each key position of factor f.
-    pub fn new(kept_dims: Vec<usize>, elim_dims: Vec<usize>, factor_roles: &[Vec<Role>], solver: LinearSolver) -> Result<Self, SolveError> {
+    pub fn new(
+        kept_dims: Vec<usize>,
+        elim_dims: Vec<usize>,
+        factor_roles: &[Vec<Role>],
+        solver: LinearSolver,
+    ) -> Result<Self, SolveError> {
         let nk = kept_dims.len();
         let mut kept_offsets = Vec::with_capacity(nk + 1);
         let mut n = 0;
@@ -98,7 +124,8 @@ impl Structure {
         let mut cols: Vec<BTreeSet<usize>> = (0..nk).map(|b| BTreeSet::from([b])).collect();
         let mut elim_cams: Vec<Vec<usize>> = vec![Vec::new(); elim_dims.len()];
         for (fi, roles) in factor_roles.iter().enumerate() {
-            let kept: Vec<usize> = roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }).collect();
+            let kept: Vec<usize> =
+                roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }).collect();
             for &a in &kept {
                 for &b in &kept {
                     if a > b {
@@ -106,7 +133,8 @@ impl Structure {
                     }
                 }
             }
-            let elims: Vec<usize> = roles.iter().filter_map(|r| if let Role::Elim(e) = r { Some(*e) } else { None }).collect();
+            let elims: Vec<usize> =
+                roles.iter().filter_map(|r| if let Role::Elim(e) = r { Some(*e) } else { None }).collect();
             if elims.len() > 1 {
                 return Err(SolveError::Config(format!(
                     "factor {fi} connects {} eliminated (landmark) variables; Schur elimination needs at most one per factor",
@@ -179,8 +207,12 @@ impl Structure {
             }
             for (p, r) in roles.iter().enumerate() {
                 if let Role::Elim(e) = r {
-                    let slots = plan.kept.iter().map(|&(q, bq)| (q, elim_cams[*e].iter().position(|&c| c == bq).unwrap_or(0))).collect();
-                    plan.elim = Some((p, *e, slots));
+                    let slots = plan
+                        .kept
+                        .iter()
+                        .map(|&(q, bq)| (q, elim_cams[*e].iter().position(|&c| c == bq).unwrap_or(0)))
+                        .collect();
+                    plan.elim = Some(ElimPlan { pos: p, block: *e, slots });
                 }
             }
             plans.push(plan);
@@ -252,12 +284,14 @@ impl Structure {
     pub fn assemble(&self, lins: &[WhitenedLinearization]) -> System {
         let mut h = vec![0.0; self.nnz()];
         let mut g = vec![0.0; self.n];
-        let mut elim: Vec<(DMatrix<f64>, DVector<f64>, Vec<DMatrix<f64>>)> = self
+        let mut elim: Vec<ElimBlock> = self
             .elim_dims
             .iter()
             .zip(&self.elim_cams)
-            .map(|(&d, cams)| {
-                (DMatrix::zeros(d, d), DVector::zeros(d), cams.iter().map(|&c| DMatrix::zeros(self.kept_dims[c], d)).collect())
+            .map(|(&d, cams)| ElimBlock {
+                hll: DMatrix::zeros(d, d),
+                gl: DVector::zeros(d),
+                hcl: cams.iter().map(|&c| DMatrix::zeros(self.kept_dims[c], d)).collect(),
             })
             .collect();
         for (plan, wl) in self.plans.iter().zip(lins) {
@@ -273,23 +307,38 @@ impl Structure {
                 let m = js[p].tr_mul(&js[q]);
                 self.add_block(&mut h, pair, &m, 1.0);
             }
-            if let Some((p, e, slots)) = &plan.elim {
-                let (hll, gl, hcl) = &mut elim[*e];
-                *hll += js[*p].tr_mul(&js[*p]);
-                *gl += js[*p].tr_mul(r);
-                for &(q, s) in slots {
-                    hcl[s] += js[q].tr_mul(&js[*p]);
+            if let Some(ep) = &plan.elim {
+                let b = &mut elim[ep.block];
+                let jl = &js[ep.pos];
+                b.hll += jl.tr_mul(jl);
+                b.gl += jl.tr_mul(r);
+                for &(q, s) in &ep.slots {
+                    b.hcl[s] += js[q].tr_mul(jl);
                 }
             }
         }
         System { h, g, elim }
     }
 
+    /// Dense symmetric copy of lower-CSC values `h`.
+    fn dense_matrix(&self, h: &[f64]) -> DMatrix<f64> {
+        let mut m = DMatrix::zeros(self.n, self.n);
+        for c in 0..self.n {
+            for (&r, &v) in
+                self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]].iter().zip(&h[self.col_ptr[c]..self.col_ptr[c + 1]])
+            {
+                m[(r, c)] = v;
+                m[(c, r)] = v;
+            }
+        }
+        m
+    }
+
     /// Diagonal of H over kept unknowns followed by eliminated ones.
     pub fn diagonal(&self, sys: &System) -> Vec<f64> {
         let mut d: Vec<f64> = self.diag_positions.iter().map(|&p| sys.h[p]).collect();
-        for (hll, _, _) in &sys.elim {
-            d.extend(hll.diagonal().iter());
+        for b in &sys.elim {
+            d.extend(b.hll.diagonal().iter());
         }
         d
     }
@@ -308,7 +357,7 @@ impl Structure {
         // Schur complement of the eliminated blocks.
         let mut elim_inv = Vec::with_capacity(sys.elim.len());
         let mut off = self.n;
-        for (e, (hll, gl, hcl)) in sys.elim.iter().enumerate() {
+        for (e, ElimBlock { hll, gl, hcl }) in sys.elim.iter().enumerate() {
             let mut a = hll.clone();
             if let Some(d) = damping {
                 for k in 0..a.nrows() {
@@ -343,15 +392,8 @@ impl Structure {
             fact_s = 0.0;
             t_solve = std::time::Instant::now();
         } else if self.dense {
-            let mut m = DMatrix::zeros(self.n, self.n);
-            for c in 0..self.n {
-                for k in self.col_ptr[c]..self.col_ptr[c + 1] {
-                    let r = self.row_idx[k];
-                    m[(r, c)] = h[k];
-                    m[(c, r)] = h[k];
-                }
-            }
-            let ch = nalgebra::Cholesky::new(m).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
+            let ch = nalgebra::Cholesky::new(self.dense_matrix(&h))
+                .ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
             fact_s = t_fact.elapsed().as_secs_f64();
             t_solve = std::time::Instant::now();
             let sol = ch.solve(&DVector::from_vec(x));
@@ -360,7 +402,8 @@ impl Structure {
             let sym = SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
             if self.symbolic.is_none() {
                 self.symbolic = Some(
-                    SymbolicLlt::try_new(sym, Side::Lower).map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?,
+                    SymbolicLlt::try_new(sym, Side::Lower)
+                        .map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?,
                 );
             }
             let mat = SparseColMatRef::new(sym, &h);
@@ -376,7 +419,7 @@ impl Structure {
             }
         }
         // Back-substitution for eliminated blocks: δ_l = −H_ll⁻¹ (g_l + Σ H_lc δ_c).
-        for (e, (_, gl, hcl)) in sys.elim.iter().enumerate() {
+        for (e, ElimBlock { gl, hcl, .. }) in sys.elim.iter().enumerate() {
             let mut rhs = gl.clone();
             for (s, &c) in self.elim_cams[e].iter().enumerate() {
                 let o = self.kept_offsets[c];
@@ -396,16 +439,16 @@ impl Structure {
     pub fn h_times(&self, sys: &System, x: &[f64]) -> Vec<f64> {
         let mut y = vec![0.0; x.len()];
         for c in 0..self.n {
-            for k in self.col_ptr[c]..self.col_ptr[c + 1] {
-                let r = self.row_idx[k];
-                y[r] += sys.h[k] * x[c];
+            let range = self.col_ptr[c]..self.col_ptr[c + 1];
+            for (&r, &v) in self.row_idx[range.clone()].iter().zip(&sys.h[range]) {
+                y[r] += v * x[c];
                 if r != c {
-                    y[c] += sys.h[k] * x[r];
+                    y[c] += v * x[r];
                 }
             }
         }
         let mut off = self.n;
-        for (e, (hll, _, hcl)) in sys.elim.iter().enumerate() {
+        for (e, ElimBlock { hll, hcl, .. }) in sys.elim.iter().enumerate() {
             let d = hll.nrows();
             let xl = DVector::from_column_slice(&x[off..off + d]);
             let mut yl = hll * &xl;
@@ -427,23 +470,15 @@ impl Structure {
         y
     }
 
-    /// Dense copy of the full (unreduced) H is not needed by the solver; this
-    /// returns selected columns of H⁻¹ over kept unknowns (no eliminated blocks).
+    /// Selected columns of H⁻¹ over kept unknowns (for a system without eliminated blocks).
     pub fn inverse_columns(&mut self, sys: &System, cols: &[usize]) -> Result<DMatrix<f64>, SolveError> {
         if !sys.elim.is_empty() {
             return Err(SolveError::Config("covariance recovery needs a system without eliminated blocks".into()));
         }
         let mut out = DMatrix::zeros(self.n, cols.len());
         if self.dense || self.n == 0 {
-            let mut m = DMatrix::zeros(self.n, self.n);
-            for c in 0..self.n {
-                for k in self.col_ptr[c]..self.col_ptr[c + 1] {
-                    let r = self.row_idx[k];
-                    m[(r, c)] = sys.h[k];
-                    m[(c, r)] = sys.h[k];
-                }
-            }
-            let ch = nalgebra::Cholesky::new(m).ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
+            let ch = nalgebra::Cholesky::new(self.dense_matrix(&sys.h))
+                .ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
             for (j, &c) in cols.iter().enumerate() {
                 let mut e = DVector::zeros(self.n);
                 e[c] = 1.0;

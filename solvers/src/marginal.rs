@@ -126,7 +126,8 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
     let mut g = DVector::zeros(n);
     for &fi in &removed {
         let e: &FactorEntry = &graph.entries()[fi];
-        let vars: Vec<&dyn DynVariable> = e.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>()?;
+        let vars: Vec<&dyn DynVariable> =
+            e.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>()?;
         let wl = e.linearize_whitened(Vars::new(&vars)).map_err(|source| SolveError::Factor { factor: fi, source })?;
         for (a, ka) in e.factor.keys().iter().enumerate() {
             let oa = offsets[ka];
@@ -155,7 +156,8 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
     let gstar = &gs - hms.transpose() * &hmm_inv * &gm;
     let eig = nalgebra::SymmetricEigen::new((&hstar + hstar.transpose()) * 0.5);
     let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
-    let kept: Vec<usize> = (0..eig.eigenvalues.len()).filter(|&i| eig.eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
+    let kept: Vec<usize> =
+        (0..eig.eigenvalues.len()).filter(|&i| eig.eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
     let mut r = DMatrix::zeros(kept.len(), n - nm);
     let mut e = DVector::zeros(kept.len());
     for (row, &i) in kept.iter().enumerate() {
@@ -167,7 +169,13 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
     let sep_keys: Vec<Key> = order[keys.len()..].to_vec();
     let anchors = sep_keys.iter().map(|k| values.get_dyn(*k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
     Ok(Marginalization {
-        prior: MarginalPrior { keys: sep_keys, dims: dims[keys.len()..].to_vec(), anchors, sqrt_information: r, offset: e },
+        prior: MarginalPrior {
+            keys: sep_keys,
+            dims: dims[keys.len()..].to_vec(),
+            anchors,
+            sqrt_information: r,
+            offset: e,
+        },
         removed_factors: removed,
     })
 }
@@ -199,14 +207,16 @@ impl Covariances {
 /// weights included) of `keys` at `values`. Constant variables are conditioned on.
 pub fn covariances(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Covariances, SolveError> {
     let layout = Layout::new(graph, values, &[])?;
-    let vars: Vec<Box<dyn DynVariable>> = layout.keys.iter().map(|&k| values.get_dyn(k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
+    let vars: Vec<Box<dyn DynVariable>> =
+        layout.keys.iter().map(|&k| values.get_dyn(k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
     let mut structure = layout.structure(&vars, LinearSolver::Auto)?;
     let (lins, _) = linearize_all(graph.entries(), &layout, &vars)?;
     let sys = structure.assemble(&lins);
     let mut cols = Vec::new();
     let mut offsets = vec![0];
     for k in keys {
-        let vi = layout.keys.iter().position(|x| x == k).ok_or(SolveError::Config(format!("key {k} is in no factor")))?;
+        let vi =
+            layout.keys.iter().position(|x| x == k).ok_or(SolveError::Config(format!("key {k} is in no factor")))?;
         let b = match layout.roles[vi] {
             crate::linear::Role::Kept(b) => b,
             _ => return Err(SolveError::Config(format!("key {k} is held constant"))),

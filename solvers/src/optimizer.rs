@@ -148,10 +148,18 @@ impl fmt::Display for Summary {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         writeln!(f, "tumble solver summary")?;
         writeln!(f, "  variables {:>10}   factors {:>10}", self.variables, self.factors)?;
-        writeln!(f, "  reduced system {} unknowns, {} nonzeros; {} eliminated", self.reduced_dim, self.reduced_nnz, self.eliminated_dim)?;
+        writeln!(
+            f,
+            "  reduced system {} unknowns, {} nonzeros; {} eliminated",
+            self.reduced_dim, self.reduced_nnz, self.eliminated_dim
+        )?;
         writeln!(f, "  initial cost {:.6e}", self.initial_cost)?;
         writeln!(f, "  final cost   {:.6e}", self.final_cost)?;
-        writeln!(f, "  iterations {} ({} linear solves), termination: {:?}", self.iterations, self.linear_solves, self.termination)?;
+        writeln!(
+            f,
+            "  iterations {} ({} linear solves), termination: {:?}",
+            self.iterations, self.linear_solves, self.termination
+        )?;
         writeln!(
             f,
             "  time [s]: linearize {:.4}  build {:.4}  factorize {:.4}  solve {:.4}  total {:.4}",
@@ -193,7 +201,10 @@ impl Layout {
                 if d != e.factor.residual_dim() {
                     return Err(SolveError::BadFactor {
                         factor: fi,
-                        what: format!("noise model of dimension {d} on a residual of dimension {}", e.factor.residual_dim()),
+                        what: format!(
+                            "noise model of dimension {d} on a residual of dimension {}",
+                            e.factor.residual_dim()
+                        ),
                     });
                 }
             }
@@ -222,7 +233,8 @@ impl Layout {
     pub fn structure(&self, vars: &[Box<dyn DynVariable>], solver: LinearSolver) -> Result<Structure, SolveError> {
         let kept_dims = self.kept_vars.iter().map(|&v| vars[v].dim()).collect();
         let elim_dims = self.elim_vars.iter().map(|&v| vars[v].dim()).collect();
-        let factor_roles: Vec<Vec<Role>> = self.factor_vars.iter().map(|fv| fv.iter().map(|&v| self.roles[v]).collect()).collect();
+        let factor_roles: Vec<Vec<Role>> =
+            self.factor_vars.iter().map(|fv| fv.iter().map(|&v| self.roles[v]).collect()).collect();
         Structure::new(kept_dims, elim_dims, &factor_roles, solver)
     }
 }
@@ -246,9 +258,17 @@ pub(crate) fn linearize_all(
             let wl = e.linearize_whitened(Vars::new(&v)).map_err(|source| SolveError::Factor { factor: fi, source })?;
             if wl.lin.jacobians.len() != fv.len()
                 || wl.lin.residual.len() != e.factor.residual_dim()
-                || wl.lin.jacobians.iter().zip(&v).any(|(j, x)| j.nrows() != wl.lin.residual.len() || j.ncols() != x.dim())
+                || wl
+                    .lin
+                    .jacobians
+                    .iter()
+                    .zip(&v)
+                    .any(|(j, x)| j.nrows() != wl.lin.residual.len() || j.ncols() != x.dim())
             {
-                return Err(SolveError::BadFactor { factor: fi, what: "Jacobian or residual has the wrong shape".into() });
+                return Err(SolveError::BadFactor {
+                    factor: fi,
+                    what: "Jacobian or residual has the wrong shape".into(),
+                });
             }
             Ok(wl)
         })
@@ -352,13 +372,15 @@ impl Optimizer {
             let t = Instant::now();
             let sys: System = structure.assemble(&lins);
             summary.time_build += t.elapsed().as_secs_f64();
-            let gmax = sys.g.iter().chain(sys.elim.iter().flat_map(|e| e.1.iter())).fold(0.0f64, |m, v| m.max(v.abs()));
+            let g_all: Vec<f64> =
+                sys.g.iter().copied().chain(sys.elim.iter().flat_map(|e| e.gl.iter().copied())).collect();
+            let gmax = g_all.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             if gmax <= o.gradient_tolerance {
                 summary.termination = Termination::GradientTolerance;
                 break;
             }
-            let g_all: Vec<f64> = sys.g.iter().copied().chain(sys.elim.iter().flat_map(|e| e.1.iter().copied())).collect();
-            let diag: Vec<f64> = structure.diagonal(&sys).iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
+            let diag: Vec<f64> =
+                structure.diagonal(&sys).iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
             summary.iterations += 1;
             loop {
                 let damping: Option<Vec<f64>> = if gn { None } else { Some(diag.iter().map(|d| d * lambda).collect()) };
@@ -383,7 +405,8 @@ impl Optimizer {
                 summary.time_solve += ss;
                 summary.time_build += bs;
                 let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let x_norm = free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
+                let x_norm =
+                    free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
                 let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
                 // Retract.
                 let t = Instant::now();
@@ -398,8 +421,8 @@ impl Optimizer {
                 summary.time_linearize += t.elapsed().as_secs_f64();
                 // Predicted decrease: −gᵀδ − ½ δᵀHδ.
                 let hd = structure.h_times(&sys, &delta);
-                let predicted: f64 =
-                    -delta.iter().zip(&g_all).map(|(a, b)| a * b).sum::<f64>() - 0.5 * delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>();
+                let predicted: f64 = -delta.iter().zip(&g_all).map(|(a, b)| a * b).sum::<f64>()
+                    - 0.5 * delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>();
                 let (new_cost, accepted, rho) = match new_cost {
                     Ok(c) => {
                         let rho = if predicted > 0.0 { (cost - c) / predicted } else { -1.0 };

@@ -33,7 +33,11 @@ impl Factor for LinearFactor {
         for (i, a) in self.a.iter().enumerate() {
             let p = DVector::from_vec(vars.get_dyn(i).params_dyn());
             if p.len() != a.ncols() {
-                return Err(FactorError::Other(format!("variable {i} has {} parameters, A has {} columns", p.len(), a.ncols())));
+                return Err(FactorError::Other(format!(
+                    "variable {i} has {} parameters, A has {} columns",
+                    p.len(),
+                    a.ncols()
+                )));
             }
             r += a * p;
         }

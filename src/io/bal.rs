@@ -1,0 +1,111 @@
+//! Bundle Adjustment in the Large text files (Agarwal et al. 2010).
+//!
+//! Header `cameras points observations`, then one `camera point x y` line per
+//! observation, then 9 numbers per camera and 3 per point (whitespace-separated,
+//! any line breaking). Cameras become `C(i)` (R^9), points `L(j)` (R^3); the
+//! points are meant to be eliminated by the Schur complement (`eliminate = ['l']`).
+
+use crate::error::InputError;
+use crate::io::tokens::read_text;
+use nalgebra::{SVector, Vector3};
+use std::path::Path;
+use tumble_factors::SnavelyReprojection;
+use tumble_solvers::{AutoDiff, Graph, NoiseModel, Values, C, L};
+
+/// A bundle-adjustment problem.
+pub struct BalProblem {
+    /// One reprojection factor per observation (unit noise, pixels).
+    pub graph: Graph,
+    /// Cameras and points.
+    pub values: Values,
+    /// Number of cameras.
+    pub cameras: usize,
+    /// Number of points.
+    pub points: usize,
+    /// Number of observations.
+    pub observations: usize,
+}
+
+/// Read a BAL file.
+pub fn read_bal(path: &Path) -> Result<BalProblem, InputError> {
+    parse_bal(path, &read_text(path)?)
+}
+
+/// Parse BAL text; `path` is only used in messages.
+pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
+    // Token stream that remembers line numbers.
+    let mut toks = text.lines().enumerate().flat_map(|(i, l)| l.split_whitespace().map(move |t| (i + 1, t)));
+    let mut last_line = 1;
+    let mut next = |what: &str| -> Result<(usize, &str), InputError> {
+        match toks.next() {
+            Some((l, t)) => {
+                last_line = l;
+                Ok((l, t))
+            }
+            None => Err(InputError::at(path, last_line, format!("file ends early: missing {what}"))),
+        }
+    };
+    fn num(path: &Path, (l, t): (usize, &str), what: &str) -> Result<f64, InputError> {
+        let v: f64 = t.parse().map_err(|_| InputError::at(path, l, format!("{what}: '{t}' is not a number")))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(InputError::at(path, l, format!("{what} is not finite")))
+        }
+    }
+    fn int(path: &Path, (l, t): (usize, &str), what: &str) -> Result<usize, InputError> {
+        t.parse().map_err(|_| InputError::at(path, l, format!("{what}: '{t}' is not a non-negative integer")))
+    }
+    let nc = int(path, next("camera count")?, "camera count")?;
+    let np = int(path, next("point count")?, "point count")?;
+    let no = int(path, next("observation count")?, "observation count")?;
+    if nc == 0 || np == 0 || no == 0 {
+        return Err(InputError::at(
+            path,
+            1,
+            format!("header says {nc} cameras, {np} points, {no} observations: nothing to solve"),
+        ));
+    }
+    let mut graph = Graph::new();
+    for _ in 0..no {
+        let tc = next("observation camera index")?;
+        let c = int(path, tc, "camera index")?;
+        let p = int(path, next("observation point index")?, "point index")?;
+        if c >= nc {
+            return Err(InputError::at(path, tc.0, format!("camera index {c} out of range (file has {nc} cameras)")));
+        }
+        if p >= np {
+            return Err(InputError::at(path, tc.0, format!("point index {p} out of range (file has {np} points)")));
+        }
+        let x = num(path, next("observation x")?, "observation x")?;
+        let y = num(path, next("observation y")?, "observation y")?;
+        graph.add(AutoDiff::new(SnavelyReprojection::new(C(c as u64), L(p as u64), [x, y])), NoiseModel::Unit);
+    }
+    let mut values = Values::new();
+    for c in 0..nc {
+        let mut v = [0.0; 9];
+        for (k, vk) in v.iter_mut().enumerate() {
+            *vk = num(
+                path,
+                next(&format!("camera {c} parameter {}", k + 1))?,
+                &format!("camera {c} parameter {}", k + 1),
+            )?;
+        }
+        values.insert(C(c as u64), SVector::<f64, 9>::from_column_slice(&v));
+    }
+    for p in 0..np {
+        let mut v = [0.0; 3];
+        for (k, vk) in v.iter_mut().enumerate() {
+            *vk = num(
+                path,
+                next(&format!("point {p} coordinate {}", k + 1))?,
+                &format!("point {p} coordinate {}", k + 1),
+            )?;
+        }
+        values.insert(L(p as u64), Vector3::from_column_slice(&v));
+    }
+    if let Some((l, t)) = toks.next() {
+        return Err(InputError::at(path, l, format!("unexpected extra data '{t}' after the last point")));
+    }
+    Ok(BalProblem { graph, values, cameras: nc, points: np, observations: no })
+}

@@ -1,0 +1,241 @@
+//! g2o pose-graph files: `VERTEX_SE2`/`EDGE_SE2` and `VERTEX_SE3:QUAT`/`EDGE_SE3:QUAT`
+//! with their information matrices, plus `FIX`.
+//!
+//! Conventions: SE(2) tangents in tumble are `[θ, x, y]` and SE(3) `[ω, ν]`, so
+//! g2o's information matrices (ordered `[x, y, θ]` and `[x, y, z, qx, qy, qz]`)
+//! are permuted, not rescaled, exactly as GTSAM's `readG2o` does. The error of
+//! each edge is GTSAM's `BetweenFactor`: `Log(Z⁻¹ X₁⁻¹ X₂)`.
+
+use crate::error::InputError;
+use crate::io::tokens::{read_text, LineTokens};
+use nalgebra::{DMatrix, Vector3};
+use std::collections::BTreeMap;
+use std::path::Path;
+use tumble_factors::BetweenFactor;
+use tumble_solvers::{se2, se3_from_quaternion, Graph, NoiseModel, Values, X};
+
+/// What to do with an information matrix that is not positive definite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum BadInformation {
+    /// Refuse the file (the default).
+    #[default]
+    Refuse,
+    /// Replace it by the nearest positive-definite matrix (eigenvalues clamped
+    /// to 1e-9 · the largest) and report every such edge as a warning.
+    Repair,
+}
+
+/// Options of [`read_g2o`].
+#[derive(Clone, Debug, Default)]
+pub struct G2oOptions {
+    /// Handling of non-positive-definite information matrices.
+    pub bad_information: BadInformation,
+}
+
+/// Dimension of a pose graph.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PoseKind {
+    /// Planar poses.
+    Se2,
+    /// Spatial poses.
+    Se3,
+}
+
+/// A pose graph read from a g2o file.
+pub struct PoseGraph {
+    /// One `BetweenFactor` per edge.
+    pub graph: Graph,
+    /// Initial poses, keyed `X(vertex id)`. Vertices named by `FIX` (or, when
+    /// none is, the lowest id) are held constant to fix the gauge.
+    pub values: Values,
+    /// SE(2) or SE(3).
+    pub kind: PoseKind,
+    /// Number of vertices.
+    pub vertices: usize,
+    /// Number of edges.
+    pub edges: usize,
+    /// Warnings (e.g. repaired information matrices).
+    pub warnings: Vec<String>,
+}
+
+fn information(
+    file: &Path,
+    line: usize,
+    upper: &[f64],
+    n: usize,
+    perm: &[usize],
+    opts: &G2oOptions,
+    warnings: &mut Vec<String>,
+) -> Result<NoiseModel, InputError> {
+    let mut g = DMatrix::zeros(n, n);
+    let mut k = 0;
+    for r in 0..n {
+        for c in r..n {
+            g[(r, c)] = upper[k];
+            g[(c, r)] = upper[k];
+            k += 1;
+        }
+    }
+    let m = DMatrix::from_fn(n, n, |r, c| g[(perm[r], perm[c])]);
+    match NoiseModel::from_information(&m) {
+        Ok(noise) => Ok(noise),
+        Err(_) => {
+            let eig = nalgebra::SymmetricEigen::new(m.clone());
+            let min = eig.eigenvalues.min();
+            match opts.bad_information {
+                BadInformation::Refuse => Err(InputError::at(
+                    file,
+                    line,
+                    format!("information matrix is not positive definite (smallest eigenvalue {min:.3e})"),
+                )
+                .with_hint("use --repair-information to replace such matrices by the nearest positive-definite one")),
+                BadInformation::Repair => {
+                    let max = eig.eigenvalues.max().max(1.0);
+                    let clamped = eig.eigenvalues.map(|l| l.max(1e-9 * max));
+                    let fixed = &eig.eigenvectors * DMatrix::from_diagonal(&clamped) * eig.eigenvectors.transpose();
+                    warnings.push(format!(
+                        "{}:{}: information matrix not positive definite (smallest eigenvalue {min:.3e}); repaired",
+                        file.display(),
+                        line
+                    ));
+                    NoiseModel::from_information(&((&fixed + fixed.transpose()) * 0.5))
+                        .map_err(|e| InputError::at(file, line, format!("information matrix cannot be repaired: {e}")))
+                }
+            }
+        }
+    }
+}
+
+/// Read a g2o pose graph.
+///
+/// ```no_run
+/// let pg = tumble::io::g2o::read_g2o("M3500.g2o".as_ref(), &Default::default()).unwrap();
+/// println!("{} poses, {} edges", pg.vertices, pg.edges);
+/// ```
+pub fn read_g2o(path: &Path, opts: &G2oOptions) -> Result<PoseGraph, InputError> {
+    parse_g2o(path, &read_text(path)?, opts)
+}
+
+/// Parse g2o text; `path` is only used in messages.
+pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph, InputError> {
+    let mut kind: Option<PoseKind> = None;
+    let mut values = Values::new();
+    let mut vertex_lines: BTreeMap<u64, usize> = BTreeMap::new();
+    let mut edges = Vec::new();
+    let mut fixed = Vec::new();
+    let mut warnings = Vec::new();
+    let mut set_kind = |k: PoseKind, line: usize| -> Result<(), InputError> {
+        match kind {
+            Some(old) if old != k => Err(InputError::at(path, line, "file mixes SE(2) and SE(3) elements")),
+            _ => {
+                kind = Some(k);
+                Ok(())
+            }
+        }
+    };
+    for (i, raw) in text.lines().enumerate() {
+        let ln = i + 1;
+        let l = raw.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        let tag = l.split_whitespace().next().unwrap_or("");
+        let mut t = LineTokens::new(path, ln, &l[tag.len()..]);
+        match tag {
+            "VERTEX_SE2" => {
+                set_kind(PoseKind::Se2, ln)?;
+                let id = t.usize("vertex id")? as u64;
+                let (x, y, th) = (t.f64("x")?, t.f64("y")?, t.f64("theta")?);
+                t.finish()?;
+                if vertex_lines.insert(id, ln).is_some() {
+                    return Err(InputError::at(path, ln, format!("vertex {id} defined twice")));
+                }
+                values.insert(X(id), se2(x, y, th));
+            }
+            "VERTEX_SE3:QUAT" => {
+                set_kind(PoseKind::Se3, ln)?;
+                let id = t.usize("vertex id")? as u64;
+                let p = Vector3::new(t.f64("x")?, t.f64("y")?, t.f64("z")?);
+                let (qx, qy, qz, qw) = (t.f64("qx")?, t.f64("qy")?, t.f64("qz")?, t.f64("qw")?);
+                t.finish()?;
+                let qn = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+                if (qn - 1.0).abs() > 1e-3 {
+                    return Err(InputError::at(path, ln, format!("quaternion norm is {qn}, not 1")));
+                }
+                if vertex_lines.insert(id, ln).is_some() {
+                    return Err(InputError::at(path, ln, format!("vertex {id} defined twice")));
+                }
+                values.insert(X(id), se3_from_quaternion([qw, qx, qy, qz], p));
+            }
+            "EDGE_SE2" => {
+                set_kind(PoseKind::Se2, ln)?;
+                let (a, b) = (t.usize("from id")? as u64, t.usize("to id")? as u64);
+                let (x, y, th) = (t.f64("dx")?, t.f64("dy")?, t.f64("dtheta")?);
+                let info: Vec<f64> =
+                    (0..6).map(|k| t.f64(&format!("information entry {}", k + 1))).collect::<Result<_, _>>()?;
+                t.finish()?;
+                let noise = information(path, ln, &info, 3, &[2, 0, 1], opts, &mut warnings)?;
+                edges.push((ln, a, b, EdgeMeas::Se2(se2(x, y, th)), noise));
+            }
+            "EDGE_SE3:QUAT" => {
+                set_kind(PoseKind::Se3, ln)?;
+                let (a, b) = (t.usize("from id")? as u64, t.usize("to id")? as u64);
+                let p = Vector3::new(t.f64("x")?, t.f64("y")?, t.f64("z")?);
+                let (qx, qy, qz, qw) = (t.f64("qx")?, t.f64("qy")?, t.f64("qz")?, t.f64("qw")?);
+                let info: Vec<f64> =
+                    (0..21).map(|k| t.f64(&format!("information entry {}", k + 1))).collect::<Result<_, _>>()?;
+                t.finish()?;
+                let qn = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+                if (qn - 1.0).abs() > 1e-3 {
+                    return Err(InputError::at(path, ln, format!("quaternion norm is {qn}, not 1")));
+                }
+                let noise = information(path, ln, &info, 6, &[3, 4, 5, 0, 1, 2], opts, &mut warnings)?;
+                edges.push((ln, a, b, EdgeMeas::Se3(se3_from_quaternion([qw, qx, qy, qz], p)), noise));
+            }
+            "FIX" => {
+                let id = t.usize("vertex id")? as u64;
+                t.finish()?;
+                fixed.push((ln, id));
+            }
+            other => {
+                return Err(InputError::at(path, ln, format!("unknown tag '{other}'"))
+                    .with_hint("supported: VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT, FIX"))
+            }
+        }
+    }
+    let kind =
+        kind.ok_or_else(|| InputError::file(path, "no vertex or edge found").with_hint("is this a g2o file?"))?;
+    let mut graph = Graph::new();
+    let n_edges = edges.len();
+    for (ln, a, b, meas, noise) in edges {
+        for id in [a, b] {
+            if !vertex_lines.contains_key(&id) {
+                return Err(InputError::at(path, ln, format!("edge refers to vertex {id}, which is not defined")));
+            }
+        }
+        if a == b {
+            return Err(InputError::at(path, ln, format!("edge connects vertex {a} to itself")));
+        }
+        match meas {
+            EdgeMeas::Se2(z) => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
+            EdgeMeas::Se3(z) => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
+        };
+    }
+    if fixed.is_empty() {
+        if let Some((&id, _)) = vertex_lines.iter().next() {
+            values.set_constant(X(id), true);
+        }
+    }
+    for (ln, id) in fixed {
+        if !vertex_lines.contains_key(&id) {
+            return Err(InputError::at(path, ln, format!("FIX names vertex {id}, which is not defined")));
+        }
+        values.set_constant(X(id), true);
+    }
+    Ok(PoseGraph { graph, values, kind, vertices: vertex_lines.len(), edges: n_edges, warnings })
+}
+
+enum EdgeMeas {
+    Se2(tumble_solvers::sophus_lie::Isometry2F64),
+    Se3(tumble_solvers::sophus_lie::Isometry3F64),
+}

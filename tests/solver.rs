@@ -1,0 +1,437 @@
+//! Correctness of the solver on problems with known answers.
+
+use approx::assert_relative_eq;
+use nalgebra::{DMatrix, DVector, SVector, Vector1, Vector2, Vector3, Vector6};
+use rand::{Rng, SeedableRng};
+use tumble_factors::{BetweenFactor, PriorFactor, SnavelyReprojection};
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::testing::LinearFactor;
+use tumble_solvers::*;
+
+fn lm() -> LmOptions {
+    LmOptions { function_tolerance: 1e-12, parameter_tolerance: 1e-12, ..LmOptions::default() }
+}
+
+/// Random overdetermined linear problem: the solution equals the normal-equation closed form.
+#[test]
+fn linear_least_squares_equals_closed_form() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let (m, n) = (20, 4);
+    let a = DMatrix::from_fn(m, n, |_, _| rng.random::<f64>() - 0.5);
+    let b = DVector::from_fn(m, |_, _| rng.random::<f64>() - 0.5);
+    let mut g = Graph::new();
+    // Split the 4 unknowns into two 2-vectors, the rows into 4 factors.
+    for f in 0..4 {
+        let rows = a.rows(5 * f, 5);
+        g.add(
+            LinearFactor::new(
+                vec![X(0), X(1)],
+                vec![rows.columns(0, 2).into_owned(), rows.columns(2, 2).into_owned()],
+                -b.rows(5 * f, 5).into_owned(),
+            ),
+            NoiseModel::Unit,
+        );
+    }
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(3.0, -1.0));
+    v.insert(X(1), Vector2::new(0.0, 10.0));
+    let closed = (a.transpose() * &a).cholesky().unwrap().solve(&(a.transpose() * &b));
+    for method in [Method::LevenbergMarquardt, Method::GaussNewton] {
+        let (sol, s) = Optimizer::new(LmOptions { method, ..lm() }).optimize(&g, &v).unwrap();
+        let x0: &Vector2<f64> = sol.get(X(0)).unwrap();
+        let x1: &Vector2<f64> = sol.get(X(1)).unwrap();
+        assert_relative_eq!(DVector::from_column_slice(&[x0[0], x0[1], x1[0], x1[1]]), closed, epsilon = 1e-9);
+        assert_relative_eq!(2.0 * s.final_cost, (&a * &closed - &b).norm_squared(), epsilon = 1e-12);
+    }
+}
+
+struct Rosenbrock(Vec<Key>);
+impl AutoDiffResidual<2> for Rosenbrock {
+    fn keys(&self) -> &[Key] {
+        &self.0
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+        vec![T::from(1.0) - p[0][0], (p[0][1] - p[0][0] * p[0][0]) * 10.0]
+    }
+}
+
+/// Beale's function: minimum 0 at (3, 0.5).
+struct Beale(Vec<Key>);
+impl AutoDiffResidual<2> for Beale {
+    fn keys(&self) -> &[Key] {
+        &self.0
+    }
+    fn residual_dim(&self) -> usize {
+        3
+    }
+    fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+        let (x, y) = (p[0][0], p[0][1]);
+        let one = T::from(1.0);
+        vec![-(x * (one - y)) + 1.5, -(x * (one - y * y)) + 2.25, -(x * (one - y * y * y)) + 2.625]
+    }
+}
+
+#[test]
+fn classic_nonlinear_problems_reach_known_optimum() {
+    let solve = |f: Box<dyn Fn(&mut Graph)>, x0: Vector2<f64>| {
+        let mut g = Graph::new();
+        f(&mut g);
+        let mut v = Values::new();
+        v.insert(X(0), x0);
+        let (sol, s) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+        (*sol.get::<Vector2<f64>>(X(0)).unwrap(), s)
+    };
+    let (x, s) = solve(
+        Box::new(|g| {
+            g.add(AutoDiff::new(Rosenbrock(vec![X(0)])), NoiseModel::Unit);
+        }),
+        Vector2::new(-1.2, 1.0),
+    );
+    assert_relative_eq!(x, Vector2::new(1.0, 1.0), epsilon = 1e-8);
+    assert!(s.final_cost < 1e-20);
+    let (x, s) = solve(
+        Box::new(|g| {
+            g.add(AutoDiff::new(Beale(vec![X(0)])), NoiseModel::Unit);
+        }),
+        Vector2::new(1.0, 1.0),
+    );
+    assert_relative_eq!(x, Vector2::new(3.0, 0.5), epsilon = 1e-7);
+    assert!(s.final_cost < 1e-18);
+    // Numeric Jacobians (default Factor::linearize) reach the same optimum.
+    struct NumericRosenbrock(Vec<Key>);
+    impl Factor for NumericRosenbrock {
+        fn keys(&self) -> &[Key] {
+            &self.0
+        }
+        fn residual_dim(&self) -> usize {
+            2
+        }
+        fn residual(&self, v: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+            let x: &Vector2<f64> = v.get(0)?;
+            Ok(DVector::from_vec(vec![1.0 - x[0], 10.0 * (x[1] - x[0] * x[0])]))
+        }
+    }
+    let (x, _) = solve(
+        Box::new(|g| {
+            g.add(NumericRosenbrock(vec![X(0)]), NoiseModel::Unit);
+        }),
+        Vector2::new(-1.2, 1.0),
+    );
+    assert_relative_eq!(x, Vector2::new(1.0, 1.0), epsilon = 1e-6);
+}
+
+fn pose(w: [f64; 3], t: [f64; 3]) -> Isometry3F64 {
+    Isometry3F64::exp(Vector6::new(w[0], w[1], w[2], 0.0, 0.0, 0.0))
+        .group_mul(Isometry3F64::from_translation(Vector3::from(t)))
+}
+
+/// A square SE(3) loop with exact measurements: optimum is the truth, cost 0.
+#[test]
+fn se3_pose_graph_loop_reaches_known_optimum() {
+    let truth: Vec<Isometry3F64> = (0..8)
+        .map(|i| {
+            let a = i as f64 * std::f64::consts::FRAC_PI_4;
+            Isometry3F64::from_translation(Vector3::new(3.0 * a.cos(), 3.0 * a.sin(), 0.2 * i as f64))
+                .group_mul(Isometry3F64::exp(Vector6::new(0.1, -0.05, a, 0.0, 0.0, 0.0)))
+        })
+        .collect();
+    let noise = NoiseModel::diagonal(&[0.01, 0.01, 0.01, 0.1, 0.1, 0.1]).unwrap();
+    let mut g = Graph::new();
+    g.add(PriorFactor::new(X(0), truth[0]), NoiseModel::isotropic(6, 1e-3).unwrap());
+    for i in 0..8 {
+        let j = (i + 1) % 8;
+        g.add(BetweenFactor::new(X(i as u64), X(j as u64), truth[i].inverse().group_mul(truth[j])), noise.clone());
+    }
+    let mut v = Values::new();
+    for (i, t) in truth.iter().enumerate() {
+        v.insert(X(i as u64), t.group_mul(pose([0.2, -0.1, 0.3], [0.5, -0.4, 0.3])));
+    }
+    let (sol, s) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+    assert!(s.final_cost < 1e-16, "{s}");
+    for (i, t) in truth.iter().enumerate() {
+        let x: &Isometry3F64 = sol.get(X(i as u64)).unwrap();
+        assert!(t.inverse().group_mul(*x).log().norm() < 1e-7);
+    }
+}
+
+/// Line fit y = a x + b with 20 % gross outliers.
+fn line_fit(loss: Option<&str>, outliers: bool) -> Vector2<f64> {
+    struct Point(Vec<Key>, f64, f64);
+    impl AutoDiffResidual<2> for Point {
+        fn keys(&self) -> &[Key] {
+            &self.0
+        }
+        fn residual_dim(&self) -> usize {
+            1
+        }
+        fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+            vec![p[0][0] * self.1 + p[0][1] - self.2]
+        }
+    }
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let mut g = Graph::new();
+    let sigma = 0.1;
+    let noise = NoiseModel::isotropic(1, sigma).unwrap();
+    for i in 0..100 {
+        let x = i as f64 / 10.0;
+        let mut y = 2.0 * x - 1.0 + sigma * (rng.random::<f64>() - 0.5) * 3.4;
+        if outliers && i % 5 == 0 {
+            y += 20.0 + 10.0 * rng.random::<f64>();
+        }
+        let f = AutoDiff::new(Point(vec![X(0)], x, y));
+        match loss {
+            Some("huber") => g.add_robust(f, noise.clone(), Huber(1.345)),
+            Some("cauchy") => g.add_robust(f, noise.clone(), Cauchy(1.0)),
+            Some("tukey") => g.add_robust(f, noise.clone(), Tukey(4.685)),
+            _ => g.add(f, noise.clone()),
+        };
+    }
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(0.0, 0.0));
+    if loss == Some("tukey") {
+        // Tukey is non-convex: start from the Huber solution, as one does in practice.
+        v.insert(X(0), line_fit(Some("huber"), outliers));
+    }
+    let (sol, _) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+    *sol.get::<Vector2<f64>>(X(0)).unwrap()
+}
+
+#[test]
+fn robust_losses_resist_gross_outliers() {
+    let clean = line_fit(None, false);
+    let plain = line_fit(None, true);
+    assert!((plain - clean).norm() > 1.0, "plain least squares should be pulled away: {plain:?} vs {clean:?}");
+    // Huber keeps a bounded pull from each outlier (about δσ), the redescending
+    // losses almost none.
+    for (l, tol) in [("huber", 0.1), ("cauchy", 0.03), ("tukey", 0.03)] {
+        let robust = line_fit(Some(l), true);
+        assert!((robust - clean).norm() < tol, "{l}: {robust:?} vs {clean:?}");
+        assert!((robust - clean).norm() < 0.1 * (plain - clean).norm());
+    }
+}
+
+/// A linear-Gaussian chain: marginalizing x0 then solving equals solving the
+/// full problem, in solution and in information of the kept variables.
+#[test]
+fn marginalization_is_equivalent_to_full_problem() {
+    let build = || {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+        let mut rand_mat = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random::<f64>() - 0.5);
+        let b = |v: f64| DVector::from_element(2, v);
+        let i2 = DMatrix::identity(2, 2);
+        let mut g = Graph::new();
+        g.add(LinearFactor::new(vec![X(0)], vec![i2.clone()], b(0.3)), NoiseModel::isotropic(2, 0.5).unwrap());
+        g.add(LinearFactor::new(vec![X(0), X(1)], vec![rand_mat(2, 2), i2.clone()], b(-0.2)), NoiseModel::Unit);
+        g.add(
+            LinearFactor::new(vec![X(0), X(2)], vec![rand_mat(2, 2), rand_mat(2, 2) + &i2], b(0.7)),
+            NoiseModel::Unit,
+        );
+        g.add(LinearFactor::new(vec![X(1), X(2)], vec![rand_mat(2, 2), i2.clone()], b(0.1)), NoiseModel::Unit);
+        g.add(LinearFactor::new(vec![X(2)], vec![i2], b(-1.0)), NoiseModel::Unit);
+        g
+    };
+    let g = build();
+    let mut v = Values::new();
+    for i in 0..3 {
+        v.insert(X(i), Vector2::new(0.5 * i as f64, -0.25));
+    }
+    let (full, _) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+    let full_cov = covariances(&g, &full, &[X(1), X(2)]).unwrap();
+
+    let m = marginalize(&g, &v, &[X(0)]).unwrap();
+    assert_eq!(m.removed_factors, vec![0, 1, 2]);
+    let mut g2 = build();
+    g2.remove(&m.removed_factors);
+    g2.add(m.prior, NoiseModel::Unit);
+    let mut v2 = v.clone();
+    v2.remove(X(0));
+    let (marg, _) = Optimizer::new(lm()).optimize(&g2, &v2).unwrap();
+    for k in [X(1), X(2)] {
+        assert_relative_eq!(marg.get::<Vector2<f64>>(k).unwrap(), full.get::<Vector2<f64>>(k).unwrap(), epsilon = 1e-9);
+    }
+    let marg_cov = covariances(&g2, &marg, &[X(1), X(2)]).unwrap();
+    for (a, b) in [(X(1), X(1)), (X(1), X(2)), (X(2), X(2))] {
+        assert_relative_eq!(marg_cov.block(a, b).unwrap(), full_cov.block(a, b).unwrap(), epsilon = 1e-9);
+    }
+}
+
+/// Marginal covariance equals the block of the dense inverse of JᵀJ.
+#[test]
+fn covariance_equals_dense_inverse() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let n = 4;
+    let mut g = Graph::new();
+    let mut j_rows: Vec<DMatrix<f64>> = Vec::new();
+    for i in 0..n {
+        for k in i..n.min(i + 2) {
+            let a = DMatrix::from_fn(3, 3, |_, _| rng.random::<f64>() - 0.5) + DMatrix::identity(3, 3);
+            let c = DMatrix::from_fn(3, 3, |_, _| rng.random::<f64>() - 0.5);
+            let mut row = DMatrix::zeros(3, 3 * n);
+            if k == i {
+                g.add(LinearFactor::new(vec![X(i as u64)], vec![a.clone()], DVector::zeros(3)), NoiseModel::Unit);
+                row.view_mut((0, 3 * i), (3, 3)).copy_from(&a);
+            } else {
+                g.add(
+                    LinearFactor::new(vec![X(i as u64), X(k as u64)], vec![a.clone(), c.clone()], DVector::zeros(3)),
+                    NoiseModel::Unit,
+                );
+                row.view_mut((0, 3 * i), (3, 3)).copy_from(&a);
+                row.view_mut((0, 3 * k), (3, 3)).copy_from(&c);
+            }
+            j_rows.push(row);
+        }
+    }
+    let mut j = DMatrix::zeros(3 * j_rows.len(), 3 * n);
+    for (r, row) in j_rows.iter().enumerate() {
+        j.view_mut((3 * r, 0), (3, 3 * n)).copy_from(row);
+    }
+    let dense = (j.transpose() * &j).try_inverse().unwrap();
+    let mut v = Values::new();
+    for i in 0..n {
+        v.insert(X(i as u64), Vector3::new(0.0, 0.0, 0.0));
+    }
+    let keys: Vec<Key> = (0..n as u64).map(X).collect();
+    let cov = covariances(&g, &v, &keys).unwrap();
+    for a in 0..n {
+        for b in 0..n {
+            assert_relative_eq!(
+                cov.block(X(a as u64), X(b as u64)).unwrap(),
+                dense.view((3 * a, 3 * b), (3, 3)).into_owned(),
+                epsilon = 1e-10
+            );
+        }
+    }
+}
+
+/// Small bundle adjustment: Schur elimination of the points gives the same
+/// solution as the full sparse and dense solves.
+#[test]
+fn schur_complement_matches_full_solve() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+    let cams: Vec<SVector<f64, 9>> = (0..4)
+        .map(|i| {
+            SVector::<f64, 9>::from_column_slice(&[
+                0.01 * i as f64,
+                -0.02,
+                0.01,
+                0.1 * i as f64,
+                0.0,
+                -5.0,
+                500.0,
+                0.0,
+                0.0,
+            ])
+        })
+        .collect();
+    let pts: Vec<Vector3<f64>> = (0..30)
+        .map(|_| Vector3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5))
+        .collect();
+    let mut g = Graph::new();
+    let mut v = Values::new();
+    for (ci, c) in cams.iter().enumerate() {
+        for (pi, p) in pts.iter().enumerate() {
+            let proj = SnavelyReprojection::new(C(ci as u64), L(pi as u64), [0.0, 0.0]);
+            let f = AutoDiff::new(proj);
+            let r = f.residual(Vars::new(&[c, p])).unwrap();
+            let obs = [r[0] + 0.5 * (rng.random::<f64>() - 0.5), r[1] + 0.5 * (rng.random::<f64>() - 0.5)];
+            g.add(AutoDiff::new(SnavelyReprojection::new(C(ci as u64), L(pi as u64), obs)), NoiseModel::Unit);
+        }
+        let mut perturbed = *c;
+        perturbed[3] += 0.01;
+        v.insert(C(ci as u64), perturbed);
+    }
+    for (pi, p) in pts.iter().enumerate() {
+        v.insert(L(pi as u64), p + Vector3::new(0.01, -0.01, 0.02));
+    }
+    v.set_constant(C(0), true);
+    let run = |eliminate: Vec<char>, linear_solver| {
+        Optimizer::new(LmOptions { eliminate, linear_solver, ..lm() }).optimize(&g, &v).unwrap()
+    };
+    let (a, sa) = run(vec!['l'], LinearSolver::SparseCholesky);
+    let (b, sb) = run(vec![], LinearSolver::SparseCholesky);
+    let (c, _) = run(vec!['l'], LinearSolver::DenseCholesky);
+    assert_eq!(sa.eliminated_dim, 90);
+    assert_eq!(sb.eliminated_dim, 0);
+    assert_relative_eq!(sa.final_cost, sb.final_cost, epsilon = 1e-9, max_relative = 1e-9);
+    for k in 1..4 {
+        let ka: &SVector<f64, 9> = a.get(C(k)).unwrap();
+        assert_relative_eq!(ka, b.get::<SVector<f64, 9>>(C(k)).unwrap(), epsilon = 1e-6);
+        assert_relative_eq!(ka, c.get::<SVector<f64, 9>>(C(k)).unwrap(), epsilon = 1e-6);
+    }
+    // The constant camera did not move.
+    assert_eq!(a.get::<SVector<f64, 9>>(C(0)).unwrap()[3], cams[0][3] + 0.01);
+}
+
+/// Results are bit-identical whatever the number of threads.
+#[test]
+fn parallel_linearization_is_deterministic() {
+    let sim = tumble::posegraph::simulate_helix(50, 2, 5.0, 0.02, 0.1, 3);
+    let solve = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| Optimizer::new(LmOptions::default()).optimize(&sim.graph, &sim.initial).unwrap())
+    };
+    let (a, sa) = solve(1);
+    let (b, sb) = solve(3);
+    assert_eq!(sa.final_cost.to_bits(), sb.final_cost.to_bits());
+    for i in 0..sim.poses as u64 {
+        assert_eq!(
+            a.get::<Isometry3F64>(X(i)).unwrap().params_dyn(),
+            b.get::<Isometry3F64>(X(i)).unwrap().params_dyn()
+        );
+    }
+}
+
+#[test]
+fn errors_not_panics() {
+    let mut v = Values::new();
+    v.insert(X(0), Vector1::new(1.0));
+    assert_eq!(v.get::<Vector1<f64>>(X(1)).unwrap_err(), ValueError::Missing(X(1)));
+    assert!(matches!(v.get::<Vector2<f64>>(X(0)), Err(ValueError::WrongType { .. })));
+    // Factor on a missing key.
+    let mut g = Graph::new();
+    g.add(PriorFactor::new(X(5), Vector1::new(0.0)), NoiseModel::Unit);
+    assert!(matches!(Optimizer::new(lm()).optimize(&g, &v), Err(SolveError::MissingVariable { factor: 0, .. })));
+    // Factor whose variable has the wrong type.
+    let mut g = Graph::new();
+    g.add(PriorFactor::new(X(0), Vector2::new(0.0, 0.0)), NoiseModel::Unit);
+    assert!(matches!(Optimizer::new(lm()).optimize(&g, &v), Err(SolveError::Factor { factor: 0, .. })));
+    // Noise model of the wrong dimension.
+    let mut g = Graph::new();
+    g.add(PriorFactor::new(X(0), Vector1::new(0.0)), NoiseModel::isotropic(3, 1.0).unwrap());
+    assert!(matches!(Optimizer::new(lm()).optimize(&g, &v), Err(SolveError::BadFactor { .. })));
+    // Gauss–Newton on a singular system reports it.
+    let mut g = Graph::new();
+    g.add(
+        LinearFactor::new(vec![X(0), X(1)], vec![DMatrix::identity(1, 1), -DMatrix::identity(1, 1)], DVector::zeros(1)),
+        NoiseModel::Unit,
+    );
+    v.insert(X(1), Vector1::new(0.0));
+    let r = Optimizer::new(LmOptions { method: Method::GaussNewton, ..lm() }).optimize(&g, &v);
+    assert!(matches!(r, Err(SolveError::Singular(_))), "{:?}", r.err());
+    // Two landmarks in one factor cannot be Schur-eliminated.
+    let mut g = Graph::new();
+    g.add(BetweenFactor::new(L(0), L(1), Vector1::new(1.0)), NoiseModel::Unit);
+    let mut v = Values::new();
+    v.insert(L(0), Vector1::new(0.0));
+    v.insert(L(1), Vector1::new(0.0));
+    assert!(matches!(
+        Optimizer::new(LmOptions { eliminate: vec!['l'], ..lm() }).optimize(&g, &v),
+        Err(SolveError::Config(_))
+    ));
+}
+
+#[test]
+fn constant_variables_stay_put() {
+    let mut g = Graph::new();
+    g.add(BetweenFactor::new(X(0), X(1), Vector2::new(1.0, 1.0)), NoiseModel::Unit);
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(5.0, 5.0));
+    v.insert(X(1), Vector2::new(0.0, 0.0));
+    v.set_constant(X(0), true);
+    let (sol, _) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+    assert_eq!(*sol.get::<Vector2<f64>>(X(0)).unwrap(), Vector2::new(5.0, 5.0));
+    assert_relative_eq!(*sol.get::<Vector2<f64>>(X(1)).unwrap(), Vector2::new(6.0, 6.0), epsilon = 1e-9);
+}
