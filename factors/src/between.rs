@@ -54,7 +54,8 @@ impl<G: LieGroup> Factor for BetweenFactor<G> {
         let x12 = x1.inverse_elem().compose(x2);
         let r = self.measured_inv.compose(&x12).log_vec();
         let jinv = G::right_jacobian_inv(&r);
-        let j1 = -(&jinv * x12.inverse_elem().adjoint_mat());
+        let mut j1 = &jinv * x12.inverse_elem().adjoint_mat();
+        j1.neg_mut();
         Ok(Linearization { residual: r, jacobians: vec![j1, jinv] })
     }
 }

@@ -8,9 +8,14 @@
 
 use crate::error::SolveError;
 use crate::graph::WhitenedLinearization;
-use faer::sparse::linalg::solvers::{Llt, SymbolicLlt};
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
-use faer::Side;
+use faer::{Conj, Par, Side};
 use nalgebra::{DMatrix, DVector};
 use std::collections::{BTreeSet, HashMap};
 
@@ -72,7 +77,8 @@ pub(crate) struct ElimBlock {
     pub hcl: Vec<DMatrix<f64>>,
 }
 
-/// Sparsity structure: the lower triangle of the reduced system, in CSC.
+/// Sparsity structure: the upper triangle of the reduced system, in CSC,
+/// with the kept blocks in a fill-reducing order.
 pub(crate) struct Structure {
     pub kept_dims: Vec<usize>,
     pub kept_offsets: Vec<usize>,
@@ -90,12 +96,133 @@ pub(crate) struct Structure {
     /// Per eliminated block: (slot a, slot b, pair) with blk(a) ≥ blk(b).
     elim_pairs: Vec<Vec<(usize, usize, usize)>>,
     dense: bool,
-    symbolic: Option<SymbolicLlt<usize>>,
+    /// Original kept-block index → position in the fill-reducing order.
+    rank: Vec<usize>,
+    factor: Option<SparseFactor>,
+    /// Reused copy of H for damping and the Schur complement.
+    scratch: Vec<f64>,
+}
+
+/// faer's sparse Cholesky on our pattern, whose blocks are already in a
+/// fill-reducing (block AMD) order: symbolic analysis once, then only numeric
+/// factorizations into reused buffers.
+struct SparseFactor {
+    symbolic: SymbolicCholesky<usize>,
+    l_values: Vec<f64>,
+    mem: MemBuffer,
+}
+
+impl SparseFactor {
+    fn new(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> Result<Self, SolveError> {
+        let sym = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
+        let symbolic =
+            // Supernodal always: with 3- to 9-wide variable blocks it beat the
+            // simplicial path on every benchmark graph (e.g. sphere2500 7×).
+            factorize_symbolic_cholesky(
+                sym,
+                Side::Upper,
+                SymmetricOrdering::Identity,
+                CholeskySymbolicParams {
+                    supernodal_flop_ratio_threshold: faer::sparse::linalg::SupernodalThreshold::FORCE_SUPERNODAL,
+                    ..Default::default()
+                },
+            )
+                .map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?;
+        let req = symbolic
+            .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
+            .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
+        let mem = MemBuffer::try_new(req).map_err(|_| SolveError::Singular("out of memory".into()))?;
+        let l_values = vec![0.0; symbolic.len_val()];
+        Ok(SparseFactor { symbolic, l_values, mem })
+    }
+
+    /// Factorize `h` (upper CSC values on the structure's pattern), then solve
+    /// in place for each column of `rhs`. Returns factorization seconds.
+    fn factor_solve(
+        &mut self,
+        col_ptr: &[usize],
+        row_idx: &[usize],
+        h: &[f64],
+        rhs: faer::MatMut<'_, f64>,
+    ) -> Result<(f64, f64), SolveError> {
+        let t = std::time::Instant::now();
+        let n = col_ptr.len() - 1;
+        let a = SparseColMatRef::new(SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx), h);
+        self.symbolic
+            .factorize_numeric_llt(
+                &mut self.l_values,
+                a,
+                Side::Upper,
+                LltRegularization::default(),
+                Par::Seq,
+                MemStack::new(&mut self.mem),
+                Default::default(),
+            )
+            .map_err(|e| SolveError::Singular(format!("sparse Cholesky: {e:?}")))?;
+        let fact_s = t.elapsed().as_secs_f64();
+        let t = std::time::Instant::now();
+        let llt = LltRef::new(&self.symbolic, &self.l_values);
+        let req = self.symbolic.solve_in_place_scratch::<f64>(rhs.ncols(), Par::Seq);
+        let mut mem = MemBuffer::try_new(req).map_err(|_| SolveError::Singular("out of memory".into()))?;
+        llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut mem));
+        Ok((fact_s, t.elapsed().as_secs_f64()))
+    }
+}
+
+/// Fill-reducing order of the kept blocks: AMD on the block graph (including
+/// the fill the Schur complement of eliminated blocks creates). Returns the
+/// rank of each block.
+fn block_amd(nk: usize, factor_roles: &[Vec<Role>]) -> Vec<usize> {
+    let mut adj: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); nk];
+    let mut elim_nbrs: HashMap<usize, BTreeSet<usize>> = HashMap::new();
+    for roles in factor_roles {
+        let kept: Vec<usize> =
+            roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }).collect();
+        for &a in &kept {
+            for &b in &kept {
+                if a != b {
+                    adj[a].insert(b);
+                }
+            }
+        }
+        for r in roles {
+            if let Role::Elim(e) = r {
+                elim_nbrs.entry(*e).or_default().extend(kept.iter().copied());
+            }
+        }
+    }
+    for nb in elim_nbrs.values() {
+        for &a in nb {
+            for &b in nb {
+                if a != b {
+                    adj[a].insert(b);
+                }
+            }
+        }
+    }
+    let mut col_ptr = Vec::with_capacity(nk + 1);
+    let mut row_idx = Vec::new();
+    for a in &adj {
+        col_ptr.push(row_idx.len());
+        row_idx.extend(a.iter().copied());
+    }
+    col_ptr.push(row_idx.len());
+    let mut perm = vec![0usize; nk];
+    let mut perm_inv = vec![0usize; nk];
+    let sym = SymbolicSparseColMatRef::new_checked(nk, nk, &col_ptr, None, &row_idx);
+    let ok = MemBuffer::try_new(amd::order_scratch::<usize>(nk, row_idx.len())).ok().and_then(|mut mem| {
+        amd::order(&mut perm, &mut perm_inv, sym, amd::Control::default(), MemStack::new(&mut mem)).ok()
+    });
+    if ok.is_none() {
+        return (0..nk).collect();
+    }
+    // perm[new] = old, perm_inv[old] = new.
+    perm_inv
 }
 
 /// Numeric content of the normal equations `H δ = −g` at one linearization.
 pub(crate) struct System {
-    /// Lower-triangular CSC values of H over kept blocks.
+    /// Upper-triangular CSC values of H over kept blocks.
     pub h: Vec<f64>,
     /// Gradient over kept blocks.
     pub g: Vec<f64>,
@@ -112,6 +239,17 @@ impl Structure {
         solver: LinearSolver,
     ) -> Result<Self, SolveError> {
         let nk = kept_dims.len();
+        let rank = block_amd(nk, factor_roles);
+        let mut dims_new = vec![0; nk];
+        for (b, &d) in kept_dims.iter().enumerate() {
+            dims_new[rank[b]] = d;
+        }
+        let kept_dims = dims_new;
+        let remapped: Vec<Vec<Role>> = factor_roles
+            .iter()
+            .map(|roles| roles.iter().map(|r| if let Role::Kept(b) = r { Role::Kept(rank[*b]) } else { *r }).collect())
+            .collect();
+        let factor_roles = &remapped[..];
         let mut kept_offsets = Vec::with_capacity(nk + 1);
         let mut n = 0;
         for d in &kept_dims {
@@ -120,7 +258,7 @@ impl Structure {
         }
         kept_offsets.push(n);
 
-        // Block pattern: col block → set of row blocks ≥ col.
+        // Block pattern (upper triangle): col block → set of row blocks ≤ col.
         let mut cols: Vec<BTreeSet<usize>> = (0..nk).map(|b| BTreeSet::from([b])).collect();
         let mut elim_cams: Vec<Vec<usize>> = vec![Vec::new(); elim_dims.len()];
         for (fi, roles) in factor_roles.iter().enumerate() {
@@ -129,7 +267,7 @@ impl Structure {
             for &a in &kept {
                 for &b in &kept {
                     if a > b {
-                        cols[b].insert(a);
+                        cols[a].insert(b);
                     }
                 }
             }
@@ -153,7 +291,7 @@ impl Structure {
             for &a in cams {
                 for &b in cams {
                     if a > b {
-                        cols[b].insert(a);
+                        cols[a].insert(b);
                     }
                 }
             }
@@ -166,23 +304,23 @@ impl Structure {
         let mut pairs = Vec::new();
         let mut bases = Vec::new();
         let mut diag_positions = vec![0; n];
+        // Pair (big, small) lives in the columns of `big`; `bases[b0 + r]` is the
+        // position of row `offset(small)` in column `offset(big) + r`.
         for (j, rows) in cols.iter().enumerate() {
             for &i in rows {
-                pair_id.insert((i, j), pairs.len());
-                pairs.push((i, j, bases.len()));
+                pair_id.insert((j, i), pairs.len());
+                pairs.push((j, i, bases.len()));
                 bases.extend(std::iter::repeat_n(0, kept_dims[j]));
             }
             for c in 0..kept_dims[j] {
                 col_ptr.push(row_idx.len());
                 for &i in rows {
-                    let pid = pair_id[&(i, j)];
-                    let base_slot = pairs[pid].2 + c;
+                    let base_slot = pairs[pair_id[&(j, i)]].2 + c;
+                    bases[base_slot] = row_idx.len();
                     if i == j {
-                        bases[base_slot] = row_idx.len();
-                        diag_positions[kept_offsets[j] + c] = row_idx.len();
-                        row_idx.extend(kept_offsets[j] + c..kept_offsets[j + 1]);
+                        diag_positions[kept_offsets[j] + c] = row_idx.len() + c;
+                        row_idx.extend(kept_offsets[j]..=kept_offsets[j] + c);
                     } else {
-                        bases[base_slot] = row_idx.len();
                         row_idx.extend(kept_offsets[i]..kept_offsets[i + 1]);
                     }
                 }
@@ -250,40 +388,79 @@ impl Structure {
             elim_cams,
             elim_pairs,
             dense,
-            symbolic: None,
+            rank,
+            factor: None,
+            scratch: Vec::new(),
         })
     }
 
-    /// Number of stored entries of the lower triangle of the reduced system.
+    /// Scalar offset of original kept block `b` in the reduced system.
+    pub fn kept_offset(&self, b: usize) -> usize {
+        self.kept_offsets[self.rank[b]]
+    }
+
+    /// Tangent dimension of original kept block `b`.
+    pub fn kept_dim(&self, b: usize) -> usize {
+        self.kept_dims[self.rank[b]]
+    }
+
+    /// Number of stored entries of the upper triangle of the reduced system.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()
     }
 
     #[inline]
     fn add_block(&self, h: &mut [f64], pair: usize, m: &DMatrix<f64>, sign: f64) {
+        // m = H_(big, small) (d_big × d_small); stored transposed in the upper triangle.
         let (i, j, b0) = self.pairs[pair];
-        let dc = self.kept_dims[j];
+        let di = self.kept_dims[i];
         if i == j {
-            for c in 0..dc {
-                let base = self.bases[b0 + c];
-                for r in c..dc {
-                    h[base + r - c] += sign * m[(r, c)];
+            for r in 0..di {
+                let base = self.bases[b0 + r];
+                for c in 0..=r {
+                    h[base + c] += sign * m[(r, c)];
                 }
             }
         } else {
-            for c in 0..dc {
-                let base = self.bases[b0 + c];
-                for r in 0..self.kept_dims[i] {
-                    h[base + r] += sign * m[(r, c)];
+            let dj = self.kept_dims[j];
+            for r in 0..di {
+                let base = self.bases[b0 + r];
+                for c in 0..dj {
+                    h[base + c] += sign * m[(r, c)];
                 }
+            }
+        }
+    }
+
+    /// `H_(big, small) += J_bigᵀ J_small`, without a temporary.
+    #[inline]
+    fn add_jtj(&self, h: &mut [f64], pair: usize, j_big: &DMatrix<f64>, j_small: &DMatrix<f64>) {
+        let (i, j, b0) = self.pairs[pair];
+        for (r, cr) in j_big.column_iter().enumerate() {
+            let base = self.bases[b0 + r];
+            let cmax = if i == j { r + 1 } else { j_small.ncols() };
+            for c in 0..cmax {
+                h[base + c] += cr.dot(&j_small.column(c));
             }
         }
     }
 
     /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
     pub fn assemble(&self, lins: &[WhitenedLinearization]) -> System {
-        let mut h = vec![0.0; self.nnz()];
-        let mut g = vec![0.0; self.n];
+        let mut sys = System { h: Vec::new(), g: Vec::new(), elim: Vec::new() };
+        self.assemble_into(lins, &mut sys);
+        sys
+    }
+
+    /// As [`Structure::assemble`], reusing the buffers of `sys` (large `h`
+    /// buffers are otherwise returned to the OS and page-faulted back every iteration).
+    pub fn assemble_into(&self, lins: &[WhitenedLinearization], sys: &mut System) {
+        let mut h = std::mem::take(&mut sys.h);
+        h.clear();
+        h.resize(self.nnz(), 0.0);
+        let mut g = std::mem::take(&mut sys.g);
+        g.clear();
+        g.resize(self.n, 0.0);
         let mut elim: Vec<ElimBlock> = self
             .elim_dims
             .iter()
@@ -297,15 +474,13 @@ impl Structure {
         for (plan, wl) in self.plans.iter().zip(lins) {
             let (r, js) = (&wl.lin.residual, &wl.lin.jacobians);
             for &(p, b) in &plan.kept {
-                let gp = js[p].tr_mul(r);
                 let o = self.kept_offsets[b];
-                for (k, v) in gp.iter().enumerate() {
-                    g[o + k] += v;
+                for (k, col) in js[p].column_iter().enumerate() {
+                    g[o + k] += col.dot(r);
                 }
             }
             for &(p, q, pair) in &plan.pairs {
-                let m = js[p].tr_mul(&js[q]);
-                self.add_block(&mut h, pair, &m, 1.0);
+                self.add_jtj(&mut h, pair, &js[p], &js[q]);
             }
             if let Some(ep) = &plan.elim {
                 let b = &mut elim[ep.block];
@@ -317,10 +492,10 @@ impl Structure {
                 }
             }
         }
-        System { h, g, elim }
+        *sys = System { h, g, elim };
     }
 
-    /// Dense symmetric copy of lower-CSC values `h`.
+    /// Dense symmetric copy of triangular CSC values `h`.
     fn dense_matrix(&self, h: &[f64]) -> DMatrix<f64> {
         let mut m = DMatrix::zeros(self.n, self.n);
         for c in 0..self.n {
@@ -347,7 +522,9 @@ impl Structure {
     /// Returns `(δ, factorize_seconds, solve_seconds, build_seconds)`.
     pub fn solve(&mut self, sys: &System, damping: Option<&[f64]>) -> Result<(Vec<f64>, f64, f64, f64), SolveError> {
         let t_build = std::time::Instant::now();
-        let mut h = sys.h.clone();
+        let mut h = std::mem::take(&mut self.scratch);
+        h.clear();
+        h.extend_from_slice(&sys.h);
         let mut g = sys.g.clone();
         if let Some(d) = damping {
             for (k, &p) in self.diag_positions.iter().enumerate() {
@@ -386,39 +563,32 @@ impl Structure {
 
         let t_fact = std::time::Instant::now();
         let mut x: Vec<f64> = g.iter().map(|v| -v).collect();
-        let fact_s;
-        let t_solve;
+        let mut fact_s = 0.0;
+        let mut solve_s = 0.0;
         if self.n == 0 {
-            fact_s = 0.0;
-            t_solve = std::time::Instant::now();
         } else if self.dense {
             let ch = nalgebra::Cholesky::new(self.dense_matrix(&h))
                 .ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
             fact_s = t_fact.elapsed().as_secs_f64();
-            t_solve = std::time::Instant::now();
+            let t_solve = std::time::Instant::now();
             let sol = ch.solve(&DVector::from_vec(x));
             x = sol.as_slice().to_vec();
+            solve_s = t_solve.elapsed().as_secs_f64();
         } else {
-            let sym = SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
-            if self.symbolic.is_none() {
-                self.symbolic = Some(
-                    SymbolicLlt::try_new(sym, Side::Lower)
-                        .map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?,
-                );
+            if self.factor.is_none() {
+                self.factor = Some(SparseFactor::new(self.n, &self.col_ptr, &self.row_idx)?);
             }
-            let mat = SparseColMatRef::new(sym, &h);
-            let llt = Llt::try_new_with_symbolic(self.symbolic.clone().expect("symbolic set above"), mat, Side::Lower)
-                .map_err(|e| SolveError::Singular(format!("sparse Cholesky: {e:?}")))?;
-            fact_s = t_fact.elapsed().as_secs_f64();
-            t_solve = std::time::Instant::now();
+            let factor = self.factor.as_mut().expect("set above");
             let mut rhs = faer::Mat::<f64>::from_fn(self.n, 1, |i, _| x[i]);
-            use faer::linalg::solvers::SolveCore;
-            llt.solve_in_place_with_conj(faer::Conj::No, rhs.as_mut());
+            let (fs, ss) = factor.factor_solve(&self.col_ptr, &self.row_idx, &h, rhs.as_mut())?;
+            fact_s = fs;
+            solve_s = ss;
             for (i, xi) in x.iter_mut().enumerate() {
                 *xi = rhs[(i, 0)];
             }
         }
         // Back-substitution for eliminated blocks: δ_l = −H_ll⁻¹ (g_l + Σ H_lc δ_c).
+        let t_back = std::time::Instant::now();
         for (e, ElimBlock { gl, hcl, .. }) in sys.elim.iter().enumerate() {
             let mut rhs = gl.clone();
             for (s, &c) in self.elim_cams[e].iter().enumerate() {
@@ -432,7 +602,8 @@ impl Structure {
         if x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::Singular("non-finite step".into()));
         }
-        Ok((x, fact_s, t_solve.elapsed().as_secs_f64(), build_s))
+        self.scratch = h;
+        Ok((x, fact_s, solve_s + t_back.elapsed().as_secs_f64(), build_s))
     }
 
     /// `Hδ` for the predicted decrease, over kept then eliminated unknowns (undamped H).
@@ -486,13 +657,11 @@ impl Structure {
             }
             return Ok(out);
         }
-        let sym = SymbolicSparseColMatRef::new_checked(self.n, self.n, &self.col_ptr, None, &self.row_idx);
-        let symbolic = SymbolicLlt::try_new(sym, Side::Lower).map_err(|e| SolveError::Singular(format!("{e:?}")))?;
-        let llt = Llt::try_new_with_symbolic(symbolic, SparseColMatRef::new(sym, &sys.h), Side::Lower)
-            .map_err(|_| SolveError::Singular("information matrix is singular (unobservable variables?)".into()))?;
+        let mut factor = SparseFactor::new(self.n, &self.col_ptr, &self.row_idx)?;
         let mut rhs = faer::Mat::<f64>::from_fn(self.n, cols.len(), |i, j| if i == cols[j] { 1.0 } else { 0.0 });
-        use faer::linalg::solvers::SolveCore;
-        llt.solve_in_place_with_conj(faer::Conj::No, rhs.as_mut());
+        factor
+            .factor_solve(&self.col_ptr, &self.row_idx, &sys.h, rhs.as_mut())
+            .map_err(|_| SolveError::Singular("information matrix is singular (unobservable variables?)".into()))?;
         for j in 0..cols.len() {
             for i in 0..self.n {
                 out[(i, j)] = rhs[(i, j)];

@@ -221,8 +221,8 @@ pub fn covariances(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Covar
             crate::linear::Role::Kept(b) => b,
             _ => return Err(SolveError::Config(format!("key {k} is held constant"))),
         };
-        let o = structure.kept_offsets[b];
-        cols.extend(o..o + structure.kept_dims[b]);
+        let o = structure.kept_offset(b);
+        cols.extend(o..o + structure.kept_dim(b));
         offsets.push(cols.len());
     }
     let full = structure.inverse_columns(&sys, &cols)?;

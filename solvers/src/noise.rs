@@ -46,6 +46,23 @@ fn check_symmetric(m: &DMatrix<f64>) -> Result<(), NoiseError> {
     Ok(())
 }
 
+fn is_upper_triangular(w: &DMatrix<f64>) -> bool {
+    let n = w.nrows();
+    n == w.ncols() && (0..n).all(|c| (c + 1..n).all(|r| w[(r, c)] == 0.0))
+}
+
+/// `x ← W x` for upper-triangular `W`, in place (row i only reads x[k ≥ i]).
+fn upper_mul_in_place(w: &DMatrix<f64>, x: &mut [f64]) {
+    let n = x.len();
+    for i in 0..n {
+        let mut s = 0.0;
+        for (k, xk) in x.iter().enumerate().skip(i) {
+            s += w[(i, k)] * xk;
+        }
+        x[i] = s;
+    }
+}
+
 impl NoiseModel {
     /// Isotropic model with standard deviation `sigma`.
     pub fn isotropic(dim: usize, sigma: f64) -> Result<Self, NoiseError> {
@@ -92,7 +109,13 @@ impl NoiseModel {
             NoiseModel::Unit => {}
             NoiseModel::Isotropic { sigma, .. } => *r /= *sigma,
             NoiseModel::Diagonal(s) => r.component_div_assign(s),
-            NoiseModel::SqrtInformation(w) => *r = w * &*r,
+            NoiseModel::SqrtInformation(w) => {
+                if is_upper_triangular(w) {
+                    upper_mul_in_place(w, r.as_mut_slice());
+                } else {
+                    *r = w * &*r
+                }
+            }
         }
     }
     /// Whiten a Jacobian block (rows = residual components) in place.
@@ -105,7 +128,15 @@ impl NoiseModel {
                     row /= *si;
                 }
             }
-            NoiseModel::SqrtInformation(w) => *j = w * &*j,
+            NoiseModel::SqrtInformation(w) => {
+                if is_upper_triangular(w) && w.nrows() == j.nrows() {
+                    for mut col in j.column_iter_mut() {
+                        upper_mul_in_place(w, col.as_mut_slice());
+                    }
+                } else {
+                    *j = w * &*j
+                }
+            }
         }
     }
 }

@@ -239,7 +239,23 @@ impl Layout {
     }
 }
 
-fn gather<'a>(vars: &'a [Box<dyn DynVariable>], idx: &[usize]) -> Vec<&'a dyn DynVariable> {
+/// Stand-in for a slot of the trial vector that is overwritten right away.
+#[derive(Clone, Debug)]
+struct Placeholder;
+impl crate::Variable for Placeholder {
+    const DIM: usize = 0;
+    fn retract(&self, _: &[f64]) -> Self {
+        Placeholder
+    }
+    fn local(&self, _: &Self) -> Vec<f64> {
+        Vec::new()
+    }
+    fn params(&self) -> Vec<f64> {
+        Vec::new()
+    }
+}
+
+fn gather<'a>(vars: &'a [Box<dyn DynVariable>], idx: &[usize]) -> smallvec::SmallVec<[&'a dyn DynVariable; 4]> {
     idx.iter().map(|&i| vars[i].as_ref()).collect()
 }
 
@@ -362,6 +378,7 @@ impl Optimizer {
         let mut lambda = o.initial_lambda;
         let mut nu = 2.0;
         let gn = o.method == Method::GaussNewton;
+        let mut sys = System { h: Vec::new(), g: Vec::new(), elim: Vec::new() };
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
 
         'outer: while summary.termination != Termination::NothingToOptimize {
@@ -370,7 +387,7 @@ impl Optimizer {
                 break;
             }
             let t = Instant::now();
-            let sys: System = structure.assemble(&lins);
+            structure.assemble_into(&lins, &mut sys);
             summary.time_build += t.elapsed().as_secs_f64();
             let g_all: Vec<f64> =
                 sys.g.iter().copied().chain(sys.elim.iter().flat_map(|e| e.gl.iter().copied())).collect();
@@ -382,6 +399,8 @@ impl Optimizer {
             let diag: Vec<f64> =
                 structure.diagonal(&sys).iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
             summary.iterations += 1;
+            let x_norm =
+                free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
             loop {
                 let damping: Option<Vec<f64>> = if gn { None } else { Some(diag.iter().map(|d| d * lambda).collect()) };
                 summary.linear_solves += 1;
@@ -405,14 +424,26 @@ impl Optimizer {
                 summary.time_solve += ss;
                 summary.time_build += bs;
                 let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
-                let x_norm =
-                    free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
                 let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
                 // Retract.
                 let t = Instant::now();
-                let mut trial = vars.clone();
-                let mut off = 0;
-                for &v in &free {
+                let mut trial: Vec<Box<dyn DynVariable>> = vars
+                    .iter()
+                    .enumerate()
+                    .map(|(i, v)| {
+                        if layout.roles[i] == Role::Const {
+                            v.clone_box()
+                        } else {
+                            Box::new(Placeholder) as Box<dyn DynVariable>
+                        }
+                    })
+                    .collect();
+                for (b, &v) in layout.kept_vars.iter().enumerate() {
+                    let (o, d) = (structure.kept_offset(b), structure.kept_dim(b));
+                    trial[v] = vars[v].retract_dyn(&delta[o..o + d]);
+                }
+                let mut off = structure.n;
+                for &v in &layout.elim_vars {
                     let d = vars[v].dim();
                     trial[v] = vars[v].retract_dyn(&delta[off..off + d]);
                     off += d;

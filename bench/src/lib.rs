@@ -1,0 +1,175 @@
+//! Shared pieces of tumble's benchmark programs: running each solver on a
+//! problem file in a fresh process and reporting comparable figures.
+//!
+//! Every peer gets the same problem: the g2o edges with their information
+//! matrices (permuted to each library's tangent order), GTSAM's between error
+//! `Log(Z⁻¹ X₁⁻¹ X₂)`, the first pose fixed (tumble holds it constant; the peers
+//! get a prior with σ = 1e-3 on it, as their own examples do). Final costs are
+//! all re-evaluated by tumble's graph from each peer's solution, so the χ²
+//! column means the same thing for everyone.
+
+pub mod peers;
+
+use serde_json::json;
+use std::path::Path;
+use std::time::Instant;
+use tumble::io::{bal, g2o};
+use tumble_solvers::{Graph, LmOptions, Optimizer, Values};
+
+/// One solver's result on one problem.
+#[derive(Clone, Debug, Default)]
+pub struct Record {
+    /// Problem name (file stem).
+    pub problem: String,
+    /// Solver name.
+    pub solver: String,
+    /// Free variables.
+    pub variables: usize,
+    /// Factors.
+    pub factors: usize,
+    /// Iterations reported by the solver.
+    pub iterations: usize,
+    /// χ² at the start (sum of squared whitened residuals).
+    pub initial_chi2: f64,
+    /// χ² at the end.
+    pub final_chi2: f64,
+    /// Median seconds of the optimize call.
+    pub total_s: f64,
+    /// Seconds in numeric factorization (tumble only; NaN for peers).
+    pub factorize_s: f64,
+    /// Peak resident memory of the worker process [MB].
+    pub peak_rss_mb: f64,
+    /// Why the solver did not run, if it did not.
+    pub skipped: Option<String>,
+}
+
+impl Record {
+    /// The JSON line the issue asks for.
+    pub fn to_json(&self) -> String {
+        json!({
+            "problem": self.problem, "solver": self.solver, "variables": self.variables,
+            "factors": self.factors, "iterations": self.iterations,
+            "initial_chi2": self.initial_chi2, "final_chi2": self.final_chi2,
+            "total_s": self.total_s, "factorize_s": if self.factorize_s.is_finite() { json!(self.factorize_s) } else { json!(null) },
+            "peak_rss_mb": self.peak_rss_mb, "skipped": self.skipped,
+        })
+        .to_string()
+    }
+    /// Parse a line written by [`Record::to_json`].
+    pub fn from_json(line: &str) -> Option<Record> {
+        let v: serde_json::Value = serde_json::from_str(line).ok()?;
+        let f = |k: &str| v[k].as_f64().unwrap_or(f64::NAN);
+        Some(Record {
+            problem: v["problem"].as_str()?.to_string(),
+            solver: v["solver"].as_str()?.to_string(),
+            variables: v["variables"].as_u64().unwrap_or(0) as usize,
+            factors: v["factors"].as_u64().unwrap_or(0) as usize,
+            iterations: v["iterations"].as_u64().unwrap_or(0) as usize,
+            initial_chi2: f("initial_chi2"),
+            final_chi2: f("final_chi2"),
+            total_s: f("total_s"),
+            factorize_s: f("factorize_s"),
+            peak_rss_mb: f("peak_rss_mb"),
+            skipped: v["skipped"].as_str().map(|s| s.to_string()),
+        })
+    }
+}
+
+/// Peak resident set size of this process [MB] (Linux `VmHWM`).
+pub fn peak_rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines().find(|l| l.starts_with("VmHWM:")).and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// Median of a non-empty slice.
+pub fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(|a, b| a.total_cmp(b));
+    v[v.len() / 2]
+}
+
+/// A problem loaded by tumble's readers.
+pub struct TumbleProblem {
+    /// The graph.
+    pub graph: Graph,
+    /// Initial values.
+    pub values: Values,
+    /// Solver options (Schur on points for BAL).
+    pub options: LmOptions,
+    /// Whether it is bundle adjustment.
+    pub is_bal: bool,
+}
+
+/// Load a g2o or BAL file with tumble's readers.
+pub fn load(path: &Path) -> Result<TumbleProblem, String> {
+    let options = LmOptions { log_iterations: false, ..LmOptions::default() };
+    if path.extension().is_some_and(|e| e == "g2o") {
+        let pg = g2o::read_g2o(path, &Default::default()).map_err(|e| e.to_string())?;
+        Ok(TumbleProblem { graph: pg.graph, values: pg.values, options, is_bal: false })
+    } else {
+        let p = bal::read_bal(path).map_err(|e| e.to_string())?;
+        Ok(TumbleProblem {
+            graph: p.graph,
+            values: p.values,
+            options: LmOptions { eliminate: vec!['l'], ..options },
+            is_bal: true,
+        })
+    }
+}
+
+/// Run tumble `repeat` times on a problem.
+pub fn run_tumble(path: &Path, repeat: usize) -> Record {
+    let name = problem_name(path);
+    let p = match load(path) {
+        Ok(p) => p,
+        Err(e) => return skipped(&name, "tumble", &e),
+    };
+    let mut times = Vec::new();
+    let mut fact = Vec::new();
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        let t = Instant::now();
+        let r = Optimizer::new(p.options.clone()).optimize(&p.graph, &p.values);
+        times.push(t.elapsed().as_secs_f64());
+        match r {
+            Ok((_, s)) => {
+                fact.push(s.time_factorize);
+                last = Some(s);
+            }
+            Err(e) => return skipped(&name, "tumble", &e.to_string()),
+        }
+    }
+    let s = last.expect("at least one run");
+    Record {
+        problem: name,
+        solver: "tumble".into(),
+        variables: s.variables,
+        factors: s.factors,
+        iterations: s.iterations,
+        initial_chi2: 2.0 * s.initial_cost,
+        final_chi2: 2.0 * s.final_cost,
+        total_s: median(&mut times),
+        factorize_s: median(&mut fact),
+        peak_rss_mb: peak_rss_mb(),
+        skipped: None,
+    }
+}
+
+/// File stem of a problem.
+pub fn problem_name(path: &Path) -> String {
+    path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+}
+
+/// A record saying the solver did not run.
+pub fn skipped(problem: &str, solver: &str, why: &str) -> Record {
+    Record {
+        problem: problem.into(),
+        solver: solver.into(),
+        skipped: Some(why.into()),
+        factorize_s: f64::NAN,
+        ..Default::default()
+    }
+}
