@@ -39,6 +39,12 @@ enum Command {
         /// Maximum iterations.
         #[arg(long, default_value_t = 100)]
         max_iterations: usize,
+        /// Initial Levenberg–Marquardt damping λ (relative to diag(H)).
+        #[arg(long)]
+        initial_lambda: Option<f64>,
+        /// Smallest factor λ shrinks by after a good step.
+        #[arg(long)]
+        min_lambda_decrease: Option<f64>,
         /// Relative cost-decrease tolerance.
         #[arg(long, default_value_t = 1e-6)]
         function_tolerance: f64,
@@ -83,7 +89,17 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             };
             println!("position RMS error vs truth: initial {:.3} m -> optimized {:.3} m", err(&sim.initial), err(&sol));
         }
-        Command::Solve { file, method, max_iterations, function_tolerance, repair_information, verbose } => {
+        Command::Solve {
+            file,
+            method,
+            max_iterations,
+            initial_lambda,
+            min_lambda_decrease,
+            function_tolerance,
+            repair_information,
+            verbose,
+        } => {
+            let defaults = LmOptions::default();
             let options = LmOptions {
                 method: match method {
                     MethodArg::Lm => Method::LevenbergMarquardt,
@@ -91,6 +107,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 },
                 max_iterations,
                 function_tolerance,
+                initial_lambda: initial_lambda.unwrap_or(defaults.initial_lambda),
+                min_lambda_decrease: min_lambda_decrease.unwrap_or(defaults.min_lambda_decrease),
                 ..LmOptions::default()
             };
             let is_g2o = file.extension().is_some_and(|e| e.eq_ignore_ascii_case("g2o"));
