@@ -20,9 +20,9 @@ pub struct SimulatedPoseGraph {
     pub poses: usize,
 }
 
-/// Poses on `laps` loops of a helix of radius `radius` [m]; odometry between
+/// Poses on `laps` loops of a helix of radius `radius` \[m\]; odometry between
 /// consecutive poses and a loop closure to the pose one lap earlier, all with
-/// noise `sigma_rot` [rad] and `sigma_trans` [m]. Deterministic for a seed.
+/// noise `sigma_rot` \[rad\] and `sigma_trans` \[m\]. Deterministic for a seed.
 pub fn simulate_helix(
     poses_per_lap: usize,
     laps: usize,

@@ -1,5 +1,6 @@
-//! Solver benchmark: tumble against factrs, tiny-solver and apex-solver on the
-//! same problems, each run in its own process (so peak memory is its own).
+//! Solver benchmark: tumble against GTSAM (Python wheel, if installed), factrs,
+//! tiny-solver and apex-solver on the same problems, each run in its own
+//! process (so peak memory is its own).
 //!
 //! ```sh
 //! cargo run --release -p tumble-bench --example bench_solver -- ../shared/data/pose_graphs/*.g2o ../shared/data/bal/*.txt
@@ -14,7 +15,7 @@ use std::path::PathBuf;
 use std::process::Command;
 use tumble_bench::{peers, run_tumble, Record};
 
-const SOLVERS: [&str; 4] = ["tumble", "factrs", "tiny-solver", "apex-solver"];
+const SOLVERS: [&str; 5] = ["tumble", "gtsam", "factrs", "tiny-solver", "apex-solver"];
 
 fn worker(solver: &str, file: &std::path::Path, repeat: usize) -> Record {
     match solver {
@@ -44,7 +45,7 @@ fn main() {
             "--repeat" => repeat = it.next().and_then(|s| s.parse().ok()).unwrap_or(3),
             "--solvers" => solvers = it.next().map(|s| s.split(',').map(String::from).collect()).unwrap_or_default(),
             "-h" | "--help" => {
-                println!("usage: bench_solver [--json] [--repeat N] [--solvers tumble,factrs,tiny-solver,apex-solver] FILE...");
+                println!("usage: bench_solver [--json] [--repeat N] [--solvers tumble,gtsam,factrs,tiny-solver,apex-solver] FILE...");
                 return;
             }
             f => files.push(PathBuf::from(f)),
@@ -74,8 +75,15 @@ fn main() {
     for file in &files {
         let mut tumble_time = f64::NAN;
         for solver in &solvers {
-            let out =
-                Command::new(&exe).args(["--worker", solver, &file.to_string_lossy(), &repeat.to_string()]).output();
+            let out = if solver == "gtsam" {
+                // GTSAM through its Python wheel (pip install gtsam==4.3.0), same JSON line.
+                let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/bench_gtsam.py");
+                Command::new("python3")
+                    .args([script, "--repeat", &repeat.to_string(), &file.to_string_lossy()])
+                    .output()
+            } else {
+                Command::new(&exe).args(["--worker", solver, &file.to_string_lossy(), &repeat.to_string()]).output()
+            };
             let rec = match out {
                 Ok(o) => String::from_utf8_lossy(&o.stdout).lines().find_map(Record::from_json).unwrap_or_else(|| {
                     let err = String::from_utf8_lossy(&o.stderr);

@@ -37,7 +37,7 @@ pub struct Record {
     pub total_s: f64,
     /// Seconds in numeric factorization (tumble only; NaN for peers).
     pub factorize_s: f64,
-    /// Peak resident memory of the worker process [MB].
+    /// Peak resident memory of the worker process \[MB\].
     pub peak_rss_mb: f64,
     /// Why the solver did not run, if it did not.
     pub skipped: Option<String>,
@@ -75,7 +75,7 @@ impl Record {
     }
 }
 
-/// Peak resident set size of this process [MB] (Linux `VmHWM`).
+/// Peak resident set size of this process \[MB\] (Linux `VmHWM`).
 pub fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()

@@ -27,18 +27,18 @@ fn chi2_of(graph: &Graph, template: &Values, poses: Vec<(u64, PoseOut)>) -> f64 
 pub enum PoseOut {
     /// Planar pose.
     Se2 {
-        /// x [m].
+        /// x \[m\].
         x: f64,
-        /// y [m].
+        /// y \[m\].
         y: f64,
-        /// heading [rad].
+        /// heading \[rad\].
         theta: f64,
     },
     /// Spatial pose: quaternion (w, x, y, z) and translation.
     Se3 {
         /// (w, x, y, z).
         q: [f64; 4],
-        /// translation [m].
+        /// translation \[m\].
         t: na::Vector3<f64>,
     },
 }
@@ -177,7 +177,7 @@ struct TinyBetween {
     se3: bool,
     /// Measurement: SE(2) (θ, x, y) or SE(3) quaternion (x, y, z, w) + t.
     z: Vec<f64>,
-    /// Square-root information in tumble's tangent order ([θ, x, y] / [ω, ν]).
+    /// Square-root information in tumble's tangent order (\[θ, x, y\] / \[ω, ν\]).
     w: na::DMatrix<f64>,
 }
 

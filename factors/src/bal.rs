@@ -5,9 +5,9 @@ use tumble_solvers::{AutoDiffResidual, Key, Real};
 /// Reprojection of a 3D point into a BAL camera, written generically and
 /// differentiated automatically (wrap it in [`tumble_solvers::AutoDiff`] with `N = 12`).
 ///
-/// Camera (R^9): angle-axis rotation `w` [rad], translation `t`, focal length `f`
-/// [px], radial distortion `k1`, `k2`. Point (R^3) in world coordinates.
-/// `P = R(w) X + t`, `p = −P_xy / P_z`, `r = f (1 + k1‖p‖² + k2‖p‖⁴) p − observed` [px].
+/// Camera (R^9): angle-axis rotation `w` \[rad\], translation `t`, focal length `f`
+/// \[px\], radial distortion `k1`, `k2`. Point (R^3) in world coordinates.
+/// `P = R(w) X + t`, `p = −P_xy / P_z`, `r = f (1 + k1‖p‖² + k2‖p‖⁴) p − observed` \[px\].
 #[derive(Clone, Debug)]
 pub struct SnavelyReprojection {
     keys: [Key; 2],

@@ -26,7 +26,7 @@ pub fn so3_exp(w: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() + k * a + k * k * b
 }
 
-/// SO(3) logarithm of a rotation matrix, angle in [0, π].
+/// SO(3) logarithm of a rotation matrix, angle in \[0, π\].
 pub fn so3_log(r: &Matrix3<f64>) -> Vector3<f64> {
     let q = nalgebra::UnitQuaternion::from_matrix(r);
     q.scaled_axis()

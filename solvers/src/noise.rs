@@ -51,7 +51,7 @@ fn is_upper_triangular(w: &DMatrix<f64>) -> bool {
     n == w.ncols() && (0..n).all(|c| (c + 1..n).all(|r| w[(r, c)] == 0.0))
 }
 
-/// `x ← W x` for upper-triangular `W`, in place (row i only reads x[k ≥ i]).
+/// `x ← W x` for upper-triangular `W`, in place (row i only reads x\[k ≥ i\]).
 fn upper_mul_in_place(w: &DMatrix<f64>, x: &mut [f64]) {
     let n = x.len();
     for i in 0..n {

@@ -6,7 +6,7 @@
 //!
 //! Built in:
 //! - `nalgebra::SVector<f64, N>`: R^N, `x ⊞ δ = x + δ`.
-//! - [`Rotation3F64`] (SO(3), from sophus-rs): tangent ω [rad], body frame.
+//! - [`Rotation3F64`] (SO(3), from sophus-rs): tangent ω \[rad\], body frame.
 //! - [`Isometry3F64`] (SE(3), from sophus-rs): tangent `[ω, ν]`, rotation first.
 //! - [`Isometry2F64`] (SE(2), from sophus-rs): tangent `[θ, νx, νy]`, rotation first.
 //!
@@ -135,7 +135,7 @@ fn row_major(m: &nalgebra::Matrix3<f64>) -> [f64; 9] {
     out
 }
 
-/// d vec_rowmajor(R·Exp(δ)) / dδ at 0: column i is R·[e_i]×.
+/// d vec_rowmajor(R·Exp(δ)) / dδ at 0: column i is R·\[e_i\]×.
 fn rot_params_jacobian(r: &nalgebra::Matrix3<f64>) -> DMatrix<f64> {
     let mut j = DMatrix::zeros(9, 3);
     for i in 0..3 {
@@ -213,7 +213,7 @@ impl Variable for Isometry2F64 {
     }
 }
 
-/// SE(2) from `(x, y, θ)` [m, m, rad].
+/// SE(2) from `(x, y, θ)` \[m, m, rad\].
 pub fn se2(x: f64, y: f64, theta: f64) -> Isometry2F64 {
     Isometry2F64::from_rotation_and_translation(
         Rotation2F64::exp(nalgebra::Vector1::new(theta)),
@@ -221,7 +221,7 @@ pub fn se2(x: f64, y: f64, theta: f64) -> Isometry2F64 {
     )
 }
 
-/// SE(3) from a unit quaternion `(w, x, y, z)` and a translation [m].
+/// SE(3) from a unit quaternion `(w, x, y, z)` and a translation \[m\].
 /// The quaternion is normalized; it must not be zero.
 pub fn se3_from_quaternion(q: [f64; 4], t: Vector3<f64>) -> Isometry3F64 {
     let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
@@ -233,7 +233,7 @@ pub fn se3_rotation_matrix(x: &Isometry3F64) -> nalgebra::Matrix3<f64> {
     x.rotation().matrix()
 }
 
-/// Translation [m] of an SE(3) element.
+/// Translation \[m\] of an SE(3) element.
 pub fn se3_translation(x: &Isometry3F64) -> Vector3<f64> {
     x.translation()
 }
