@@ -435,3 +435,70 @@ fn constant_variables_stay_put() {
     assert_eq!(*sol.get::<Vector2<f64>>(X(0)).unwrap(), Vector2::new(5.0, 5.0));
     assert_relative_eq!(*sol.get::<Vector2<f64>>(X(1)).unwrap(), Vector2::new(6.0, 6.0), epsilon = 1e-9);
 }
+
+/// A user-defined variable type: a direction on the unit sphere S² with a
+/// 2-dof retraction, used by an autodiff factor and an analytic-free numeric one.
+#[derive(Clone, Debug)]
+struct Direction(Vector3<f64>);
+
+impl Direction {
+    /// Orthonormal basis of the tangent plane at the direction.
+    fn basis(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let d = self.0;
+        let a = if d.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        let b1 = d.cross(&a).normalize();
+        (b1, d.cross(&b1))
+    }
+}
+
+impl Variable for Direction {
+    const DIM: usize = 2;
+    fn retract(&self, delta: &[f64]) -> Self {
+        let (b1, b2) = self.basis();
+        Direction((self.0 + b1 * delta[0] + b2 * delta[1]).normalize())
+    }
+    fn local(&self, other: &Self) -> Vec<f64> {
+        let (b1, b2) = self.basis();
+        // Inverse of the retraction: project onto the tangent plane and rescale.
+        let v = other.0 / self.0.dot(&other.0);
+        vec![b1.dot(&v), b2.dot(&v)]
+    }
+    fn params(&self) -> Vec<f64> {
+        self.0.as_slice().to_vec()
+    }
+}
+
+/// Angle-free residual between a direction and a measured unit vector.
+struct DirectionPrior(Vec<Key>, Vector3<f64>);
+impl AutoDiffResidual<2> for DirectionPrior {
+    fn keys(&self) -> &[Key] {
+        &self.0
+    }
+    fn residual_dim(&self) -> usize {
+        3
+    }
+    fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+        (0..3).map(|i| p[0][i] - self.1[i]).collect()
+    }
+}
+
+#[test]
+fn user_defined_variable_type() {
+    let x = Direction(Vector3::new(1.0, 2.0, 2.0).normalize());
+    // Retraction and local coordinates are inverse of each other.
+    let y = x.retract(&[0.1, -0.2]);
+    let back = x.local(&y);
+    assert_relative_eq!(back[0], 0.1, epsilon = 1e-12);
+    assert_relative_eq!(back[1], -0.2, epsilon = 1e-12);
+    // Autodiff through the default (numeric) params Jacobian matches central differences.
+    let target = Vector3::new(0.0, 0.6, 0.8);
+    let f = AutoDiff::new(DirectionPrior(vec![P(0)], target));
+    assert!(check_jacobians(&f, &[&x]).unwrap().passes(1e-6));
+    let mut g = Graph::new();
+    g.add(f, NoiseModel::isotropic(3, 0.1).unwrap());
+    let mut v = Values::new();
+    v.insert(P(0), x);
+    let (sol, s) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+    assert_relative_eq!(sol.get::<Direction>(P(0)).unwrap().0, target, epsilon = 1e-6);
+    assert!(s.final_cost < 1e-12);
+}

@@ -106,7 +106,7 @@ fn main() {
                     rec.solver,
                     rec.variables,
                     rec.factors,
-                    rec.iterations,
+                    rec.iterations.map_or("-".to_string(), |i| i.to_string()),
                     rec.initial_chi2,
                     rec.final_chi2,
                     rec.total_s,

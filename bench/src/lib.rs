@@ -27,8 +27,8 @@ pub struct Record {
     pub variables: usize,
     /// Factors.
     pub factors: usize,
-    /// Iterations reported by the solver.
-    pub iterations: usize,
+    /// Iterations reported by the solver (`None` when it does not report them).
+    pub iterations: Option<usize>,
     /// χ² at the start (sum of squared whitened residuals).
     pub initial_chi2: f64,
     /// χ² at the end.
@@ -64,7 +64,7 @@ impl Record {
             solver: v["solver"].as_str()?.to_string(),
             variables: v["variables"].as_u64().unwrap_or(0) as usize,
             factors: v["factors"].as_u64().unwrap_or(0) as usize,
-            iterations: v["iterations"].as_u64().unwrap_or(0) as usize,
+            iterations: v["iterations"].as_u64().map(|i| i as usize),
             initial_chi2: f("initial_chi2"),
             final_chi2: f("final_chi2"),
             total_s: f("total_s"),
@@ -148,7 +148,7 @@ pub fn run_tumble(path: &Path, repeat: usize) -> Record {
         solver: "tumble".into(),
         variables: s.variables,
         factors: s.factors,
-        iterations: s.iterations,
+        iterations: Some(s.iterations),
         initial_chi2: 2.0 * s.initial_cost,
         final_chi2: 2.0 * s.final_cost,
         total_s: median(&mut times),

@@ -104,7 +104,7 @@ fn finish(
     graph: &Graph,
     values: &Values,
     times: &mut [f64],
-    iterations: usize,
+    iterations: Option<usize>,
     poses: Vec<(u64, PoseOut)>,
 ) -> Record {
     let variables = values.keys().filter(|k| !values.is_constant(*k)).count();
@@ -169,7 +169,7 @@ pub fn run_factrs(path: &Path, repeat: usize) -> Record {
             })
         })
         .collect();
-    finish(&name, "factrs", &tp.graph, &tp.values, &mut times, 0, poses)
+    finish(&name, "factrs", &tp.graph, &tp.values, &mut times, None, poses)
 }
 
 /// Whitened GTSAM between error for tiny-solver, written over its scalar type.
@@ -320,7 +320,7 @@ pub fn run_tiny(path: &Path, repeat: usize) -> Record {
             })
         })
         .collect();
-    finish(&name, "tiny-solver", &tp.graph, &tp.values, &mut times, 0, poses)
+    finish(&name, "tiny-solver", &tp.graph, &tp.values, &mut times, None, poses)
 }
 
 /// apex-solver 1.5 with its own g2o loader, information matrices as noise
@@ -428,5 +428,5 @@ pub fn run_apex(path: &Path, repeat: usize) -> Record {
             })
             .collect();
     }
-    finish(&name, "apex-solver", &tp.graph, &tp.values, &mut times, iterations, poses)
+    finish(&name, "apex-solver", &tp.graph, &tp.values, &mut times, Some(iterations), poses)
 }

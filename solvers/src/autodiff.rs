@@ -90,18 +90,28 @@ impl<R: AutoDiffResidual<N>, const N: usize> Factor for AutoDiff<R, N> {
         for i in 0..vars.len() {
             let v = vars.get_dyn(i);
             let p = v.params_dyn();
-            let jp = v.params_jacobian_dyn();
-            let lv = p
-                .iter()
-                .enumerate()
-                .map(|(row, &re)| {
-                    let mut eps = SVector::<f64, N>::zeros();
-                    for c in 0..v.dim() {
-                        eps[offset + c] = jp[(row, c)];
-                    }
-                    DualSVec64::<N>::new(re, Derivative::some(eps))
-                })
-                .collect();
+            let lv = if v.params_are_tangent() {
+                p.iter()
+                    .enumerate()
+                    .map(|(row, &re)| {
+                        let mut eps = SVector::<f64, N>::zeros();
+                        eps[offset + row] = 1.0;
+                        DualSVec64::<N>::new(re, Derivative::some(eps))
+                    })
+                    .collect()
+            } else {
+                let jp = v.params_jacobian_dyn();
+                p.iter()
+                    .enumerate()
+                    .map(|(row, &re)| {
+                        let mut eps = SVector::<f64, N>::zeros();
+                        for c in 0..v.dim() {
+                            eps[offset + c] = jp[(row, c)];
+                        }
+                        DualSVec64::<N>::new(re, Derivative::some(eps))
+                    })
+                    .collect()
+            };
             lifted.push(lv);
             offset += v.dim();
         }

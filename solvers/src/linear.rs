@@ -409,25 +409,20 @@ impl Structure {
         self.row_idx.len()
     }
 
+    /// `H_(big, small) −= W_big H_smallᵀ` (Schur update), without a temporary.
     #[inline]
-    fn add_block(&self, h: &mut [f64], pair: usize, m: &DMatrix<f64>, sign: f64) {
-        // m = H_(big, small) (d_big × d_small); stored transposed in the upper triangle.
+    fn sub_w_ht(&self, h: &mut [f64], pair: usize, w_big: &DMatrix<f64>, h_small: &DMatrix<f64>) {
         let (i, j, b0) = self.pairs[pair];
-        let di = self.kept_dims[i];
-        if i == j {
-            for r in 0..di {
-                let base = self.bases[b0 + r];
-                for c in 0..=r {
-                    h[base + c] += sign * m[(r, c)];
+        let dl = w_big.ncols();
+        for r in 0..w_big.nrows() {
+            let base = self.bases[b0 + r];
+            let cmax = if i == j { r + 1 } else { h_small.nrows() };
+            for c in 0..cmax {
+                let mut s = 0.0;
+                for k in 0..dl {
+                    s += w_big[(r, k)] * h_small[(c, k)];
                 }
-            }
-        } else {
-            let dj = self.kept_dims[j];
-            for r in 0..di {
-                let base = self.bases[b0 + r];
-                for c in 0..dj {
-                    h[base + c] += sign * m[(r, c)];
-                }
+                h[base + c] -= s;
             }
         }
     }
@@ -485,10 +480,10 @@ impl Structure {
             if let Some(ep) = &plan.elim {
                 let b = &mut elim[ep.block];
                 let jl = &js[ep.pos];
-                b.hll += jl.tr_mul(jl);
-                b.gl += jl.tr_mul(r);
+                b.hll.gemm_tr(1.0, jl, jl, 1.0);
+                b.gl.gemv_tr(1.0, jl, r, 1.0);
                 for &(q, s) in &ep.slots {
-                    b.hcl[s] += js[q].tr_mul(jl);
+                    b.hcl[s].gemm_tr(1.0, &js[q], jl, 1.0);
                 }
             }
         }
@@ -547,8 +542,7 @@ impl Structure {
                 .inverse();
             let w: Vec<DMatrix<f64>> = hcl.iter().map(|m| m * &inv).collect();
             for &(sa, sb, pair) in &self.elim_pairs[e] {
-                let m = &w[sa] * hcl[sb].transpose();
-                self.add_block(&mut h, pair, &m, -1.0);
+                self.sub_w_ht(&mut h, pair, &w[sa], &hcl[sb]);
             }
             for (s, &c) in self.elim_cams[e].iter().enumerate() {
                 let v = &w[s] * gl;

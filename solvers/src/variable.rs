@@ -28,6 +28,9 @@ use std::fmt::Debug;
 pub trait Variable: Clone + Debug + Send + Sync + 'static {
     /// Tangent-space dimension.
     const DIM: usize;
+    /// Whether `params()` are the tangent coordinates themselves (vector
+    /// spaces), so that `params_jacobian()` is the identity.
+    const PARAMS_ARE_TANGENT: bool = false;
     /// Retraction `self ⊞ delta` (`delta.len() == DIM`).
     fn retract(&self, delta: &[f64]) -> Self;
     /// Local coordinates `self ⊟ other`: the `delta` with `self ⊞ delta = other`.
@@ -67,6 +70,8 @@ pub trait DynVariable: Any + Debug + Send + Sync {
     fn params_dyn(&self) -> Vec<f64>;
     /// See [`Variable::params_jacobian`].
     fn params_jacobian_dyn(&self) -> DMatrix<f64>;
+    /// See [`Variable::PARAMS_ARE_TANGENT`].
+    fn params_are_tangent(&self) -> bool;
     /// Boxed clone.
     fn clone_box(&self) -> Box<dyn DynVariable>;
     /// For downcasting.
@@ -91,6 +96,9 @@ impl<V: Variable> DynVariable for V {
     fn params_jacobian_dyn(&self) -> DMatrix<f64> {
         self.params_jacobian()
     }
+    fn params_are_tangent(&self) -> bool {
+        V::PARAMS_ARE_TANGENT
+    }
     fn clone_box(&self) -> Box<dyn DynVariable> {
         Box::new(self.clone())
     }
@@ -110,6 +118,7 @@ impl Clone for Box<dyn DynVariable> {
 
 impl<const N: usize> Variable for SVector<f64, N> {
     const DIM: usize = N;
+    const PARAMS_ARE_TANGENT: bool = true;
     fn retract(&self, delta: &[f64]) -> Self {
         self + SVector::<f64, N>::from_column_slice(delta)
     }
