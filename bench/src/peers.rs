@@ -383,29 +383,22 @@ pub fn run_apex(path: &Path, repeat: usize) -> Record {
                 prior_noise(6),
             );
         }
-        for e in &graph.edges_se2 {
-            let info = na::DMatrix::from_column_slice(3, 3, e.information.as_slice());
-            let Ok(noise) = ApexNoise::from_information(info) else {
+        let edges_se2 = graph.edges_se2.iter().map(|e| (e.from, e.to, e.information.as_slice(), 3));
+        let edges_se3 = graph.edges_se3.iter().map(|e| (e.from, e.to, e.information.as_slice(), 6));
+        let factors: Vec<Box<dyn apex_solver::factors::Factor + Send + Sync>> = graph
+            .edges_se2
+            .iter()
+            .map(|e| {
+                Box::new(BetweenFactor::new(e.measurement.clone()))
+                    as Box<dyn apex_solver::factors::Factor + Send + Sync>
+            })
+            .chain(graph.edges_se3.iter().map(|e| Box::new(BetweenFactor::new(e.measurement.clone())) as _))
+            .collect();
+        for ((from, to, info, n), factor) in edges_se2.chain(edges_se3).zip(factors) {
+            let Ok(noise) = ApexNoise::from_information(na::DMatrix::from_column_slice(n, n, info)) else {
                 return skipped(&name, "apex-solver", "information not positive definite");
             };
-            problem.add_residual_block_with_noise(
-                &[keys[&e.from], keys[&e.to]],
-                Box::new(BetweenFactor::new(e.measurement.clone())),
-                None,
-                noise,
-            );
-        }
-        for e in &graph.edges_se3 {
-            let info = na::DMatrix::from_column_slice(6, 6, e.information.as_slice());
-            let Ok(noise) = ApexNoise::from_information(info) else {
-                return skipped(&name, "apex-solver", "information not positive definite");
-            };
-            problem.add_residual_block_with_noise(
-                &[keys[&e.from], keys[&e.to]],
-                Box::new(BetweenFactor::new(e.measurement.clone())),
-                None,
-                noise,
-            );
+            problem.add_residual_block_with_noise(&[keys[&from], keys[&to]], factor, None, noise);
         }
         let mut solver = LevenbergMarquardt::new();
         let t = Instant::now();

@@ -81,27 +81,22 @@ pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
         let y = num(path, next("observation y")?, "observation y")?;
         graph.add(AutoDiff::new(SnavelyReprojection::new(C(c as u64), L(p as u64), [x, y])), NoiseModel::Unit);
     }
+    // Camera and point parameters: `n` numbers named "<what> <k>".
+    let mut read_block = |what: &str, n: usize| -> Result<Vec<f64>, InputError> {
+        (1..=n)
+            .map(|k| {
+                let label = format!("{what} {k}");
+                num(path, next(&label)?, &label)
+            })
+            .collect()
+    };
     let mut values = Values::new();
     for c in 0..nc {
-        let mut v = [0.0; 9];
-        for (k, vk) in v.iter_mut().enumerate() {
-            *vk = num(
-                path,
-                next(&format!("camera {c} parameter {}", k + 1))?,
-                &format!("camera {c} parameter {}", k + 1),
-            )?;
-        }
+        let v = read_block(&format!("camera {c} parameter"), 9)?;
         values.insert(C(c as u64), SVector::<f64, 9>::from_column_slice(&v));
     }
     for p in 0..np {
-        let mut v = [0.0; 3];
-        for (k, vk) in v.iter_mut().enumerate() {
-            *vk = num(
-                path,
-                next(&format!("point {p} coordinate {}", k + 1))?,
-                &format!("point {p} coordinate {}", k + 1),
-            )?;
-        }
+        let v = read_block(&format!("point {p} coordinate"), 3)?;
         values.insert(L(p as u64), Vector3::from_column_slice(&v));
     }
     if let Some((l, t)) = toks.next() {
