@@ -300,20 +300,6 @@ pub(crate) fn linearize_all(
     Ok((lins, cost))
 }
 
-/// Cost ½ Σ ρ at `vars` (parallel, deterministic summation order).
-fn evaluate_cost(entries: &[FactorEntry], layout: &Layout, vars: &[Box<dyn DynVariable>]) -> Result<f64, SolveError> {
-    let rhos: Vec<f64> = entries
-        .par_iter()
-        .zip(layout.factor_vars.par_iter())
-        .enumerate()
-        .map(|(fi, (e, fv))| {
-            let v = gather(vars, fv);
-            e.evaluate(Vars::new(&v)).map(|x| x.1).map_err(|source| SolveError::Factor { factor: fi, source })
-        })
-        .collect::<Result<_, _>>()?;
-    Ok(0.5 * rhos.iter().sum::<f64>())
-}
-
 /// Nonlinear least-squares optimizer over a [`Graph`].
 ///
 /// ```
@@ -455,7 +441,11 @@ impl Optimizer {
                     trial[v] = vars[v].retract_dyn(&delta[off..off + d]);
                     off += d;
                 }
-                let new_cost = evaluate_cost(entries, &layout, &trial);
+                // Linearize at the trial point right away: with small damping
+                // nearly every step is accepted, and then this is the next
+                // iteration's linearization (no second pass over the residuals).
+                let trial_lin = linearize_all(entries, &layout, &trial);
+                let new_cost = trial_lin.as_ref().map(|(_, c)| *c);
                 summary.time_linearize += t.elapsed().as_secs_f64();
                 // Predicted decrease: −gᵀδ − ½ δᵀHδ.
                 let hd = structure.h_times(&sys, &delta);
@@ -478,12 +468,9 @@ impl Optimizer {
                         accepted,
                     });
                 }
-                if accepted {
+                if let (true, Ok((l, c))) = (accepted, trial_lin) {
                     let decrease = cost - new_cost;
                     vars = trial;
-                    let t = Instant::now();
-                    let (l, c) = linearize_all(entries, &layout, &vars)?;
-                    summary.time_linearize += t.elapsed().as_secs_f64();
                     lins = l;
                     cost = c;
                     if !gn {
