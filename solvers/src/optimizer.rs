@@ -246,22 +246,6 @@ impl Layout {
     }
 }
 
-/// Stand-in for a slot of the trial vector that is overwritten right away.
-#[derive(Clone, Debug)]
-struct Placeholder;
-impl crate::Variable for Placeholder {
-    const DIM: usize = 0;
-    fn retract(&self, _: &[f64]) -> Self {
-        Placeholder
-    }
-    fn local(&self, _: &Self) -> Vec<f64> {
-        Vec::new()
-    }
-    fn params(&self) -> Vec<f64> {
-        Vec::new()
-    }
-}
-
 fn gather<'a>(vars: &'a [Box<dyn DynVariable>], idx: &[usize]) -> smallvec::SmallVec<[&'a dyn DynVariable; 4]> {
     idx.iter().map(|&i| vars[i].as_ref()).collect()
 }
@@ -373,6 +357,16 @@ impl Optimizer {
         let gn = o.method == Method::GaussNewton;
         let mut sys = System { h: Vec::new(), g: Vec::new(), elim: Vec::new() };
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
+        // Offsets of the eliminated blocks in the step vector (after the reduced system).
+        let elim_offsets: Vec<usize> = structure
+            .elim_dims
+            .iter()
+            .scan(structure.n, |o, d| {
+                let here = *o;
+                *o += d;
+                Some(here)
+            })
+            .collect();
 
         'outer: while summary.termination != Termination::NothingToOptimize {
             if summary.iterations >= o.max_iterations {
@@ -420,27 +414,18 @@ impl Optimizer {
                 let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
                 // Retract.
                 let t = Instant::now();
-                let mut trial: Vec<Box<dyn DynVariable>> = vars
+                let trial: Vec<Box<dyn DynVariable>> = vars
                     .iter()
                     .enumerate()
-                    .map(|(i, v)| {
-                        if layout.roles[i] == Role::Const {
-                            v.clone_box()
-                        } else {
-                            Box::new(Placeholder) as Box<dyn DynVariable>
+                    .map(|(i, v)| match layout.roles[i] {
+                        Role::Const => v.clone_box(),
+                        Role::Kept(b) => {
+                            let o = structure.kept_offset(b);
+                            v.retract_dyn(&delta[o..o + structure.kept_dim(b)])
                         }
+                        Role::Elim(e) => v.retract_dyn(&delta[elim_offsets[e]..elim_offsets[e] + v.dim()]),
                     })
                     .collect();
-                for (b, &v) in layout.kept_vars.iter().enumerate() {
-                    let (o, d) = (structure.kept_offset(b), structure.kept_dim(b));
-                    trial[v] = vars[v].retract_dyn(&delta[o..o + d]);
-                }
-                let mut off = structure.n;
-                for &v in &layout.elim_vars {
-                    let d = vars[v].dim();
-                    trial[v] = vars[v].retract_dyn(&delta[off..off + d]);
-                    off += d;
-                }
                 // Linearize at the trial point right away: with small damping
                 // nearly every step is accepted, and then this is the next
                 // iteration's linearization (no second pass over the residuals).
