@@ -36,7 +36,7 @@ pub enum LinearSolver {
     /// Dense Cholesky up to 200 unknowns, sparse above.
     #[default]
     Auto,
-    /// Always faer's sparse Cholesky (supernodal or simplicial, faer decides).
+    /// Always faer's supernodal sparse Cholesky.
     SparseCholesky,
     /// Always nalgebra's dense Cholesky.
     DenseCholesky,
