@@ -84,6 +84,8 @@ pub(crate) struct Structure {
     pub kept_offsets: Vec<usize>,
     pub n: usize,
     pub elim_dims: Vec<usize>,
+    /// Offset of each eliminated block in the step vector (after the `n` reduced unknowns).
+    pub elim_offsets: Vec<usize>,
     col_ptr: Vec<usize>,
     row_idx: Vec<usize>,
     /// Per pair: (row block, col block, index into `bases`).
@@ -374,11 +376,20 @@ impl Structure {
             LinearSolver::SparseCholesky => false,
             LinearSolver::Auto => n <= DENSE_THRESHOLD,
         };
+        let elim_offsets = elim_dims
+            .iter()
+            .scan(n, |o, d| {
+                let here = *o;
+                *o += d;
+                Some(here)
+            })
+            .collect();
         Ok(Structure {
             kept_dims,
             kept_offsets,
             n,
             elim_dims,
+            elim_offsets,
             col_ptr,
             row_idx,
             pairs,
@@ -528,15 +539,14 @@ impl Structure {
         }
         // Schur complement of the eliminated blocks.
         let mut elim_inv = Vec::with_capacity(sys.elim.len());
-        let mut off = self.n;
         for (e, ElimBlock { hll, gl, hcl }) in sys.elim.iter().enumerate() {
+            let off = self.elim_offsets[e];
             let mut a = hll.clone();
             if let Some(d) = damping {
                 for k in 0..a.nrows() {
                     a[(k, k)] += d[off + k];
                 }
             }
-            off += a.nrows();
             let inv = nalgebra::Cholesky::new(a)
                 .ok_or_else(|| SolveError::Singular(format!("eliminated block {e} is not positive definite")))?
                 .inverse();
@@ -612,9 +622,8 @@ impl Structure {
                 }
             }
         }
-        let mut off = self.n;
         for (e, ElimBlock { hll, hcl, .. }) in sys.elim.iter().enumerate() {
-            let d = hll.nrows();
+            let (off, d) = (self.elim_offsets[e], hll.nrows());
             let xl = DVector::from_column_slice(&x[off..off + d]);
             let mut yl = hll * &xl;
             for (s, &c) in self.elim_cams[e].iter().enumerate() {
@@ -630,7 +639,6 @@ impl Structure {
             for k in 0..d {
                 y[off + k] += yl[k];
             }
-            off += d;
         }
         y
     }

@@ -5,7 +5,6 @@ use crate::factor::{Factor, Linearization, Vars};
 use crate::graph::{FactorEntry, Graph};
 use crate::key::Key;
 use crate::linear::LinearSolver;
-use crate::noise::NoiseModel;
 use crate::optimizer::{linearize_all, Layout};
 use crate::values::Values;
 use crate::variable::DynVariable;
@@ -13,7 +12,7 @@ use nalgebra::{DMatrix, DVector};
 use std::collections::HashMap;
 
 /// A linear prior on a set of variables left by marginalization:
-/// `r(x) = R · [x_k ⊟_{x0_k}]_k + e`, already whitened (use [`NoiseModel::Unit`]).
+/// `r(x) = R · [x_k ⊟_{x0_k}]_k + e`, already whitened (use [`crate::NoiseModel::Unit`]).
 ///
 /// The Jacobians are held at the linearization point (first-estimate Jacobians),
 /// as VINS-Mono and Basalt do, so the prior stays consistent.
@@ -71,7 +70,7 @@ impl Factor for MarginalPrior {
 
 /// Result of [`marginalize`].
 pub struct Marginalization {
-    /// The prior on the separator variables (add it with [`NoiseModel::Unit`]).
+    /// The prior on the separator variables (add it with [`crate::NoiseModel::Unit`]).
     pub prior: MarginalPrior,
     /// Indices (in the input graph) of the factors it replaces.
     pub removed_factors: Vec<usize>,
@@ -233,9 +232,4 @@ pub fn covariances(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Covar
         }
     }
     Ok(Covariances { keys: keys.to_vec(), offsets, joint })
-}
-
-/// Noise model for a prior built from a marginal covariance.
-pub fn noise_from_covariance(cov: &DMatrix<f64>) -> Result<NoiseModel, SolveError> {
-    NoiseModel::from_covariance(cov).map_err(|e| SolveError::Config(e.to_string()))
 }

@@ -357,16 +357,6 @@ impl Optimizer {
         let gn = o.method == Method::GaussNewton;
         let mut sys = System { h: Vec::new(), g: Vec::new(), elim: Vec::new() };
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
-        // Offsets of the eliminated blocks in the step vector (after the reduced system).
-        let elim_offsets: Vec<usize> = structure
-            .elim_dims
-            .iter()
-            .scan(structure.n, |o, d| {
-                let here = *o;
-                *o += d;
-                Some(here)
-            })
-            .collect();
 
         'outer: while summary.termination != Termination::NothingToOptimize {
             if summary.iterations >= o.max_iterations {
@@ -423,7 +413,10 @@ impl Optimizer {
                             let o = structure.kept_offset(b);
                             v.retract_dyn(&delta[o..o + structure.kept_dim(b)])
                         }
-                        Role::Elim(e) => v.retract_dyn(&delta[elim_offsets[e]..elim_offsets[e] + v.dim()]),
+                        Role::Elim(e) => {
+                            let o = structure.elim_offsets[e];
+                            v.retract_dyn(&delta[o..o + v.dim()])
+                        }
                     })
                     .collect();
                 // Linearize at the trial point right away: with small damping

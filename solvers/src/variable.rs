@@ -237,16 +237,6 @@ pub fn se3_from_quaternion(q: [f64; 4], t: Vector3<f64>) -> Isometry3F64 {
     Isometry3F64::from_rotation_and_translation(Rotation3F64::exp(uq.scaled_axis()), t)
 }
 
-/// Rotation matrix (3×3) of an SE(3) element.
-pub fn se3_rotation_matrix(x: &Isometry3F64) -> nalgebra::Matrix3<f64> {
-    x.rotation().matrix()
-}
-
-/// Translation \[m\] of an SE(3) element.
-pub fn se3_translation(x: &Isometry3F64) -> Vector3<f64> {
-    x.translation()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

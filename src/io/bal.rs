@@ -6,7 +6,7 @@
 //! points are meant to be eliminated by the Schur complement (`eliminate = ['l']`).
 
 use crate::error::InputError;
-use crate::io::tokens::read_text;
+use crate::io::tokens::{parse_f64, parse_usize, read_text};
 use nalgebra::{SVector, Vector3};
 use std::path::Path;
 use tumble_factors::SnavelyReprojection;
@@ -45,17 +45,8 @@ pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
             None => Err(InputError::at(path, last_line, format!("file ends early: missing {what}"))),
         }
     };
-    fn num(path: &Path, (l, t): (usize, &str), what: &str) -> Result<f64, InputError> {
-        let v: f64 = t.parse().map_err(|_| InputError::at(path, l, format!("{what}: '{t}' is not a number")))?;
-        if v.is_finite() {
-            Ok(v)
-        } else {
-            Err(InputError::at(path, l, format!("{what} is not finite")))
-        }
-    }
-    fn int(path: &Path, (l, t): (usize, &str), what: &str) -> Result<usize, InputError> {
-        t.parse().map_err(|_| InputError::at(path, l, format!("{what}: '{t}' is not a non-negative integer")))
-    }
+    let num = |path: &Path, (l, t): (usize, &str), what: &str| parse_f64(path, l, t, what);
+    let int = |path: &Path, (l, t): (usize, &str), what: &str| parse_usize(path, l, t, what);
     let nc = int(path, next("camera count")?, "camera count")?;
     let np = int(path, next("point count")?, "point count")?;
     let no = int(path, next("observation count")?, "observation count")?;

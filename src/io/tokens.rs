@@ -8,7 +8,7 @@ pub(crate) struct LineTokens<'a> {
     pub file: &'a Path,
     pub line: usize,
     toks: std::str::SplitWhitespace<'a>,
-    pub consumed: usize,
+    consumed: usize,
 }
 
 impl<'a> LineTokens<'a> {
@@ -24,18 +24,12 @@ impl<'a> LineTokens<'a> {
     /// Next token as a finite f64.
     pub fn f64(&mut self, what: &str) -> Result<f64, InputError> {
         let s = self.next_str(what)?;
-        let v: f64 =
-            s.parse().map_err(|_| InputError::at(self.file, self.line, format!("{what}: '{s}' is not a number")))?;
-        if !v.is_finite() {
-            return Err(InputError::at(self.file, self.line, format!("{what} is not finite ({s})")));
-        }
-        Ok(v)
+        parse_f64(self.file, self.line, s, what)
     }
     /// Next token as a non-negative integer.
     pub fn usize(&mut self, what: &str) -> Result<usize, InputError> {
         let s = self.next_str(what)?;
-        s.parse()
-            .map_err(|_| InputError::at(self.file, self.line, format!("{what}: '{s}' is not a non-negative integer")))
+        parse_usize(self.file, self.line, s, what)
     }
     /// Error if tokens remain.
     pub fn finish(mut self) -> Result<(), InputError> {
@@ -44,6 +38,20 @@ impl<'a> LineTokens<'a> {
             Some(t) => Err(InputError::at(self.file, self.line, format!("unexpected extra field '{t}'"))),
         }
     }
+}
+
+/// One token as a finite f64, with a file:line error naming `what`.
+pub(crate) fn parse_f64(file: &Path, line: usize, tok: &str, what: &str) -> Result<f64, InputError> {
+    let v: f64 = tok.parse().map_err(|_| InputError::at(file, line, format!("{what}: '{tok}' is not a number")))?;
+    if !v.is_finite() {
+        return Err(InputError::at(file, line, format!("{what} is not finite ({tok})")));
+    }
+    Ok(v)
+}
+
+/// One token as a non-negative integer, with a file:line error naming `what`.
+pub(crate) fn parse_usize(file: &Path, line: usize, tok: &str, what: &str) -> Result<usize, InputError> {
+    tok.parse().map_err(|_| InputError::at(file, line, format!("{what}: '{tok}' is not a non-negative integer")))
 }
 
 /// Read a whole file, naming it in the error.
