@@ -1,9 +1,10 @@
 //! The `tumble` command-line tool.
 
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use tumble::io::{bal, g2o};
+use tumble::io::validate::Duplicates;
+use tumble::io::{bal, g2o, AccelUnit, GyroUnit, ImuColumns, RecordingOptions, TimeUnit};
 use tumble_solvers::{LmOptions, Method, Optimizer, Summary};
 
 #[derive(Parser)]
@@ -23,8 +24,61 @@ enum MethodArg {
     Gn,
 }
 
+/// How to read an IMU recording given on the command line.
+#[derive(Args, Clone)]
+struct RecordingArgs {
+    /// Text files: column names in file order, from t, gx, gy, gz, ax, ay, az, temp and _ (skip).
+    #[arg(long, default_value = "t,gx,gy,gz,ax,ay,az", value_parser = |s: &str| ImuColumns::parse(s))]
+    columns: ImuColumns,
+    /// Text files: unit of the time column (s, ms, us, ns).
+    #[arg(long, default_value = "ns", value_parser = |s: &str| TimeUnit::parse(s).ok_or("use s, ms, us or ns"))]
+    time_unit: TimeUnit,
+    /// Text files: gyro unit: rad/s, deg/s, counts (kept raw) or counts:SCALE[:OFFSET] (SCALE in rad/s per count).
+    #[arg(long, default_value = "rad/s", value_parser = |s: &str| GyroUnit::parse(s))]
+    gyro_unit: GyroUnit,
+    /// Text files: accelerometer unit: m/s2, g, counts or counts:SCALE[:OFFSET] (SCALE in m/s² per count).
+    #[arg(long, default_value = "m/s2", value_parser = |s: &str| AccelUnit::parse(s))]
+    accel_unit: AccelUnit,
+    /// imu_tk layout: the gyro file (`t x y z`); the recording argument is then the accelerometer file.
+    #[arg(long)]
+    gyro_file: Option<PathBuf>,
+    /// Nominal sample rate [Hz] (estimated from the timestamps when absent).
+    #[arg(long)]
+    rate: Option<f64>,
+    /// Refuse duplicated timestamps instead of re-stamping at the nominal rate.
+    #[arg(long)]
+    strict_timestamps: bool,
+    /// Skip the check that values at rest look like rad/s and m/s².
+    #[arg(long)]
+    no_unit_check: bool,
+}
+
+impl RecordingArgs {
+    fn options(&self) -> RecordingOptions {
+        let mut o = RecordingOptions::default();
+        o.format.columns = self.columns.clone();
+        o.format.time_unit = self.time_unit;
+        o.format.gyro_unit = self.gyro_unit;
+        o.format.accel_unit = self.accel_unit;
+        o.format.validate.nominal_rate = self.rate;
+        o.format.validate.check_units = !self.no_unit_check;
+        if self.strict_timestamps {
+            o.format.validate.duplicates = Duplicates::Error;
+        }
+        o.gyro_file = self.gyro_file.clone();
+        o
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
+    /// Read an IMU recording, check it, and print what it holds and what looks wrong.
+    Inspect {
+        /// ASL dataset folder (or its mav0/), a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
+        recording: PathBuf,
+        #[command(flatten)]
+        read: RecordingArgs,
+    },
     /// Run the main job on embedded default data. (Temporary: until the
     /// calibration pipeline exists, this solves a simulated SE(3) pose graph
     /// with known truth and prints the solver summary.)
@@ -70,6 +124,41 @@ fn print_log(s: &Summary) {
 
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     match cli.command {
+        Command::Inspect { recording, read } => {
+            let start = std::time::Instant::now();
+            let r = tumble::io::open_recording(&recording, &read.options())?;
+            println!("{}: {} samples in {:.2} s", r.source_name(), r.len(), start.elapsed().as_secs_f64());
+            println!("  duration {:.3} s, mean rate {:.3} Hz", r.duration(), r.mean_rate());
+            let stat = |v: &[[f64; 3]], name: &str, unit: &str| {
+                if v.is_empty() {
+                    return;
+                }
+                let n = v.len() as f64;
+                let m: Vec<f64> = (0..3).map(|k| v.iter().map(|s| s[k]).sum::<f64>() / n).collect();
+                let sd: Vec<f64> =
+                    (0..3).map(|k| (v.iter().map(|s| (s[k] - m[k]).powi(2)).sum::<f64>() / n).sqrt()).collect();
+                println!(
+                    "  {name:<6} mean [{:+.5}, {:+.5}, {:+.5}] std [{:.5}, {:.5}, {:.5}] {unit}",
+                    m[0], m[1], m[2], sd[0], sd[1], sd[2]
+                );
+            };
+            let unit = |u: tumble::io::StoredUnits, si: &'static str| match u.0 {
+                tumble::io::Stored::Si => si,
+                tumble::io::Stored::RawCounts => "counts",
+            };
+            stat(&r.gyro, "gyro", unit(r.gyro_units, "rad/s"));
+            stat(&r.accel, "accel", unit(r.accel_units, "m/s²"));
+            if let Some(t) = &r.temperature {
+                let (lo, hi) = t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+                println!("  temperature {lo:.2} … {hi:.2} °C");
+            }
+            if r.warnings.is_empty() {
+                println!("  no problems found");
+            }
+            for w in &r.warnings {
+                println!("warning: {w}");
+            }
+        }
         Command::Demo => {
             println!("tumble demo (temporary): simulated SE(3) helix pose graph, 3 laps × 200 poses, known truth");
             let sim = tumble::posegraph::simulate_helix(200, 3, 5.0, 0.01, 0.05, 7);

@@ -5,12 +5,14 @@
 //!
 //! - [`PriorFactor`]: `r = prior ⊟ x` on any [`LieGroup`] variable.
 //! - [`BetweenFactor`]: `r = Log(Z⁻¹ · X₁⁻¹ X₂)`, relative measurement (odometry, loop closures).
+//! - [`camera::CameraModel`]: pinhole with radial–tangential or equidistant distortion.
 //! - [`SnavelyReprojection`]: the Bundle-Adjustment-in-the-Large camera model (autodiff).
 //!
 //! Every factor's Jacobians are verified against central differences in tests.
 
 pub mod bal;
 pub mod between;
+pub mod camera;
 pub mod prior;
 
 pub use bal::SnavelyReprojection;

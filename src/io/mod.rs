@@ -1,5 +1,18 @@
 //! Reading users' files. Every parser reports errors with file and line.
 
+pub mod asl;
 pub mod bal;
 pub mod g2o;
+pub mod imu;
+pub mod imu_text;
+pub mod recording;
+pub mod table;
 pub(crate) mod tokens;
+pub mod trajectory;
+pub mod validate;
+pub mod yaml;
+
+pub use imu::{ImuRecording, Stored, StoredUnits};
+pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat};
+pub use recording::{open_recording, RecordingOptions};
+pub use table::TimeUnit;

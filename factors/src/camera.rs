@@ -1,0 +1,152 @@
+//! Camera models: pinhole projection with radial–tangential (OpenCV `plumb_bob`)
+//! or equidistant (Kannala–Brandt / OpenCV fisheye) distortion.
+//!
+//! Frames: a point `p_c = [x, y, z]` in the camera frame (z forward, x right,
+//! y down) projects to pixel `[u, v]`. Projection is generic over the scalar
+//! so reprojection residuals can be differentiated automatically.
+//!
+//! ```
+//! use tumble_factors::camera::{CameraModel, Distortion};
+//! let cam = CameraModel { fx: 458.654, fy: 457.296, cx: 367.215, cy: 248.375,
+//!     distortion: Distortion::RadTan { k1: -0.28340811, k2: 0.07395907, p1: 0.00019359, p2: 1.76187114e-05 } };
+//! let uv = cam.project(&[0.1, -0.05, 2.0]).unwrap();
+//! let xy = cam.unproject(uv).unwrap(); // normalized [x/z, y/z]
+//! assert!((xy[0] - 0.05).abs() < 1e-9 && (xy[1] + 0.025).abs() < 1e-9);
+//! ```
+
+use tumble_solvers::Real;
+
+/// Lens distortion of a [`CameraModel`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Distortion {
+    /// No distortion.
+    None,
+    /// Radial–tangential: radial `k1 r² + k2 r⁴`, tangential `p1, p2`.
+    RadTan {
+        /// r² coefficient.
+        k1: f64,
+        /// r⁴ coefficient.
+        k2: f64,
+        /// First tangential coefficient.
+        p1: f64,
+        /// Second tangential coefficient.
+        p2: f64,
+    },
+    /// Equidistant: `θ_d = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`.
+    Equidistant {
+        /// θ² coefficient.
+        k1: f64,
+        /// θ⁴ coefficient.
+        k2: f64,
+        /// θ⁶ coefficient.
+        k3: f64,
+        /// θ⁸ coefficient.
+        k4: f64,
+    },
+}
+
+/// A pinhole camera with focal lengths and principal point in pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraModel {
+    /// Focal length along u \[px\].
+    pub fx: f64,
+    /// Focal length along v \[px\].
+    pub fy: f64,
+    /// Principal point u \[px\].
+    pub cx: f64,
+    /// Principal point v \[px\].
+    pub cy: f64,
+    /// Lens distortion.
+    pub distortion: Distortion,
+}
+
+impl CameraModel {
+    /// Distort normalized coordinates `[x/z, y/z]`.
+    pub fn distort<T: Real>(&self, x: T, y: T) -> [T; 2] {
+        match self.distortion {
+            Distortion::None => [x, y],
+            Distortion::RadTan { k1, k2, p1, p2 } => {
+                let r2 = x * x + y * y;
+                let radial = T::one() + r2 * k1 + r2 * r2 * k2;
+                let xy = x * y;
+                [
+                    x * radial + xy * (2.0 * p1) + (r2 + x * x * 2.0) * p2,
+                    y * radial + (r2 + y * y * 2.0) * p1 + xy * (2.0 * p2),
+                ]
+            }
+            Distortion::Equidistant { k1, k2, k3, k4 } => {
+                let r2 = x * x + y * y;
+                if r2.re() < 1e-16 {
+                    return [x, y];
+                }
+                let r = r2.sqrt();
+                let th = r.atan();
+                let t2 = th * th;
+                let thd = th * (T::one() + t2 * (t2 * (t2 * (t2 * k4 + k3) + k2) + k1));
+                let s = thd / r;
+                [x * s, y * s]
+            }
+        }
+    }
+
+    /// Project a point in the camera frame to pixels; None behind the camera
+    /// (z ≤ 1 mm) or past the equidistant model's 180° field.
+    pub fn project<T: Real>(&self, p: &[T; 3]) -> Option<[T; 2]> {
+        if p[2].re() <= 1e-3 {
+            return None;
+        }
+        let [xd, yd] = self.distort(p[0] / p[2], p[1] / p[2]);
+        Some([xd * self.fx + self.cx, yd * self.fy + self.cy])
+    }
+
+    /// Pixel to normalized undistorted coordinates `[x/z, y/z]` (Gauss–Newton
+    /// on the distortion, 20 iterations at most); None if it does not converge.
+    pub fn unproject(&self, uv: [f64; 2]) -> Option<[f64; 2]> {
+        let xd = [(uv[0] - self.cx) / self.fx, (uv[1] - self.cy) / self.fy];
+        let mut x = xd;
+        for _ in 0..20 {
+            let f = self.distort(x[0], x[1]);
+            let r = [f[0] - xd[0], f[1] - xd[1]];
+            if r[0].abs() + r[1].abs() < 1e-14 {
+                return Some(x);
+            }
+            // Numeric 2×2 Jacobian of the distortion.
+            let h = 1e-7;
+            let fx = self.distort(x[0] + h, x[1]);
+            let fy = self.distort(x[0], x[1] + h);
+            let (a, c) = ((fx[0] - f[0]) / h, (fx[1] - f[1]) / h);
+            let (b, d) = ((fy[0] - f[0]) / h, (fy[1] - f[1]) / h);
+            let det = a * d - b * c;
+            if det.abs() < 1e-12 {
+                return None;
+            }
+            x[0] -= (d * r[0] - b * r[1]) / det;
+            x[1] -= (-c * r[0] + a * r[1]) / det;
+        }
+        let f = self.distort(x[0], x[1]);
+        ((f[0] - xd[0]).abs() + (f[1] - xd[1]).abs() < 1e-9).then_some(x)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn unproject_inverts_project_for_both_models() {
+        let dists = [
+            Distortion::None,
+            Distortion::RadTan { k1: -0.28, k2: 0.07, p1: 2e-4, p2: 1.8e-5 },
+            Distortion::Equidistant { k1: 0.01, k2: -0.005, k3: 0.001, k4: -0.0002 },
+        ];
+        for d in dists {
+            let cam = CameraModel { fx: 400.0, fy: 410.0, cx: 320.0, cy: 240.0, distortion: d };
+            for p in [[0.3, -0.2, 1.0], [-0.5, 0.4, 2.0], [0.0, 0.0, 3.0]] {
+                let uv = cam.project(&p).unwrap();
+                let xy = cam.unproject(uv).unwrap();
+                assert!((xy[0] - p[0] / p[2]).abs() < 1e-9 && (xy[1] - p[1] / p[2]).abs() < 1e-9, "{d:?} {p:?}");
+            }
+            assert!(cam.project(&[0.0, 0.0, -1.0]).is_none());
+        }
+    }
+}

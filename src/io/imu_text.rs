@@ -1,0 +1,353 @@
+//! IMU recordings in plain text: a declared column map and units, one file
+//! holding both sensors or imu_tk's pair of `t x y z` files.
+//!
+//! ```
+//! use tumble::io::{ImuColumns, ImuTextFormat, GyroUnit, AccelUnit, TimeUnit};
+//! // A CSV "time [ms], ax, ay, az [g], gx, gy, gz [deg/s]":
+//! let fmt = ImuTextFormat {
+//!     columns: ImuColumns::parse("t,ax,ay,az,gx,gy,gz").unwrap(),
+//!     time_unit: TimeUnit::Ms,
+//!     gyro_unit: GyroUnit::DegPerS,
+//!     accel_unit: AccelUnit::G,
+//!     ..ImuTextFormat::default()
+//! };
+//! assert_eq!(fmt.columns.accel, Some([1, 2, 3]));
+//! ```
+
+use super::imu::{ImuRecording, Stored, StoredUnits};
+use super::table::{read_table, Table, TableSpec, TimeUnit};
+use super::validate::{validate, ValidateOptions};
+use crate::error::InputError;
+use std::path::Path;
+
+/// Standard gravity used to convert g to m/s² \[m/s²\].
+pub const STANDARD_GRAVITY: f64 = 9.80665;
+
+/// Unit of the gyro columns.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GyroUnit {
+    /// rad/s.
+    RadPerS,
+    /// deg/s.
+    DegPerS,
+    /// Raw counts: `(raw − offset) · scale` \[rad/s\]; kept raw when `scale` is None.
+    Counts {
+        /// rad/s per count, if known.
+        scale: Option<f64>,
+        /// Zero-rate offset \[counts\].
+        offset: f64,
+    },
+}
+
+/// Unit of the accelerometer columns.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AccelUnit {
+    /// m/s².
+    MetersPerS2,
+    /// Standard gravities (9.80665 m/s²).
+    G,
+    /// Raw counts: `(raw − offset) · scale` \[m/s²\]; kept raw when `scale` is None.
+    Counts {
+        /// m/s² per count, if known.
+        scale: Option<f64>,
+        /// Zero-g offset \[counts\].
+        offset: f64,
+    },
+}
+
+impl GyroUnit {
+    /// Parse `rad/s`, `deg/s`, `counts` or `counts:SCALE[:OFFSET]`.
+    pub fn parse(s: &str) -> Result<GyroUnit, String> {
+        match s {
+            "rad/s" => Ok(GyroUnit::RadPerS),
+            "deg/s" => Ok(GyroUnit::DegPerS),
+            _ => parse_counts(s).map(|(scale, offset)| GyroUnit::Counts { scale, offset }),
+        }
+    }
+    fn convert(self, v: f64) -> f64 {
+        match self {
+            GyroUnit::RadPerS => v,
+            GyroUnit::DegPerS => v.to_radians(),
+            GyroUnit::Counts { scale: Some(s), offset } => (v - offset) * s,
+            GyroUnit::Counts { scale: None, .. } => v,
+        }
+    }
+    fn stored(self) -> Stored {
+        if matches!(self, GyroUnit::Counts { scale: None, .. }) {
+            Stored::RawCounts
+        } else {
+            Stored::Si
+        }
+    }
+}
+
+impl AccelUnit {
+    /// Parse `m/s2` (or `m/s^2`, `m/s²`), `g`, `counts` or `counts:SCALE[:OFFSET]`.
+    pub fn parse(s: &str) -> Result<AccelUnit, String> {
+        match s {
+            "m/s2" | "m/s^2" | "m/s²" => Ok(AccelUnit::MetersPerS2),
+            "g" => Ok(AccelUnit::G),
+            _ => parse_counts(s).map(|(scale, offset)| AccelUnit::Counts { scale, offset }),
+        }
+    }
+    fn convert(self, v: f64) -> f64 {
+        match self {
+            AccelUnit::MetersPerS2 => v,
+            AccelUnit::G => v * STANDARD_GRAVITY,
+            AccelUnit::Counts { scale: Some(s), offset } => (v - offset) * s,
+            AccelUnit::Counts { scale: None, .. } => v,
+        }
+    }
+    fn stored(self) -> Stored {
+        if matches!(self, AccelUnit::Counts { scale: None, .. }) {
+            Stored::RawCounts
+        } else {
+            Stored::Si
+        }
+    }
+}
+
+fn parse_counts(s: &str) -> Result<(Option<f64>, f64), String> {
+    let mut it = s.split(':');
+    if it.next() != Some("counts") {
+        return Err(format!("unknown unit '{s}'"));
+    }
+    let num = |x: Option<&str>, what: &str| -> Result<Option<f64>, String> {
+        x.map(|t| t.parse::<f64>().map_err(|_| format!("counts {what} '{t}' is not a number"))).transpose()
+    };
+    let scale = num(it.next(), "scale")?;
+    let offset = num(it.next(), "offset")?.unwrap_or(0.0);
+    Ok((scale, offset))
+}
+
+/// 0-based column indices of time, gyro, accelerometer and temperature.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ImuColumns {
+    /// Timestamp column; None when the file has none (then the nominal rate
+    /// must be given and sample `i` is stamped `i / rate`).
+    pub time: Option<usize>,
+    /// Gyro x, y, z columns.
+    pub gyro: Option<[usize; 3]>,
+    /// Accelerometer x, y, z columns.
+    pub accel: Option<[usize; 3]>,
+    /// Temperature column \[°C\].
+    pub temperature: Option<usize>,
+}
+
+impl Default for ImuColumns {
+    /// EuRoC order: `t, gx, gy, gz, ax, ay, az`.
+    fn default() -> Self {
+        ImuColumns { time: Some(0), gyro: Some([1, 2, 3]), accel: Some([4, 5, 6]), temperature: None }
+    }
+}
+
+impl ImuColumns {
+    /// Parse a comma-separated list naming each column in file order:
+    /// `t`, `gx gy gz`, `ax ay az`, `temp`, and `_` for a column to skip.
+    /// Without `t`, samples are stamped from the nominal rate.
+    pub fn parse(spec: &str) -> Result<ImuColumns, String> {
+        let mut time = None;
+        let mut gyro = [None; 3];
+        let mut accel = [None; 3];
+        let mut temperature = None;
+        for (i, name) in spec.split(',').map(str::trim).enumerate() {
+            let slot = match name {
+                "t" | "time" => &mut time,
+                "gx" => &mut gyro[0],
+                "gy" => &mut gyro[1],
+                "gz" => &mut gyro[2],
+                "ax" => &mut accel[0],
+                "ay" => &mut accel[1],
+                "az" => &mut accel[2],
+                "temp" | "temperature" => &mut temperature,
+                "_" => continue,
+                other => {
+                    return Err(format!(
+                        "unknown column name '{other}' (use t, gx, gy, gz, ax, ay, az, temp or _ to skip)"
+                    ))
+                }
+            };
+            if slot.replace(i).is_some() {
+                return Err(format!("column '{name}' named twice"));
+            }
+        }
+        let triad = |v: [Option<usize>; 3], what: &str| -> Result<Option<[usize; 3]>, String> {
+            match v {
+                [Some(x), Some(y), Some(z)] => Ok(Some([x, y, z])),
+                [None, None, None] => Ok(None),
+                _ => Err(format!("{what}: name all three axes or none")),
+            }
+        };
+        let cols = ImuColumns { time, gyro: triad(gyro, "gyro")?, accel: triad(accel, "accelerometer")?, temperature };
+        if cols.gyro.is_none() && cols.accel.is_none() {
+            return Err("neither gyro nor accelerometer columns named".into());
+        }
+        Ok(cols)
+    }
+}
+
+/// How to read an IMU text file.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ImuTextFormat {
+    /// Column map.
+    pub columns: ImuColumns,
+    /// Unit of the time column.
+    pub time_unit: TimeUnit,
+    /// Unit of the gyro columns.
+    pub gyro_unit: GyroUnit,
+    /// Unit of the accelerometer columns.
+    pub accel_unit: AccelUnit,
+    /// Checks run after reading.
+    pub validate: ValidateOptions,
+}
+
+impl Default for ImuTextFormat {
+    /// EuRoC's `imu0/data.csv`: ns, rad/s, m/s².
+    fn default() -> Self {
+        ImuTextFormat {
+            columns: ImuColumns::default(),
+            time_unit: TimeUnit::Ns,
+            gyro_unit: GyroUnit::RadPerS,
+            accel_unit: AccelUnit::MetersPerS2,
+            validate: ValidateOptions::default(),
+        }
+    }
+}
+
+/// Read one IMU text file (CSV or whitespace; `.gz` allowed) and validate it.
+///
+/// A column whose header name starts with `temperature` is used as the
+/// temperature column when the format names none.
+pub fn read_imu_text(path: &Path, fmt: &ImuTextFormat) -> Result<ImuRecording, InputError> {
+    let c = &fmt.columns;
+    let mut values = Vec::new();
+    let mut names = Vec::new();
+    for (triad, what) in [(c.gyro, "gyro"), (c.accel, "accel")] {
+        if let Some(ix) = triad {
+            values.extend(ix);
+            names.extend(["x", "y", "z"].map(|a| format!("{what} {a}")));
+        }
+    }
+    if let Some(tc) = c.temperature {
+        values.push(tc);
+        names.push("temperature".into());
+    }
+    let time = c.time.map(|tc| (tc, fmt.time_unit));
+    let spec = TableSpec { time, values, names };
+    let rate = match (c.time, fmt.validate.nominal_rate) {
+        (Some(_), _) => None,
+        (None, Some(r)) if r.is_finite() && r > 0.0 => Some(r),
+        (None, _) => {
+            return Err(InputError::file(path, "the column map has no time column and no nominal rate is given")
+                .with_hint("name the time column (t) or give the sample rate"))
+        }
+    };
+    let mut table = read_table(path, &spec)?;
+    if let Some(r) = rate {
+        table.t_ns.iter_mut().enumerate().for_each(|(i, t)| *t = (i as f64 * 1e9 / r).round() as i64);
+    }
+    let mut temperature_col = c.temperature.map(|_| spec.values.len() - 1);
+    if temperature_col.is_none() {
+        if let Some(ix) = header_temperature_column(table.header.as_deref()) {
+            let spec_t = TableSpec { time, values: vec![ix], names: vec!["temperature".into()] };
+            let t = read_table(path, &spec_t)?;
+            table.columns.push(t.columns.into_iter().next().unwrap_or_default());
+            temperature_col = Some(table.columns.len() - 1);
+        }
+    }
+    let mut rec = recording_from_table(path, table, fmt, temperature_col);
+    validate(&mut rec, &fmt.validate)?;
+    Ok(rec)
+}
+
+fn header_temperature_column(header: Option<&str>) -> Option<usize> {
+    let h = header?;
+    let sep = if h.contains(',') { ',' } else { ' ' };
+    h.split(sep).filter(|s| !s.trim().is_empty()).position(|name| name.trim().to_lowercase().starts_with("temperature"))
+}
+
+fn recording_from_table(path: &Path, table: Table, fmt: &ImuTextFormat, temp: Option<usize>) -> ImuRecording {
+    let n = table.t_ns.len();
+    let t0 = table.t_ns[0];
+    let mut k = 0;
+    let mut triad = |present: bool, conv: &dyn Fn(f64) -> f64| -> Vec<[f64; 3]> {
+        if !present {
+            return Vec::new();
+        }
+        let cols = &table.columns[k..k + 3];
+        k += 3;
+        (0..n).map(|i| [conv(cols[0][i]), conv(cols[1][i]), conv(cols[2][i])]).collect()
+    };
+    let gyro = triad(fmt.columns.gyro.is_some(), &|v| fmt.gyro_unit.convert(v));
+    let accel = triad(fmt.columns.accel.is_some(), &|v| fmt.accel_unit.convert(v));
+    ImuRecording {
+        sources: vec![path.to_path_buf()],
+        t0_ns: t0,
+        t: table.t_ns.iter().map(|&x| (x - t0) as f64 * 1e-9).collect(),
+        gyro,
+        accel,
+        temperature: temp.map(|c| table.columns[c].clone()),
+        gyro_units: StoredUnits(fmt.gyro_unit.stored()),
+        accel_units: StoredUnits(fmt.accel_unit.stored()),
+        lines: table.lines,
+        warnings: Vec::new(),
+    }
+}
+
+/// Read imu_tk's pair of files (`t x y z` each, same timestamps line by line):
+/// the accelerometer file in `accel_unit`, the gyro file in `gyro_unit`, time in `time_unit`.
+pub fn read_imu_tk(
+    accel_path: &Path,
+    gyro_path: &Path,
+    time_unit: TimeUnit,
+    accel_unit: AccelUnit,
+    gyro_unit: GyroUnit,
+    checks: &ValidateOptions,
+) -> Result<ImuRecording, InputError> {
+    let one = |path: &Path, what: &str| {
+        let spec = TableSpec {
+            time: Some((0, time_unit)),
+            values: vec![1, 2, 3],
+            names: ["x", "y", "z"].map(|a| format!("{what} {a}")).to_vec(),
+        };
+        read_table(path, &spec)
+    };
+    let acc = one(accel_path, "accel")?;
+    let gyr = one(gyro_path, "gyro")?;
+    if acc.t_ns.len() != gyr.t_ns.len() {
+        return Err(InputError::file(
+            gyro_path,
+            format!("has {} samples but {} has {}", gyr.t_ns.len(), accel_path.display(), acc.t_ns.len()),
+        )
+        .with_hint("imu_tk's files pair samples line by line; both must hold the same samples"));
+    }
+    if let Some(i) = (0..acc.t_ns.len()).find(|&i| (acc.t_ns[i] - gyr.t_ns[i]).abs() > 1000) {
+        return Err(InputError::at(
+            gyro_path,
+            gyr.lines[i] as usize,
+            format!(
+                "timestamp {} s differs from {}:{} ({} s)",
+                gyr.t_ns[i] as f64 * 1e-9,
+                accel_path.display(),
+                acc.lines[i],
+                acc.t_ns[i] as f64 * 1e-9
+            ),
+        ));
+    }
+    let fmt = ImuTextFormat {
+        columns: ImuColumns { time: Some(0), gyro: Some([1, 2, 3]), accel: Some([4, 5, 6]), temperature: None },
+        time_unit,
+        gyro_unit,
+        accel_unit,
+        validate: checks.clone(),
+    };
+    let mut columns = gyr.columns;
+    columns.extend(acc.columns);
+    let table = Table { t_ns: acc.t_ns, columns, lines: acc.lines, header: None };
+    let mut rec = recording_from_table(accel_path, table, &fmt, None);
+    rec.sources.push(gyro_path.to_path_buf());
+    validate(&mut rec, checks)?;
+    Ok(rec)
+}

@@ -1,0 +1,194 @@
+//! Trajectories: EuRoC/ASL ground truth (`t[ns], p, q(w,x,y,z), v, b_w, b_a`)
+//! and the TUM format (`t[s] x y z qx qy qz qw`), read and written.
+
+use super::table::{read_table, TableSpec, TimeUnit};
+use crate::error::InputError;
+use std::io::Write;
+use std::path::Path;
+
+/// A timed sequence of body poses in a world frame, with optional velocity and biases.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trajectory {
+    /// Time of each state \[ns\].
+    pub t_ns: Vec<i64>,
+    /// Position of the body in the world frame \[m\].
+    pub p: Vec<[f64; 3]>,
+    /// Orientation world←body as a unit quaternion `[w, x, y, z]`.
+    pub q: Vec<[f64; 4]>,
+    /// Velocity in the world frame \[m/s\] (ASL ground truth only).
+    pub v: Option<Vec<[f64; 3]>>,
+    /// Gyro bias \[rad/s\] (ASL ground truth only).
+    pub bias_gyro: Option<Vec<[f64; 3]>>,
+    /// Accelerometer bias \[m/s²\] (ASL ground truth only).
+    pub bias_accel: Option<Vec<[f64; 3]>>,
+}
+
+impl Trajectory {
+    /// Number of states.
+    pub fn len(&self) -> usize {
+        self.t_ns.len()
+    }
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.t_ns.is_empty()
+    }
+}
+
+fn triads(cols: &[Vec<f64>], first: usize) -> Vec<[f64; 3]> {
+    (0..cols[first].len()).map(|i| [cols[first][i], cols[first + 1][i], cols[first + 2][i]]).collect()
+}
+
+fn check_times_and_quaternions(path: &Path, tr: &mut Trajectory, lines: &[u32]) -> Result<(), InputError> {
+    for (i, w) in tr.t_ns.windows(2).enumerate() {
+        if w[1] <= w[0] {
+            let what = if w[1] == w[0] { "repeats" } else { "goes backwards from" };
+            return Err(InputError::at(path, lines[i + 1] as usize, format!("timestamp {what} the previous line's"))
+                .with_hint("a trajectory needs strictly increasing times"));
+        }
+    }
+    for (i, q) in tr.q.iter_mut().enumerate() {
+        let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if (n - 1.0).abs() > 1e-2 {
+            return Err(InputError::at(path, lines[i] as usize, format!("quaternion norm is {n:.4}, not 1"))
+                .with_hint("check the column order (ASL: qw qx qy qz; TUM: qx qy qz qw)"));
+        }
+        q.iter_mut().for_each(|x| *x /= n);
+    }
+    Ok(())
+}
+
+/// Read EuRoC/ASL ground truth: `t[ns], px, py, pz, qw, qx, qy, qz` and, when
+/// present, `vx vy vz, bwx bwy bwz, bax bay baz` (17 columns).
+pub fn read_asl_groundtruth(path: &Path) -> Result<Trajectory, InputError> {
+    let spec8 = TableSpec {
+        time: Some((0, TimeUnit::Ns)),
+        values: (1..8).collect(),
+        names: ["px", "py", "pz", "qw", "qx", "qy", "qz"].map(String::from).to_vec(),
+    };
+    let head = read_table(path, &spec8)?;
+    let full = head.header.as_deref().map(|h| h.split(',').count() >= 17).unwrap_or(false);
+    let (table, has_extra) = if full {
+        let names =
+            ["px", "py", "pz", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "bwx", "bwy", "bwz", "bax", "bay", "baz"];
+        let spec = TableSpec {
+            time: Some((0, TimeUnit::Ns)),
+            values: (1..17).collect(),
+            names: names.map(String::from).to_vec(),
+        };
+        (read_table(path, &spec)?, true)
+    } else {
+        (head, false)
+    };
+    let c = &table.columns;
+    let mut tr = Trajectory {
+        t_ns: table.t_ns.clone(),
+        p: triads(c, 0),
+        q: (0..table.t_ns.len()).map(|i| [c[3][i], c[4][i], c[5][i], c[6][i]]).collect(),
+        v: has_extra.then(|| triads(c, 7)),
+        bias_gyro: has_extra.then(|| triads(c, 10)),
+        bias_accel: has_extra.then(|| triads(c, 13)),
+    };
+    check_times_and_quaternions(path, &mut tr, &table.lines)?;
+    Ok(tr)
+}
+
+/// Read a TUM trajectory: `t[s] x y z qx qy qz qw` per line.
+pub fn read_tum(path: &Path) -> Result<Trajectory, InputError> {
+    let spec = TableSpec {
+        time: Some((0, TimeUnit::S)),
+        values: (1..8).collect(),
+        names: ["x", "y", "z", "qx", "qy", "qz", "qw"].map(String::from).to_vec(),
+    };
+    let table = read_table(path, &spec)?;
+    let c = &table.columns;
+    let mut tr = Trajectory {
+        t_ns: table.t_ns.clone(),
+        p: triads(c, 0),
+        q: (0..table.t_ns.len()).map(|i| [c[6][i], c[3][i], c[4][i], c[5][i]]).collect(),
+        ..Trajectory::default()
+    };
+    check_times_and_quaternions(path, &mut tr, &table.lines)?;
+    Ok(tr)
+}
+
+/// Read a trajectory in either format: ASL when the first data field is an
+/// integer of more than 12 digits (nanoseconds), TUM otherwise.
+pub fn read_trajectory(path: &Path) -> Result<Trajectory, InputError> {
+    let text = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
+    let first = text
+        .split(|&c| c == b'\n')
+        .map(|l| l.trim_ascii())
+        .find(|l| !l.is_empty() && l[0] != b'#' && l[0].is_ascii_digit());
+    let asl = first.is_some_and(|l| {
+        let f = l.split(|&c| c == b',' || c.is_ascii_whitespace()).next().unwrap_or(&[]);
+        f.len() > 12 && f.iter().all(u8::is_ascii_digit)
+    });
+    if asl {
+        read_asl_groundtruth(path)
+    } else {
+        read_tum(path)
+    }
+}
+
+fn io_err(path: &Path, e: std::io::Error) -> InputError {
+    InputError::file(path, format!("cannot write: {e}"))
+}
+
+/// Write a trajectory in TUM format (`t[s] x y z qx qy qz qw`).
+pub fn write_tum(path: &Path, tr: &Trajectory) -> Result<(), InputError> {
+    let f = std::fs::File::create(path).map_err(|e| io_err(path, e))?;
+    let mut w = std::io::BufWriter::new(f);
+    for i in 0..tr.len() {
+        let (p, q) = (tr.p[i], tr.q[i]);
+        writeln!(
+            w,
+            "{}.{:09} {} {} {} {} {} {} {}",
+            tr.t_ns[i].div_euclid(1_000_000_000),
+            tr.t_ns[i].rem_euclid(1_000_000_000),
+            p[0],
+            p[1],
+            p[2],
+            q[1],
+            q[2],
+            q[3],
+            q[0]
+        )
+        .map_err(|e| io_err(path, e))?;
+    }
+    w.flush().map_err(|e| io_err(path, e))
+}
+
+/// Write a trajectory as EuRoC/ASL ground truth (17 columns when velocity and
+/// biases are present, 8 otherwise).
+pub fn write_asl_groundtruth(path: &Path, tr: &Trajectory) -> Result<(), InputError> {
+    let f = std::fs::File::create(path).map_err(|e| io_err(path, e))?;
+    let mut w = std::io::BufWriter::new(f);
+    let full = tr.v.is_some() && tr.bias_gyro.is_some() && tr.bias_accel.is_some();
+    let mut header = String::from(
+        "#timestamp [ns], p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z []",
+    );
+    if full {
+        header.push_str(", v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]");
+    }
+    writeln!(w, "{header}").map_err(|e| io_err(path, e))?;
+    let mut line = String::new();
+    for i in 0..tr.len() {
+        line.clear();
+        line.push_str(&tr.t_ns[i].to_string());
+        let mut push = |v: &[f64]| {
+            for x in v {
+                line.push(',');
+                line.push_str(ryu::Buffer::new().format(*x));
+            }
+        };
+        push(&tr.p[i]);
+        push(&tr.q[i]);
+        if full {
+            for series in [&tr.v, &tr.bias_gyro, &tr.bias_accel].into_iter().flatten() {
+                push(&series[i]);
+            }
+        }
+        writeln!(w, "{line}").map_err(|e| io_err(path, e))?;
+    }
+    w.flush().map_err(|e| io_err(path, e))
+}

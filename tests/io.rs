@@ -1,0 +1,288 @@
+//! Recording readers: real datasets load with the right counts and units, and
+//! every bad input gives an error naming file and line (or a warning), never a panic.
+
+use std::path::{Path, PathBuf};
+use tumble::io::asl::{read_asl, read_camera_sensor, read_imu_sensor};
+use tumble::io::trajectory::{read_trajectory, write_asl_groundtruth, write_tum, Trajectory};
+use tumble::io::validate::{Duplicates, ValidateOptions};
+use tumble::io::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, Stored, TimeUnit};
+
+fn shared(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        println!("SKIPPED: {} is absent", p.display());
+        None
+    }
+}
+
+fn tmp(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("tumble-io-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A static 200 Hz recording in EuRoC CSV layout with the given values.
+fn euroc_csv(n: usize, gyro: [f64; 3], accel: [f64; 3]) -> String {
+    let mut s = String::from("#timestamp [ns],wx,wy,wz,ax,ay,az\n");
+    for i in 0..n {
+        let t = 1_000_000_000_000i64 + i as i64 * 5_000_000;
+        let jitter = (i % 7) as f64 * 1e-4;
+        s.push_str(&format!(
+            "{t},{},{},{},{},{},{}\n",
+            gyro[0] + jitter,
+            gyro[1],
+            gyro[2],
+            accel[0] + jitter,
+            accel[1],
+            accel[2]
+        ));
+    }
+    s
+}
+
+#[test]
+fn euroc_folder_loads_from_dataset_or_mav0() {
+    let Some(ds) = shared("euroc/V1_01_easy_micro") else { return };
+    for p in [ds.clone(), ds.join("mav0")] {
+        let d = read_asl(&p, &ImuTextFormat::default()).unwrap();
+        assert_eq!(d.imu.len(), 29_120);
+        assert!((d.imu.mean_rate() - 200.0).abs() < 0.5, "{}", d.imu.mean_rate());
+        assert_eq!(d.imu.t0_ns, 1_403_715_273_262_142_976);
+        assert_eq!(d.cameras.len(), 2);
+        assert_eq!(d.cameras[0].frames.len(), 95);
+        let m = d.cameras[0].model.unwrap();
+        assert_eq!((m.fx, m.cy), (458.654, 248.375));
+        assert!((d.cameras[1].t_bs.unwrap().translation.vector.y - 0.0453689425024).abs() < 1e-12);
+        let s = d.imu_sensor.as_ref().unwrap();
+        assert_eq!(s.gyroscope_noise_density, Some(1.6968e-04));
+        assert!(d.cameras[0].frames[0].1.is_file());
+    }
+}
+
+#[test]
+fn euroc_groundtruth_with_biases() {
+    let Some(ds) = shared("euroc/V1_02_medium_40s") else { return };
+    let d = read_asl(&ds, &ImuTextFormat::default()).unwrap();
+    let gt = d.groundtruth.expect("gt0");
+    assert!(gt.len() > 1000);
+    assert_eq!(gt.bias_gyro.as_ref().unwrap()[0], [-0.002153, 0.020744, 0.075806]);
+    let Some(f) = shared("euroc/groundtruth/V1_01_easy.csv") else { return };
+    let gt = read_trajectory(&f).unwrap();
+    assert!(gt.bias_accel.is_some() && gt.len() > 2000);
+}
+
+#[test]
+fn imu_tk_xsens_counts_and_t265_duplicates() {
+    let checks = ValidateOptions::default();
+    if let Some(d) = shared("imu_tk_xsens") {
+        let counts = AccelUnit::Counts { scale: None, offset: 0.0 };
+        let gcounts = GyroUnit::Counts { scale: None, offset: 0.0 };
+        let r = read_imu_tk(&d.join("xsens_acc.mat"), &d.join("xsens_gyro.mat"), TimeUnit::S, counts, gcounts, &checks)
+            .unwrap();
+        assert_eq!(r.len(), 51_175);
+        assert_eq!(r.accel_units.0, Stored::RawCounts);
+        assert_eq!(r.accel[0], [33108.0, 33329.0, 36429.0]);
+        assert!((r.duration() - 511.7).abs() < 0.5);
+    }
+    if let Some(d) = shared("imu_tk_t265") {
+        let r = read_imu_tk(
+            &d.join("t265_acc.mat"),
+            &d.join("t265_gyr.mat"),
+            TimeUnit::S,
+            AccelUnit::MetersPerS2,
+            GyroUnit::RadPerS,
+            &checks,
+        )
+        .unwrap();
+        let w = r.warnings.join("\n");
+        assert!(w.contains("duplicated timestamps") && w.contains("re-stamped"), "{w}");
+        assert!((r.mean_rate() - 200.0).abs() < 2.0, "{}", r.mean_rate());
+        assert!(r.t.windows(2).all(|w| w[1] > w[0]));
+        let strict = ValidateOptions { duplicates: Duplicates::Error, ..checks };
+        let e = read_imu_tk(
+            &d.join("t265_acc.mat"),
+            &d.join("t265_gyr.mat"),
+            TimeUnit::S,
+            AccelUnit::MetersPerS2,
+            GyroUnit::RadPerS,
+            &strict,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("t265_acc.mat:") && e.contains("duplicated"), "{e}");
+    }
+}
+
+#[test]
+fn plain_csv_with_units_and_temperature() {
+    let mut s = String::from("time_ms,ax,ay,az,gx,gy,gz,temperature [degC]\n");
+    for i in 0..400 {
+        s.push_str(&format!("{},0.01,0.0,1.0,0.1,0.2,{},25.5\n", i * 5, (i % 3) as f64 * 0.05));
+    }
+    let p = tmp("plain.csv", &s);
+    let fmt = ImuTextFormat {
+        columns: ImuColumns::parse("t,ax,ay,az,gx,gy,gz").unwrap(),
+        time_unit: TimeUnit::Ms,
+        gyro_unit: GyroUnit::DegPerS,
+        accel_unit: AccelUnit::G,
+        ..ImuTextFormat::default()
+    };
+    let r = read_imu_text(&p, &fmt).unwrap();
+    assert_eq!(r.len(), 400);
+    assert!((r.accel[0][2] - 9.80665).abs() < 1e-12);
+    assert!((r.gyro[0][1] - 0.2f64.to_radians()).abs() < 1e-15);
+    assert_eq!(r.temperature.as_ref().unwrap()[3], 25.5);
+    assert!((r.t[1] - 0.005).abs() < 1e-12);
+    assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+}
+
+fn err_of(text: &str, fmt: &ImuTextFormat) -> String {
+    let p = tmp("bad.csv", text);
+    match read_imu_text(&p, fmt) {
+        Ok(r) => panic!("accepted bad input; warnings {:?}", r.warnings),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bad_recordings_give_located_errors() {
+    let f = ImuTextFormat::default();
+    let good = euroc_csv(400, [0.001, 0.0, 0.0], [0.0, 0.0, 9.81]);
+    let mut lines: Vec<&str> = good.lines().collect();
+    // Unsorted.
+    lines.swap(10, 11);
+    let e = err_of(&lines.join("\n"), &f);
+    assert!(e.contains("bad.csv:12:") && e.contains("backwards"), "{e}");
+    // Non-finite.
+    let e = err_of(&good.replacen(",9.81\n", ",inf\n", 1), &f);
+    assert!(e.contains("bad.csv:2:") && e.contains("not finite"), "{e}");
+    // Truncated last line.
+    let trunc = &good[..good.len() - 20];
+    let e = err_of(trunc, &f);
+    assert!(e.contains("bad.csv:401:") && e.contains("truncated"), "{e}");
+    // Empty.
+    let e = err_of("", &f);
+    assert!(e.contains("no data rows"), "{e}");
+    let e = err_of("#timestamp\n", &f);
+    assert!(e.contains("no data rows"), "{e}");
+    // Accelerometer in g read as m/s².
+    let e = err_of(&euroc_csv(400, [0.001, 0.0, 0.0], [0.0, 0.0, 1.0]), &f);
+    assert!(e.contains("1 g") && e.contains("hint: declare the accelerometer unit as g"), "{e}");
+    // Gyro in deg/s read as rad/s (bias of 2 deg/s).
+    let e = err_of(&euroc_csv(400, [2.0, -1.5, 0.5], [0.0, 0.0, 9.81]), &f);
+    assert!(e.contains("rad/s") && e.contains("deg/s"), "{e}");
+    // Raw counts as m/s².
+    let e = err_of(&euroc_csv(400, [0.0, 0.0, 0.0], [32768.0, 32768.0, 36000.0]), &f);
+    assert!(e.contains("raw counts"), "{e}");
+}
+
+#[test]
+fn gaps_and_saturation_are_warned_and_located() {
+    let good = euroc_csv(600, [0.001, 0.0, 0.0], [0.0, 0.0, 9.81]);
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    lines.drain(300..320); // a 20-sample gap after data line 299
+    for l in lines.iter_mut().skip(400).take(8) {
+        // gyro z flat at its extreme for 8 samples
+        let mut f: Vec<String> = l.split(',').map(String::from).collect();
+        f[3] = "8.7".into();
+        *l = f.join(",");
+    }
+    let p = tmp("gappy.csv", &lines.join("\n"));
+    let r = read_imu_text(&p, &ImuTextFormat::default()).unwrap();
+    let w = r.warnings.join("\n");
+    assert!(w.contains("1 gaps longer than 2 nominal periods") && w.contains("line 301"), "{w}");
+    assert!(w.contains("gyro z is flat at 8.7") && w.contains("8 samples from line 401"), "{w}");
+}
+
+#[test]
+fn column_maps_and_units_parse_with_clear_errors() {
+    assert!(ImuColumns::parse("t,gx,gy").unwrap_err().contains("all three axes"));
+    assert!(ImuColumns::parse("t,gx,gy,gz,gx").unwrap_err().contains("named twice"));
+    assert_eq!(ImuColumns::parse("gx,gy,gz").unwrap().time, None);
+    assert!(ImuColumns::parse("t,foo").unwrap_err().contains("unknown column name 'foo'"));
+    assert_eq!(GyroUnit::parse("counts:0.001:32768"), Ok(GyroUnit::Counts { scale: Some(0.001), offset: 32768.0 }));
+    assert!(AccelUnit::parse("furlongs").is_err());
+    // Counts with a scale convert to SI.
+    let mut s = String::new();
+    for i in 0..300 {
+        s.push_str(&format!("{} 100 100 1100\n", i as f64 * 0.01));
+    }
+    let p = tmp("counts.txt", &s);
+    let fmt = ImuTextFormat {
+        columns: ImuColumns::parse("t,ax,ay,az").unwrap(),
+        time_unit: TimeUnit::S,
+        accel_unit: AccelUnit::Counts { scale: Some(0.01), offset: 100.0 },
+        ..ImuTextFormat::default()
+    };
+    let r = read_imu_text(&p, &fmt).unwrap();
+    assert_eq!(r.accel[0], [0.0, 0.0, 10.0]);
+    assert!(r.gyro.is_empty());
+}
+
+#[test]
+fn imu_tk_pair_must_match() {
+    let a = tmp("a.txt", "0 1 2 3\n0.01 1 2 3\n0.02 1 2 3\n");
+    let g = tmp("g.txt", "0 1 2 3\n0.01 1 2 3\n");
+    let c = AccelUnit::Counts { scale: None, offset: 0.0 };
+    let gc = GyroUnit::Counts { scale: None, offset: 0.0 };
+    let e = read_imu_tk(&a, &g, TimeUnit::S, c, gc, &ValidateOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("g.txt") && e.contains("has 2 samples"), "{e}");
+    let g = tmp("g2.txt", "0 1 2 3\n0.01 1 2 3\n0.05 1 2 3\n");
+    let e = read_imu_tk(&a, &g, TimeUnit::S, c, gc, &ValidateOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("g2.txt:3:") && e.contains("differs"), "{e}");
+}
+
+#[test]
+fn sensor_yaml_errors() {
+    let good = "%YAML:1.0\nsensor_type: camera\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1,0,0,0, 0,1,0,0, 0,0,1,0, 0,0,0,1]\nrate_hz: 20\nresolution: [752, 480]\ncamera_model: pinhole\nintrinsics: [458.6, 457.3, 367.2, 248.4]\ndistortion_model: equidistant\ndistortion_coefficients: [0.1, 0.01, 0.0, 0.0]\n";
+    let (m, t, r, _) = read_camera_sensor(&tmp("cam.yaml", good)).unwrap();
+    assert!(matches!(m.distortion, tumble_factors::camera::Distortion::Equidistant { .. }));
+    assert!(t.is_some() && r == Some([752, 480]));
+    for (text, what) in [
+        (good.replace("intrinsics: [458.6, 457.3, 367.2, 248.4]\n", ""), "missing intrinsics"),
+        (good.replace("[0.1, 0.01, 0.0, 0.0]", "[0.1]"), "needs 4"),
+        (good.replace("equidistant", "kb8"), "not supported"),
+        (good.replace("data: [1,0,0,0,", "data: [2,0,0,0,"), "not a rotation"),
+        (good.replace("rate_hz: 20", "rate_hz: [20"), "cam.yaml:"),
+    ] {
+        let e = read_camera_sensor(&tmp("cam.yaml", &text)).unwrap_err().to_string();
+        assert!(e.contains(what) && e.contains("cam.yaml"), "{what}: {e}");
+    }
+    let e = read_imu_sensor(&tmp("imu.yaml", "rate_hz: -5\n")).unwrap_err().to_string();
+    assert!(e.contains("rate_hz must be positive"), "{e}");
+    let e = read_asl(Path::new("/nonexistent/folder"), &ImuTextFormat::default()).unwrap_err().to_string();
+    assert!(e.contains("does not exist"), "{e}");
+    let e = read_asl(&std::env::temp_dir(), &ImuTextFormat::default()).unwrap_err().to_string();
+    assert!(e.contains("not an ASL dataset"), "{e}");
+}
+
+#[test]
+fn trajectories_round_trip_in_both_formats() {
+    let tr = Trajectory {
+        t_ns: vec![1_403_715_273_262_142_976, 1_403_715_273_312_143_104],
+        p: vec![[1.0, 2.0, 3.0], [1.5, -2.0, 0.25]],
+        q: vec![[1.0, 0.0, 0.0, 0.0], [0.5, 0.5, -0.5, 0.5]],
+        v: Some(vec![[0.1, 0.2, 0.3], [0.0, 0.0, 0.0]]),
+        bias_gyro: Some(vec![[1e-3, 2e-3, 3e-3]; 2]),
+        bias_accel: Some(vec![[0.01, -0.02, 0.03]; 2]),
+    };
+    let p = tmp("gt.csv", "");
+    write_asl_groundtruth(&p, &tr).unwrap();
+    assert_eq!(read_trajectory(&p).unwrap(), tr);
+    let p = tmp("traj.txt", "");
+    write_tum(&p, &tr).unwrap();
+    let back = read_trajectory(&p).unwrap();
+    assert_eq!(back.p, tr.p);
+    assert_eq!(back.q, tr.q);
+    for (a, b) in back.t_ns.iter().zip(&tr.t_ns) {
+        assert!((a - b).abs() < 1000, "{a} {b}");
+    }
+    let e = read_trajectory(&tmp("badq.txt", "0 0 0 0 0 0 0 2\n")).unwrap_err().to_string();
+    assert!(e.contains("badq.txt:1:") && e.contains("quaternion norm"), "{e}");
+    let e = read_trajectory(&tmp("dupt.txt", "0 0 0 0 0 0 0 1\n0 0 0 0 0 0 0 1\n")).unwrap_err().to_string();
+    assert!(e.contains("dupt.txt:2:") && e.contains("repeats"), "{e}");
+}
