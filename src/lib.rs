@@ -8,6 +8,7 @@
 pub mod error;
 pub mod io;
 pub mod posegraph;
+pub mod sim;
 
 pub use error::InputError;
 pub use tumble_factors as factors;

@@ -72,6 +72,27 @@ impl RecordingArgs {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Simulate a recording with known truth and write it as an ASL dataset folder.
+    Sim {
+        /// What to simulate.
+        #[arg(value_enum)]
+        scenario: tumble::sim::Scenario,
+        /// Output folder (gets mav0/ and truth.json).
+        #[arg(long)]
+        out: PathBuf,
+        /// YAML config: IMU model, effects, durations, camera (every key optional).
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Random seed; the same seed and config give the same bytes.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Length of static, walk and flight scenarios [s] (overrides the config).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Print the default config as YAML and exit (a starting point for --config).
+        #[arg(long)]
+        print_config: bool,
+    },
     /// Read an IMU recording, check it, and print what it holds and what looks wrong.
     Inspect {
         /// ASL dataset folder (or its mav0/), a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
@@ -124,6 +145,33 @@ fn print_log(s: &Summary) {
 
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     match cli.command {
+        Command::Sim { scenario, out, config, seed, duration, print_config } => {
+            let mut cfg = match &config {
+                Some(p) => tumble::sim::SimConfig::read(p)?,
+                None => tumble::sim::SimConfig::default(),
+            };
+            if print_config {
+                print!("{}", serde_saphyr::to_string(&cfg)?);
+                return Ok(());
+            }
+            if duration.is_some() {
+                cfg.duration_s = duration;
+            }
+            let start = std::time::Instant::now();
+            let sim = tumble::sim::simulate_and_write(scenario, &cfg, seed, &out)?;
+            println!(
+                "simulated {:?}: {} IMU samples over {:.1} s{}, written to {} in {:.2} s",
+                scenario,
+                sim.imu.t.len(),
+                sim.motion.duration(),
+                sim.tracks
+                    .as_ref()
+                    .map(|t| format!(", {} frames, {} feature observations", t.frames.len(), t.observations.len()))
+                    .unwrap_or_default(),
+                out.display(),
+                start.elapsed().as_secs_f64()
+            );
+        }
         Command::Inspect { recording, read } => {
             let start = std::time::Instant::now();
             let r = tumble::io::open_recording(&recording, &read.options())?;

@@ -1,0 +1,240 @@
+//! Camera simulation: landmarks on the walls of a room, feature tracks with
+//! pixel noise, track loss and outliers, seen through a pinhole camera with
+//! distortion mounted on the body at `T_BC`, with a time offset.
+//!
+//! Time offset convention (Kalibr, VINS-Mono): an image stamped `t` was taken
+//! at IMU time `t + time_offset_s`.
+
+use super::motion::Motion;
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use tumble_factors::camera::{CameraModel, Distortion};
+
+/// Distortion model names used in configs and `sensor.yaml`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DistortionKind {
+    /// `radial-tangential` (k1, k2, p1, p2).
+    RadialTangential,
+    /// `equidistant` (k1, k2, k3, k4).
+    Equidistant,
+}
+
+/// Camera settings of a simulation.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraSettings {
+    /// Frame rate \[Hz\].
+    pub rate_hz: f64,
+    /// Image size `[width, height]` \[px\].
+    pub resolution: [u32; 2],
+    /// `[fu, fv, cu, cv]` \[px\].
+    pub intrinsics: [f64; 4],
+    /// Distortion model.
+    pub distortion_model: DistortionKind,
+    /// Its four coefficients.
+    pub distortion_coefficients: [f64; 4],
+    /// Camera position in the body frame \[m\].
+    pub body_t_camera: [f64; 3],
+    /// Camera orientation in the body frame as a quaternion `[w, x, y, z]`.
+    pub body_q_camera: [f64; 4],
+    /// Image time offset \[s\] (image stamped t was taken at IMU time t + offset).
+    pub time_offset_s: f64,
+    /// Pixel noise standard deviation \[px\].
+    pub pixel_noise_px: f64,
+    /// Probability per frame that a tracked feature is lost.
+    pub track_loss: f64,
+    /// Fraction of observations replaced by a random pixel.
+    pub outlier_fraction: f64,
+    /// Most features reported per frame.
+    pub max_features: usize,
+    /// Number of landmarks on the room's walls, floor and ceiling.
+    pub landmarks: usize,
+    /// Half extents of the room around the motion's centre \[m\].
+    pub room_half_extent: [f64; 3],
+}
+
+impl Default for CameraSettings {
+    /// EuRoC's cam0 (MT9M034): 752×480 at 20 Hz, looking forward (z_C along x_B).
+    fn default() -> Self {
+        // Camera z forward = body x, camera x right = body −y, camera y down = body −z.
+        let r = nalgebra::Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
+        let q = UnitQuaternion::from_matrix(&r);
+        CameraSettings {
+            rate_hz: 20.0,
+            resolution: [752, 480],
+            intrinsics: [458.654, 457.296, 367.215, 248.375],
+            distortion_model: DistortionKind::RadialTangential,
+            distortion_coefficients: [-0.28340811, 0.07395907, 0.00019359, 1.76187114e-05],
+            body_t_camera: [0.05, -0.02, 0.01],
+            body_q_camera: [q.w, q.i, q.j, q.k],
+            time_offset_s: 0.0,
+            pixel_noise_px: 0.5,
+            track_loss: 0.02,
+            outlier_fraction: 0.01,
+            max_features: 150,
+            landmarks: 2000,
+            room_half_extent: [3.0, 3.0, 1.5],
+        }
+    }
+}
+
+impl CameraSettings {
+    /// The camera model.
+    pub fn model(&self) -> CameraModel {
+        let [k1, k2, a, b] = self.distortion_coefficients;
+        let distortion = match self.distortion_model {
+            DistortionKind::RadialTangential => Distortion::RadTan { k1, k2, p1: a, p2: b },
+            DistortionKind::Equidistant => Distortion::Equidistant { k1, k2, k3: a, k4: b },
+        };
+        let [fx, fy, cx, cy] = self.intrinsics;
+        CameraModel { fx, fy, cx, cy, distortion }
+    }
+    /// Body ← camera transform.
+    pub fn body_from_camera(&self) -> Isometry3<f64> {
+        let [w, x, y, z] = self.body_q_camera;
+        let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+        Isometry3::from_parts(Translation3::from(Vector3::from(self.body_t_camera)), q)
+    }
+    /// Check for values that cannot be simulated.
+    pub fn check(&self) -> Result<(), String> {
+        if !(self.rate_hz > 0.0 && self.rate_hz.is_finite()) {
+            return Err("camera.rate_hz must be positive".into());
+        }
+        if self.resolution[0] == 0 || self.resolution[1] == 0 || self.intrinsics[0] <= 0.0 || self.intrinsics[1] <= 0.0
+        {
+            return Err("camera resolution and focal lengths must be positive".into());
+        }
+        let qn = self.body_q_camera.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if (qn - 1.0).abs() > 1e-3 {
+            return Err(format!("camera.body_q_camera has norm {qn:.4}, not 1"));
+        }
+        for (p, what) in [(self.track_loss, "track_loss"), (self.outlier_fraction, "outlier_fraction")] {
+            if !(0.0..=1.0).contains(&p) {
+                return Err(format!("camera.{what} must be in [0, 1], found {p}"));
+            }
+        }
+        if self.pixel_noise_px < 0.0 || self.room_half_extent.iter().any(|x| *x <= 0.0) {
+            return Err("camera.pixel_noise_px must be ≥ 0 and the room extents > 0".into());
+        }
+        Ok(())
+    }
+}
+
+/// One feature observation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    /// Frame stamp \[s\].
+    pub t: f64,
+    /// Track id (a landmark gets a new id each time its track is re-acquired).
+    pub track: u64,
+    /// Landmark index in the truth list.
+    pub landmark: usize,
+    /// Measured pixel `[u, v]` \[px\].
+    pub uv: [f64; 2],
+    /// True when this observation is an injected outlier.
+    pub outlier: bool,
+}
+
+/// Simulated tracks with the landmarks behind them.
+#[derive(Debug, Clone, Default)]
+pub struct SimulatedTracks {
+    /// Frame stamps \[s\].
+    pub frames: Vec<f64>,
+    /// Landmarks in the world frame \[m\].
+    pub landmarks: Vec<[f64; 3]>,
+    /// Observations in time order.
+    pub observations: Vec<Observation>,
+}
+
+/// Landmarks uniformly on the six faces of a box around `centre`.
+fn room_landmarks(n: usize, centre: Vector3<f64>, half: [f64; 3], rng: &mut ChaCha8Rng) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|_| {
+            let face = rng.random_range(0..6);
+            let axis = face / 2;
+            let sign = if face % 2 == 0 { -1.0 } else { 1.0 };
+            let mut p = [0.0; 3];
+            for (k, pk) in p.iter_mut().enumerate() {
+                *pk = if k == axis { sign * half[k] } else { rng.random_range(-half[k]..half[k]) };
+                *pk += centre[k];
+            }
+            p
+        })
+        .collect()
+}
+
+/// Simulate feature tracks along `motion` with world-frame centre `centre` \[m\].
+pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<f64>, seed: u64) -> SimulatedTracks {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(200);
+    let landmarks = room_landmarks(s.landmarks, centre, s.room_half_extent, &mut rng);
+    let model = s.model();
+    let b_t_c = s.body_from_camera();
+    let (w, h) = (s.resolution[0] as f64, s.resolution[1] as f64);
+    let mut frames = Vec::new();
+    let mut observations = Vec::new();
+    let mut track_of: Vec<Option<u64>> = vec![None; landmarks.len()];
+    let mut next_track = 0u64;
+    let dt = 1.0 / s.rate_hz;
+    let mut t = 0.0;
+    while t <= motion.duration() {
+        let k = motion.at((t + s.time_offset_s).clamp(0.0, motion.duration()));
+        let rot = UnitQuaternion::from_matrix(&k.rotation);
+        let w_t_b = Isometry3::from_parts(Translation3::from(k.position), rot);
+        let c_t_w = (w_t_b * b_t_c).inverse();
+        let mut visible: Vec<(usize, [f64; 2])> = Vec::new();
+        for (j, l) in landmarks.iter().enumerate() {
+            let pc = c_t_w * Point3::from(*l);
+            if pc.z < 0.2 {
+                continue;
+            }
+            if let Some(uv) = model.project(&[pc.x, pc.y, pc.z]) {
+                if uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h {
+                    visible.push((j, uv));
+                }
+            }
+        }
+        // Tracked features first, then new ones in random order, up to the cap.
+        let (mut kept, mut fresh): (Vec<_>, Vec<_>) = visible.into_iter().partition(|(j, _)| track_of[*j].is_some());
+        for i in (1..fresh.len()).rev() {
+            let r = rng.random_range(0..=i);
+            fresh.swap(i, r);
+        }
+        kept.extend(fresh);
+        kept.truncate(s.max_features);
+        let mut seen = vec![false; landmarks.len()];
+        for (j, uv) in kept {
+            seen[j] = true;
+            let lost = rng.random_bool(s.track_loss);
+            let track = match track_of[j] {
+                Some(id) if !lost => id,
+                _ => {
+                    next_track += 1;
+                    next_track - 1
+                }
+            };
+            track_of[j] = Some(track);
+            let outlier = rng.random_bool(s.outlier_fraction);
+            let uv = if outlier {
+                [rng.random_range(0.0..w), rng.random_range(0.0..h)]
+            } else {
+                let nu: f64 = StandardNormal.sample(&mut rng);
+                let nv: f64 = StandardNormal.sample(&mut rng);
+                [uv[0] + s.pixel_noise_px * nu, uv[1] + s.pixel_noise_px * nv]
+            };
+            observations.push(Observation { t, track, landmark: j, uv, outlier });
+        }
+        for (j, tr) in track_of.iter_mut().enumerate() {
+            if !seen[j] {
+                *tr = None;
+            }
+        }
+        frames.push(t);
+        t = frames.len() as f64 * dt;
+    }
+    SimulatedTracks { frames, landmarks, observations }
+}

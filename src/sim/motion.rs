@@ -1,0 +1,394 @@
+//! True motions with analytic derivatives: the hand tumble, a static log, the
+//! 6-minute hand-held loop and an EuRoC-like flight.
+//!
+//! Frames: world `W` with z up and gravity `g_W = [0, 0, −g]`; body `B` is the
+//! IMU (accelerometer) frame. `R` maps body to world. The angular rate is in
+//! the body frame, so a gyro measures `ω_B` and an accelerometer measures the
+//! specific force `R⁻¹ (a_W − g_W)`.
+
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::f64::consts::PI;
+use tumble_solvers::lie::{so3_exp, so3_log, so3_right_jacobian};
+
+/// The true state at one instant.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Kinematics {
+    /// Orientation world ← body.
+    pub rotation: Matrix3<f64>,
+    /// Position in the world \[m\].
+    pub position: Vector3<f64>,
+    /// Velocity in the world \[m/s\].
+    pub velocity: Vector3<f64>,
+    /// Acceleration in the world \[m/s²\].
+    pub acceleration: Vector3<f64>,
+    /// Angular rate in the body frame \[rad/s\].
+    pub omega: Vector3<f64>,
+}
+
+impl Kinematics {
+    /// Specific force in the body frame \[m/s²\] under gravity magnitude `g`.
+    pub fn specific_force(&self, g: f64) -> Vector3<f64> {
+        self.rotation.transpose() * (self.acceleration + Vector3::new(0.0, 0.0, g))
+    }
+    /// Orientation as a unit quaternion.
+    pub fn quaternion(&self) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(self.rotation))
+    }
+}
+
+/// A motion: the true state at any time in `[0, duration]` \[s\].
+pub trait Motion: Send + Sync {
+    /// State at `t` \[s\].
+    fn at(&self, t: f64) -> Kinematics;
+    /// Length \[s\].
+    fn duration(&self) -> f64;
+}
+
+/// Quintic minimum-jerk blend s(u) on u ∈ \[0, 1\] with its first two derivatives in u.
+fn min_jerk(u: f64) -> (f64, f64, f64) {
+    let u = u.clamp(0.0, 1.0);
+    let (u2, u3) = (u * u, u * u * u);
+    (
+        10.0 * u3 - 15.0 * u3 * u + 6.0 * u3 * u2,
+        30.0 * u2 - 60.0 * u3 + 30.0 * u3 * u,
+        60.0 * u - 180.0 * u2 + 120.0 * u3,
+    )
+}
+
+/// A motionless sensor in a fixed orientation.
+#[derive(Debug, Clone)]
+pub struct Static {
+    /// Orientation world ← body.
+    pub rotation: Matrix3<f64>,
+    /// Length \[s\].
+    pub duration: f64,
+}
+
+impl Motion for Static {
+    fn at(&self, _t: f64) -> Kinematics {
+        Kinematics {
+            rotation: self.rotation,
+            position: Vector3::zeros(),
+            velocity: Vector3::zeros(),
+            acceleration: Vector3::zeros(),
+            omega: Vector3::zeros(),
+        }
+    }
+    fn duration(&self) -> f64 {
+        self.duration
+    }
+}
+
+/// The paper's hand-tumble recording: a static start, then poses held still,
+/// joined by smooth rotations with a little translation.
+#[derive(Debug, Clone)]
+pub struct Tumble {
+    /// Segments in time order.
+    segments: Vec<Segment>,
+    duration: f64,
+}
+
+#[derive(Debug, Clone)]
+struct Segment {
+    start: f64,
+    length: f64,
+    r0: Matrix3<f64>,
+    phi: Vector3<f64>,
+    p0: Vector3<f64>,
+    dp: Vector3<f64>,
+}
+
+/// Settings of the [`Tumble`] motion.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TumbleSettings {
+    /// Initial static period \[s\].
+    pub initial_static_s: f64,
+    /// Number of held poses after it.
+    pub poses: usize,
+    /// Shortest and longest hold \[s\].
+    pub hold_s: [f64; 2],
+    /// Mean rotation rate of the hand between poses \[rad/s\].
+    pub turn_rate: f64,
+    /// Largest translation between poses \[m\].
+    pub max_shift_m: f64,
+}
+
+impl Default for TumbleSettings {
+    fn default() -> Self {
+        TumbleSettings { initial_static_s: 50.0, poses: 50, hold_s: [1.5, 3.0], turn_rate: 1.2, max_shift_m: 0.05 }
+    }
+}
+
+impl Tumble {
+    /// A random tumble: orientations drawn so consecutive poses differ by
+    /// 40°–140° (every axis gets excited), deterministic for `seed`.
+    pub fn new(s: &TumbleSettings, seed: u64) -> Tumble {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7475_6d62);
+        let mut segments = Vec::new();
+        let mut r = Matrix3::identity();
+        let mut p = Vector3::zeros();
+        let mut t = 0.0;
+        let mut hold = |t: &mut f64, len: f64, r: Matrix3<f64>, p: Vector3<f64>| {
+            segments.push(Segment {
+                start: *t,
+                length: len,
+                r0: r,
+                phi: Vector3::zeros(),
+                p0: p,
+                dp: Vector3::zeros(),
+            });
+            *t += len;
+        };
+        hold(&mut t, s.initial_static_s, r, p);
+        let mut turns = Vec::new();
+        for _ in 0..s.poses {
+            let axis = loop {
+                let v =
+                    Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
+                let n: f64 = v.norm();
+                if n > 0.1 && n <= 1.0 {
+                    break v / n;
+                }
+            };
+            let angle = rng.random_range(40f64.to_radians()..140f64.to_radians());
+            let phi = axis * angle;
+            let dp =
+                Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
+                    * s.max_shift_m
+                    / 3f64.sqrt();
+            // Keep the device near its start.
+            let dp = dp - p * 0.5;
+            let len = (angle / s.turn_rate).max(0.8);
+            turns.push((len, phi, dp, rng.random_range(s.hold_s[0]..=s.hold_s[1])));
+        }
+        let mut segs = segments;
+        for (len, phi, dp, hold_len) in turns {
+            segs.push(Segment { start: t, length: len, r0: r, phi, p0: p, dp });
+            t += len;
+            r *= so3_exp(&phi);
+            p += dp;
+            segs.push(Segment {
+                start: t,
+                length: hold_len,
+                r0: r,
+                phi: Vector3::zeros(),
+                p0: p,
+                dp: Vector3::zeros(),
+            });
+            t += hold_len;
+        }
+        Tumble { segments: segs, duration: t }
+    }
+
+    /// The held (static) intervals `[start, end]` \[s\], the initial one first.
+    pub fn static_intervals(&self) -> Vec<[f64; 2]> {
+        self.segments.iter().filter(|s| s.phi == Vector3::zeros()).map(|s| [s.start, s.start + s.length]).collect()
+    }
+}
+
+impl Motion for Tumble {
+    fn at(&self, t: f64) -> Kinematics {
+        let i = self.segments.partition_point(|s| s.start <= t).saturating_sub(1);
+        let s = &self.segments[i];
+        let (b, db, ddb) = min_jerk((t - s.start) / s.length);
+        let (db, ddb) = (db / s.length, ddb / (s.length * s.length));
+        Kinematics {
+            rotation: s.r0 * so3_exp(&(s.phi * b)),
+            position: s.p0 + s.dp * b,
+            velocity: s.dp * db,
+            acceleration: s.dp * ddb,
+            omega: s.phi * db,
+        }
+    }
+    fn duration(&self) -> f64 {
+        self.duration
+    }
+}
+
+/// A smooth periodic 3-vector: `Σ_k a_k sin(2π n_k t / T + φ_k)` per axis,
+/// with integer `n_k`, so value and derivatives return to their start at `T`.
+#[derive(Debug, Clone)]
+struct Harmonics {
+    period: f64,
+    terms: Vec<(Vector3<f64>, f64, Vector3<f64>)>, // amplitude, harmonic number, phase
+}
+
+impl Harmonics {
+    fn random(rng: &mut ChaCha8Rng, period: f64, harmonics: &[f64], amplitude: Vector3<f64>) -> Harmonics {
+        let terms = harmonics
+            .iter()
+            .map(|&n| {
+                let a = amplitude.map(|x| x * rng.random_range(0.5..1.0)) / harmonics.len() as f64;
+                let ph = Vector3::new(
+                    rng.random_range(0.0..2.0 * PI),
+                    rng.random_range(0.0..2.0 * PI),
+                    rng.random_range(0.0..2.0 * PI),
+                );
+                (a, n, ph)
+            })
+            .collect();
+        Harmonics { period, terms }
+    }
+    /// Value minus its value at 0, first and second derivative.
+    fn eval(&self, t: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+        let mut v = Vector3::zeros();
+        let mut d = Vector3::zeros();
+        let mut dd = Vector3::zeros();
+        for (a, n, ph) in &self.terms {
+            let w = 2.0 * PI * n / self.period;
+            for k in 0..3 {
+                let arg = w * t + ph[k];
+                v[k] += a[k] * (arg.sin() - ph[k].sin());
+                d[k] += a[k] * w * arg.cos();
+                dd[k] -= a[k] * w * w * arg.sin();
+            }
+        }
+        (v, d, dd)
+    }
+}
+
+/// Smooth 0→1 ramp over `[0, ramp]` and 1→0 over `[T − ramp, T]`, with derivatives.
+fn envelope(t: f64, total: f64, ramp: f64) -> (f64, f64, f64) {
+    if t < ramp {
+        let (s, ds, dds) = min_jerk(t / ramp);
+        (s, ds / ramp, dds / (ramp * ramp))
+    } else if t > total - ramp {
+        let (s, ds, dds) = min_jerk((total - t) / ramp);
+        (s, -ds / ramp, dds / (ramp * ramp))
+    } else {
+        (1.0, 0.0, 0.0)
+    }
+}
+
+/// Periodic motion that starts and ends at rest at the same pose: position and
+/// rotation vector are harmonics under a start/stop envelope. Used for the
+/// hand-held loop and for the flight.
+#[derive(Debug, Clone)]
+pub struct Loop {
+    duration: f64,
+    rest_s: f64,
+    ramp_s: f64,
+    centre: Vector3<f64>,
+    r0: Matrix3<f64>,
+    pos: Harmonics,
+    rot: Harmonics,
+}
+
+impl Loop {
+    /// The paper's hand-held walk: 6 minutes inside a 1 m cube, back at the start.
+    pub fn handheld(duration: f64, seed: u64) -> Loop {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x77616c6b);
+        let pos = Harmonics::random(&mut rng, duration - 10.0, &[17.0, 41.0, 83.0], Vector3::new(0.22, 0.22, 0.2));
+        let rot = Harmonics::random(&mut rng, duration - 10.0, &[23.0, 53.0, 97.0], Vector3::new(0.35, 0.35, 0.8));
+        Loop {
+            duration,
+            rest_s: 3.0,
+            ramp_s: 2.0,
+            centre: Vector3::new(0.0, 0.0, 1.2),
+            r0: Matrix3::identity(),
+            pos,
+            rot,
+        }
+    }
+    /// An EuRoC-like flight: a few metres in a room, faster and with larger yaw.
+    pub fn flight(duration: f64, seed: u64) -> Loop {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x666c7900);
+        let pos = Harmonics::random(&mut rng, duration - 10.0, &[3.0, 7.0, 11.0], Vector3::new(1.5, 1.5, 0.5));
+        let rot = Harmonics::random(&mut rng, duration - 10.0, &[5.0, 13.0, 29.0], Vector3::new(0.2, 0.2, 1.0));
+        Loop {
+            duration,
+            rest_s: 3.0,
+            ramp_s: 2.0,
+            centre: Vector3::new(0.0, 0.0, 1.5),
+            r0: Matrix3::identity(),
+            pos,
+            rot,
+        }
+    }
+}
+
+impl Motion for Loop {
+    fn at(&self, t: f64) -> Kinematics {
+        let moving = self.duration - 2.0 * self.rest_s;
+        let tm = (t - self.rest_s).clamp(0.0, moving);
+        let active = t > self.rest_s && t < self.duration - self.rest_s;
+        let (e, de, dde) = if active { envelope(tm, moving, self.ramp_s) } else { (0.0, 0.0, 0.0) };
+        let (q, dq, ddq) = self.pos.eval(tm);
+        let (th, dth, _) = self.rot.eval(tm);
+        let theta = th * e;
+        let dtheta = dth * e + th * de;
+        Kinematics {
+            rotation: self.r0 * so3_exp(&theta),
+            position: self.centre + q * e,
+            velocity: dq * e + q * de,
+            acceleration: ddq * e + dq * (2.0 * de) + q * dde,
+            omega: so3_right_jacobian(&theta) * dtheta,
+        }
+    }
+    fn duration(&self) -> f64 {
+        self.duration
+    }
+}
+
+/// Rotation vector from `a` to `b` in `a`'s frame (`Log(aᵀ b)`).
+pub fn relative_rotation(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Vector3<f64> {
+    so3_log(&(a.transpose() * b))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Velocity, acceleration and body rate agree with central differences of
+    /// position, velocity and orientation.
+    fn check_derivatives(m: &dyn Motion) {
+        let h = 1e-5;
+        let mut t = 0.37;
+        while t < m.duration() - 0.01 {
+            let (a, b, c) = (m.at(t - h), m.at(t), m.at(t + h));
+            let v = (c.position - a.position) / (2.0 * h);
+            let acc = (c.velocity - a.velocity) / (2.0 * h);
+            let w = relative_rotation(&a.rotation, &c.rotation) / (2.0 * h);
+            assert!((v - b.velocity).norm() < 1e-5 * (1.0 + v.norm()), "v at {t}: {v} vs {}", b.velocity);
+            assert!((acc - b.acceleration).norm() < 1e-4 * (1.0 + acc.norm()), "a at {t}");
+            assert!((w - b.omega).norm() < 1e-5 * (1.0 + w.norm()), "ω at {t}: {w} vs {}", b.omega);
+            t += 0.713;
+        }
+    }
+
+    #[test]
+    fn analytic_derivatives_match_numeric() {
+        check_derivatives(&Tumble::new(&TumbleSettings { initial_static_s: 2.0, poses: 10, ..Default::default() }, 3));
+        check_derivatives(&Loop::handheld(60.0, 4));
+        check_derivatives(&Loop::flight(60.0, 5));
+    }
+
+    #[test]
+    fn loop_returns_to_start_and_stays_in_its_volume() {
+        let m = Loop::handheld(360.0, 1);
+        let (a, b) = (m.at(0.0), m.at(360.0));
+        assert!((a.position - b.position).norm() < 1e-12 && relative_rotation(&a.rotation, &b.rotation).norm() < 1e-12);
+        let mut t = 0.0;
+        while t < 360.0 {
+            let k = m.at(t);
+            let d = k.position - m.centre;
+            assert!(d.x.abs() <= 0.5 && d.y.abs() <= 0.5 && d.z.abs() <= 0.5, "{t}: {d}");
+            t += 0.05;
+        }
+    }
+
+    #[test]
+    fn tumble_has_its_holds() {
+        let m = Tumble::new(&TumbleSettings::default(), 9);
+        let holds = m.static_intervals();
+        assert_eq!(holds.len(), 51);
+        assert!(holds[0] == [0.0, 50.0]);
+        for h in &holds[1..] {
+            let k = m.at(0.5 * (h[0] + h[1]));
+            assert!(k.omega.norm() == 0.0 && k.velocity.norm() == 0.0);
+        }
+    }
+}

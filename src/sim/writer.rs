@@ -1,0 +1,256 @@
+//! Writes a [`Simulation`] as an ASL dataset folder, the layout every
+//! pipeline reads real recordings in, plus the truth:
+//!
+//! ```text
+//! OUT/mav0/imu0/data.csv                       t[ns], ω [rad/s], a [m/s²] (+ temperature [degC])
+//! OUT/mav0/imu0/sensor.yaml                    rate and Kalibr noise figures of the model
+//! OUT/mav0/cam0/{data.csv,tracks.csv,sensor.yaml}   when a camera was simulated
+//! OUT/mav0/state_groundtruth_estimate0/data.csv     p, q, v, b_w, b_a
+//! OUT/truth.json                               every parameter, the seed, static intervals
+//! OUT/truth/{landmarks.csv,observations.csv}   landmark positions, which landmark each track sees
+//! ```
+
+use super::imu::SimulatedImu;
+use super::Simulation;
+use crate::error::InputError;
+use crate::io::trajectory::{write_asl_groundtruth, Trajectory};
+use rayon::prelude::*;
+use std::io::Write;
+use std::path::Path;
+
+fn werr(path: &Path, e: std::io::Error) -> InputError {
+    InputError::file(path, format!("cannot write: {e}"))
+}
+
+fn create(path: &Path) -> Result<std::io::BufWriter<std::fs::File>, InputError> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| werr(dir, e))?;
+    }
+    let f = std::fs::File::create(path).map_err(|e| werr(path, e))?;
+    Ok(std::io::BufWriter::with_capacity(1 << 20, f))
+}
+
+fn push_f64(out: &mut Vec<u8>, x: f64) {
+    out.push(b',');
+    out.extend_from_slice(ryu::Buffer::new().format(x).as_bytes());
+}
+
+fn imu_header(temperature: bool) -> String {
+    let mut header = String::from("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]");
+    if temperature {
+        header.push_str(",temperature [degC]");
+    }
+    header.push('\n');
+    header
+}
+
+/// Format samples `range` of the IMU CSV, in parallel pieces, in order.
+fn format_imu_rows(imu: &SimulatedImu, t0_ns: i64, rate_hz: f64, range: std::ops::Range<usize>) -> Vec<Vec<u8>> {
+    const PIECE: usize = 1 << 13;
+    let dt_ns = 1e9 / rate_hz;
+    let starts: Vec<usize> = range.clone().step_by(PIECE).collect();
+    starts
+        .into_par_iter()
+        .map(|s| {
+            let mut out = Vec::with_capacity(PIECE * 100);
+            let mut ib = itoa::Buffer::new();
+            for i in s..(s + PIECE).min(range.end) {
+                out.extend_from_slice(ib.format(t0_ns + (i as f64 * dt_ns).round() as i64).as_bytes());
+                for &x in imu.gyro[i].iter().chain(imu.accel[i].iter()) {
+                    // 1e-9 resolution: far below any IMU's LSB, and half the bytes
+                    // (+ 0.0 turns −0 into 0).
+                    push_f64(&mut out, (x * 1e9).round() / 1e9 + 0.0);
+                }
+                if let Some(tc) = &imu.temperature {
+                    push_f64(&mut out, (tc[i] * 1e3).round() / 1e3 + 0.0);
+                }
+                out.push(b'\n');
+            }
+            out
+        })
+        .collect()
+}
+
+/// Simulate and write at once: each chunk of IMU samples is formatted as soon
+/// as it is final and written by a second thread while the next chunk is
+/// simulated. Then the rest of the folder as [`write_asl`] does.
+pub fn simulate_and_write(
+    scenario: super::Scenario,
+    config: &super::SimConfig,
+    seed: u64,
+    out: &Path,
+) -> Result<Simulation, InputError> {
+    let csv = out.join("mav0").join("imu0").join("data.csv");
+    let mut w = create(&csv)?;
+    let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<Vec<u8>>>(2);
+    let sim = std::thread::scope(|scope| -> Result<Simulation, InputError> {
+        let writer = scope.spawn(move || -> std::io::Result<()> {
+            for pieces in rx {
+                for p in pieces {
+                    w.write_all(&p)?;
+                }
+            }
+            w.flush()
+        });
+        let (t0, rate) = (config.t0_ns, config.imu.rate_hz);
+        let mut header_sent = false;
+        let mut send = |imu: &SimulatedImu, range: std::ops::Range<usize>| {
+            let mut pieces = Vec::new();
+            if !header_sent {
+                pieces.push(imu_header(imu.temperature.is_some()).into_bytes());
+                header_sent = true;
+            }
+            pieces.extend(format_imu_rows(imu, t0, rate, range));
+            // A send fails only if the writer stopped on an error, reported below.
+            let _ = tx.send(pieces);
+        };
+        let sim = super::simulate_with(scenario, config, seed, &mut send);
+        drop(tx);
+        let written = writer.join().map_err(|_| InputError::file(&csv, "writer thread panicked"))?;
+        written.map_err(|e| werr(&csv, e))?;
+        sim.map_err(|m| InputError::file(out, m))
+    })?;
+    write_rest(&sim, out)?;
+    Ok(sim)
+}
+
+/// Write the IMU CSV of an in-memory simulation.
+fn write_imu_csv(path: &Path, sim: &Simulation) -> Result<(), InputError> {
+    let mut w = create(path)?;
+    w.write_all(imu_header(sim.imu.temperature.is_some()).as_bytes()).map_err(|e| werr(path, e))?;
+    let n = sim.imu.t.len();
+    for c0 in (0..n).step_by(1 << 18) {
+        for piece in format_imu_rows(&sim.imu, sim.config.t0_ns, sim.config.imu.rate_hz, c0..(c0 + (1 << 18)).min(n)) {
+            w.write_all(&piece).map_err(|e| werr(path, e))?;
+        }
+    }
+    w.flush().map_err(|e| werr(path, e))
+}
+
+fn write_text(path: &Path, text: &str) -> Result<(), InputError> {
+    let mut w = create(path)?;
+    w.write_all(text.as_bytes()).map_err(|e| werr(path, e))?;
+    w.flush().map_err(|e| werr(path, e))
+}
+
+fn worst(v: &[f64; 3]) -> f64 {
+    v.iter().copied().fold(0.0, f64::max)
+}
+
+fn imu_yaml(sim: &Simulation) -> String {
+    let m = &sim.config.imu;
+    format!(
+        "%YAML:1.0\n# Simulated by tumble (scenario {:?}, seed {}). Noise figures: worst axis of the model, continuous time, SI.\nsensor_type: imu\ncomment: simulated BMI055-like IMU\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\nrate_hz: {}\ngyroscope_noise_density: {:e}\ngyroscope_random_walk: {:e}\naccelerometer_noise_density: {:e}\naccelerometer_random_walk: {:e}\n",
+        sim.scenario,
+        sim.seed,
+        m.rate_hz,
+        worst(&m.gyro.noise_density),
+        worst(&m.gyro.random_walk),
+        worst(&m.accel.noise_density),
+        worst(&m.accel.random_walk)
+    )
+}
+
+fn camera_yaml(sim: &Simulation) -> String {
+    let c = &sim.config.camera;
+    let t = c.body_from_camera().to_homogeneous();
+    let data: Vec<String> = t.transpose().iter().map(|x| format!("{x}")).collect();
+    let model = match c.distortion_model {
+        super::camera::DistortionKind::RadialTangential => "radial-tangential",
+        super::camera::DistortionKind::Equidistant => "equidistant",
+    };
+    format!(
+        "%YAML:1.0\nsensor_type: camera\ncomment: simulated camera (no images; features in tracks.csv)\nT_BS:\n  cols: 4\n  rows: 4\n  data: [{}]\nrate_hz: {}\nresolution: [{}, {}]\ncamera_model: pinhole\nintrinsics: [{}, {}, {}, {}]\ndistortion_model: {model}\ndistortion_coefficients: [{}, {}, {}, {}]\n",
+        data.join(", "),
+        c.rate_hz,
+        c.resolution[0],
+        c.resolution[1],
+        c.intrinsics[0],
+        c.intrinsics[1],
+        c.intrinsics[2],
+        c.intrinsics[3],
+        c.distortion_coefficients[0],
+        c.distortion_coefficients[1],
+        c.distortion_coefficients[2],
+        c.distortion_coefficients[3],
+    )
+}
+
+/// The ground truth at the configured rate (every k-th IMU sample).
+pub fn groundtruth(sim: &Simulation) -> Trajectory {
+    let rate = sim.config.imu.rate_hz;
+    let step = sim.imu.bias_every;
+    let mut tr = Trajectory {
+        v: Some(Vec::new()),
+        bias_gyro: Some(Vec::new()),
+        bias_accel: Some(Vec::new()),
+        ..Trajectory::default()
+    };
+    let dt_ns = 1e9 / rate;
+    for (j, i) in (0..sim.imu.t.len()).step_by(step).enumerate() {
+        let k = sim.motion.at(sim.imu.t[i]);
+        let q = k.quaternion();
+        tr.t_ns.push(sim.config.t0_ns + (i as f64 * dt_ns).round() as i64);
+        tr.p.push(k.position.into());
+        tr.q.push([q.w, q.i, q.j, q.k]);
+        if let (Some(v), Some(bg), Some(ba)) = (&mut tr.v, &mut tr.bias_gyro, &mut tr.bias_accel) {
+            v.push(k.velocity.into());
+            bg.push(sim.imu.bias_gyro[j]);
+            ba.push(sim.imu.bias_accel[j]);
+        }
+    }
+    tr
+}
+
+/// Write the simulation into `out` (created if needed).
+pub fn write_asl(sim: &Simulation, out: &Path) -> Result<(), InputError> {
+    write_imu_csv(&out.join("mav0").join("imu0").join("data.csv"), sim)?;
+    write_rest(sim, out)
+}
+
+/// Everything but the IMU CSV.
+fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
+    let mav0 = out.join("mav0");
+    write_text(&mav0.join("imu0").join("sensor.yaml"), &imu_yaml(sim))?;
+    let gt = mav0.join("state_groundtruth_estimate0").join("data.csv");
+    create(&gt)?;
+    write_asl_groundtruth(&gt, &groundtruth(sim))?;
+    let t0 = sim.config.t0_ns;
+    let ns = |t: f64| t0 + (t * 1e9).round() as i64;
+    if let Some(tr) = &sim.tracks {
+        let cam = mav0.join("cam0");
+        write_text(&cam.join("sensor.yaml"), &camera_yaml(sim))?;
+        let mut frames = String::from("#timestamp [ns],filename\n");
+        for &t in &tr.frames {
+            frames.push_str(&format!("{0},{0}.png\n", ns(t)));
+        }
+        write_text(&cam.join("data.csv"), &frames)?;
+        let mut tracks = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
+        let mut truth_obs = String::from("#timestamp [ns],track_id,landmark_id,outlier\n");
+        for o in &tr.observations {
+            tracks.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
+            truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
+        }
+        write_text(&cam.join("tracks.csv"), &tracks)?;
+        write_text(&out.join("truth").join("observations.csv"), &truth_obs)?;
+        let mut lm = String::from("#landmark_id,x [m],y [m],z [m]\n");
+        for (j, p) in tr.landmarks.iter().enumerate() {
+            lm.push_str(&format!("{j},{},{},{}\n", p[0], p[1], p[2]));
+        }
+        write_text(&out.join("truth").join("landmarks.csv"), &lm)?;
+    }
+    let truth = serde_json::json!({
+        "generator": format!("tumble {}", env!("CARGO_PKG_VERSION")),
+        "scenario": sim.scenario,
+        "seed": sim.seed,
+        "t0_ns": t0,
+        "samples": sim.imu.t.len(),
+        "duration_s": sim.motion.duration(),
+        "gravity": sim.config.gravity,
+        "static_intervals_s": sim.static_intervals,
+        "config": sim.config,
+        "convention": "ω̃ = T_g K_g(1+s_T ΔT) f_g(ω) + b_g + η_g + G a + n_g; ã = T_a K_a(1+s_T ΔT) f_a(a) + b_a + η_a + n_a; f(x) = x + c⊙x²; matrices row major; body = accelerometer frame; camera time offset: image stamped t taken at IMU time t + offset",
+    });
+    let text = serde_json::to_string_pretty(&truth).map_err(|e| InputError::file(out, format!("truth: {e}")))?;
+    write_text(&out.join("truth.json"), &text)
+}

@@ -1,0 +1,215 @@
+//! The simulator: each error term shows up with the set magnitude, output
+//! round-trips through the readers, and the same seed gives the same bytes.
+
+use std::path::PathBuf;
+use tumble::io::asl::{read_asl, read_tracks};
+use tumble::io::ImuTextFormat;
+use tumble::sim::model::flicker_components;
+use tumble::sim::{simulate, simulate_and_write, write_asl, Effects, Scenario, SimConfig};
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("tumble-sim-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+/// Non-overlapping Allan deviation of `x` (sampled every `dt`) at cluster size `m`:
+/// an independent reference for these tests.
+fn adev(x: &[f64], dt: f64, m: usize) -> (f64, f64) {
+    let means: Vec<f64> = x.chunks_exact(m).map(|c| c.iter().sum::<f64>() / m as f64).collect();
+    let d: f64 = means.windows(2).map(|w| (w[1] - w[0]).powi(2)).sum::<f64>() / (2.0 * (means.len() - 1) as f64);
+    (m as f64 * dt, d.sqrt())
+}
+
+fn axis(v: &[[f64; 3]], k: usize) -> Vec<f64> {
+    v.iter().map(|s| s[k]).collect()
+}
+
+fn only(effects: Effects) -> SimConfig {
+    let mut c = SimConfig::default();
+    c.imu.effects = effects;
+    c
+}
+
+#[test]
+fn white_noise_and_random_walk_have_allan_slopes_and_magnitudes() {
+    // Gyro: white noise only; accelerometer: bias random walk only.
+    let mut c = only(Effects { white_noise: true, random_walk: true, ..Effects::none() });
+    c.imu.gyro.noise_density = [1e-3, 2e-3, 4e-3];
+    c.imu.gyro.random_walk = [0.0; 3];
+    c.imu.accel.noise_density = [0.0; 3];
+    c.imu.accel.random_walk = [1e-3, 2e-3, 4e-3];
+    c.duration_s = Some(3.0 * 3600.0);
+    let s = simulate(Scenario::Static, &c, 11).unwrap();
+    let dt = 1.0 / c.imu.rate_hz;
+    let slope = |x: &[f64], m1: usize, m2: usize| {
+        let ((t1, a1), (t2, a2)) = (adev(x, dt, m1), adev(x, dt, m2));
+        (a2 / a1).ln() / (t2 / t1).ln()
+    };
+    for k in 0..3 {
+        let x = axis(&s.imu.gyro, k);
+        let sl = slope(&x, 20, 2000);
+        assert!((sl + 0.5).abs() < 0.03, "gyro {k}: white slope {sl}");
+        let (_, a) = adev(&x, dt, 200);
+        let n = c.imu.gyro.noise_density[k];
+        assert!((a / n - 1.0).abs() < 0.05, "gyro {k}: σ(1 s) = {a}, N = {n}");
+        let x = axis(&s.imu.accel, k);
+        let sl = slope(&x, 20, 2000);
+        assert!((sl - 0.5).abs() < 0.1, "accel {k}: random-walk slope {sl}");
+        let (tau, a) = adev(&x, dt, 2000);
+        let want = c.imu.accel.random_walk[k] * (tau / 3.0).sqrt();
+        assert!((a / want - 1.0).abs() < 0.15, "accel {k}: σ({tau}) = {a}, K√(τ/3) = {want}");
+    }
+}
+
+#[test]
+fn bias_instability_shows_a_flat_floor_at_0_664_b() {
+    let b = 1e-3;
+    let (tcs, q) = flicker_components(b, [1.0, 1000.0]);
+    let avar = |tau: f64| tcs.iter().map(|&tc| tumble::sim::model::gauss_markov_avar(q * q, tc, tau)).sum::<f64>();
+    for tau in [5.0, 20.0, 100.0, 500.0] {
+        let r = avar(tau).sqrt() / (0.664 * b);
+        assert!((r - 1.0).abs() < 0.2, "analytic floor at τ={tau}: {r}");
+    }
+    let mut c = only(Effects { bias_instability: true, ..Effects::none() });
+    c.imu.accel.bias_instability = [b; 3];
+    c.duration_s = Some(4.0 * 3600.0);
+    let s = simulate(Scenario::Static, &c, 5).unwrap();
+    let x = axis(&s.imu.accel, 0);
+    for m in [2000, 10_000] {
+        let (tau, a) = adev(&x, 1.0 / c.imu.rate_hz, m);
+        assert!((a / (0.664 * b) - 1.0).abs() < 0.3, "simulated floor at τ={tau}: {a}");
+    }
+}
+
+#[test]
+fn deterministic_terms_are_exact_on_a_still_sensor() {
+    let mut c = only(Effects { misalignment: true, scale: true, bias: true, ..Effects::none() });
+    c.duration_s = Some(20.0);
+    let s = simulate(Scenario::Static, &c, 1).unwrap();
+    // Level and still: true specific force (0, 0, g), true rate 0.
+    let a = &c.imu.accel;
+    for r in 0..3 {
+        let want = a.misalignment[r][2] * a.scale[2] * c.gravity + a.bias[r];
+        assert!((s.imu.accel[7][r] - want).abs() < 1e-12, "{r}");
+        assert!((s.imu.gyro[7][r] - c.imu.gyro.bias[r]).abs() < 1e-15);
+    }
+}
+
+#[test]
+fn g_sensitivity_shows_as_orientation_dependent_static_gyro_means() {
+    let mut c = only(Effects { g_sensitivity: true, white_noise: true, ..Effects::none() });
+    c.tumble.poses = 12;
+    c.tumble.initial_static_s = 5.0;
+    let s = simulate(Scenario::Tumble, &c, 3).unwrap();
+    let g = c.imu.g_sensitivity;
+    let mut spread = 0.0f64;
+    for iv in &s.static_intervals {
+        let (i0, i1) = ((iv[0] * 200.0).ceil() as usize + 1, (iv[1] * 200.0).floor() as usize);
+        let mean = |v: &[[f64; 3]], k: usize| v[i0..i1].iter().map(|x| x[k]).sum::<f64>() / (i1 - i0) as f64;
+        let f = [0, 1, 2].map(|k| mean(&s.imu.accel, k));
+        for (r, gr) in g.iter().enumerate() {
+            let want = gr[0] * f[0] + gr[1] * f[1] + gr[2] * f[2];
+            let noise = c.imu.gyro.noise_density[r] * 200f64.sqrt() / ((i1 - i0) as f64).sqrt();
+            assert!((mean(&s.imu.gyro, r) - want).abs() < 5.0 * noise, "axis {r}");
+            spread = spread.max(want.abs());
+        }
+    }
+    assert!(spread > 1e-3, "the effect is visible: {spread}");
+}
+
+#[test]
+fn quantization_saturation_and_temperature() {
+    let mut c =
+        only(Effects { quantization: true, saturation: true, temperature: true, bias: true, ..Effects::none() });
+    c.imu.gyro.range = 0.5; // a hand tumble turns faster than this
+    c.tumble.poses = 6;
+    c.tumble.initial_static_s = 5.0;
+    let dir = out_dir("sat");
+    let s = simulate_and_write(Scenario::Tumble, &c, 2, &dir).unwrap();
+    let lsb = c.imu.accel.lsb;
+    assert!(s.imu.accel.iter().flatten().all(|v| ((v / lsb) - (v / lsb).round()).abs() < 1e-6));
+    assert!(s.imu.gyro.iter().flatten().all(|v| v.abs() <= 0.5 + c.imu.gyro.lsb));
+    let d = read_asl(&dir, &ImuTextFormat::default()).unwrap();
+    let w = d.imu.warnings.join("\n");
+    assert!(w.contains("saturates"), "{w}");
+    let temp = d.imu.temperature.expect("temperature column read back");
+    assert!((temp[0] - c.imu.temperature.start).abs() < 1e-3);
+    // η shifts the accelerometer bias with temperature, and the truth says so.
+    let gt = d.groundtruth.unwrap();
+    let ba = gt.bias_accel.unwrap();
+    let dtemp = c.imu.temperature.at(s.imu.t[200]) - c.imu.temperature.reference;
+    let want = c.imu.accel.bias[0] + c.imu.accel.temperature_bias[0] * dtemp;
+    assert!((ba[200][0] - want).abs() < 1e-12);
+}
+
+#[test]
+fn walk_round_trips_through_the_readers_and_returns_to_start() {
+    let c = SimConfig { duration_s: Some(30.0), ..SimConfig::default() };
+    let dir = out_dir("walk");
+    let s = simulate_and_write(Scenario::Walk, &c, 4, &dir).unwrap();
+    let d = read_asl(&dir, &ImuTextFormat::default()).unwrap();
+    assert!(d.warnings.is_empty() && d.imu.warnings.is_empty(), "{:?} {:?}", d.warnings, d.imu.warnings);
+    assert_eq!(d.imu.len(), s.imu.t.len());
+    for i in [0, 17, 5999] {
+        for k in 0..3 {
+            assert!((d.imu.gyro[i][k] - s.imu.gyro[i][k]).abs() < 1e-9);
+            assert!((d.imu.accel[i][k] - s.imu.accel[i][k]).abs() < 1e-9);
+        }
+    }
+    let gt = d.groundtruth.unwrap();
+    assert_eq!(gt.len(), s.imu.t.len());
+    let (a, b) = (gt.p[0], gt.p[gt.len() - 1]);
+    assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-9), "{a:?} vs {b:?}");
+    assert_eq!(gt.bias_gyro.unwrap()[100], s.imu.bias_gyro[100]);
+    let cam = &d.cameras[0];
+    let tr = s.tracks.as_ref().unwrap();
+    assert_eq!(cam.frames.len(), tr.frames.len());
+    assert_eq!(cam.model.unwrap(), c.camera.model());
+    let obs = read_tracks(&dir.join("mav0/cam0/tracks.csv")).unwrap();
+    assert_eq!(obs.len(), tr.observations.len());
+    let per_frame = obs.len() as f64 / tr.frames.len() as f64;
+    assert!(per_frame > 50.0, "features per frame {per_frame}");
+    // truth.json carries the whole config back.
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
+    let back: SimConfig = serde_json::from_value(truth["config"].clone()).unwrap();
+    assert_eq!(back, c);
+}
+
+#[test]
+fn same_seed_same_bytes() {
+    let mut c = SimConfig::default();
+    c.tumble.poses = 5;
+    c.tumble.initial_static_s = 5.0;
+    let (d1, d2, d3) = (out_dir("s1"), out_dir("s2"), out_dir("s3"));
+    let s1 = simulate_and_write(Scenario::Tumble, &c, 9, &d1).unwrap();
+    write_asl(&s1, &d2).unwrap();
+    simulate_and_write(Scenario::Tumble, &c, 10, &d3).unwrap();
+    let f = |d: &PathBuf| std::fs::read(d.join("mav0/imu0/data.csv")).unwrap();
+    assert_eq!(f(&d1), f(&d2), "streamed and in-memory writers agree");
+    let again = out_dir("s1b");
+    simulate_and_write(Scenario::Tumble, &c, 9, &again).unwrap();
+    assert_eq!(f(&d1), f(&again));
+    assert_eq!(std::fs::read(d1.join("truth.json")).unwrap(), std::fs::read(again.join("truth.json")).unwrap());
+    assert_ne!(f(&d1), f(&d3));
+}
+
+#[test]
+fn bad_configs_are_refused_with_the_field_named() {
+    let dir = out_dir("cfg");
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("sim.yaml");
+    std::fs::write(&p, "gravity: 9.8\nimu:\n  rate_hz: 100\n  gyro:\n    scael: [1, 1, 1]\n").unwrap();
+    let e = SimConfig::read(&p).unwrap_err().to_string();
+    assert!(e.contains("sim.yaml:5") && e.contains("scael"), "{e}");
+    std::fs::write(&p, "imu:\n  rate_hz: -100\n").unwrap();
+    let e = SimConfig::read(&p).unwrap_err().to_string();
+    assert!(e.contains("rate_hz must be positive"), "{e}");
+    std::fs::write(&p, "duration_s: 1\n").unwrap();
+    assert!(SimConfig::read(&p).unwrap_err().to_string().contains("duration_s"));
+    std::fs::write(&p, "camera:\n  body_q_camera: [1, 1, 0, 0]\n").unwrap();
+    assert!(SimConfig::read(&p).unwrap_err().to_string().contains("norm"));
+    std::fs::write(&p, "imu:\n  rate_hz: 400\n").unwrap();
+    assert_eq!(SimConfig::read(&p).unwrap().imu.rate_hz, 400.0);
+}
