@@ -271,20 +271,17 @@ pub fn read_tracks(path: &Path) -> Result<Vec<(i64, u64, [f64; 2])>, InputError>
         time: Some((0, TimeUnit::Ns)),
         values: vec![1, 2, 3],
         names: vec!["track id".into(), "u".into(), "v".into()],
+        ..TableSpec::default()
     };
     let t = read_table(path, &spec)?;
     let mut out = Vec::with_capacity(t.t_ns.len());
     for i in 0..t.t_ns.len() {
         let id = t.columns[0][i];
         if id < 0.0 || id.fract() != 0.0 {
-            return Err(InputError::at(
-                path,
-                t.lines[i] as usize,
-                format!("track id {id} is not a non-negative integer"),
-            ));
+            return Err(InputError::at(path, t.lines.line(i), format!("track id {id} is not a non-negative integer")));
         }
         if i > 0 && t.t_ns[i] < t.t_ns[i - 1] {
-            return Err(InputError::at(path, t.lines[i] as usize, "observations must be in time order"));
+            return Err(InputError::at(path, t.lines.line(i), "observations must be in time order"));
         }
         out.push((t.t_ns[i], id as u64, [t.columns[1][i], t.columns[2][i]]));
     }

@@ -33,8 +33,8 @@ pub struct ImuRecording {
     pub gyro_units: StoredUnits,
     /// Units of `accel`.
     pub accel_units: StoredUnits,
-    /// 1-based line number in the first source of each sample (for messages).
-    pub lines: Vec<u32>,
+    /// Line of each sample in the first source (for messages).
+    pub lines: super::table::LineMap,
     /// Problems found that did not stop reading (duplicates, gaps, units, saturation).
     pub warnings: Vec<String>,
 }
@@ -91,7 +91,7 @@ impl ImuRecording {
             temperature: self.temperature.as_ref().map(|v| v[a..b].to_vec()),
             gyro_units: self.gyro_units,
             accel_units: self.accel_units,
-            lines: self.lines.get(a..b).map(|l| l.to_vec()).unwrap_or_default(),
+            lines: self.lines.slice(a),
             warnings: Vec::new(),
         }
     }

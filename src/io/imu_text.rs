@@ -15,9 +15,10 @@
 //! ```
 
 use super::imu::{ImuRecording, Stored, StoredUnits};
-use super::table::{read_table, Table, TableSpec, TimeUnit};
+use super::table::{peek_header, read_table, Table, TableSpec, TimeUnit};
 use super::validate::{validate, ValidateOptions};
 use crate::error::InputError;
+use rayon::prelude::*;
 use std::path::Path;
 
 /// Standard gravity used to convert g to m/s² \[m/s²\].
@@ -222,20 +223,18 @@ impl Default for ImuTextFormat {
 /// temperature column when the format names none.
 pub fn read_imu_text(path: &Path, fmt: &ImuTextFormat) -> Result<ImuRecording, InputError> {
     let c = &fmt.columns;
-    let mut values = Vec::new();
-    let mut names = Vec::new();
+    let mut spec = TableSpec { time: c.time.map(|tc| (tc, fmt.time_unit)), ..TableSpec::default() };
     for (triad, what) in [(c.gyro, "gyro"), (c.accel, "accel")] {
         if let Some(ix) = triad {
-            values.extend(ix);
-            names.extend(["x", "y", "z"].map(|a| format!("{what} {a}")));
+            spec.triads.push(ix);
+            spec.triad_names.push(what.into());
         }
     }
-    if let Some(tc) = c.temperature {
-        values.push(tc);
-        names.push("temperature".into());
+    let temperature = c.temperature.or_else(|| header_temperature_column(peek_header(path).ok().flatten().as_deref()));
+    if let Some(tc) = temperature {
+        spec.values.push(tc);
+        spec.names.push("temperature".into());
     }
-    let time = c.time.map(|tc| (tc, fmt.time_unit));
-    let spec = TableSpec { time, values, names };
     let rate = match (c.time, fmt.validate.nominal_rate) {
         (Some(_), _) => None,
         (None, Some(r)) if r.is_finite() && r > 0.0 => Some(r),
@@ -246,18 +245,9 @@ pub fn read_imu_text(path: &Path, fmt: &ImuTextFormat) -> Result<ImuRecording, I
     };
     let mut table = read_table(path, &spec)?;
     if let Some(r) = rate {
-        table.t_ns.iter_mut().enumerate().for_each(|(i, t)| *t = (i as f64 * 1e9 / r).round() as i64);
+        table.t_ns.par_iter_mut().enumerate().for_each(|(i, t)| *t = (i as f64 * 1e9 / r).round() as i64);
     }
-    let mut temperature_col = c.temperature.map(|_| spec.values.len() - 1);
-    if temperature_col.is_none() {
-        if let Some(ix) = header_temperature_column(table.header.as_deref()) {
-            let spec_t = TableSpec { time, values: vec![ix], names: vec!["temperature".into()] };
-            let t = read_table(path, &spec_t)?;
-            table.columns.push(t.columns.into_iter().next().unwrap_or_default());
-            temperature_col = Some(table.columns.len() - 1);
-        }
-    }
-    let mut rec = recording_from_table(path, table, fmt, temperature_col);
+    let mut rec = recording_from_table(path, table, fmt);
     validate(&mut rec, &fmt.validate)?;
     Ok(rec)
 }
@@ -268,27 +258,29 @@ fn header_temperature_column(header: Option<&str>) -> Option<usize> {
     h.split(sep).filter(|s| !s.trim().is_empty()).position(|name| name.trim().to_lowercase().starts_with("temperature"))
 }
 
-fn recording_from_table(path: &Path, table: Table, fmt: &ImuTextFormat, temp: Option<usize>) -> ImuRecording {
-    let n = table.t_ns.len();
-    let t0 = table.t_ns[0];
-    let mut k = 0;
-    let mut triad = |present: bool, conv: &dyn Fn(f64) -> f64| -> Vec<[f64; 3]> {
-        if !present {
-            return Vec::new();
-        }
-        let cols = &table.columns[k..k + 3];
-        k += 3;
-        (0..n).map(|i| [conv(cols[0][i]), conv(cols[1][i]), conv(cols[2][i])]).collect()
-    };
-    let gyro = triad(fmt.columns.gyro.is_some(), &|v| fmt.gyro_unit.convert(v));
-    let accel = triad(fmt.columns.accel.is_some(), &|v| fmt.accel_unit.convert(v));
+/// Build the recording from a table whose triads are gyro then accelerometer
+/// (those present) and whose only value column, if any, is the temperature.
+/// Reuses the table's buffers: units are converted in place.
+fn recording_from_table(path: &Path, table: Table, fmt: &ImuTextFormat) -> ImuRecording {
+    let t0 = table.t_ns.first().copied().unwrap_or(0);
+    let mut triads = table.triads.into_iter();
+    let mut take = |present: bool| if present { triads.next().unwrap_or_default() } else { Vec::new() };
+    let mut gyro = take(fmt.columns.gyro.is_some());
+    let mut accel = take(fmt.columns.accel.is_some());
+    if fmt.gyro_unit != GyroUnit::RadPerS {
+        gyro.par_iter_mut().for_each(|w| *w = w.map(|v| fmt.gyro_unit.convert(v)));
+    }
+    if fmt.accel_unit != AccelUnit::MetersPerS2 {
+        accel.par_iter_mut().for_each(|a| *a = a.map(|v| fmt.accel_unit.convert(v)));
+    }
     ImuRecording {
         sources: vec![path.to_path_buf()],
         t0_ns: t0,
-        t: table.t_ns.iter().map(|&x| (x - t0) as f64 * 1e-9).collect(),
+        // In place: an i64 buffer becomes the f64 one.
+        t: table.t_ns.into_iter().map(|x| (x - t0) as f64 * 1e-9).collect(),
         gyro,
         accel,
-        temperature: temp.map(|c| table.columns[c].clone()),
+        temperature: table.columns.into_iter().next(),
         gyro_units: StoredUnits(fmt.gyro_unit.stored()),
         accel_units: StoredUnits(fmt.accel_unit.stored()),
         lines: table.lines,
@@ -309,8 +301,9 @@ pub fn read_imu_tk(
     let one = |path: &Path, what: &str| {
         let spec = TableSpec {
             time: Some((0, time_unit)),
-            values: vec![1, 2, 3],
-            names: ["x", "y", "z"].map(|a| format!("{what} {a}")).to_vec(),
+            triads: vec![[1, 2, 3]],
+            triad_names: vec![what.into()],
+            ..TableSpec::default()
         };
         read_table(path, &spec)
     };
@@ -326,12 +319,12 @@ pub fn read_imu_tk(
     if let Some(i) = (0..acc.t_ns.len()).find(|&i| (acc.t_ns[i] - gyr.t_ns[i]).abs() > 1000) {
         return Err(InputError::at(
             gyro_path,
-            gyr.lines[i] as usize,
+            gyr.lines.line(i),
             format!(
                 "timestamp {} s differs from {}:{} ({} s)",
                 gyr.t_ns[i] as f64 * 1e-9,
                 accel_path.display(),
-                acc.lines[i],
+                acc.lines.line(i),
                 acc.t_ns[i] as f64 * 1e-9
             ),
         ));
@@ -343,10 +336,10 @@ pub fn read_imu_tk(
         accel_unit,
         validate: checks.clone(),
     };
-    let mut columns = gyr.columns;
-    columns.extend(acc.columns);
-    let table = Table { t_ns: acc.t_ns, columns, lines: acc.lines, header: None };
-    let mut rec = recording_from_table(accel_path, table, &fmt, None);
+    let mut triads = gyr.triads;
+    triads.extend(acc.triads);
+    let table = Table { t_ns: acc.t_ns, triads, lines: acc.lines, ..Table::default() };
+    let mut rec = recording_from_table(accel_path, table, &fmt);
     rec.sources.push(gyro_path.to_path_buf());
     validate(&mut rec, checks)?;
     Ok(rec)

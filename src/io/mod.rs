@@ -5,6 +5,7 @@ pub mod bal;
 pub mod g2o;
 pub mod imu;
 pub mod imu_text;
+mod mem;
 pub mod recording;
 pub mod table;
 pub(crate) mod tokens;

@@ -10,6 +10,7 @@
 use crate::error::InputError;
 use rayon::prelude::*;
 use std::io::Read;
+use std::mem::MaybeUninit;
 use std::path::Path;
 
 /// Unit of a timestamp column.
@@ -49,7 +50,7 @@ impl TimeUnit {
 }
 
 /// Which columns to take (0-based) from each data line.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct TableSpec {
     /// Timestamp column and its unit; None for files without one (rows then
     /// get `t_ns = 0` and the caller stamps them from a known rate).
@@ -58,6 +59,44 @@ pub struct TableSpec {
     pub values: Vec<usize>,
     /// What each value column is (for messages), same length as `values`.
     pub names: Vec<String>,
+    /// Column triples read as `[x, y, z]` rows (an IMU's gyro and accelerometer).
+    pub triads: Vec<[usize; 3]>,
+    /// What each triad is (for messages), same length as `triads`.
+    pub triad_names: Vec<String>,
+}
+
+/// Source line of each row, stored as anchors: from row `r` on, rows sit on
+/// consecutive lines starting at `line`, until the next anchor (a blank or
+/// comment line, or a new parse piece). A few entries instead of one per row.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LineMap {
+    anchors: Vec<(usize, usize)>,
+}
+
+impl LineMap {
+    /// 1-based line number of row `i`.
+    pub fn line(&self, i: usize) -> usize {
+        let k = self.anchors.partition_point(|a| a.0 <= i);
+        match k {
+            0 => i + 1,
+            _ => {
+                let (r, l) = self.anchors[k - 1];
+                l + (i - r)
+            }
+        }
+    }
+    /// Rows `a..b` as a map starting at row 0.
+    pub fn slice(&self, a: usize) -> LineMap {
+        let first = (0, self.line(a));
+        let rest = self.anchors.iter().filter(|x| x.0 > a).map(|&(r, l)| (r - a, l));
+        LineMap { anchors: std::iter::once(first).chain(rest).collect() }
+    }
+    fn push(&mut self, row: usize, line: usize) {
+        if self.anchors.last().is_some_and(|&(r, l)| line == l + (row - r)) {
+            return;
+        }
+        self.anchors.push((row, line));
+    }
 }
 
 /// The parsed table: absolute times \[ns\], the chosen columns, and source lines.
@@ -67,28 +106,79 @@ pub struct Table {
     pub t_ns: Vec<i64>,
     /// One vector per requested value column.
     pub columns: Vec<Vec<f64>>,
-    /// 1-based line number of each row.
-    pub lines: Vec<u32>,
+    /// One vector per requested triad.
+    pub triads: Vec<Vec<[f64; 3]>>,
+    /// Source line of each row.
+    pub lines: LineMap,
     /// The header line, if the file had one (first non-comment line that is not numeric).
     pub header: Option<String>,
 }
 
+/// Streamed block size.
 const BLOCK: usize = 8 << 20;
+/// Slice of a memory-mapped file parsed at once.
+const MAPPED_BLOCK: usize = 64 << 20;
 
-/// Read a numeric table from `path` (a `.gz` suffix means gzip).
+/// Read a numeric table from `path`: memory-mapped and parsed in parallel
+/// blocks, or streamed through gzip when the name ends in `.gz`.
 pub fn read_table(path: &Path, spec: &TableSpec) -> Result<Table, InputError> {
     let file = std::fs::File::open(path).map_err(|e| InputError::file(path, format!("cannot open: {e}")))?;
     let gz = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"));
-    let reader: Box<dyn Read> = if gz { Box::new(flate2::read::MultiGzDecoder::new(file)) } else { Box::new(file) };
-    parse_table_from(path, reader, spec)
+    let size = file.metadata().map(|m| m.len() as usize).unwrap_or(0);
+    if gz || size == 0 {
+        return parse_table_from(path, flate2_or_plain(file, gz), spec);
+    }
+    // SAFETY: the map is read-only and dropped before returning; a file changed
+    // by another process while it is read gives garbage numbers or a parse
+    // error, never unsoundness visible to safe code here (we only read bytes).
+    let map = unsafe { memmap2::MmapOptions::new().populate().map(&file) }
+        .map_err(|e| InputError::file(path, format!("cannot map: {e}")))?;
+    #[cfg(unix)]
+    let _ = map.advise(memmap2::Advice::Sequential);
+    let mut p = Parser::new(path, spec);
+    let mut start = 0;
+    while start < map.len() {
+        let end = if map.len() - start <= MAPPED_BLOCK {
+            map.len()
+        } else {
+            memchr::memchr(b'\n', &map[start + MAPPED_BLOCK..])
+                .map(|q| start + MAPPED_BLOCK + q + 1)
+                .unwrap_or(map.len())
+        };
+        if start == 0 {
+            p.reserve_for(size, &map[..end]);
+        }
+        p.feed(&map[start..end])?;
+        start = end;
+    }
+    p.finish()
 }
 
-/// Parse a numeric table from any reader; `path` names it in errors.
+fn flate2_or_plain(file: std::fs::File, gz: bool) -> Box<dyn Read> {
+    if gz {
+        Box::new(flate2::read::MultiGzDecoder::new(file))
+    } else {
+        Box::new(file)
+    }
+}
+
+/// The header line of a table file (looking at its first 64 KiB only).
+pub fn peek_header(path: &Path) -> Result<Option<String>, InputError> {
+    let file = std::fs::File::open(path).map_err(|e| InputError::file(path, format!("cannot open: {e}")))?;
+    let gz = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"));
+    let mut head = Vec::with_capacity(1 << 16);
+    flate2_or_plain(file, gz)
+        .take(1 << 16)
+        .read_to_end(&mut head)
+        .map_err(|e| InputError::file(path, format!("read failed: {e}")))?;
+    let cut = memchr::memrchr(b'\n', &head).map(|q| q + 1).unwrap_or(head.len());
+    Ok(detect_layout(path, &head[..cut], 0)?.2)
+}
+
+/// Parse a numeric table from any reader, streamed in blocks; `path` names it in errors.
 pub fn parse_table_from(path: &Path, mut reader: impl Read, spec: &TableSpec) -> Result<Table, InputError> {
-    let mut out = Table { columns: vec![Vec::new(); spec.values.len()], ..Table::default() };
+    let mut p = Parser::new(path, spec);
     let mut buf: Vec<u8> = Vec::with_capacity(BLOCK + 4096);
-    let mut line_no: usize = 0; // lines consumed so far
-    let mut layout: Option<Layout> = None;
     let mut eof = false;
     while !eof {
         let start = buf.len();
@@ -104,37 +194,77 @@ pub fn parse_table_from(path: &Path, mut reader: impl Read, spec: &TableSpec) ->
         }
         buf.truncate(filled);
         // Parse up to the last complete line (everything at EOF).
-        let cut = if eof { buf.len() } else { memchr::memrchr(b'\n', &buf).map(|p| p + 1).unwrap_or(0) };
+        let cut = if eof { buf.len() } else { memchr::memrchr(b'\n', &buf).map(|q| q + 1).unwrap_or(0) };
         if cut == 0 && !eof {
             if buf.len() > 64 * BLOCK {
-                return Err(InputError::at(path, line_no + 1, "line longer than 512 MiB: not a text table"));
+                return Err(InputError::at(path, p.line_no + 1, "line longer than 512 MiB: not a text table"));
             }
             continue;
         }
-        let body = &buf[..cut];
-        let body = if layout.is_none() {
-            let (skip, lay, header, lines) = detect_layout(path, body, line_no)?;
-            line_no += lines;
+        p.feed(&buf[..cut])?;
+        buf.drain(..cut);
+    }
+    p.finish()
+}
+
+/// Parsing state across blocks of complete lines.
+struct Parser<'a> {
+    path: &'a Path,
+    spec: &'a TableSpec,
+    plan: Vec<Field>,
+    out: Table,
+    line_no: usize,
+    layout: Option<Layout>,
+}
+
+impl<'a> Parser<'a> {
+    fn new(path: &'a Path, spec: &'a TableSpec) -> Self {
+        let out = Table {
+            columns: vec![Vec::new(); spec.values.len()],
+            triads: vec![Vec::new(); spec.triads.len()],
+            ..Table::default()
+        };
+        Parser { path, spec, plan: plan(spec), out, line_no: 0, layout: None }
+    }
+
+    /// Reserve the output for a `size`-byte input whose first bytes are `head`.
+    fn reserve_for(&mut self, size: usize, head: &[u8]) {
+        let lines = memchr::memchr_iter(b'\n', head).count().max(1);
+        let est = (size as f64 / (head.len() as f64 / lines as f64) * 1.01) as usize + 1024;
+        super::mem::reserve_huge(&mut self.out.t_ns, est);
+        self.out.columns.iter_mut().for_each(|c| super::mem::reserve_huge(c, est));
+        self.out.triads.iter_mut().for_each(|c| super::mem::reserve_huge(c, est));
+    }
+
+    /// Parse a block of complete lines.
+    fn feed(&mut self, body: &[u8]) -> Result<(), InputError> {
+        let body = if self.layout.is_none() {
+            let (skip, lay, header, lines) = detect_layout(self.path, body, self.line_no)?;
+            self.line_no += lines;
             if header.is_some() {
-                out.header = header;
+                self.out.header = header;
             }
-            layout = lay;
+            self.layout = lay;
             &body[skip..]
         } else {
             body
         };
-        if let Some(lay) = layout {
-            line_no = parse_block(path, body, line_no, lay, spec, &mut out)?;
-        } else {
-            line_no += memchr::memchr_iter(b'\n', body).count();
+        match self.layout {
+            Some(lay) => {
+                self.line_no = parse_block(self.path, body, self.line_no, lay, self.spec, &self.plan, &mut self.out)?
+            }
+            None => self.line_no += memchr::memchr_iter(b'\n', body).count(),
         }
-        buf.drain(..cut);
+        Ok(())
     }
-    if out.t_ns.is_empty() {
-        return Err(InputError::file(path, "no data rows (the file is empty or holds only comments/header)")
-            .with_hint("check the path and that the file is a numeric table"));
+
+    fn finish(self) -> Result<Table, InputError> {
+        if self.out.t_ns.is_empty() {
+            return Err(InputError::file(self.path, "no data rows (the file is empty or holds only comments/header)")
+                .with_hint("check the path and that the file is a numeric table"));
+        }
+        Ok(self.out)
     }
-    Ok(out)
 }
 
 #[derive(Clone, Copy)]
@@ -223,18 +353,43 @@ fn first_field(t: &[u8], comma: bool) -> &[u8] {
     trim(&t[..end])
 }
 
+/// Rows a piece wrote and its line anchors `(row, line)`.
+type PieceResult = (usize, Vec<(usize, usize)>);
+
+/// One piece's share of the output rows (not yet initialized).
+struct PieceOut<'a> {
+    t_ns: &'a mut [MaybeUninit<i64>],
+    columns: Vec<&'a mut [MaybeUninit<f64>]>,
+    triads: Vec<&'a mut [MaybeUninit<[f64; 3]>]>,
+}
+
+/// Split the spare capacity of `v` (at least `counts.iter().sum()`) into one slice per count.
+fn split_spare<'a, T>(v: &'a mut Vec<T>, counts: &[usize]) -> Vec<&'a mut [MaybeUninit<T>]> {
+    let mut rest = v.spare_capacity_mut();
+    counts
+        .iter()
+        .map(|&n| {
+            let (h, r) = std::mem::take(&mut rest).split_at_mut(n);
+            rest = r;
+            h
+        })
+        .collect()
+}
+
 /// Parse complete lines of `body` (line numbering continues from `line0`),
-/// in parallel pieces, appending to `out`. Returns the new line count.
+/// in parallel pieces writing straight into `out`'s spare capacity, so page
+/// faults and parsing are shared by all threads. Returns the new line count.
 fn parse_block(
     path: &Path,
     body: &[u8],
     line0: usize,
     lay: Layout,
     spec: &TableSpec,
+    plan: &[Field],
     out: &mut Table,
 ) -> Result<usize, InputError> {
     let threads = rayon::current_num_threads().max(1);
-    let pieces = if body.len() < (1 << 20) { 1 } else { threads * 2 };
+    let pieces = if body.len() < (1 << 20) { 1 } else { threads * 4 };
     let mut bounds = vec![0usize];
     for k in 1..pieces {
         let target = body.len() * k / pieces;
@@ -249,86 +404,484 @@ fn parse_block(
     }
     bounds.push(body.len());
     bounds.dedup();
-    let parts: Vec<Result<(Table, usize), InputError>> = bounds
+    // Lines per piece (a last line without '\n' counts too): the most rows it can give.
+    let counts: Vec<usize> = bounds
         .par_windows(2)
         .map(|w| {
             let piece = &body[w[0]..w[1]];
-            let n_lines = memchr::memchr_iter(b'\n', piece).count() + usize::from(!piece.ends_with(b"\n"));
-            Ok((parse_piece(path, piece, lay, spec)?, n_lines))
+            memchr::memchr_iter(b'\n', piece).count() + usize::from(!piece.is_empty() && !piece.ends_with(b"\n"))
         })
         .collect();
+    let total: usize = counts.iter().sum();
+    let base = out.t_ns.len();
+    super::mem::reserve_huge(&mut out.t_ns, total);
+    out.columns.iter_mut().for_each(|c| super::mem::reserve_huge(c, total));
+    out.triads.iter_mut().for_each(|c| super::mem::reserve_huge(c, total));
+    let mut t_parts = split_spare(&mut out.t_ns, &counts).into_iter();
+    let mut c_parts: Vec<_> = out.columns.iter_mut().map(|c| split_spare(c, &counts).into_iter()).collect();
+    let mut g_parts: Vec<_> = out.triads.iter_mut().map(|c| split_spare(c, &counts).into_iter()).collect();
+    let outs: Vec<PieceOut<'_>> = counts
+        .iter()
+        .map(|_| PieceOut {
+            t_ns: t_parts.next().expect("one part per piece"),
+            columns: c_parts.iter_mut().map(|p| p.next().expect("one part per piece")).collect(),
+            triads: g_parts.iter_mut().map(|p| p.next().expect("one part per piece")).collect(),
+        })
+        .collect();
+    let results: Vec<Result<PieceResult, InputError>> = outs
+        .into_par_iter()
+        .zip(bounds.par_windows(2))
+        .map(|(o, w)| parse_piece(path, &body[w[0]..w[1]], lay, spec, plan, o))
+        .collect();
+    // Offset piece-local line numbers; close the holes left by blank/comment lines.
     let mut line = line0;
-    for part in parts {
-        let (mut t, n_lines) = part.map_err(|mut e| {
+    let mut write = 0;
+    let mut read = 0;
+    for (r, &n) in results.into_iter().zip(&counts) {
+        let (rows, anchors) = r.map_err(|mut e| {
             e.line = e.line.map(|l| l + line);
             e
         })?;
-        // Piece-local errors are offset above; piece-local lines here.
-        out.t_ns.append(&mut t.t_ns);
-        for (dst, src) in out.columns.iter_mut().zip(t.columns.iter_mut()) {
-            dst.append(src);
+        if write != read {
+            out.t_ns.spare_capacity_mut().copy_within(read..read + rows, write);
+            for c in out.columns.iter_mut() {
+                c.spare_capacity_mut().copy_within(read..read + rows, write);
+            }
+            for c in out.triads.iter_mut() {
+                c.spare_capacity_mut().copy_within(read..read + rows, write);
+            }
         }
-        out.lines.extend(t.lines.iter().map(|&l| (l as usize + line) as u32));
-        line += n_lines;
+        for (r, l) in anchors {
+            out.lines.push(base + write + r, line + l);
+        }
+        write += rows;
+        read += n;
+        line += n;
+    }
+    // SAFETY: each piece initialized the first `rows` slots of its part (it
+    // writes row by row and reports how many), and the loop above moved them
+    // to be contiguous, so the first `write` spare slots of every vector are
+    // initialized.
+    unsafe {
+        out.t_ns.set_len(base + write);
+        for c in out.columns.iter_mut() {
+            c.set_len(base + write);
+        }
+        for c in out.triads.iter_mut() {
+            c.set_len(base + write);
+        }
     }
     Ok(line)
 }
 
-/// Parse one piece; line numbers are piece-local (1-based).
-fn parse_piece(path: &Path, piece: &[u8], lay: Layout, spec: &TableSpec) -> Result<Table, InputError> {
-    let mut t = Table { columns: vec![Vec::new(); spec.values.len()], ..Table::default() };
-    let want = spec.values.iter().copied().chain(spec.time.map(|t| t.0)).max().unwrap_or(0) + 1;
+/// Split a trimmed data line into fields.
+fn split_fields<'a>(s: &'a [u8], comma: bool, fields: &mut Vec<&'a [u8]>) {
+    fields.clear();
+    if comma {
+        let mut start = 0;
+        for p in memchr::memchr_iter(b',', s) {
+            fields.push(trim(&s[start..p]));
+            start = p + 1;
+        }
+        fields.push(trim(&s[start..]));
+    } else {
+        fields.extend(s.split(|c| c.is_ascii_whitespace()).filter(|f| !f.is_empty()));
+    }
+}
+
+/// Parse one piece into its output slices; line numbers are piece-local
+/// (1-based). Returns the rows written (slots `0..rows` of every part are
+/// initialized) and the line anchors (row, line).
+fn parse_piece(
+    path: &Path,
+    piece: &[u8],
+    lay: Layout,
+    spec: &TableSpec,
+    plan: &[Field],
+    o: PieceOut<'_>,
+) -> Result<PieceResult, InputError> {
+    let PieceOut { t_ns, mut columns, mut triads } = o;
+    let mut anchors = Vec::new();
+    let mut skipped = true;
     let mut fields: Vec<&[u8]> = Vec::with_capacity(16);
-    for (i, raw) in piece.split(|&c| c == b'\n').enumerate() {
-        let line_no = i + 1;
-        if raw.is_empty() || is_comment(raw) {
-            continue;
+    let mut row = 0;
+    let mut start = 0;
+    let mut line_no = 0;
+    let mut vals = Row::default();
+    while start < piece.len() {
+        let rest = &piece[start..];
+        let end = match fast_row(rest, lay.comma, plan, &mut vals) {
+            Some(i) => {
+                // Usually the line ends right after the last needed field.
+                let mut j = i;
+                while j < rest.len() && matches!(rest[j], b' ' | b'\t' | b'\r') {
+                    j += 1;
+                }
+                if j >= rest.len() || rest[j] == b'\n' {
+                    start + j
+                } else {
+                    memchr::memchr(b'\n', &rest[j..]).map(|p| start + j + p).unwrap_or(piece.len())
+                }
+            }
+            None => {
+                let end = memchr::memchr(b'\n', rest).map(|p| start + p).unwrap_or(piece.len());
+                let s = trim(&piece[start..end]);
+                if s.is_empty() || s[0] == b'#' || s[0] == b'%' {
+                    skipped = true;
+                    line_no += 1;
+                    start = end + 1;
+                    continue;
+                }
+                split_fields(s, lay.comma, &mut fields);
+                slow_row(path, line_no + 1, &fields, plan, spec, &mut vals)?;
+                end
+            }
+        };
+        start = end + 1;
+        line_no += 1;
+        if skipped {
+            anchors.push((row, line_no));
+            skipped = false;
         }
-        let s = trim(raw);
-        fields.clear();
-        if lay.comma {
-            fields.extend(s.split(|&c| c == b',').map(trim));
-        } else {
-            fields.extend(s.split(|c| c.is_ascii_whitespace()).filter(|f| !f.is_empty()));
+        t_ns[row].write(vals.time);
+        for (c, v) in columns.iter_mut().zip(&vals.values) {
+            c[row].write(*v);
         }
-        if fields.len() < want {
+        for (c, v) in triads.iter_mut().zip(&vals.triads) {
+            c[row].write(*v);
+        }
+        row += 1;
+    }
+    Ok((row, anchors))
+}
+
+/// One parsed row.
+struct Row {
+    time: i64,
+    values: [f64; MAX_FIELDS],
+    triads: [[f64; 3]; MAX_FIELDS / 3],
+}
+
+impl Default for Row {
+    fn default() -> Self {
+        Row { time: 0, values: [0.0; MAX_FIELDS], triads: [[0.0; 3]; MAX_FIELDS / 3] }
+    }
+}
+
+/// Most value columns (and triads × 3) a table may ask for.
+pub const MAX_FIELDS: usize = 48;
+
+/// The general path: fields already split; exact error messages.
+fn slow_row(
+    path: &Path,
+    line_no: usize,
+    fields: &[&[u8]],
+    plan: &[Field],
+    spec: &TableSpec,
+    vals: &mut Row,
+) -> Result<(), InputError> {
+    let want = plan.len();
+    if fields.len() < want {
+        return Err(InputError::at(
+            path,
+            line_no,
+            format!("line has {} fields, {} needed (column {} is used)", fields.len(), want, want),
+        )
+        .with_hint("a short last line usually means the file was truncated while being written"));
+    }
+    for (c, f) in plan.iter().enumerate() {
+        let text = fields[c];
+        let name = match *f {
+            Field::Skip => continue,
+            Field::Time(unit) => {
+                vals.time = parse_time(path, line_no, text, unit)?;
+                continue;
+            }
+            Field::Value(k) => spec.names[k].clone(),
+            Field::Triad(g, a) => format!("{} {}", spec.triad_names[g], ["x", "y", "z"][a]),
+        };
+        let v: f64 = fast_float2::parse(text).map_err(|_| {
+            InputError::at(
+                path,
+                line_no,
+                format!("{name} (column {}): '{}' is not a number", c + 1, String::from_utf8_lossy(text)),
+            )
+        })?;
+        if !v.is_finite() {
             return Err(InputError::at(
                 path,
                 line_no,
-                format!("line has {} fields, {} needed (column {} is used)", fields.len(), want, want),
-            )
-            .with_hint("a short last line usually means the file was truncated while being written"));
+                format!("{name} (column {}) is not finite ({})", c + 1, String::from_utf8_lossy(text)),
+            ));
         }
-        t.t_ns.push(match spec.time {
-            Some((tc, unit)) => parse_time(path, line_no, fields[tc], unit)?,
-            None => 0,
-        });
-        for (k, &c) in spec.values.iter().enumerate() {
-            let f = fields[c];
-            let v: f64 = fast_float2::parse(f).map_err(|_| {
-                InputError::at(
-                    path,
-                    line_no,
-                    format!("{} (column {}): '{}' is not a number", spec.names[k], c + 1, String::from_utf8_lossy(f)),
-                )
-            })?;
-            if !v.is_finite() {
-                return Err(InputError::at(
-                    path,
-                    line_no,
-                    format!("{} (column {}) is not finite ({})", spec.names[k], c + 1, String::from_utf8_lossy(f)),
-                ));
-            }
-            t.columns[k].push(v);
+        match *f {
+            Field::Value(k) => vals.values[k] = v,
+            Field::Triad(g, a) => vals.triads[g][a] = v,
+            _ => {}
         }
-        t.lines.push(line_no as u32);
     }
-    Ok(t)
+    if spec.time.is_none() {
+        vals.time = 0;
+    }
+    Ok(())
+}
+
+/// What to do with each field of a line, up to the last one needed.
+#[derive(Clone, Copy)]
+enum Field {
+    Skip,
+    Time(TimeUnit),
+    Value(usize),
+    Triad(usize, usize),
+}
+
+fn plan(spec: &TableSpec) -> Vec<Field> {
+    let all = spec.values.iter().copied().chain(spec.triads.iter().flatten().copied()).chain(spec.time.map(|t| t.0));
+    let want = all.max().unwrap_or(0) + 1;
+    let mut p = vec![Field::Skip; want];
+    if let Some((c, u)) = spec.time {
+        p[c] = Field::Time(u);
+    }
+    for (k, &c) in spec.values.iter().enumerate().take(MAX_FIELDS) {
+        p[c] = Field::Value(k);
+    }
+    for (g, t) in spec.triads.iter().enumerate().take(MAX_FIELDS / 3) {
+        for (a, &c) in t.iter().enumerate() {
+            p[c] = Field::Triad(g, a);
+        }
+    }
+    p
+}
+
+/// Exact powers of ten up to 10²² (the range where Clinger's fast path is exact).
+const POW10: [f64; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20,
+    1e21, 1e22,
+];
+
+/// The eight bytes at `b[i..i + 8]` as a decimal number, if all are digits
+/// (SWAR: one 64-bit load, a check and three multiplies).
+#[inline(always)]
+fn eight_digits(b: &[u8], i: usize) -> Option<u64> {
+    let bytes: [u8; 8] = b.get(i..i + 8)?.try_into().ok()?;
+    let v = u64::from_le_bytes(bytes);
+    let all_digits = ((v & 0xF0F0_F0F0_F0F0_F0F0)
+        | ((v.wrapping_add(0x0606_0606_0606_0606) & 0xF0F0_F0F0_F0F0_F0F0) >> 4))
+        == 0x3333_3333_3333_3333;
+    if !all_digits {
+        return None;
+    }
+    let mut v = v.wrapping_sub(0x3030_3030_3030_3030);
+    v = v.wrapping_mul(10).wrapping_add(v >> 8);
+    let lo = (v & 0x0000_00FF_0000_00FF).wrapping_mul(100 + (1_000_000 << 32));
+    let hi = ((v >> 16) & 0x0000_00FF_0000_00FF).wrapping_mul(1 + (10_000 << 32));
+    Some(lo.wrapping_add(hi) >> 32)
+}
+
+/// Parse a plain decimal (`-12.5`, `3e-4`) starting at `b[i]`; returns the
+/// value and the index after it. Correctly rounded: the mantissa ≤ 2⁵³ and
+/// |exponent| ≤ 22 case is exact (Clinger), anything else goes to fast-float2.
+/// None when no number starts here.
+#[inline(always)]
+fn parse_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
+    let start = i;
+    let neg = match b.get(i) {
+        Some(b'-') => {
+            i += 1;
+            true
+        }
+        Some(b'+') => {
+            i += 1;
+            false
+        }
+        _ => false,
+    };
+    let mut mant: u64 = 0;
+    let mut exp: i32 = 0;
+    let mut digits = 0;
+    let mut exact = true;
+    while let Some(&c) = b.get(i) {
+        let d = c.wrapping_sub(b'0');
+        if d > 9 {
+            break;
+        }
+        if mant < 100_000_000_000_000_000 {
+            mant = mant * 10 + u64::from(d);
+        } else {
+            exact = false;
+        }
+        digits += 1;
+        i += 1;
+    }
+    if b.get(i) == Some(&b'.') {
+        i += 1;
+        // Eight digits at a time while the mantissa has room for them.
+        while mant < 10_000_000_000 {
+            match eight_digits(b, i) {
+                Some(v) => {
+                    mant = mant * 100_000_000 + v;
+                    exp -= 8;
+                    digits += 8;
+                    i += 8;
+                }
+                None => break,
+            }
+        }
+        while let Some(&c) = b.get(i) {
+            let d = c.wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            if mant < 100_000_000_000_000_000 {
+                mant = mant * 10 + u64::from(d);
+                exp -= 1;
+            } else {
+                exact = false;
+            }
+            digits += 1;
+            i += 1;
+        }
+    }
+    if digits == 0 {
+        return None;
+    }
+    if matches!(b.get(i), Some(b'e') | Some(b'E')) {
+        let mut j = i + 1;
+        let eneg = match b.get(j) {
+            Some(b'-') => {
+                j += 1;
+                true
+            }
+            Some(b'+') => {
+                j += 1;
+                false
+            }
+            _ => false,
+        };
+        let mut e: i32 = 0;
+        let mut ed = 0;
+        while let Some(&c) = b.get(j) {
+            let d = c.wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            e = e.saturating_mul(10).saturating_add(i32::from(d));
+            ed += 1;
+            j += 1;
+        }
+        if ed == 0 {
+            return None;
+        }
+        exp = exp.saturating_add(if eneg { -e } else { e });
+        i = j;
+    }
+    if exact && mant <= (1u64 << 53) && (-22..=22).contains(&exp) {
+        let m = mant as f64;
+        let v = if exp < 0 { m / POW10[(-exp) as usize] } else { m * POW10[exp as usize] };
+        return Some((if neg { -v } else { v }, i));
+    }
+    let v: f64 = fast_float2::parse(&b[start..i]).ok()?;
+    Some((v, i))
+}
+
+/// The common case of a data line, parsed in one pass without splitting:
+/// every needed field a plain number, separated by one comma (optionally
+/// padded with blanks) or by blanks. `s` starts at the line and may run past
+/// its end. Returns where the last needed field ended, or None for anything
+/// else (the general path then parses the line or reports the error).
+#[inline]
+fn fast_row(s: &[u8], comma: bool, plan: &[Field], vals: &mut Row) -> Option<usize> {
+    let mut i = 0;
+    let n = s.len();
+    let blank = |c: u8| c == b' ' || c == b'\t';
+    while i < n && blank(s[i]) {
+        i += 1;
+    }
+    vals.time = 0;
+    for (k, f) in plan.iter().enumerate() {
+        if k > 0 {
+            while i < n && blank(s[i]) {
+                i += 1;
+            }
+            if comma {
+                if i >= n || s[i] != b',' {
+                    return None;
+                }
+                i += 1;
+                while i < n && blank(s[i]) {
+                    i += 1;
+                }
+            } else if i >= n || s[i] == b'\n' || s[i] == b'\r' {
+                return None;
+            }
+        }
+        match *f {
+            Field::Skip => {
+                while i < n && !(if comma { s[i] == b',' } else { blank(s[i]) }) && s[i] != b'\n' && s[i] != b'\r' {
+                    i += 1;
+                }
+            }
+            Field::Time(TimeUnit::Ns) => {
+                let st = i;
+                let mut v: i64 = 0;
+                while v < 10_000_000_000 {
+                    match eight_digits(s, i) {
+                        Some(e) => {
+                            v = v * 100_000_000 + e as i64;
+                            i += 8;
+                        }
+                        None => break,
+                    }
+                }
+                while i < n {
+                    let d = s[i].wrapping_sub(b'0');
+                    if d > 9 {
+                        break;
+                    }
+                    v = v.checked_mul(10).and_then(|x| x.checked_add(i64::from(d)))?;
+                    i += 1;
+                }
+                if i == st {
+                    return None;
+                }
+                vals.time = v;
+            }
+            Field::Time(u) => {
+                let (v, j) = parse_number(s, i)?;
+                let ns = v * u.ns_per_unit();
+                if ns.is_nan() || ns.abs() > 9.2e18 {
+                    return None;
+                }
+                vals.time = ns.round() as i64;
+                i = j;
+            }
+            Field::Value(k) => {
+                let (v, j) = parse_number(s, i)?;
+                vals.values[k] = v;
+                i = j;
+            }
+            Field::Triad(g, a) => {
+                let (v, j) = parse_number(s, i)?;
+                vals.triads[g][a] = v;
+                i = j;
+            }
+        }
+        // The field must end here.
+        if i < n && !matches!(s[i], b',' | b' ' | b'\t' | b'\n' | b'\r') {
+            return None;
+        }
+    }
+    Some(i)
 }
 
 fn parse_time(path: &Path, line: usize, f: &[u8], unit: TimeUnit) -> Result<i64, InputError> {
     let bad = || InputError::at(path, line, format!("timestamp '{}' is not a number", String::from_utf8_lossy(f)));
-    if unit == TimeUnit::Ns && !f.is_empty() && f.iter().all(|c| c.is_ascii_digit() || *c == b'-') {
+    if unit == TimeUnit::Ns && !f.is_empty() && f.iter().all(u8::is_ascii_digit) {
+        return f.iter().try_fold(0i64, |acc, &c| acc.checked_mul(10)?.checked_add(i64::from(c - b'0'))).ok_or_else(
+            || InputError::at(path, line, format!("timestamp '{}' overflows", String::from_utf8_lossy(f))),
+        );
+    }
+    if unit == TimeUnit::Ns && f.iter().all(|c| c.is_ascii_digit() || *c == b'-') {
         return std::str::from_utf8(f).ok().and_then(|s| s.parse::<i64>().ok()).ok_or_else(bad);
     }
     let v: f64 = fast_float2::parse(f).map_err(|_| bad())?;
@@ -352,6 +905,7 @@ mod tests {
             time: Some((0, TimeUnit::S)),
             values: (1..=n).collect(),
             names: (1..=n).map(|i| format!("v{i}")).collect(),
+            ..Default::default()
         }
     }
 
@@ -361,11 +915,11 @@ mod tests {
         let t = parse_table_from(p, "#c\ntime,a,b\n0.0,1,2\n0.5, 3 ,4\n".as_bytes(), &spec(2)).unwrap();
         assert_eq!(t.t_ns, vec![0, 500_000_000]);
         assert_eq!(t.columns, vec![vec![1.0, 3.0], vec![2.0, 4.0]]);
-        assert_eq!(t.lines, vec![3, 4]);
+        assert_eq!((t.lines.line(0), t.lines.line(1)), (3, 4));
         assert_eq!(t.header.as_deref(), Some("time,a,b"));
         let t = parse_table_from(p, "  1 2 3\n\n2\t4 5\n".as_bytes(), &spec(2)).unwrap();
         assert_eq!(t.columns[1], vec![3.0, 5.0]);
-        assert_eq!(t.lines, vec![1, 3]);
+        assert_eq!((t.lines.line(0), t.lines.line(1)), (1, 3));
     }
 
     #[test]
@@ -393,13 +947,42 @@ mod tests {
         s.truncate(s.len() - "200000,1,oops\n".len());
         let t = parse_table_from(Path::new("big.csv"), s.as_bytes(), &spec(2)).unwrap();
         assert_eq!(t.t_ns.len(), 200_000);
-        assert_eq!(t.lines[199_999], 200_000);
+        assert_eq!(t.lines.line(199_999), 200_000);
         assert_eq!(t.columns[0][123_456], 123_456.5);
     }
 
     #[test]
+    fn odd_but_valid_lines_parse_like_the_general_path() {
+        let text = "# c\r\n1, 2.5 ,-3e-2,9\r\n\n  2,\t+4,5.000000000001,x\n# mid\n3,1e3,-0.5\n4,12345678901234567890,0.1";
+        let t = parse_table_from(Path::new("odd.csv"), text.as_bytes(), &spec(2)).unwrap();
+        assert_eq!(t.t_ns, vec![1_000_000_000, 2_000_000_000, 3_000_000_000, 4_000_000_000]);
+        assert_eq!(t.columns[0], vec![2.5, 4.0, 1e3, 12345678901234567890.0]);
+        assert_eq!(t.columns[1], vec![-3e-2, 5.000000000001, -0.5, 0.1]);
+        assert_eq!((0..4).map(|i| t.lines.line(i)).collect::<Vec<_>>(), vec![2, 4, 6, 7]);
+        let ws = "1 2 3\n 2\t4   5 extra\n";
+        let t = parse_table_from(Path::new("ws.txt"), ws.as_bytes(), &spec(2)).unwrap();
+        assert_eq!(t.columns[1], vec![3.0, 5.0]);
+    }
+
+    #[test]
+    fn eight_digit_swar_matches_plain_parsing() {
+        assert_eq!(eight_digits(b"12345678", 0), Some(12_345_678));
+        assert_eq!(eight_digits(b"x00000001", 1), Some(1));
+        assert_eq!(eight_digits(b"1234567", 0), None);
+        assert_eq!(eight_digits(b"1234a678", 0), None);
+        assert_eq!(eight_digits(b"1234/678", 0), None);
+        assert_eq!(eight_digits(b"1234:678", 0), None);
+        for text in ["0.024501082", "-9.538499414", "123.4567890123", "1e-3", "0.000000001234567890", "7"] {
+            let (v, end) = parse_number(text.as_bytes(), 0).unwrap();
+            assert_eq!(end, text.len());
+            assert_eq!(v, text.parse::<f64>().unwrap(), "{text}");
+        }
+    }
+
+    #[test]
     fn nanosecond_stamps_keep_all_digits() {
-        let sp = TableSpec { time: Some((0, TimeUnit::Ns)), values: vec![1], names: vec!["a".into()] };
+        let sp =
+            TableSpec { time: Some((0, TimeUnit::Ns)), values: vec![1], names: vec!["a".into()], ..Default::default() };
         let t = parse_table_from(Path::new("x"), "1403715273262142976,1\n".as_bytes(), &sp).unwrap();
         assert_eq!(t.t_ns[0], 1403715273262142976);
     }

@@ -1,7 +1,7 @@
 //! Trajectories: EuRoC/ASL ground truth (`t[ns], p, q(w,x,y,z), v, b_w, b_a`)
 //! and the TUM format (`t[s] x y z qx qy qz qw`), read and written.
 
-use super::table::{read_table, TableSpec, TimeUnit};
+use super::table::{read_table, LineMap, TableSpec, TimeUnit};
 use crate::error::InputError;
 use std::io::Write;
 use std::path::Path;
@@ -38,18 +38,18 @@ fn triads(cols: &[Vec<f64>], first: usize) -> Vec<[f64; 3]> {
     (0..cols[first].len()).map(|i| [cols[first][i], cols[first + 1][i], cols[first + 2][i]]).collect()
 }
 
-fn check_times_and_quaternions(path: &Path, tr: &mut Trajectory, lines: &[u32]) -> Result<(), InputError> {
+fn check_times_and_quaternions(path: &Path, tr: &mut Trajectory, lines: &LineMap) -> Result<(), InputError> {
     for (i, w) in tr.t_ns.windows(2).enumerate() {
         if w[1] <= w[0] {
             let what = if w[1] == w[0] { "repeats" } else { "goes backwards from" };
-            return Err(InputError::at(path, lines[i + 1] as usize, format!("timestamp {what} the previous line's"))
+            return Err(InputError::at(path, lines.line(i + 1), format!("timestamp {what} the previous line's"))
                 .with_hint("a trajectory needs strictly increasing times"));
         }
     }
     for (i, q) in tr.q.iter_mut().enumerate() {
         let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
         if (n - 1.0).abs() > 1e-2 {
-            return Err(InputError::at(path, lines[i] as usize, format!("quaternion norm is {n:.4}, not 1"))
+            return Err(InputError::at(path, lines.line(i), format!("quaternion norm is {n:.4}, not 1"))
                 .with_hint("check the column order (ASL: qw qx qy qz; TUM: qx qy qz qw)"));
         }
         q.iter_mut().for_each(|x| *x /= n);
@@ -64,6 +64,7 @@ pub fn read_asl_groundtruth(path: &Path) -> Result<Trajectory, InputError> {
         time: Some((0, TimeUnit::Ns)),
         values: (1..8).collect(),
         names: ["px", "py", "pz", "qw", "qx", "qy", "qz"].map(String::from).to_vec(),
+        ..TableSpec::default()
     };
     let head = read_table(path, &spec8)?;
     let full = head.header.as_deref().map(|h| h.split(',').count() >= 17).unwrap_or(false);
@@ -74,6 +75,7 @@ pub fn read_asl_groundtruth(path: &Path) -> Result<Trajectory, InputError> {
             time: Some((0, TimeUnit::Ns)),
             values: (1..17).collect(),
             names: names.map(String::from).to_vec(),
+            ..TableSpec::default()
         };
         (read_table(path, &spec)?, true)
     } else {
@@ -98,6 +100,7 @@ pub fn read_tum(path: &Path) -> Result<Trajectory, InputError> {
         time: Some((0, TimeUnit::S)),
         values: (1..8).collect(),
         names: ["x", "y", "z", "qx", "qy", "qz", "qw"].map(String::from).to_vec(),
+        ..TableSpec::default()
     };
     let table = read_table(path, &spec)?;
     let c = &table.columns;

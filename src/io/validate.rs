@@ -4,6 +4,7 @@
 
 use super::imu::{ImuRecording, Stored};
 use crate::error::InputError;
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// What to do with duplicated timestamps.
@@ -50,7 +51,7 @@ fn source(rec: &ImuRecording) -> PathBuf {
 }
 
 fn line_of(rec: &ImuRecording, i: usize) -> usize {
-    rec.lines.get(i).map(|&l| l as usize).unwrap_or(i + 1)
+    rec.lines.line(i)
 }
 
 /// Validate (and where documented, repair) a freshly read recording.
@@ -130,14 +131,23 @@ fn check_duplicates(rec: &mut ImuRecording, opts: &ValidateOptions, file: &Path)
     Ok(())
 }
 
-/// Median step between samples \[s\].
-pub fn median_period(t: &[f64]) -> f64 {
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    if d.is_empty() {
+/// At most this many values enter a median (evenly spread over the recording).
+const MEDIAN_SAMPLES: usize = 1 << 16;
+
+/// Median of `f(i)` over at most [`MEDIAN_SAMPLES`] indices evenly spread over `0..n`.
+fn sampled_median(n: usize, f: impl Fn(usize) -> f64) -> f64 {
+    if n == 0 {
         return 0.0;
     }
-    let mid = d.len() / 2;
-    *d.select_nth_unstable_by(mid, f64::total_cmp).1
+    let stride = n.div_ceil(MEDIAN_SAMPLES);
+    let mut v: Vec<f64> = (0..n).step_by(stride).map(f).collect();
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// Median step between samples \[s\] (from at most 65 536 steps spread over the recording).
+pub fn median_period(t: &[f64]) -> f64 {
+    sampled_median(t.len().saturating_sub(1), |i| t[i + 1] - t[i])
 }
 
 fn check_gaps(rec: &mut ImuRecording, opts: &ValidateOptions) {
@@ -172,41 +182,42 @@ fn check_gaps(rec: &mut ImuRecording, opts: &ValidateOptions) {
     ));
 }
 
-/// Index range of the quietest window of `w` samples (lowest accelerometer variance).
+/// Index range of the quietest window of `w` samples (lowest accelerometer
+/// variance), among windows starting every `w/4` samples. O(n): per-block
+/// sums (in parallel), then four blocks per window.
 pub fn quietest_window(accel: &[[f64; 3]], w: usize) -> Option<std::ops::Range<usize>> {
     let n = accel.len();
-    if n < w || w < 2 {
+    if n < w || w < 4 {
         return None;
     }
-    let mut s = [0.0; 3];
-    let mut s2 = [0.0; 3];
-    for a in &accel[..w] {
-        for k in 0..3 {
-            s[k] += a[k];
-            s2[k] += a[k] * a[k];
-        }
-    }
-    let var = |s: &[f64; 3], s2: &[f64; 3]| (0..3).map(|k| (s2[k] - s[k] * s[k] / w as f64).max(0.0)).sum::<f64>();
-    let mut best = (var(&s, &s2), 0);
-    // Recompute sums every window start (stride w/4) to avoid drift.
-    let stride = (w / 4).max(1);
-    let mut start = stride;
-    while start + w <= n {
-        let mut s = [0.0; 3];
-        let mut s2 = [0.0; 3];
-        for a in &accel[start..start + w] {
-            for k in 0..3 {
-                s[k] += a[k];
-                s2[k] += a[k] * a[k];
+    let b = w / 4;
+    let blocks: Vec<([f64; 3], [f64; 3])> = accel
+        .par_chunks_exact(b)
+        .map(|c| {
+            let mut s = [0.0; 3];
+            let mut s2 = [0.0; 3];
+            for a in c {
+                for k in 0..3 {
+                    s[k] += a[k];
+                    s2[k] += a[k] * a[k];
+                }
             }
-        }
-        let v = var(&s, &s2);
-        if v < best.0 {
-            best = (v, start);
-        }
-        start += stride;
-    }
-    Some(best.1..best.1 + w)
+            (s, s2)
+        })
+        .collect();
+    let m = (4 * b) as f64;
+    (0..blocks.len().saturating_sub(3))
+        .map(|j| {
+            let mut v = 0.0;
+            for k in 0..3 {
+                let s: f64 = blocks[j..j + 4].iter().map(|x| x.0[k]).sum();
+                let s2: f64 = blocks[j..j + 4].iter().map(|x| x.1[k]).sum();
+                v += (s2 - s * s / m).max(0.0);
+            }
+            (v, j)
+        })
+        .min_by(|x, y| x.0.total_cmp(&y.0))
+        .map(|(_, j)| j * b..j * b + 4 * b)
 }
 
 fn mean3(v: &[[f64; 3]]) -> [f64; 3] {
@@ -279,49 +290,58 @@ fn check_units(rec: &mut ImuRecording, file: &Path) -> Result<(), InputError> {
 
 fn check_saturation(rec: &mut ImuRecording, opts: &ValidateOptions) {
     let name = rec.source_name();
-    let mut found = Vec::new();
-    for (v, sensor) in [(&rec.gyro, "gyro"), (&rec.accel, "accelerometer")] {
-        if v.is_empty() {
-            continue;
-        }
-        for (k, axis) in ["x", "y", "z"].iter().enumerate() {
-            let col: Vec<f64> = v.iter().map(|s| s[k]).collect();
-            let mut sorted = col.clone();
-            let mid = sorted.len() / 2;
-            let median = *sorted.select_nth_unstable_by(mid, f64::total_cmp).1;
-            let mut dev: Vec<f64> = col.iter().map(|x| (x - median).abs()).collect();
-            let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
-            let (lo, hi) = col.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
-            for extreme in [hi, lo] {
-                if (extreme - median).abs() <= 10.0 * mad.max(1e-12) {
-                    continue;
-                }
-                let mut runs = 0;
-                let mut longest = (0, 0);
-                let mut i = 0;
-                while i < col.len() {
-                    if col[i] == extreme {
-                        let j = (i..col.len()).find(|&j| col[j] != extreme).unwrap_or(col.len());
-                        if j - i >= opts.saturation_run {
-                            runs += 1;
-                            if j - i > longest.0 {
-                                longest = (j - i, i);
-                            }
-                        }
-                        i = j;
-                    } else {
-                        i += 1;
-                    }
-                }
-                if runs > 0 {
-                    found.push(format!(
-                        "{name}: {sensor} {axis} is flat at {extreme} in {runs} run(s) (longest {} samples from line {}): the sensor saturates there and those samples are clipped",
-                        longest.0,
-                        line_of(rec, longest.1)
-                    ));
+    let sensors: Vec<(&Vec<[f64; 3]>, &str)> =
+        [(&rec.gyro, "gyro"), (&rec.accel, "accelerometer")].into_iter().filter(|(v, _)| !v.is_empty()).collect();
+    let found: Vec<Vec<String>> = sensors
+        .par_iter()
+        .map(|&(v, sensor)| {
+            // One pass for the extremes of all three axes.
+            let mut lo = [f64::INFINITY; 3];
+            let mut hi = [f64::NEG_INFINITY; 3];
+            for x in v.iter() {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(x[k]);
+                    hi[k] = hi[k].max(x[k]);
                 }
             }
-        }
-    }
-    rec.warnings.extend(found);
+            let mut found = Vec::new();
+            for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
+                let col = |i: usize| v[i][k];
+                let median = sampled_median(v.len(), col);
+                let mad = sampled_median(v.len(), |i| (col(i) - median).abs());
+                for extreme in [hi[k], lo[k]] {
+                    // Only an extreme far out in the tail can be a clipping level.
+                    if (extreme - median).abs() <= 10.0 * mad.max(1e-12) {
+                        continue;
+                    }
+                    let mut runs = 0;
+                    let mut longest = (0, 0);
+                    let mut i = 0;
+                    while i < v.len() {
+                        if col(i) == extreme {
+                            let j = (i..v.len()).find(|&j| col(j) != extreme).unwrap_or(v.len());
+                            if j - i >= opts.saturation_run {
+                                runs += 1;
+                                if j - i > longest.0 {
+                                    longest = (j - i, i);
+                                }
+                            }
+                            i = j;
+                        } else {
+                            i += 1;
+                        }
+                    }
+                    if runs > 0 {
+                        found.push(format!(
+                            "{name}: {sensor} {axis} is flat at {extreme} in {runs} run(s) (longest {} samples from line {}): the sensor saturates there and those samples are clipped",
+                            longest.0,
+                            line_of(rec, longest.1)
+                        ));
+                    }
+                }
+            }
+            found
+        })
+        .collect();
+    rec.warnings.extend(found.into_iter().flatten());
 }
