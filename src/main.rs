@@ -42,6 +42,9 @@ struct RecordingArgs {
     /// imu_tk layout: the gyro file (`t x y z`); the recording argument is then the accelerometer file.
     #[arg(long)]
     gyro_file: Option<PathBuf>,
+    /// ROS bag / MCAP: the sensor_msgs/Imu topic (needed when the file has several).
+    #[arg(long)]
+    topic: Option<String>,
     /// Nominal sample rate [Hz] (estimated from the timestamps when absent).
     #[arg(long)]
     rate: Option<f64>,
@@ -66,6 +69,7 @@ impl RecordingArgs {
             o.format.validate.duplicates = Duplicates::Error;
         }
         o.gyro_file = self.gyro_file.clone();
+        o.topic = self.topic.clone();
         o
     }
 }
@@ -95,7 +99,7 @@ enum Command {
     },
     /// Read an IMU recording, check it, and print what it holds and what looks wrong.
     Inspect {
-        /// ASL dataset folder (or its mav0/), a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
+        /// ASL dataset folder (or its mav0/), a ROS .bag or .mcap, a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
         recording: PathBuf,
         #[command(flatten)]
         read: RecordingArgs,

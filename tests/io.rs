@@ -286,3 +286,169 @@ fn trajectories_round_trip_in_both_formats() {
     let e = read_trajectory(&tmp("dupt.txt", "0 0 0 0 0 0 0 1\n0 0 0 0 0 0 0 1\n")).unwrap_err().to_string();
     assert!(e.contains("dupt.txt:2:") && e.contains("repeats"), "{e}");
 }
+
+/// A ROS 1 `sensor_msgs/Imu` message.
+fn ros1_imu(t_ns: i64, w: [f64; 3], a: [f64; 3]) -> Vec<u8> {
+    let mut b = Vec::new();
+    b.extend(0u32.to_le_bytes());
+    b.extend(((t_ns / 1_000_000_000) as u32).to_le_bytes());
+    b.extend(((t_ns % 1_000_000_000) as u32).to_le_bytes());
+    b.extend(3u32.to_le_bytes());
+    b.extend(b"imu");
+    let mut f = vec![0.0; 13];
+    f.extend(w);
+    f.extend([0.0; 9]);
+    f.extend(a);
+    f.extend([0.0; 9]);
+    f.iter().for_each(|v| b.extend(v.to_le_bytes()));
+    b
+}
+
+/// A bag record: header fields (name, value bytes) and data.
+fn bag_record(fields: &[(&str, Vec<u8>)], data: &[u8]) -> Vec<u8> {
+    let mut h = Vec::new();
+    for (name, value) in fields {
+        h.extend(((name.len() + 1 + value.len()) as u32).to_le_bytes());
+        h.extend(name.as_bytes());
+        h.push(b'=');
+        h.extend(value);
+    }
+    let mut r = (h.len() as u32).to_le_bytes().to_vec();
+    r.extend(h);
+    r.extend((data.len() as u32).to_le_bytes());
+    r.extend(data);
+    r
+}
+
+/// A minimal uncompressed ROS 1 bag (v2.0) with one IMU topic.
+fn ros1_bag(n: usize, index_pos_override: Option<u64>) -> Vec<u8> {
+    let conn_data = bag_record(
+        &[
+            ("topic", b"/imu0".to_vec()),
+            ("type", b"sensor_msgs/Imu".to_vec()),
+            ("md5sum", b"6a62c6daae103f4ff57a132d6f95cec2".to_vec()),
+            ("message_definition", b"...".to_vec()),
+        ],
+        &[],
+    );
+    // A connection record's data is the field block alone (no lengths around it).
+    let conn_fields = &conn_data[4..conn_data.len() - 4];
+    let mut chunk = bag_record(
+        &[("op", vec![7]), ("conn", 0u32.to_le_bytes().to_vec()), ("topic", b"/imu0".to_vec())],
+        conn_fields,
+    );
+    for i in 0..n {
+        let t = 1_600_000_000_000_000_000i64 + i as i64 * 5_000_000;
+        let time = [((t / 1_000_000_000) as u32).to_le_bytes(), ((t % 1_000_000_000) as u32).to_le_bytes()].concat();
+        let msg = ros1_imu(t, [0.01, -0.02, 0.001 * (i % 3) as f64], [0.1, 0.2, 9.8]);
+        chunk.extend(bag_record(&[("op", vec![2]), ("conn", 0u32.to_le_bytes().to_vec()), ("time", time)], &msg));
+    }
+    let chunk_rec = bag_record(
+        &[("op", vec![5]), ("compression", b"none".to_vec()), ("size", (chunk.len() as u32).to_le_bytes().to_vec())],
+        &chunk,
+    );
+    let mut out = b"#ROSBAG V2.0\n".to_vec();
+    let header_len = bag_record(
+        &[
+            ("op", vec![3]),
+            ("index_pos", 0u64.to_le_bytes().to_vec()),
+            ("conn_count", 1u32.to_le_bytes().to_vec()),
+            ("chunk_count", 1u32.to_le_bytes().to_vec()),
+        ],
+        &[],
+    )
+    .len();
+    let index_pos = index_pos_override.unwrap_or((out.len() + header_len + chunk_rec.len()) as u64);
+    out.extend(bag_record(
+        &[
+            ("op", vec![3]),
+            ("index_pos", index_pos.to_le_bytes().to_vec()),
+            ("conn_count", 1u32.to_le_bytes().to_vec()),
+            ("chunk_count", 1u32.to_le_bytes().to_vec()),
+        ],
+        &[],
+    ));
+    out.extend(chunk_rec);
+    out
+}
+
+#[test]
+fn ros1_bag_imu_topic_reads_and_bad_bags_are_refused() {
+    let opts = tumble::io::RecordingOptions::default();
+    let dir = std::env::temp_dir().join(format!("tumble-io-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("imu.bag");
+    std::fs::write(&p, ros1_bag(400, None)).unwrap();
+    let r = tumble::io::open_recording(&p, &opts).unwrap();
+    assert_eq!(r.len(), 400);
+    assert_eq!(r.t0_ns, 1_600_000_000_000_000_000);
+    assert!((r.mean_rate() - 200.0).abs() < 1e-6);
+    assert_eq!(r.gyro[2], [0.01, -0.02, 0.002]);
+    assert_eq!(r.accel[0], [0.1, 0.2, 9.8]);
+    let wrong = tumble::io::RecordingOptions { topic: Some("/imu1".into()), ..Default::default() };
+    let e = tumble::io::open_recording(&p, &wrong).unwrap_err().to_string();
+    assert!(e.contains("no sensor_msgs/Imu topic '/imu1'") && e.contains("/imu0"), "{e}");
+    std::fs::write(&p, ros1_bag(10, Some(1 << 40))).unwrap();
+    let e = tumble::io::open_recording(&p, &opts).unwrap_err().to_string();
+    assert!(e.contains("index_pos points outside the file"), "{e}");
+    let good = ros1_bag(400, None);
+    std::fs::write(&p, &good[..good.len() / 2]).unwrap();
+    assert!(tumble::io::open_recording(&p, &opts).is_err());
+    std::fs::write(&p, b"not a bag").unwrap();
+    assert!(tumble::io::open_recording(&p, &opts).unwrap_err().to_string().contains("not a ROS 1 bag"));
+}
+
+/// A CDR `sensor_msgs/msg/Imu`.
+fn cdr_imu(t_ns: i64, w: [f64; 3], a: [f64; 3]) -> Vec<u8> {
+    let mut b = vec![0u8, 1, 0, 0];
+    b.extend(((t_ns / 1_000_000_000) as i32).to_le_bytes());
+    b.extend(((t_ns % 1_000_000_000) as u32).to_le_bytes());
+    b.extend(5u32.to_le_bytes());
+    b.extend(b"imu0\0");
+    while (b.len() - 4) % 8 != 0 {
+        b.push(0);
+    }
+    let mut f = vec![0.0, 0.0, 0.0, 1.0];
+    f.extend([0.0; 9]);
+    f.extend(w);
+    f.extend([0.0; 9]);
+    f.extend(a);
+    f.extend([0.0; 9]);
+    f.iter().for_each(|v| b.extend(v.to_le_bytes()));
+    b
+}
+
+#[test]
+fn mcap_imu_topic_reads() {
+    let dir = std::env::temp_dir().join(format!("tumble-io-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("imu.mcap");
+    {
+        let mut w = mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&p).unwrap())).unwrap();
+        let schema = w.add_schema("sensor_msgs/msg/Imu", "ros2msg", b"...").unwrap();
+        let ch = w.add_channel(schema, "/imu", "cdr", &Default::default()).unwrap();
+        let other = w.add_channel(schema, "/imu_raw", "cdr", &Default::default()).unwrap();
+        for i in 0..300u32 {
+            let t = 1_700_000_000_000_000_000i64 + i64::from(i) * 10_000_000;
+            for c in [ch, other] {
+                let h = mcap::records::MessageHeader {
+                    channel_id: c,
+                    sequence: i,
+                    log_time: t as u64,
+                    publish_time: t as u64,
+                };
+                w.write_to_known_channel(&h, &cdr_imu(t, [0.003, 0.0, -0.001], [0.0, 0.5, 9.79])).unwrap();
+            }
+        }
+        w.finish().unwrap();
+    }
+    let e = tumble::io::open_recording(&p, &Default::default()).unwrap_err().to_string();
+    assert!(e.contains("several") && e.contains("/imu_raw"), "{e}");
+    let opts = tumble::io::RecordingOptions { topic: Some("/imu".into()), ..Default::default() };
+    let r = tumble::io::open_recording(&p, &opts).unwrap();
+    assert_eq!(r.len(), 300);
+    assert!((r.mean_rate() - 100.0).abs() < 1e-6);
+    assert_eq!(r.accel[5], [0.0, 0.5, 9.79]);
+    std::fs::write(&p, b"\x89MCAP0\r\n garbage").unwrap();
+    assert!(tumble::io::open_recording(&p, &opts).unwrap_err().to_string().contains("MCAP"));
+}

@@ -15,7 +15,7 @@ use super::imu::ImuRecording;
 use super::imu_text::{read_imu_text, ImuTextFormat};
 use super::table::{read_table, TableSpec, TimeUnit};
 use super::trajectory::{read_asl_groundtruth, Trajectory};
-use super::yaml::{read_yaml, YamlMatrix};
+use super::yaml::{parse_yaml, YamlMatrix};
 use crate::error::InputError;
 use nalgebra::Isometry3;
 use serde::Deserialize;
@@ -113,7 +113,12 @@ struct CameraYaml {
 
 /// Read `imu0/sensor.yaml`.
 pub fn read_imu_sensor(path: &Path) -> Result<ImuSensor, InputError> {
-    let y: ImuYaml = read_yaml(path)?;
+    parse_imu_sensor(path, &super::tokens::read_text(path)?)
+}
+
+/// Parse the text of an IMU `sensor.yaml` (`path` names it in errors).
+pub fn parse_imu_sensor(path: &Path, text: &str) -> Result<ImuSensor, InputError> {
+    let y: ImuYaml = parse_yaml(path, text)?;
     let t_bs = match &y.T_BS {
         Some(m) => m.to_transform(path, "T_BS")?,
         None => Isometry3::identity(),
@@ -145,11 +150,16 @@ pub fn read_imu_sensor(path: &Path) -> Result<ImuSensor, InputError> {
 }
 
 /// Read a camera `sensor.yaml` into (model, T_BS, resolution, rate).
-#[allow(clippy::type_complexity)]
-pub fn read_camera_sensor(
-    path: &Path,
-) -> Result<(CameraModel, Option<Isometry3<f64>>, Option<[u32; 2]>, Option<f64>), InputError> {
-    let y: CameraYaml = read_yaml(path)?;
+pub fn read_camera_sensor(path: &Path) -> Result<CameraSensor, InputError> {
+    parse_camera_sensor(path, &super::tokens::read_text(path)?)
+}
+
+/// A camera `sensor.yaml`: model, body ← camera transform, resolution \[px\], rate \[Hz\].
+pub type CameraSensor = (CameraModel, Option<Isometry3<f64>>, Option<[u32; 2]>, Option<f64>);
+
+/// Parse the text of a camera `sensor.yaml` (`path` names it in errors).
+pub fn parse_camera_sensor(path: &Path, text: &str) -> Result<CameraSensor, InputError> {
+    let y: CameraYaml = parse_yaml(path, text)?;
     if let Some(m) = y.camera_model.as_deref() {
         if m != "pinhole" {
             return Err(InputError::file(path, format!("camera_model '{m}' is not supported (only pinhole)")));

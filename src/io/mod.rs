@@ -7,6 +7,7 @@ pub mod imu;
 pub mod imu_text;
 mod mem;
 pub mod recording;
+pub mod rosbag;
 pub mod table;
 pub(crate) mod tokens;
 pub mod trajectory;

@@ -781,7 +781,8 @@ fn parse_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
         return Some((if neg { -v } else { v }, i));
     }
     let v: f64 = fast_float2::parse(&b[start..i]).ok()?;
-    Some((v, i))
+    // Overflow to infinity is left to the general path, which reports it.
+    v.is_finite().then_some((v, i))
 }
 
 /// The common case of a data line, parsed in one pass without splitting:
@@ -953,12 +954,15 @@ mod tests {
 
     #[test]
     fn odd_but_valid_lines_parse_like_the_general_path() {
-        let text = "# c\r\n1, 2.5 ,-3e-2,9\r\n\n  2,\t+4,5.000000000001,x\n# mid\n3,1e3,-0.5\n4,12345678901234567890,0.1";
+        let text =
+            "# c\r\n1, 2.5 ,-3e-2,9\r\n\n  2,\t+4,5.000000000001,x\n# mid\n3,1e3,-0.5\n4,12345678901234567890,0.1";
         let t = parse_table_from(Path::new("odd.csv"), text.as_bytes(), &spec(2)).unwrap();
         assert_eq!(t.t_ns, vec![1_000_000_000, 2_000_000_000, 3_000_000_000, 4_000_000_000]);
         assert_eq!(t.columns[0], vec![2.5, 4.0, 1e3, 12345678901234567890.0]);
         assert_eq!(t.columns[1], vec![-3e-2, 5.000000000001, -0.5, 0.1]);
         assert_eq!((0..4).map(|i| t.lines.line(i)).collect::<Vec<_>>(), vec![2, 4, 6, 7]);
+        let e = parse_table_from(Path::new("big.csv"), "1,1e999,2\n".as_bytes(), &spec(2)).unwrap_err().to_string();
+        assert!(e.contains("big.csv:1:") && e.contains("not finite"), "{e}");
         let ws = "1 2 3\n 2\t4   5 extra\n";
         let t = parse_table_from(Path::new("ws.txt"), ws.as_bytes(), &spec(2)).unwrap();
         assert_eq!(t.columns[1], vec![3.0, 5.0]);
