@@ -178,21 +178,15 @@ pub fn peek_header(path: &Path) -> Result<Option<String>, InputError> {
 /// Parse a numeric table from any reader, streamed in blocks; `path` names it in errors.
 pub fn parse_table_from(path: &Path, mut reader: impl Read, spec: &TableSpec) -> Result<Table, InputError> {
     let mut p = Parser::new(path, spec);
-    let mut buf: Vec<u8> = Vec::with_capacity(BLOCK + 4096);
+    let mut buf: Vec<u8> = Vec::new();
     let mut eof = false;
     while !eof {
-        let start = buf.len();
-        buf.resize(start + BLOCK, 0);
-        let mut filled = start;
-        while filled < buf.len() {
-            let n = reader.read(&mut buf[filled..]).map_err(|e| InputError::file(path, format!("read failed: {e}")))?;
-            if n == 0 {
-                eof = true;
-                break;
-            }
-            filled += n;
-        }
-        buf.truncate(filled);
+        // Append up to one block; fewer bytes than asked means end of input.
+        let n = (&mut reader)
+            .take(BLOCK as u64)
+            .read_to_end(&mut buf)
+            .map_err(|e| InputError::file(path, format!("read failed: {e}")))?;
+        eof = n < BLOCK;
         // Parse up to the last complete line (everything at EOF).
         let cut = if eof { buf.len() } else { memchr::memrchr(b'\n', &buf).map(|q| q + 1).unwrap_or(0) };
         if cut == 0 && !eof {
@@ -678,6 +672,22 @@ fn eight_digits(b: &[u8], i: usize) -> Option<u64> {
     Some(lo.wrapping_add(hi) >> 32)
 }
 
+/// Skip an optional sign at `b[*i]`; true when it was '-'.
+#[inline(always)]
+fn take_sign(b: &[u8], i: &mut usize) -> bool {
+    match b.get(*i) {
+        Some(b'-') => {
+            *i += 1;
+            true
+        }
+        Some(b'+') => {
+            *i += 1;
+            false
+        }
+        _ => false,
+    }
+}
+
 /// Parse a plain decimal (`-12.5`, `3e-4`) starting at `b[i]`; returns the
 /// value and the index after it. Correctly rounded: the mantissa ≤ 2⁵³ and
 /// |exponent| ≤ 22 case is exact (Clinger), anything else goes to fast-float2.
@@ -685,17 +695,7 @@ fn eight_digits(b: &[u8], i: usize) -> Option<u64> {
 #[inline(always)]
 fn parse_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
     let start = i;
-    let neg = match b.get(i) {
-        Some(b'-') => {
-            i += 1;
-            true
-        }
-        Some(b'+') => {
-            i += 1;
-            false
-        }
-        _ => false,
-    };
+    let neg = take_sign(b, &mut i);
     let mut mant: u64 = 0;
     let mut exp: i32 = 0;
     let mut digits = 0;
@@ -747,17 +747,7 @@ fn parse_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
     }
     if matches!(b.get(i), Some(b'e') | Some(b'E')) {
         let mut j = i + 1;
-        let eneg = match b.get(j) {
-            Some(b'-') => {
-                j += 1;
-                true
-            }
-            Some(b'+') => {
-                j += 1;
-                false
-            }
-            _ => false,
-        };
+        let eneg = take_sign(b, &mut j);
         let mut e: i32 = 0;
         let mut ed = 0;
         while let Some(&c) = b.get(j) {
