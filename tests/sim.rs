@@ -213,3 +213,41 @@ fn bad_configs_are_refused_with_the_field_named() {
     std::fs::write(&p, "imu:\n  rate_hz: 400\n").unwrap();
     assert_eq!(SimConfig::read(&p).unwrap().imu.rate_hz, 400.0);
 }
+
+#[test]
+fn nonlinearity_and_temperature_scale_are_exact_on_a_still_sensor() {
+    let mut c = only(Effects { nonlinearity: true, temperature: true, ..Effects::none() });
+    c.duration_s = Some(20.0);
+    let s = simulate(Scenario::Static, &c, 1).unwrap();
+    let a = &c.imu.accel;
+    let i = 1000;
+    let dtemp = c.imu.temperature.at(s.imu.t[i]) - c.imu.temperature.reference;
+    let g = c.gravity;
+    // f(a) = a + c a², scaled by (1 + s_T ΔT), plus η = c_T ΔT.
+    let want = (g + a.nonlinearity[2] * g * g) * (1.0 + a.temperature_scale[2] * dtemp) + a.temperature_bias[2] * dtemp;
+    assert!((s.imu.accel[i][2] - want).abs() < 1e-12, "{} vs {want}", s.imu.accel[i][2]);
+    assert!(a.nonlinearity[2] * g * g > 0.01, "the effect is visible");
+}
+
+#[test]
+fn sample_time_jitter_moves_samples_by_the_set_amount() {
+    let mut c = only(Effects { jitter: true, ..Effects::none() });
+    c.imu.jitter_s = 1e-3;
+    c.tumble.poses = 8;
+    c.tumble.initial_static_s = 2.0;
+    let with = simulate(Scenario::Tumble, &c, 6).unwrap();
+    c.imu.effects.jitter = false;
+    let without = simulate(Scenario::Tumble, &c, 6).unwrap();
+    // gyro(t + δ) − gyro(t) ≈ ω̇(t) δ: the ratio of spreads is σ_δ.
+    let dt = 1.0 / c.imu.rate_hz;
+    let (mut num, mut den) = (0.0, 0.0);
+    for i in 1..without.imu.t.len() - 1 {
+        for k in 0..3 {
+            let wdot = (without.imu.gyro[i + 1][k] - without.imu.gyro[i - 1][k]) / (2.0 * dt);
+            num += (with.imu.gyro[i][k] - without.imu.gyro[i][k]).powi(2);
+            den += wdot * wdot;
+        }
+    }
+    let sigma = (num / den).sqrt();
+    assert!((sigma / 1e-3 - 1.0).abs() < 0.1, "jitter {sigma}");
+}
