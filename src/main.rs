@@ -194,7 +194,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                     m[0], m[1], m[2], sd[0], sd[1], sd[2]
                 );
             };
-            let unit = |u: tumble::io::StoredUnits, si: &'static str| match u.0 {
+            let unit = |u: tumble::io::Stored, si: &'static str| match u {
                 tumble::io::Stored::Si => si,
                 tumble::io::Stored::RawCounts => "counts",
             };

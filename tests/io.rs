@@ -84,7 +84,7 @@ fn imu_tk_xsens_counts_and_t265_duplicates() {
         let r = read_imu_tk(&d.join("xsens_acc.mat"), &d.join("xsens_gyro.mat"), TimeUnit::S, counts, gcounts, &checks)
             .unwrap();
         assert_eq!(r.len(), 51_175);
-        assert_eq!(r.accel_units.0, Stored::RawCounts);
+        assert_eq!(r.accel_units, Stored::RawCounts);
         assert_eq!(r.accel[0], [33108.0, 33329.0, 36429.0]);
         assert!((r.duration() - 511.7).abs() < 0.5);
     }

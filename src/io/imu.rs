@@ -4,10 +4,11 @@
 use std::path::PathBuf;
 
 /// What the stored numbers of one sensor are.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Stored {
     /// SI units: rad/s for the gyro, m/s² for the accelerometer.
+    #[default]
     Si,
     /// Raw sensor counts, kept as read because no scale was given (imu_tk's
     /// calibration works on these; its biases come out in counts).
@@ -30,23 +31,13 @@ pub struct ImuRecording {
     /// Temperature per sample \[°C\], when the file has a temperature column.
     pub temperature: Option<Vec<f64>>,
     /// Units of `gyro`.
-    pub gyro_units: StoredUnits,
+    pub gyro_units: Stored,
     /// Units of `accel`.
-    pub accel_units: StoredUnits,
+    pub accel_units: Stored,
     /// Line of each sample in the first source (for messages).
     pub lines: super::table::LineMap,
     /// Problems found that did not stop reading (duplicates, gaps, units, saturation).
     pub warnings: Vec<String>,
-}
-
-/// Units of one sensor's stored numbers (a newtype so it can default to SI).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct StoredUnits(pub Stored);
-
-impl Default for StoredUnits {
-    fn default() -> Self {
-        StoredUnits(Stored::Si)
-    }
 }
 
 impl ImuRecording {

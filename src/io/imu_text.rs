@@ -14,7 +14,7 @@
 //! assert_eq!(fmt.columns.accel, Some([1, 2, 3]));
 //! ```
 
-use super::imu::{ImuRecording, Stored, StoredUnits};
+use super::imu::{ImuRecording, Stored};
 use super::table::{peek_header, read_table, Table, TableSpec, TimeUnit};
 use super::validate::{validate, ValidateOptions};
 use crate::error::InputError;
@@ -281,8 +281,8 @@ fn recording_from_table(path: &Path, table: Table, fmt: &ImuTextFormat) -> ImuRe
         gyro,
         accel,
         temperature: table.columns.into_iter().next(),
-        gyro_units: StoredUnits(fmt.gyro_unit.stored()),
-        accel_units: StoredUnits(fmt.accel_unit.stored()),
+        gyro_units: fmt.gyro_unit.stored(),
+        accel_units: fmt.accel_unit.stored(),
         lines: table.lines,
         warnings: Vec::new(),
     }

@@ -14,7 +14,7 @@ pub mod trajectory;
 pub mod validate;
 pub mod yaml;
 
-pub use imu::{ImuRecording, Stored, StoredUnits};
+pub use imu::{ImuRecording, Stored};
 pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat};
 pub use recording::{open_recording, RecordingOptions};
 pub use table::TimeUnit;

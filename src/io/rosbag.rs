@@ -5,7 +5,7 @@
 //! Times are the messages' `header.stamp`; the topic is chosen by name, or
 //! automatically when the file has exactly one IMU topic.
 
-use super::imu::{ImuRecording, Stored, StoredUnits};
+use super::imu::{ImuRecording, Stored};
 use super::table::LineMap;
 use super::validate::{validate, ValidateOptions};
 use crate::error::InputError;
@@ -117,8 +117,8 @@ fn recording(path: &Path, mut msgs: Vec<ImuMsg>, checks: &ValidateOptions) -> Re
         t: msgs.iter().map(|m| (m.0 - t0) as f64 * 1e-9).collect(),
         gyro: msgs.iter().map(|m| m.1).collect(),
         accel: msgs.iter().map(|m| m.2).collect(),
-        gyro_units: StoredUnits(Stored::Si),
-        accel_units: StoredUnits(Stored::Si),
+        gyro_units: Stored::Si,
+        accel_units: Stored::Si,
         lines: LineMap::default(),
         ..ImuRecording::default()
     };

@@ -241,7 +241,7 @@ fn check_units(rec: &mut ImuRecording, file: &Path) -> Result<(), InputError> {
         return Ok(());
     };
     let at = format!("at rest (the quietest second, from line {})", line_of(rec, win.start));
-    if !rec.accel.is_empty() && rec.accel_units.0 == Stored::Si {
+    if !rec.accel.is_empty() && rec.accel_units == Stored::Si {
         let g = norm(mean3(&rec.accel[win.clone()]));
         if (0.8..1.25).contains(&g) {
             return Err(InputError::at(
@@ -266,7 +266,7 @@ fn check_units(rec: &mut ImuRecording, file: &Path) -> Result<(), InputError> {
             ));
         }
     }
-    if !rec.gyro.is_empty() && rec.gyro_units.0 == Stored::Si {
+    if !rec.gyro.is_empty() && rec.gyro_units == Stored::Si {
         let wmean = norm(mean3(&rec.gyro[win.clone()]));
         if wmean > 1.0 {
             return Err(InputError::at(

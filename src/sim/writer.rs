@@ -80,6 +80,7 @@ pub fn simulate_and_write(
     seed: u64,
     out: &Path,
 ) -> Result<Simulation, InputError> {
+    config.check().map_err(|m| InputError::file(out, m))?;
     let csv = out.join("mav0").join("imu0").join("data.csv");
     let mut w = create(&csv)?;
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<Vec<u8>>>(2);
