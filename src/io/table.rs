@@ -672,6 +672,28 @@ fn eight_digits(b: &[u8], i: usize) -> Option<u64> {
     Some(lo.wrapping_add(hi) >> 32)
 }
 
+/// Append the decimal digits at `b[*i..]` to `mant` while it has room (else
+/// clear `exact`); returns (digits read, digits kept in the mantissa).
+#[inline(always)]
+fn accumulate_digits(b: &[u8], i: &mut usize, mant: &mut u64, exact: &mut bool) -> (u32, i32) {
+    let (mut read, mut kept) = (0, 0);
+    while let Some(&c) = b.get(*i) {
+        let d = c.wrapping_sub(b'0');
+        if d > 9 {
+            break;
+        }
+        if *mant < 100_000_000_000_000_000 {
+            *mant = *mant * 10 + u64::from(d);
+            kept += 1;
+        } else {
+            *exact = false;
+        }
+        read += 1;
+        *i += 1;
+    }
+    (read, kept)
+}
+
 /// Skip an optional sign at `b[*i]`; true when it was '-'.
 #[inline(always)]
 fn take_sign(b: &[u8], i: &mut usize) -> bool {
@@ -700,19 +722,7 @@ fn parse_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
     let mut exp: i32 = 0;
     let mut digits = 0;
     let mut exact = true;
-    while let Some(&c) = b.get(i) {
-        let d = c.wrapping_sub(b'0');
-        if d > 9 {
-            break;
-        }
-        if mant < 100_000_000_000_000_000 {
-            mant = mant * 10 + u64::from(d);
-        } else {
-            exact = false;
-        }
-        digits += 1;
-        i += 1;
-    }
+    digits += accumulate_digits(b, &mut i, &mut mant, &mut exact).0;
     if b.get(i) == Some(&b'.') {
         i += 1;
         // Eight digits at a time while the mantissa has room for them.
@@ -727,20 +737,9 @@ fn parse_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
                 None => break,
             }
         }
-        while let Some(&c) = b.get(i) {
-            let d = c.wrapping_sub(b'0');
-            if d > 9 {
-                break;
-            }
-            if mant < 100_000_000_000_000_000 {
-                mant = mant * 10 + u64::from(d);
-                exp -= 1;
-            } else {
-                exact = false;
-            }
-            digits += 1;
-            i += 1;
-        }
+        let (read, kept) = accumulate_digits(b, &mut i, &mut mant, &mut exact);
+        digits += read;
+        exp -= kept;
     }
     if digits == 0 {
         return None;
