@@ -88,7 +88,7 @@ fn decode_cdr(b: &[u8]) -> Option<ImuMsg> {
     Some((i64::from(sec) * 1_000_000_000 + i64::from(nsec), w, a))
 }
 
-fn choose_topic(path: &Path, topics: &BTreeMap<String, usize>, topic: Option<&str>) -> Result<String, InputError> {
+fn choose_topic<V>(path: &Path, topics: &BTreeMap<String, V>, topic: Option<&str>) -> Result<String, InputError> {
     match topic {
         Some(t) if topics.contains_key(t) => Ok(t.to_string()),
         Some(t) => Err(InputError::file(path, format!("no sensor_msgs/Imu topic '{t}'"))
@@ -129,30 +129,25 @@ fn recording(path: &Path, mut msgs: Vec<ImuMsg>, checks: &ValidateOptions) -> Re
     Ok(rec)
 }
 
-/// Read `sensor_msgs/msg/Imu` messages (CDR) from a ROS 2 MCAP file.
+/// Read `sensor_msgs/msg/Imu` messages (CDR) from a ROS 2 MCAP file (one pass;
+/// every IMU topic is decoded, then the chosen one kept).
 pub fn read_mcap_imu(path: &Path, topic: Option<&str>, checks: &ValidateOptions) -> Result<ImuRecording, InputError> {
     let bytes = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
     let bad = |e: mcap::McapError| InputError::file(path, format!("not a readable MCAP file: {e}"));
-    let mut topics = BTreeMap::new();
+    let mut by_topic: BTreeMap<String, Vec<ImuMsg>> = BTreeMap::new();
     for m in mcap::MessageStream::new(&bytes).map_err(bad)? {
         let m = m.map_err(bad)?;
         let is_imu = m.channel.schema.as_ref().is_some_and(|s| s.name == "sensor_msgs/msg/Imu");
         if is_imu && m.channel.message_encoding == "cdr" {
-            *topics.entry(m.channel.topic.clone()).or_insert(0) += 1;
-        }
-    }
-    let topic = choose_topic(path, &topics, topic)?;
-    let mut msgs = Vec::new();
-    for m in mcap::MessageStream::new(&bytes).map_err(bad)? {
-        let m = m.map_err(bad)?;
-        if m.channel.topic == topic {
             let d = decode_cdr(&m.data).ok_or_else(|| {
-                InputError::file(path, format!("message {} on {topic} is not a CDR sensor_msgs/msg/Imu", m.sequence))
+                let t = &m.channel.topic;
+                InputError::file(path, format!("message {} on {t} is not a CDR sensor_msgs/msg/Imu", m.sequence))
             })?;
-            msgs.push(d);
+            by_topic.entry(m.channel.topic.clone()).or_default().push(d);
         }
     }
-    recording(path, msgs, checks)
+    let topic = choose_topic(path, &by_topic, topic)?;
+    recording(path, by_topic.remove(&topic).unwrap_or_default(), checks)
 }
 
 /// Check a ROS 1 bag's header before handing it to `rosbag`, which slices the
@@ -196,36 +191,31 @@ pub fn read_ros1_bag_imu(
     let bag =
         rosbag::RosBag::new(path).map_err(|e| InputError::file(path, format!("not a readable ROS 1 bag: {e}")))?;
     let bad = |e: rosbag::Error| InputError::file(path, format!("corrupt bag record: {e}"));
-    let mut conns: BTreeMap<u32, (String, bool)> = BTreeMap::new();
-    let mut raw: Vec<(u32, Vec<u8>)> = Vec::new();
+    // Connection records come before their messages; only IMU messages are decoded.
+    let mut imu_conns: BTreeMap<u32, String> = BTreeMap::new();
+    let mut by_topic: BTreeMap<String, Vec<ImuMsg>> = BTreeMap::new();
     for rec in bag.chunk_records() {
         if let rosbag::ChunkRecord::Chunk(chunk) = rec.map_err(bad)? {
             for msg in chunk.messages() {
                 match msg.map_err(bad)? {
-                    rosbag::MessageRecord::Connection(c) => {
-                        conns.insert(c.id, (c.topic.to_string(), c.tp == "sensor_msgs/Imu"));
+                    rosbag::MessageRecord::Connection(c) if c.tp == "sensor_msgs/Imu" => {
+                        imu_conns.insert(c.id, c.topic.to_string());
                     }
-                    rosbag::MessageRecord::MessageData(m) => raw.push((m.conn_id, m.data.to_vec())),
+                    rosbag::MessageRecord::Connection(_) => {}
+                    rosbag::MessageRecord::MessageData(m) => {
+                        if let Some(t) = imu_conns.get(&m.conn_id) {
+                            let d = decode_ros1(m.data).ok_or_else(|| {
+                                InputError::file(path, format!("a message on {t} is not a sensor_msgs/Imu (too short)"))
+                            })?;
+                            by_topic.entry(t.clone()).or_default().push(d);
+                        }
+                    }
                 }
             }
         }
     }
-    let mut topics = BTreeMap::new();
-    for (id, _) in &raw {
-        if let Some((t, true)) = conns.get(id) {
-            *topics.entry(t.clone()).or_insert(0) += 1;
-        }
-    }
-    let topic = choose_topic(path, &topics, topic)?;
-    let mut msgs = Vec::new();
-    for (i, (id, d)) in raw.iter().enumerate() {
-        if conns.get(id).is_some_and(|(t, imu)| *imu && *t == topic) {
-            msgs.push(decode_ros1(d).ok_or_else(|| {
-                InputError::file(path, format!("message {i} on {topic} is not a sensor_msgs/Imu (too short)"))
-            })?);
-        }
-    }
-    recording(path, msgs, checks)
+    let topic = choose_topic(path, &by_topic, topic)?;
+    recording(path, by_topic.remove(&topic).unwrap_or_default(), checks)
 }
 
 #[cfg(test)]
