@@ -152,7 +152,8 @@ pub fn read_mcap_imu(path: &Path, topic: Option<&str>, checks: &ValidateOptions)
 
 /// Check a ROS 1 bag's header before handing it to `rosbag`, which slices the
 /// file at the header's `index_pos` without checking it.
-fn check_bag_header(path: &Path, data: &[u8]) -> Result<(), InputError> {
+/// `data` is the start of the file (at least its header record), `file_len` its length.
+fn check_bag_header(path: &Path, data: &[u8], file_len: usize) -> Result<(), InputError> {
     let bad = |m: &str| Err(InputError::file(path, format!("not a ROS 1 bag: {m}")));
     let magic = b"#ROSBAG V2.0\n";
     if !data.starts_with(magic) {
@@ -171,7 +172,7 @@ fn check_bag_header(path: &Path, data: &[u8]) -> Result<(), InputError> {
         let field = data.get(pos + 4..pos + 4 + flen).unwrap_or(&[]);
         if let Some(v) = field.strip_prefix(b"index_pos=") {
             let idx = v.get(..8).map(|b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
-            if idx.is_none_or(|i| i as usize > data.len() || (i as usize) < end) {
+            if idx.is_none_or(|i| i as usize > file_len || (i as usize) < end) {
                 return bad("index_pos points outside the file (truncated while recording? try `rosbag reindex`)");
             }
         }
@@ -186,8 +187,13 @@ pub fn read_ros1_bag_imu(
     topic: Option<&str>,
     checks: &ValidateOptions,
 ) -> Result<ImuRecording, InputError> {
-    let data = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
-    check_bag_header(path, &data)?;
+    // The header record comes first (4 KiB in bags rosbag writes); read only that much.
+    let io = |e: std::io::Error| InputError::file(path, format!("cannot read: {e}"));
+    let file = std::fs::File::open(path).map_err(io)?;
+    let file_len = file.metadata().map_err(io)?.len() as usize;
+    let mut head = Vec::new();
+    std::io::Read::read_to_end(&mut std::io::Read::take(file, 1 << 20), &mut head).map_err(io)?;
+    check_bag_header(path, &head, file_len)?;
     let bag =
         rosbag::RosBag::new(path).map_err(|e| InputError::file(path, format!("not a readable ROS 1 bag: {e}")))?;
     let bad = |e: rosbag::Error| InputError::file(path, format!("corrupt bag record: {e}"));

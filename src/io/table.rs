@@ -1,11 +1,14 @@
 //! Streaming reader of numeric text tables (CSV or whitespace separated), the
 //! engine under every IMU and trajectory text format.
 //!
-//! The file is read in blocks of a few MiB (plain or gzip-compressed, by the
-//! `.gz` extension); each block is cut at line ends and parsed on all cores.
-//! Numbers are parsed with `fast-float2`; nanosecond timestamps as integers so
-//! 19-digit EuRoC stamps keep every digit. Memory stays at the output plus one
-//! block.
+//! Regular files are memory-mapped; `.gz` files and other readers are
+//! streamed in 8 MiB blocks. Each block is cut at line ends into pieces parsed
+//! on all cores straight into the output. Lines go through a one-pass parser
+//! (plain decimals, SWAR digit runs, Clinger's exact fast path, `fast-float2`
+//! otherwise); anything else falls back to a general path that gives the
+//! exact error. Nanosecond timestamps are parsed as integers so 19-digit EuRoC
+//! stamps keep every digit. Memory is the output plus the block (or the
+//! mapping's page cache).
 
 use crate::error::InputError;
 use rayon::prelude::*;
@@ -85,7 +88,7 @@ impl LineMap {
             }
         }
     }
-    /// Rows `a..b` as a map starting at row 0.
+    /// The map of the rows from `a` on, renumbered to start at row 0.
     pub fn slice(&self, a: usize) -> LineMap {
         let first = (0, self.line(a));
         let rest = self.anchors.iter().filter(|x| x.0 > a).map(|&(r, l)| (r - a, l));
@@ -519,14 +522,14 @@ fn parse_piece(
             }
             None => {
                 let end = memchr::memchr(b'\n', rest).map(|p| start + p).unwrap_or(piece.len());
-                let s = trim(&piece[start..end]);
-                if s.is_empty() || s[0] == b'#' || s[0] == b'%' {
+                let line = &piece[start..end];
+                if is_comment(line) {
                     skipped = true;
                     line_no += 1;
                     start = end + 1;
                     continue;
                 }
-                split_fields(s, lay.comma, &mut fields);
+                split_fields(trim(line), lay.comma, &mut fields);
                 slow_row(path, line_no + 1, &fields, plan, spec, &mut vals)?;
                 end
             }
