@@ -5,8 +5,10 @@
 //! Levenberg–Marquardt engine ([`tumble_solvers`]) with the factors of
 //! [`tumble_factors`]. This crate holds the pipelines, data I/O and the CLI.
 
+pub mod allan;
 pub mod error;
 pub mod io;
+pub mod plot;
 pub mod posegraph;
 pub mod sim;
 

@@ -104,6 +104,35 @@ enum Command {
         #[command(flatten)]
         read: RecordingArgs,
     },
+    /// Identify IMU noise from a static recording by Allan variance: writes
+    /// allan.json, Kalibr's imu.yaml and allan_gyro.png / allan_accel.png.
+    Allan {
+        /// Static recording: ASL folder, ROS bag/MCAP, or text/CSV (.gz allowed).
+        recording: PathBuf,
+        #[command(flatten)]
+        read: RecordingArgs,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Estimator (noise coefficients are identified from oadev or adev curves).
+        #[arg(long, value_enum, default_value = "oadev")]
+        kind: tumble::allan::DeviationKind,
+        /// τ values: a number of log-spaced values per decade, `octave`, or `all`.
+        #[arg(long, default_value = "20")]
+        taus: String,
+        /// Largest τ as a fraction of the record length.
+        #[arg(long, default_value_t = 0.1)]
+        max_tau_fraction: f64,
+        /// Confidence level of the deviation intervals (0.683 = 1 σ).
+        #[arg(long, default_value_t = 0.683)]
+        confidence: f64,
+        /// How the three axes become Kalibr's single number.
+        #[arg(long, value_enum, default_value = "max")]
+        axis_stat: tumble::allan::AxisStat,
+        /// Analyse only this time span of the recording [s from its start], e.g. 0:3600.
+        #[arg(long)]
+        span: Option<String>,
+    },
     /// Run the main job on embedded default data. (Temporary: until the
     /// calibration pipeline exists, this solves a simulated SE(3) pose graph
     /// with known truth and prints the solver summary.)
@@ -211,6 +240,45 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 println!("warning: {w}");
             }
         }
+        Command::Allan { recording, read, out, kind, taus, max_tau_fraction, confidence, axis_stat, span } => {
+            let grid = match taus.as_str() {
+                "octave" => tumble::allan::TauGrid::Octave,
+                "all" => tumble::allan::TauGrid::All,
+                v => tumble::allan::TauGrid::LogSpaced(
+                    v.parse()
+                        .ok()
+                        .filter(|&p: &usize| p > 0)
+                        .ok_or_else(|| format!("--taus: expected a count per decade, `octave` or `all`, got `{v}`"))?,
+                ),
+            };
+            if !(confidence > 0.0 && confidence < 1.0) {
+                return Err(format!("--confidence must lie strictly between 0 and 1, got {confidence}").into());
+            }
+            if max_tau_fraction.is_nan() || max_tau_fraction <= 0.0 {
+                return Err(format!("--max-tau-fraction must be positive, got {max_tau_fraction}").into());
+            }
+            let start = std::time::Instant::now();
+            let mut rec = tumble::io::open_recording(&recording, &read.options())?;
+            if let Some(span) = span {
+                let (a, b) = parse_span(&span)?;
+                rec = rec.slice_time(a, b);
+            }
+            eprintln!("read {} samples ({:.1} s) in {:.2} s", rec.len(), rec.duration(), start.elapsed().as_secs_f64());
+            let opts = tumble::allan::AllanRunOptions {
+                allan: tumble::allan::AllanOptions { kind, taus: grid, max_tau_fraction, confidence },
+                axis_stat,
+                progress: std::io::IsTerminal::is_terminal(&std::io::stderr()),
+            };
+            let t = std::time::Instant::now();
+            let report = tumble::allan::run_allan(&rec, &opts)?;
+            let elapsed = t.elapsed().as_secs_f64();
+            print!("{}", report.summary_table());
+            let files = report.write_all(&out)?;
+            println!(
+                "\ncomputed in {elapsed:.2} s; wrote {}",
+                files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+            );
+        }
         Command::Demo => {
             println!("tumble demo (temporary): simulated SE(3) helix pose graph, 3 laps × 200 poses, known truth");
             let sim = tumble::posegraph::simulate_helix(200, 3, 5.0, 0.01, 0.05, 7);
@@ -287,6 +355,26 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// `A:B` seconds from the start of the recording (either end may be empty).
+fn parse_span(s: &str) -> Result<(f64, f64), String> {
+    let (a, b) = s.split_once(':').ok_or_else(|| format!("--span: expected START:END in seconds, got `{s}`"))?;
+    let num = |v: &str, default: f64| -> Result<f64, String> {
+        if v.trim().is_empty() {
+            return Ok(default);
+        }
+        v.trim()
+            .parse::<f64>()
+            .ok()
+            .filter(|x| x.is_finite())
+            .ok_or_else(|| format!("--span: `{v}` is not a number of seconds"))
+    };
+    let (a, b) = (num(a, 0.0)?, num(b, f64::INFINITY)?);
+    if b <= a {
+        return Err(format!("--span: end {b} is not after start {a}"));
+    }
+    Ok((a, b))
 }
 
 fn main() -> ExitCode {

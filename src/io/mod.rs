@@ -15,6 +15,6 @@ pub mod validate;
 pub mod yaml;
 
 pub use imu::{ImuRecording, Stored};
-pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat};
+pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, STANDARD_GRAVITY};
 pub use recording::{open_recording, RecordingOptions};
 pub use table::TimeUnit;

@@ -2,7 +2,7 @@
 //! has its own ChaCha8 stream derived from the seed, so the same seed gives
 //! the same samples whatever the thread count.
 
-use super::model::{flicker_components, ImuModel, TriadModel};
+use super::model::{flicker_components_per_decade, ImuModel, TriadModel};
 use super::motion::Motion;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -52,7 +52,7 @@ impl AxisGen {
         let mut rng = rng(seed, stream);
         let mut gm = Vec::new();
         if e.bias_instability && t.bias_instability[k] > 0.0 {
-            let (tcs, q) = flicker_components(t.bias_instability[k], t.bias_instability_band);
+            let (tcs, q) = flicker_components_per_decade(t.bias_instability[k], t.bias_instability_band, 1);
             for tc in tcs {
                 let phi = (-dt / tc).exp();
                 let x0: f64 = q * Distribution::<f64>::sample(&StandardNormal, &mut rng);
@@ -218,4 +218,81 @@ fn total_bias(model: &ImuModel, bias: &[Vec<f64>], k: usize, j: usize, dtemp: f6
         ba += model.accel.temperature_bias[k] * dtemp;
     }
     (bg, ba)
+}
+
+/// The random error terms of one sensor axis, for [`noise_series`]; units as
+/// in [`TriadModel`] (rad/s-based for a gyro, m/s²-based for an accelerometer).
+#[derive(Clone, Debug, PartialEq)]
+pub struct AxisNoise {
+    /// White noise density N \[unit/√Hz\].
+    pub noise_density: f64,
+    /// Rate random walk K \[unit·√Hz/s\].
+    pub random_walk: f64,
+    /// Bias instability B \[unit\] (flicker floor 0.664·B, realized as a sum
+    /// of Gauss–Markov processes, three per decade of `bias_instability_band`).
+    pub bias_instability: f64,
+    /// Correlation-time band of the flicker floor \[s\].
+    pub bias_instability_band: [f64; 2],
+    /// Quantization noise Q \[unit·s\] of the *integrated* output (white phase
+    /// noise of std Q on the angle; Q = δ/√12 for an angle quantum δ).
+    pub angle_quantization: f64,
+}
+
+/// `n` samples at `rate_hz` of one static axis with exactly these random
+/// errors and nothing else (no bias, scale or rate quantization): the signal
+/// with known Allan coefficients for testing noise identification.
+///
+/// Each sample is the exact *average over its sample interval* of the
+/// continuous-time processes (white noise, Brownian rate random walk,
+/// Ornstein–Uhlenbeck components of the flicker floor, each drawn jointly
+/// with its state), so the Allan variance of the output is the textbook
+/// continuous-time one at every τ = m/rate, even for correlation times
+/// shorter than the sample period.
+pub fn noise_series(spec: &AxisNoise, rate_hz: f64, n: usize, seed: u64) -> Vec<f64> {
+    let dt = 1.0 / rate_hz;
+    let mut rng = rng(seed, 0);
+    let mut normal = move || -> f64 { StandardNormal.sample(&mut rng) };
+    // Ornstein–Uhlenbeck components: (φ, sd of the state innovation, gain of
+    // the state innovation in the interval integral, sd of the rest, tc·(1−φ), state).
+    let mut ou: Vec<[f64; 6]> = Vec::new();
+    if spec.bias_instability > 0.0 {
+        let (tcs, q) = flicker_components_per_decade(spec.bias_instability, spec.bias_instability_band, 3);
+        for tc in tcs {
+            let x = dt / tc;
+            let phi = (-x).exp();
+            let one_minus_phi = -(-x).exp_m1();
+            let v1 = q * q * -(-2.0 * x).exp_m1();
+            let v2 = q * q * tc * tc * super::model::gauss_markov_shape(x);
+            let c = q * q * tc * one_minus_phi * one_minus_phi;
+            let gain = c / v1;
+            let rest = (v2 - c * gain).max(0.0).sqrt();
+            ou.push([phi, v1.sqrt(), gain, rest, tc * one_minus_phi, q * normal()]);
+        }
+    }
+    let white = spec.noise_density / dt.sqrt();
+    let (rw_step, rw_bridge) = (spec.random_walk * dt.sqrt(), spec.random_walk * (dt / 12.0).sqrt());
+    let q = spec.angle_quantization;
+    let mut rw = 0.0;
+    let mut prev_angle_error = q * normal();
+    let mut out = Vec::with_capacity(n);
+    for _ in 0..n {
+        let mut v = white * normal();
+        // Random walk: interval average = start + half the step + bridge term.
+        let step = rw_step * normal();
+        v += rw + 0.5 * step + rw_bridge * normal();
+        rw += step;
+        for c in ou.iter_mut() {
+            let e1 = c[1] * normal();
+            let integral = c[4] * c[5] + c[2] * e1 + c[3] * normal();
+            v += integral / dt;
+            c[5] = c[0] * c[5] + e1;
+        }
+        if q > 0.0 {
+            let next = q * normal();
+            v += (next - prev_angle_error) / dt;
+            prev_angle_error = next;
+        }
+        out.push(v);
+    }
+    out
 }

@@ -18,7 +18,7 @@ pub mod motion;
 pub mod writer;
 
 pub use camera::{CameraSettings, SimulatedTracks};
-pub use imu::{simulate_imu, SimulatedImu};
+pub use imu::{noise_series, simulate_imu, AxisNoise, SimulatedImu};
 pub use model::{Effects, ImuModel, TemperatureTrace, TriadModel};
 pub use motion::{Kinematics, Loop, Motion, Static, Tumble, TumbleSettings};
 pub use writer::{simulate_and_write, write_asl};

@@ -1,0 +1,552 @@
+//! The `tumble allan` stage: a static recording in, the noise coefficients of
+//! all six axes out, as `allan.json`, Kalibr's `imu.yaml`, one PNG per sensor
+//! and a terminal table.
+
+use super::identify::{basis, TERM_NAMES};
+use super::{
+    allan_deviation_with_progress, identify, AllanCurve, AllanError, AllanOptions, Coefficient, Identification,
+};
+use crate::io::{ImuRecording, Stored};
+use crate::plot::{Layer, LogLogChart, AXIS_COLORS};
+use serde_json::{json, Value};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// How the three axes of a sensor are combined into Kalibr's one number.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum AxisStat {
+    /// The worst (largest) axis: conservative, the default.
+    #[default]
+    Max,
+    /// The mean of the three axes.
+    Mean,
+}
+
+/// Options of [`run_allan`].
+#[derive(Clone, Debug, Default)]
+pub struct AllanRunOptions {
+    /// Estimator, τ grid and confidence level.
+    pub allan: AllanOptions,
+    /// Combination of axes for `imu.yaml`.
+    pub axis_stat: AxisStat,
+    /// Show a progress bar on the terminal.
+    pub progress: bool,
+}
+
+/// One axis: its curve and (for Allan curves) its identified noise.
+#[derive(Clone, Debug)]
+pub struct AxisResult {
+    /// Deviation curve.
+    pub curve: AllanCurve,
+    /// Noise coefficients (None for curves other than Allan deviations).
+    pub id: Option<Identification>,
+}
+
+/// One sensor (gyro or accelerometer): three axes.
+#[derive(Clone, Debug)]
+pub struct SensorResult {
+    /// "gyro" or "accel".
+    pub name: &'static str,
+    /// Unit of the samples ("rad/s", "m/s^2" or "counts").
+    pub unit: &'static str,
+    /// x, y, z.
+    pub axes: Vec<AxisResult>,
+}
+
+/// Kalibr's noise parameters (continuous time, SI units).
+#[derive(Clone, Debug, PartialEq)]
+pub struct KalibrNoise {
+    /// Accelerometer white noise density \[m/s²/√Hz\].
+    pub accelerometer_noise_density: f64,
+    /// Accelerometer bias random walk \[m/s³/√Hz\].
+    pub accelerometer_random_walk: f64,
+    /// Gyro white noise density \[rad/s/√Hz\].
+    pub gyroscope_noise_density: f64,
+    /// Gyro bias random walk \[rad/s²/√Hz\].
+    pub gyroscope_random_walk: f64,
+    /// Sample rate \[Hz\].
+    pub update_rate: f64,
+    /// Where a value is a bound rather than an estimate, and why.
+    pub notes: Vec<String>,
+}
+
+/// Everything the Allan stage found.
+#[derive(Clone, Debug)]
+pub struct AllanReport {
+    /// Recording name.
+    pub source: String,
+    /// Samples per axis.
+    pub samples: usize,
+    /// Sample rate used (1/τ0) \[Hz\].
+    pub rate_hz: f64,
+    /// Record length \[s\].
+    pub duration_s: f64,
+    /// Gyro and accelerometer.
+    pub sensors: Vec<SensorResult>,
+    /// Kalibr parameters (None for raw counts or non-Allan curves).
+    pub kalibr: Option<KalibrNoise>,
+    /// Options used.
+    pub axis_stat: AxisStat,
+    /// Reader warnings and remarks.
+    pub warnings: Vec<String>,
+}
+
+/// Compute curves and coefficients of all six axes of a static recording.
+pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanReport, AllanError> {
+    if rec.len() < 10 {
+        return Err(AllanError(format!(
+            "{}: {} samples are too few for an Allan analysis",
+            rec.source_name(),
+            rec.len()
+        )));
+    }
+    let rate = rec.mean_rate();
+    if !(rate.is_finite() && rate > 0.0) {
+        return Err(AllanError(format!("{}: cannot tell the sample rate from the timestamps", rec.source_name())));
+    }
+    let tau0 = 1.0 / rate;
+    let n_tau =
+        super::cluster_sizes(&opts.allan.taus, rec.len(), tau0, opts.allan.kind, opts.allan.max_tau_fraction).len();
+    let bar = if opts.progress {
+        let b = indicatif::ProgressBar::new(6 * n_tau as u64);
+        b.set_style(
+            indicatif::ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} τ  {elapsed_precise} (eta {eta})")
+                .expect("static template")
+                .progress_chars("=> "),
+        );
+        b.set_prefix("allan");
+        b
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut warnings = rec.warnings.clone();
+    if rec.duration() < 3600.0 {
+        warnings.push(format!(
+            "the record is {:.0} s long; rate random walk (K) and bias instability (B) are usually resolved only by hours of static data",
+            rec.duration()
+        ));
+    }
+    let mut sensors = Vec::new();
+    for (name, data, stored) in [("gyro", &rec.gyro, rec.gyro_units), ("accel", &rec.accel, rec.accel_units)] {
+        let unit = match (stored, name) {
+            (Stored::RawCounts, _) => "counts",
+            (_, "gyro") => "rad/s",
+            _ => "m/s^2",
+        };
+        let mut axes = Vec::new();
+        for k in 0..3 {
+            let y: Vec<f64> = data.iter().map(|s| s[k]).collect();
+            let curve = allan_deviation_with_progress(&y, tau0, &opts.allan, &|| bar.inc(1))
+                .map_err(|e| AllanError(format!("{} {name} {}: {e}", rec.source_name(), ["x", "y", "z"][k])))?;
+            let id = identify(&curve).ok();
+            axes.push(AxisResult { curve, id });
+        }
+        sensors.push(SensorResult { name, unit, axes });
+    }
+    bar.finish_and_clear();
+    let si = rec.gyro_units == Stored::Si && rec.accel_units == Stored::Si;
+    let kalibr = if si && sensors.iter().all(|s| s.axes.iter().all(|a| a.id.is_some())) {
+        Some(kalibr_noise(&sensors, rate, opts.axis_stat))
+    } else {
+        if !si {
+            warnings.push(
+                "data in raw counts: no Kalibr imu.yaml (it needs SI units; give --gyro-unit/--accel-unit scales)"
+                    .into(),
+            );
+        }
+        None
+    };
+    Ok(AllanReport {
+        source: rec.source_name(),
+        samples: rec.len(),
+        rate_hz: rate,
+        duration_s: rec.duration(),
+        sensors,
+        kalibr,
+        axis_stat: opts.axis_stat,
+        warnings,
+    })
+}
+
+/// The white-noise density and random walk of one axis for Kalibr, with a
+/// note when the random walk is only an upper bound.
+fn axis_n_k(axis: &AxisResult, label: &str, notes: &mut Vec<String>) -> (f64, f64) {
+    let id = axis.id.as_ref().expect("checked by the caller");
+    let c = &axis.curve;
+    let n = id.fit.N.or(id.readoff.N).map(|c| c.value).unwrap_or_else(|| {
+        // σ² ≥ N²/τ everywhere, so every point bounds N from above.
+        let b = (0..c.tau.len()).map(|i| c.dev_hi[i] * c.tau[i].sqrt()).fold(f64::INFINITY, f64::min);
+        notes.push(format!("{label}: white noise not resolved; using its upper bound {b:.3e}"));
+        b
+    });
+    let k = id.fit.K.or(id.readoff.K).map(|c| c.value).unwrap_or_else(|| {
+        // σ² ≥ K²τ/3 everywhere, so every point bounds K from above.
+        let b = (0..c.tau.len()).map(|i| c.dev_hi[i] * (3.0 / c.tau[i]).sqrt()).fold(f64::INFINITY, f64::min);
+        notes.push(format!(
+            "{label}: random walk not resolved by this record (too short); using its upper bound {b:.3e} — record longer for a real estimate"
+        ));
+        b
+    });
+    (n, k)
+}
+
+fn kalibr_noise(sensors: &[SensorResult], rate: f64, stat: AxisStat) -> KalibrNoise {
+    let mut notes = Vec::new();
+    let mut combine = |s: &SensorResult| -> (f64, f64) {
+        let v: Vec<(f64, f64)> = s
+            .axes
+            .iter()
+            .zip(["x", "y", "z"])
+            .map(|(a, ax)| axis_n_k(a, &format!("{} {ax}", s.name), &mut notes))
+            .collect();
+        match stat {
+            AxisStat::Max => (v.iter().map(|p| p.0).fold(0.0, f64::max), v.iter().map(|p| p.1).fold(0.0, f64::max)),
+            AxisStat::Mean => (v.iter().map(|p| p.0).sum::<f64>() / 3.0, v.iter().map(|p| p.1).sum::<f64>() / 3.0),
+        }
+    };
+    let (gn, gk) = combine(&sensors[0]);
+    let (an, ak) = combine(&sensors[1]);
+    KalibrNoise {
+        accelerometer_noise_density: an,
+        accelerometer_random_walk: ak,
+        gyroscope_noise_density: gn,
+        gyroscope_random_walk: gk,
+        update_rate: rate,
+        notes,
+    }
+}
+
+fn num(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+fn coef_json(c: Option<Coefficient>) -> Value {
+    c.map_or(Value::Null, |c| json!({"value": num(c.value), "lo": num(c.lo), "hi": num(c.hi)}))
+}
+
+fn terms_json(t: &super::NoiseTerms) -> Value {
+    let mut m = serde_json::Map::new();
+    for (k, name) in TERM_NAMES.iter().enumerate() {
+        m.insert(name.to_string(), coef_json(t.get(k)));
+    }
+    Value::Object(m)
+}
+
+impl AllanReport {
+    /// The `allan.json` document.
+    pub fn to_json(&self) -> Value {
+        let mut root = serde_json::Map::new();
+        root.insert("source".into(), json!(self.source));
+        root.insert("samples".into(), json!(self.samples));
+        root.insert("rate_hz".into(), num(self.rate_hz));
+        root.insert("duration_s".into(), num(self.duration_s));
+        let first = &self.sensors[0].axes[0].curve;
+        root.insert("deviation".into(), json!(first.kind));
+        root.insert("confidence".into(), json!(first.confidence));
+        root.insert("coefficient_confidence".into(), json!(0.95));
+        for s in &self.sensors {
+            let mut sensor = serde_json::Map::new();
+            sensor.insert("unit".into(), json!(s.unit));
+            for (a, ax) in s.axes.iter().zip(["x", "y", "z"]) {
+                let c = &a.curve;
+                let arr = |v: &[f64]| Value::Array(v.iter().map(|&x| num(x)).collect());
+                let mut o = serde_json::Map::new();
+                o.insert("tau".into(), arr(&c.tau));
+                o.insert("adev".into(), arr(&c.dev));
+                o.insert("adev_lo".into(), arr(&c.dev_lo));
+                o.insert("adev_hi".into(), arr(&c.dev_hi));
+                o.insert("m".into(), json!(c.m));
+                o.insert("alpha".into(), json!(c.alpha));
+                o.insert("edf".into(), arr(&c.edf));
+                match &a.id {
+                    Some(id) => {
+                        o.insert("fit".into(), terms_json(&id.fit));
+                        o.insert("readoff".into(), terms_json(&id.readoff));
+                        o.insert("supported".into(), json!(id.supported));
+                        o.insert("fit_chi2_dof".into(), num(id.fit_chi2_dof));
+                        o.insert("notes".into(), json!(id.notes));
+                    }
+                    None => {
+                        o.insert("fit".into(), Value::Null);
+                        o.insert("readoff".into(), Value::Null);
+                    }
+                }
+                sensor.insert(ax.into(), Value::Object(o));
+            }
+            root.insert(s.name.into(), Value::Object(sensor));
+        }
+        if let Some(k) = &self.kalibr {
+            root.insert(
+                "kalibr".into(),
+                json!({
+                    "accelerometer_noise_density": num(k.accelerometer_noise_density),
+                    "accelerometer_random_walk": num(k.accelerometer_random_walk),
+                    "gyroscope_noise_density": num(k.gyroscope_noise_density),
+                    "gyroscope_random_walk": num(k.gyroscope_random_walk),
+                    "update_rate": num(k.update_rate),
+                    "axis_stat": format!("{:?}", self.axis_stat).to_lowercase(),
+                    "notes": k.notes,
+                }),
+            );
+        }
+        root.insert("warnings".into(), json!(self.warnings));
+        Value::Object(root)
+    }
+
+    /// Kalibr's `imu.yaml` text (None when there are no Kalibr parameters).
+    pub fn kalibr_yaml(&self) -> Option<String> {
+        let k = self.kalibr.as_ref()?;
+        let dt = 1.0 / k.update_rate;
+        let mut s = String::new();
+        let _ = writeln!(s, "# IMU noise for Kalibr / OpenVINS / VINS-Mono, from `tumble allan` on {}", self.source);
+        let _ = writeln!(
+            s,
+            "# Continuous-time values, SI units, {} of the three axes.",
+            match self.axis_stat {
+                AxisStat::Max => "worst",
+                AxisStat::Mean => "mean",
+            }
+        );
+        let _ = writeln!(s, "# Discrete-time equivalents at {:.3} Hz (do not mix them up):", k.update_rate);
+        let _ = writeln!(
+            s,
+            "#   gyro  sigma_d = {:.4e} rad/s, sigma_bd = {:.4e} rad/s",
+            k.gyroscope_noise_density / dt.sqrt(),
+            k.gyroscope_random_walk * dt.sqrt()
+        );
+        let _ = writeln!(
+            s,
+            "#   accel sigma_d = {:.4e} m/s^2, sigma_bd = {:.4e} m/s^2",
+            k.accelerometer_noise_density / dt.sqrt(),
+            k.accelerometer_random_walk * dt.sqrt()
+        );
+        for n in &k.notes {
+            let _ = writeln!(s, "# note: {n}");
+        }
+        let _ = writeln!(s, "rostopic: /imu0");
+        let _ = writeln!(s, "accelerometer_noise_density: {:e}  # [m/s^2/sqrt(Hz)]", k.accelerometer_noise_density);
+        let _ = writeln!(s, "accelerometer_random_walk: {:e}  # [m/s^3/sqrt(Hz)]", k.accelerometer_random_walk);
+        let _ = writeln!(s, "gyroscope_noise_density: {:e}  # [rad/s/sqrt(Hz)]", k.gyroscope_noise_density);
+        let _ = writeln!(s, "gyroscope_random_walk: {:e}  # [rad/s^2/sqrt(Hz)]", k.gyroscope_random_walk);
+        let _ = writeln!(s, "update_rate: {}  # [Hz]", k.update_rate);
+        Some(s)
+    }
+
+    /// The terminal summary: one row per axis and method.
+    pub fn summary_table(&self) -> String {
+        let mut s = String::new();
+        let c0 = &self.sensors[0].axes[0].curve;
+        let _ = writeln!(
+            s,
+            "{}: {} samples, {:.1} s at {:.3} Hz; {} at {} τ, fit intervals 95 %, read-off intervals {:.1} %",
+            self.source,
+            self.samples,
+            self.duration_s,
+            self.rate_hz,
+            c0.kind.name(),
+            c0.tau.len(),
+            100.0 * c0.confidence
+        );
+        let cell = |c: Option<Coefficient>| match c {
+            Some(c) => {
+                let half = 0.5 * (c.hi - c.lo) / c.value.abs().max(1e-300) * 100.0;
+                format!("{:>10.3e} ±{:<5.1}%", c.value, half.min(999.9))
+            }
+            None => format!("{:>10} {:6}", "—", ""),
+        };
+        for sensor in &self.sensors {
+            let u = sensor.unit;
+            let _ = writeln!(
+                s,
+                "\n{:<5} {:<4} {:<7} {:>18} {:>18} {:>18} {:>18} {:>18}",
+                sensor.name,
+                "axis",
+                "method",
+                format!("Q [{u}·s]"),
+                format!("N [{u}/√Hz]"),
+                format!("B [{u}]"),
+                format!("K [{u}·√Hz]"),
+                format!("R [{u}/s]")
+            );
+            for (a, ax) in sensor.axes.iter().zip(["x", "y", "z"]) {
+                let Some(id) = &a.id else {
+                    let _ = writeln!(s, "{:<5} {ax:<4} (no identification for this deviation)", "");
+                    continue;
+                };
+                for (label, t) in [("fit", &id.fit), ("readoff", &id.readoff)] {
+                    let _ = write!(s, "{:<5} {ax:<4} {label:<7}", "");
+                    for k in 0..5 {
+                        let _ = write!(s, " {}", cell(t.get(k)));
+                    }
+                    let _ = writeln!(s);
+                }
+            }
+        }
+        if let Some(k) = &self.kalibr {
+            let dt = 1.0 / k.update_rate;
+            let _ = writeln!(
+                s,
+                "\nKalibr imu.yaml ({} axis, continuous time):",
+                match self.axis_stat {
+                    AxisStat::Max => "worst",
+                    AxisStat::Mean => "mean",
+                }
+            );
+            let rows = [
+                (
+                    "gyroscope_noise_density",
+                    k.gyroscope_noise_density,
+                    "rad/s/√Hz",
+                    "σ_d = N/√Δt",
+                    1.0 / dt.sqrt(),
+                    "rad/s",
+                ),
+                ("gyroscope_random_walk", k.gyroscope_random_walk, "rad/s²/√Hz", "σ_bd = K·√Δt", dt.sqrt(), "rad/s"),
+                (
+                    "accelerometer_noise_density",
+                    k.accelerometer_noise_density,
+                    "m/s²/√Hz",
+                    "σ_d = N/√Δt",
+                    1.0 / dt.sqrt(),
+                    "m/s²",
+                ),
+                (
+                    "accelerometer_random_walk",
+                    k.accelerometer_random_walk,
+                    "m/s³/√Hz",
+                    "σ_bd = K·√Δt",
+                    dt.sqrt(),
+                    "m/s²",
+                ),
+            ];
+            for (name, v, unit, what, f, dunit) in rows {
+                let _ = writeln!(
+                    s,
+                    "  {name:<28} {v:.4e} {unit:<11} discrete at {:.0} Hz: {what} = {:.4e} {dunit}",
+                    k.update_rate,
+                    v * f
+                );
+            }
+            for n in &k.notes {
+                let _ = writeln!(s, "  note: {n}");
+            }
+        }
+        for w in &self.warnings {
+            let _ = writeln!(s, "warning: {w}");
+        }
+        s
+    }
+
+    /// Draw one log-log PNG per sensor into `dir`; returns the files.
+    pub fn write_plots(&self, dir: &Path) -> Result<Vec<PathBuf>, String> {
+        let mut files = Vec::new();
+        for sensor in &self.sensors {
+            let mut layers = Vec::new();
+            for (k, a) in sensor.axes.iter().enumerate() {
+                let c = &a.curve;
+                let color = AXIS_COLORS[k];
+                layers.push(Layer::Band { x: c.tau.clone(), lo: c.dev_lo.clone(), hi: c.dev_hi.clone(), color });
+            }
+            for (k, (a, ax)) in sensor.axes.iter().zip(["x", "y", "z"]).enumerate() {
+                let c = &a.curve;
+                let color = AXIS_COLORS[k];
+                layers.push(Layer::Line {
+                    points: c.tau.iter().copied().zip(c.dev.iter().copied()).collect(),
+                    color,
+                    width: 2,
+                    label: format!("{ax} data ({:.1} % CI band)", 100.0 * c.confidence),
+                });
+                let Some(id) = &a.id else { continue };
+                // Fitted model and its terms, over the τ range of the data.
+                let (t0, t1) = (c.tau[0], *c.tau.last().expect("non-empty curve"));
+                let grid: Vec<f64> = (0..=60).map(|i| t0 * (t1 / t0).powf(i as f64 / 60.0)).collect();
+                layers.push(Layer::Line {
+                    points: grid.iter().map(|&t| (t, id.fit.model_dev(t))).collect(),
+                    color: color.mix_with_black(0.55),
+                    width: 1,
+                    label: if k == 0 { "fit (darker), terms (thin)".into() } else { String::new() },
+                });
+                for term in 0..5 {
+                    if let Some(cf) = id.fit.get(term) {
+                        layers.push(Layer::Line {
+                            points: grid.iter().map(|&t| (t, cf.value * basis(t)[term].sqrt())).collect(),
+                            color: color.mix_with_white(0.45),
+                            width: 1,
+                            label: String::new(),
+                        });
+                    }
+                }
+                // Read-off points: each term's line at its reading τ.
+                let read_tau = [3f64.sqrt(), 1.0, f64::NAN, 3.0, 2f64.sqrt()];
+                let mut pts = Vec::new();
+                for (term, &rt) in read_tau.iter().enumerate() {
+                    if let Some(cf) = id.readoff.get(term) {
+                        if term == 2 {
+                            let i = (0..c.dev.len()).min_by(|&i, &j| c.dev[i].total_cmp(&c.dev[j])).expect("non-empty");
+                            pts.push((c.tau[i], cf.value * 0.664));
+                        } else {
+                            pts.push((rt, cf.value * basis(rt)[term].sqrt()));
+                        }
+                    }
+                }
+                layers.push(Layer::Points {
+                    points: pts,
+                    color: color.mix_with_black(0.3),
+                    label: if k == 0 {
+                        "read-offs (Q at √3, N at 1, B floor, K at 3, R at √2 s)".into()
+                    } else {
+                        String::new()
+                    },
+                });
+            }
+            let chart = LogLogChart {
+                title: format!("{} — {} ({})", self.source, sensor.name, sensor.axes[0].curve.kind.name()),
+                x_label: "averaging time τ [s]".into(),
+                y_label: format!("σ(τ) [{}]", sensor.unit),
+                layers,
+            };
+            let path = dir.join(format!("allan_{}.png", sensor.name));
+            chart.write_png(&path, 1100, 760)?;
+            files.push(path);
+        }
+        Ok(files)
+    }
+
+    /// Write `allan.json`, `imu.yaml` (when SI) and the plots into `dir`
+    /// (created if needed); returns the files written.
+    pub fn write_all(&self, dir: &Path) -> Result<Vec<PathBuf>, String> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create: {e}", dir.display()))?;
+        let mut files = Vec::new();
+        let json_path = dir.join("allan.json");
+        let text = serde_json::to_string_pretty(&self.to_json()).map_err(|e| e.to_string())?;
+        std::fs::write(&json_path, text).map_err(|e| format!("{}: {e}", json_path.display()))?;
+        files.push(json_path);
+        if let Some(y) = self.kalibr_yaml() {
+            let p = dir.join("imu.yaml");
+            std::fs::write(&p, y).map_err(|e| format!("{}: {e}", p.display()))?;
+            files.push(p);
+        }
+        files.extend(self.write_plots(dir)?);
+        Ok(files)
+    }
+}
+
+trait Shade {
+    fn mix_with_black(self, f: f64) -> plotters::style::RGBColor;
+    fn mix_with_white(self, f: f64) -> plotters::style::RGBColor;
+}
+
+impl Shade for plotters::style::RGBColor {
+    fn mix_with_black(self, f: f64) -> plotters::style::RGBColor {
+        let s = |c: u8| (c as f64 * (1.0 - f)) as u8;
+        plotters::style::RGBColor(s(self.0), s(self.1), s(self.2))
+    }
+    fn mix_with_white(self, f: f64) -> plotters::style::RGBColor {
+        let s = |c: u8| (c as f64 + (255.0 - c as f64) * f) as u8;
+        plotters::style::RGBColor(s(self.0), s(self.1), s(self.2))
+    }
+}

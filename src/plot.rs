@@ -1,0 +1,146 @@
+//! PNG figures without system libraries: plotters' bitmap backend with an
+//! embedded DejaVu Sans (its license is in `assets/fonts/`).
+//!
+//! [`LogLogChart`] draws the log-log plots of the Allan stage: lines, shaded
+//! bands and markers, in data coordinates, with decade ticks.
+
+use plotters::prelude::*;
+use plotters::style::FontStyle;
+use std::path::Path;
+use std::sync::Once;
+
+static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+
+/// Register the embedded font as "sans-serif" (once per process).
+pub fn ensure_font() {
+    static ONCE: Once = Once::new();
+    ONCE.call_once(|| {
+        // The font is a known-good TTF compiled into the binary.
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
+    });
+}
+
+/// Colors of the x, y and z axes (red, green, blue, slightly darkened).
+pub const AXIS_COLORS: [RGBColor; 3] = [RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(31, 119, 180)];
+
+/// One item on a log-log chart.
+pub enum Layer {
+    /// A polyline with a legend label (empty label: no legend entry).
+    Line { points: Vec<(f64, f64)>, color: RGBColor, width: u32, label: String },
+    /// A shaded band between lower and upper values at the same abscissae.
+    Band { x: Vec<f64>, lo: Vec<f64>, hi: Vec<f64>, color: RGBColor },
+    /// Markers (circles) with a legend label.
+    Points { points: Vec<(f64, f64)>, color: RGBColor, label: String },
+}
+
+/// A log-log chart description.
+pub struct LogLogChart {
+    /// Title on top.
+    pub title: String,
+    /// Label of the horizontal axis.
+    pub x_label: String,
+    /// Label of the vertical axis.
+    pub y_label: String,
+    /// What to draw, in order.
+    pub layers: Vec<Layer>,
+}
+
+fn finite_positive(v: f64) -> bool {
+    v.is_finite() && v > 0.0
+}
+
+impl LogLogChart {
+    /// Render to a PNG file of `width`×`height` pixels.
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), String> {
+        ensure_font();
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
+        let mut grow = |x: f64, y: f64| {
+            if finite_positive(x) && finite_positive(y) {
+                x0 = x0.min(x);
+                x1 = x1.max(x);
+                y0 = y0.min(y);
+                y1 = y1.max(y);
+            }
+        };
+        for l in &self.layers {
+            match l {
+                Layer::Line { points, .. } | Layer::Points { points, .. } => {
+                    points.iter().for_each(|&(x, y)| grow(x, y))
+                }
+                Layer::Band { x, lo, hi, .. } => {
+                    for i in 0..x.len() {
+                        grow(x[i], lo[i]);
+                        grow(x[i], hi[i]);
+                    }
+                }
+            }
+        }
+        if !(x0 < x1 && y0 < y1) {
+            return Err(format!("{}: nothing to plot", path.display()));
+        }
+        // Whole decades around the data.
+        let (x0, x1) = (10f64.powf(x0.log10().floor()), 10f64.powf(x1.log10().ceil()));
+        let (y0, y1) = (10f64.powf(y0.log10().floor()), 10f64.powf(y1.log10().ceil()));
+        let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+        let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&self.title, ("sans-serif", 22))
+            .margin(14)
+            .x_label_area_size(48)
+            .y_label_area_size(78)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc(&self.x_label)
+            .y_desc(&self.y_label)
+            .x_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(|e| err(&e))?;
+        let inside = |&(x, y): &(f64, f64)| finite_positive(x) && finite_positive(y);
+        for l in &self.layers {
+            match l {
+                Layer::Band { x, lo, hi, color } => {
+                    let mut poly: Vec<(f64, f64)> =
+                        x.iter().zip(lo).map(|(&a, &b)| (a, b.max(y0))).filter(inside).collect();
+                    poly.extend(x.iter().zip(hi).rev().map(|(&a, &b)| (a, b.min(y1))).filter(inside));
+                    chart.draw_series(std::iter::once(Polygon::new(poly, color.mix(0.18)))).map_err(|e| err(&e))?;
+                }
+                Layer::Line { points, color, width, label } => {
+                    let pts: Vec<(f64, f64)> = points.iter().copied().filter(inside).collect();
+                    let s = chart.draw_series(LineSeries::new(pts, color.stroke_width(*width))).map_err(|e| err(&e))?;
+                    if !label.is_empty() {
+                        let c = *color;
+                        s.label(label.as_str())
+                            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+                    }
+                }
+                Layer::Points { points, color, label } => {
+                    let pts: Vec<(f64, f64)> = points.iter().copied().filter(inside).collect();
+                    let c = *color;
+                    let s = chart
+                        .draw_series(pts.into_iter().map(move |p| Circle::new(p, 5, c.stroke_width(2))))
+                        .map_err(|e| err(&e))?;
+                    if !label.is_empty() {
+                        s.label(label.as_str()).legend(move |(x, y)| Circle::new((x + 9, y), 5, c.stroke_width(2)));
+                    }
+                }
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.3))
+            .label_font(("sans-serif", 13))
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
+        Ok(())
+    }
+}
