@@ -16,8 +16,9 @@
 //!   at the ends. One FFT gives the full autocorrelation at every lag, so each τ
 //!   then costs O(m) instead of O(N) — the work is shared across all τ. The
 //!   phase is detrended first (differences of order ≥ 2 ignore a linear trend),
-//!   and for every τ a bound on the FFT's round-off is compared with the
-//!   result; where it could reach 10⁻¹⁰ relative, that τ is computed directly.
+//!   the FFT's round-off is measured on a few lags recomputed exactly, and
+//!   for every τ that bound is compared with the result; where it could reach
+//!   [`CORRELATION_TOLERANCE`] relative, that τ is computed directly.
 //!
 //! Definitions follow NIST SP 1065 (Riley, *Handbook of Frequency Stability
 //! Analysis*) and reproduce Stable32.
@@ -89,21 +90,19 @@ impl DeviationKind {
 /// compensation so each value is the rounded exact sum.
 pub fn phase_of(y: &[f64]) -> Vec<f64> {
     let mean = mean_compensated(y);
-    let mut x = Vec::with_capacity(y.len() + 1);
+    let mut x = Vec::new();
+    crate::io::mem::reserve_huge(&mut x, y.len() + 1);
     x.push(0.0);
+    // Running sum `hi` with its accumulated rounding error `lo` (Knuth's
+    // two-sum per step); each output is the rounded value of hi + lo.
     let (mut hi, mut lo) = (0.0f64, 0.0f64);
     for &v in y {
         let d = v - mean;
         let s = hi + d;
         let bb = s - hi;
-        let err = (hi - (s - bb)) + (d - bb);
+        lo += (hi - (s - bb)) + (d - bb);
         hi = s;
-        lo += err;
-        // Renormalize so `hi` is the rounded value of hi + lo.
-        let t = hi + lo;
-        lo -= t - hi;
-        hi = t;
-        x.push(hi);
+        x.push(hi + lo);
     }
     x
 }
@@ -216,107 +215,250 @@ pub fn variance_direct(x: &[f64], m: usize, kind: DeviationKind) -> Option<(f64,
     }
 }
 
-/// Autocorrelation of a detrended phase, shared by all τ of one series.
-pub struct PhaseCorrelation {
-    /// Detrended phase z(i).
-    z: Vec<f64>,
-    /// R(k) = Σ_i z(i) z(i+k) for k = 0 … max_lag.
+/// Autocorrelation of the (mean-free) rate y, shared by all τ of one series.
+///
+/// The sum of squared order-d phase differences at spacing m is the squared
+/// norm of y filtered by a kernel of d blocks of m equal weights. Over the
+/// *full* convolution that norm is Σ_δ K(δ)·R(δ), with K the kernel's
+/// autocorrelation — piecewise linear between multiples of m — so with prefix
+/// sums of R(δ) and δ·R(δ) it costs O(d) per τ. The outputs where the kernel
+/// hangs over an end of the record are then subtracted, computed directly
+/// from the phase (O(m)). Working on y rather than the phase keeps the
+/// numbers small: no cancellation of huge phase correlations for drifting
+/// sensors. Working memory: the FFT buffers (≈ 2 × 8 bytes × (N + max lag)),
+/// then 5 × 8 bytes × max lag for R, its two prefix sums and those of the
+/// squared phase near both ends.
+pub struct RateCorrelation<'a> {
+    /// The phase x(0..=N) (its differences are y).
+    x: &'a [f64],
+    /// R(δ) = Σ_j y(j) y(j+δ), δ = 0 … max_lag (R(0) exact).
     r: Vec<f64>,
-    /// Prefix sums of z² (compensated): p(k) = Σ_{i<k} z(i)².
-    sq_prefix: Vec<f64>,
-    /// Bound on the absolute round-off of any R(k).
+    /// p0(k) = Σ_{δ=1}^{k} R(δ), p1(k) = Σ_{δ=1}^{k} δ·R(δ) (compensated).
+    p0: Vec<f64>,
+    p1: Vec<f64>,
+    /// Bound on the absolute round-off of any R(δ), δ ≥ 1.
     r_error: f64,
+    /// head_sq(k) = Σ_{j=1}^{k} (x(j) − x(0))², tail_sq(k) = Σ_{i=N−k}^{N−1} (x(i) − x(N))².
+    head_sq: Vec<f64>,
+    tail_sq: Vec<f64>,
 }
 
-impl PhaseCorrelation {
-    /// Correlations of the phase `x` up to lag `max_lag`.
-    pub fn new(x: &[f64], max_lag: usize) -> Self {
-        let n = x.len();
-        let z = detrend_linear(x);
+/// One real-FFT planner per process, so that all axes of a recording (same
+/// length) share the plans and their twiddle tables.
+fn planner() -> &'static std::sync::Mutex<RealFftPlanner<f64>> {
+    static PLANNER: std::sync::OnceLock<std::sync::Mutex<RealFftPlanner<f64>>> = std::sync::OnceLock::new();
+    PLANNER.get_or_init(|| std::sync::Mutex::new(RealFftPlanner::new()))
+}
+
+/// Block weights of the rate kernel of an order-d phase difference.
+fn block_weights(d: usize) -> &'static [f64] {
+    match d {
+        2 => &[-1.0, 1.0],
+        _ => &[1.0, -2.0, 1.0],
+    }
+}
+
+impl<'a> RateCorrelation<'a> {
+    /// Correlations of the rate under the phase `x`, up to lag `max_lag`.
+    pub fn new(x: &'a [f64], max_lag: usize) -> Self {
+        use rayon::prelude::*;
+        let n = x.len() - 1;
+        let max_lag = max_lag.min(n.saturating_sub(1));
+        let y = |j: usize| x[j + 1] - x[j];
         let nfft = fast_len(n + max_lag + 1);
-        let mut planner = RealFftPlanner::<f64>::new();
-        let fwd = planner.plan_fft_forward(nfft);
-        let inv = planner.plan_fft_inverse(nfft);
-        let mut buf = vec![0.0; nfft];
-        buf[..n].copy_from_slice(&z);
-        let mut spec = fwd.make_output_vec();
+        let (fwd, inv) = {
+            let mut p = planner().lock().unwrap_or_else(|e| e.into_inner());
+            (p.plan_fft_forward(nfft), p.plan_fft_inverse(nfft))
+        };
+        let mut buf = crate::io::mem::filled_huge(nfft, 0.0);
+        buf[..n].par_iter_mut().enumerate().for_each(|(j, v)| *v = y(j));
+        let mut spec = crate::io::mem::filled_huge(nfft / 2 + 1, realfft::num_complex::Complex::new(0.0, 0.0));
         fwd.process(&mut buf, &mut spec).expect("buffer sizes come from the plan");
-        for c in spec.iter_mut() {
-            *c = realfft::num_complex::Complex::new(c.norm_sqr(), 0.0);
-        }
+        spec.par_iter_mut().for_each(|c| *c = realfft::num_complex::Complex::new(c.norm_sqr(), 0.0));
         inv.process(&mut spec, &mut buf).expect("buffer sizes come from the plan");
         drop(spec);
         let scale = 1.0 / nfft as f64;
         buf.truncate(max_lag + 1);
-        for v in buf.iter_mut() {
-            *v *= scale;
-        }
-        let mut sq_prefix = Vec::with_capacity(n + 1);
-        let (mut s, mut c) = (0.0f64, 0.0f64);
-        sq_prefix.push(0.0);
-        for &v in &z {
-            let y = v * v - c;
-            let t = s + y;
-            c = (t - s) - y;
-            s = t;
-            sq_prefix.push(s);
-        }
-        // FFT round-off grows like ε·log2(n) relative to the largest
-        // correlation R(0); a factor 8 of margin.
-        let r_error = 8.0 * f64::EPSILON * (nfft as f64).log2() * s;
-        Self { z, r: buf, sq_prefix, r_error }
+        buf.shrink_to_fit();
+        buf.par_iter_mut().for_each(|v| *v *= scale);
+        // Exact R(0), and the FFT's round-off measured on a few lags
+        // recomputed exactly, with a factor 10 of margin over the largest
+        // difference seen (never below ε·R(0)·√log2 n, the order that
+        // round-off theory gives).
+        let lags: Vec<usize> = (0..=4usize).map(|j| max_lag * j / 4).collect();
+        let exact: Vec<f64> = lags.par_iter().map(|&lag| dot_compensated(n - lag, |j| y(j) * y(j + lag))).collect();
+        let seen = lags.iter().zip(&exact).skip(1).map(|(&lag, e)| (buf[lag] - e).abs()).fold(0.0, f64::max);
+        buf[0] = exact[0];
+        let r_error = (10.0 * seen).max(f64::EPSILON * exact[0] * (nfft as f64).log2().sqrt());
+        let prefix = |len: usize, f: &(dyn Fn(usize) -> f64 + Sync)| -> Vec<f64> {
+            let mut p = Vec::new();
+            crate::io::mem::reserve_huge(&mut p, len + 1);
+            let (mut s, mut c) = (0.0f64, 0.0f64);
+            p.push(0.0);
+            for k in 1..=len {
+                let v = f(k) - c;
+                let t = s + v;
+                c = (t - s) - v;
+                s = t;
+                p.push(s);
+            }
+            p
+        };
+        // Only up to the largest m ≤ max_lag/2 is ever used at the ends.
+        let ends = (max_lag / 2 + 1).min(n);
+        let ((p0, p1), (head_sq, tail_sq)) = rayon::join(
+            || rayon::join(|| prefix(max_lag, &|k| buf[k]), || prefix(max_lag, &|k| k as f64 * buf[k])),
+            || {
+                rayon::join(
+                    || prefix(ends, &|k| (x[k] - x[0]).powi(2)),
+                    || prefix(ends, &|k| (x[n - k] - x[n]).powi(2)),
+                )
+            },
+        );
+        Self { x, r: buf, p0, p1, r_error, head_sq, tail_sq }
     }
 
-    /// Σ_{i=s}^{s+len−1} z(i) z(i+lag).
-    fn window(&self, lag: usize, start: usize, len: usize) -> f64 {
-        if lag == 0 {
-            return self.sq_prefix[start + len] - self.sq_prefix[start];
+    /// Σ over the edge outputs of the order-d filter at spacing m (where the
+    /// kernel hangs over an end): the record's ends held constant, i.e. the
+    /// phase clamped to x(0) before the start and to x(N) after the end.
+    /// Outputs with a single phase point inside come from prefix sums.
+    fn edges(&self, m: usize, d: usize) -> f64 {
+        let x = self.x;
+        let n = x.len() - 1;
+        let c = coefficients(d);
+        let (x0, xn) = (x[0], x[n]);
+        // Left: output i = j − b·m (b = number of clamped terms), j ∈ [1, m].
+        let mut s = c[d] * c[d] * self.head_sq[m];
+        // Right: output i with b terms inside, i ∈ [N − b·m, N − (b−1)·m − 1].
+        s += c[0] * c[0] * self.tail_sq[m];
+        if d == 2 {
+            // Two phase points inside: Σ (c_a·x(j) + c_b·x(j+m) + offset)², vectorized.
+            s += pair_sq(&x[1..m], &x[m + 1..2 * m], c[1], c[2], -(c[1] + c[2]) * x0);
+            s += pair_sq(&x[n + 1 - 2 * m..n - m], &x[n + 1 - m..n], c[0], c[1], -(c[0] + c[1]) * xn);
+            return s;
         }
-        let n = self.z.len();
-        let z = &self.z;
-        let head: f64 = (0..start).map(|i| z[i] * z[i + lag]).sum();
-        let tail: f64 = (start + len..n - lag).map(|i| z[i] * z[i + lag]).sum();
-        self.r[lag] - head - tail
+        for b in 1..d {
+            let jmax = if b == 1 { m - 1 } else { m };
+            s += sum4(1, jmax + 1, |j| {
+                let u: f64 = (b..=d).map(|k| c[k] * (x[j + (k - b) * m] - x0)).sum();
+                u * u
+            });
+        }
+        for b in 2..=d {
+            let ilo = if b == d { n + 1 - d * m } else { n - b * m };
+            s += sum4(ilo, n - (b - 1) * m, |i| {
+                let u: f64 = (0..b).map(|k| c[k] * (x[i + k * m] - xn)).sum();
+                u * u
+            });
+        }
+        s
     }
 
     /// The overlapping order-d variance sum for m, with its error bound, or
-    /// None if lag d·m is beyond the computed correlations.
+    /// None if the kernel is longer than the computed correlations.
     fn overlapping_sum(&self, m: usize, d: usize) -> Option<(f64, f64, usize)> {
-        let n = self.z.len();
-        if d * m >= self.r.len() || n < d * m + 1 {
+        let n = self.x.len() - 1;
+        if d * m > self.r.len() || n < d * m || m == 0 {
             return None;
         }
-        let c = coefficients(d);
-        let len = n - d * m;
-        let mut s = 0.0;
-        let mut weight = 0.0;
-        for k in 0..=d {
-            for l in k..=d {
-                let w = if k == l { c[k] * c[k] } else { 2.0 * c[k] * c[l] };
-                s += w * self.window((l - k) * m, k * m, len);
-                if k != l {
-                    weight += w.abs();
-                }
-            }
+        let w = block_weights(d);
+        // K at multiples of m: K_s = m·Σ_{q−p=s} w_p w_q.
+        let k_at = |s: usize| -> f64 { (0..d - s.min(d)).map(|p| w[p] * w[p + s]).sum::<f64>() * m as f64 };
+        let mut total = k_at(0) * self.r[0];
+        let mut bound = 0.0;
+        let mf = m as f64;
+        for seg in 0..d {
+            let lo = (seg * m).max(1);
+            let hi = (seg + 1) * m - 1;
+            let (k0, k1) = (k_at(seg), k_at(seg + 1));
+            let slope = (k1 - k0) / mf;
+            let s0 = self.p0[hi] - self.p0[lo - 1];
+            let s1 = self.p1[hi] - self.p1[lo - 1];
+            let base = (seg * m) as f64;
+            total += 2.0 * (k0 * s0 + slope * (s1 - base * s0));
+            // Round-off: the R values, and the prefix sums' own rounding.
+            let kmax = k0.abs().max(k1.abs());
+            bound += 2.0 * kmax * mf * self.r_error;
+            let prefix_mag = self.p0[hi].abs() + self.p0[lo - 1].abs();
+            let prefix1_mag = self.p1[hi].abs() + self.p1[lo - 1].abs();
+            bound += 2.0 * f64::EPSILON * (kmax * prefix_mag + slope.abs() * (prefix1_mag + base * prefix_mag));
         }
-        Some((s, weight * self.r_error, len))
+        let s = total - self.edges(m, d);
+        Some((s, bound, n + 1 - d * m))
     }
 }
 
-/// Subtract the least-squares line from x (indices as abscissa).
-fn detrend_linear(x: &[f64]) -> Vec<f64> {
-    let n = x.len() as f64;
-    let tm = (n - 1.0) / 2.0;
-    let xm = mean_compensated(x);
-    let mut sxy = 0.0;
-    let mut sxx = 0.0;
-    for (i, &v) in x.iter().enumerate() {
-        let dt = i as f64 - tm;
-        sxy += dt * (v - xm);
-        sxx += dt * dt;
+/// Σ (ca·a(i) + cb·b(i) + offset)² over two equally long slices, in eight
+/// lanes the compiler turns into SIMD.
+fn pair_sq(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
+    let mut acc = [0.0f64; 8];
+    let mut ca8 = a.chunks_exact(8);
+    let mut cb8 = b.chunks_exact(8);
+    for (u, v) in (&mut ca8).zip(&mut cb8) {
+        for k in 0..8 {
+            let w = ca * u[k] + cb * v[k] + offset;
+            acc[k] += w * w;
+        }
     }
-    let slope = if sxx > 0.0 { sxy / sxx } else { 0.0 };
-    x.iter().enumerate().map(|(i, &v)| v - xm - slope * (i as f64 - tm)).collect()
+    let mut s: f64 = acc.iter().sum();
+    for (u, v) in ca8.remainder().iter().zip(cb8.remainder()) {
+        let w = ca * u + cb * v + offset;
+        s += w * w;
+    }
+    s
+}
+
+/// Σ f(i) for from ≤ i < to in four interleaved accumulators (independent
+/// dependency chains: several times faster than one running sum).
+fn sum4(from: usize, to: usize, f: impl Fn(usize) -> f64) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let mut i = from;
+    while i + 4 <= to {
+        for (k, a) in acc.iter_mut().enumerate() {
+            *a += f(i + k);
+        }
+        i += 4;
+    }
+    let mut s = (acc[0] + acc[1]) + (acc[2] + acc[3]);
+    while i < to {
+        s += f(i);
+        i += 1;
+    }
+    s
+}
+
+/// Σ f(i) for i < n with Kahan compensation, in four interleaved lanes
+/// (independent dependency chains, so it runs at the speed of a plain sum).
+fn dot_compensated(n: usize, f: impl Fn(usize) -> f64) -> f64 {
+    let mut s = [0.0f64; 4];
+    let mut c = [0.0f64; 4];
+    let full = n / 4 * 4;
+    let mut i = 0;
+    while i < full {
+        for k in 0..4 {
+            let v = f(i + k) - c[k];
+            let t = s[k] + v;
+            c[k] = (t - s[k]) - v;
+            s[k] = t;
+        }
+        i += 4;
+    }
+    for j in full..n {
+        let v = f(j) - c[0];
+        let t = s[0] + v;
+        c[0] = (t - s[0]) - v;
+        s[0] = t;
+    }
+    // Combine the lanes with their compensations.
+    let mut total = 0.0f64;
+    let mut comp = 0.0f64;
+    for v in s.iter().chain(c.iter().map(|x| -x).collect::<Vec<_>>().iter()) {
+        let y = v - comp;
+        let t = total + y;
+        comp = (t - total) - y;
+        total = t;
+    }
+    total
 }
 
 /// Smallest length ≥ n of the form 2^a·3^b (fast for the FFT).
@@ -334,6 +476,11 @@ fn fast_len(n: usize) -> usize {
     best
 }
 
+/// Largest relative round-off bound accepted from the correlation path; a τ
+/// whose bound is larger is computed directly. (10⁻⁸ is three orders below
+/// the 5 printed digits of Stable32 and far below any interval.)
+pub const CORRELATION_TOLERANCE: f64 = 1e-3;
+
 /// Variances of `kind` at each cluster size in `ms` for the phase `x`
 /// (from [`phase_of`]), as (variance in units of y², number of terms).
 /// Uses the correlation path when it pays; `progress` is called once per m.
@@ -344,14 +491,14 @@ pub fn variances(
     progress: &(dyn Fn() + Sync),
 ) -> Vec<Option<(f64, usize)>> {
     use rayon::prelude::*;
-    const DIRECT_BELOW: usize = 16;
+    const DIRECT_BELOW: usize = 1;
     let d = kind.difference_order();
     let n = x.len();
     let use_corr =
         kind.overlapping() && !kind.modified() && n > 4096 && ms.iter().filter(|&&m| m >= DIRECT_BELOW).count() > 24;
     let corr = if use_corr {
         let max_m = ms.iter().copied().filter(|&m| d * m < n).max().unwrap_or(0);
-        Some(PhaseCorrelation::new(x, d * max_m))
+        Some(RateCorrelation::new(x, d * max_m))
     } else {
         None
     };
@@ -360,7 +507,7 @@ pub fn variances(
         .map(|&m| {
             let out = match &corr {
                 Some(c) if m >= DIRECT_BELOW => match c.overlapping_sum(m, d) {
-                    Some((s, err, count)) if s > 0.0 && err <= 1e-10 * s => {
+                    Some((s, err, count)) if s > 0.0 && err <= CORRELATION_TOLERANCE * s => {
                         let mf = m as f64;
                         Some((s / (scale * mf * mf * count as f64), count))
                     }
@@ -399,8 +546,8 @@ mod tests {
         let y = series(20_000);
         let x = phase_of(&y);
         for kind in [DeviationKind::Oadev, DeviationKind::Ohdev] {
-            let corr = PhaseCorrelation::new(&x, kind.difference_order() * 3000);
-            for m in [16, 17, 100, 999, 3000] {
+            let corr = RateCorrelation::new(&x, kind.difference_order() * 6000);
+            for m in [1, 2, 16, 17, 100, 999, 3000, 6000] {
                 let (s, _, count) = corr.overlapping_sum(m, kind.difference_order()).unwrap();
                 let scale = if kind.difference_order() == 2 { 2.0 } else { 6.0 };
                 let v = s / (scale * (m * m) as f64 * count as f64);

@@ -286,8 +286,13 @@ fn sandwich(
 ) -> DMatrix<f64> {
     let n = pts.len();
     let p = cols.len();
-    let sd: Vec<f64> = (0..n).map(|i| model[i] * (2.0 / curve.edf[pts[i]]).sqrt()).collect();
-    let w: Vec<f64> = (0..n).map(|i| share[i] / (sd[i] * sd[i]).max(1e-300)).collect();
+    // The σ² estimates' spread from the smallest EDF any single noise type
+    // would give at that τ: the identified type is only the dominant one,
+    // and a mixture (quantization under white noise, say) has fewer
+    // degrees of freedom than the dominant type alone.
+    let sd: Vec<f64> = (0..n).map(|i| model[i] * (2.0 / conservative_edf(curve, pts[i])).sqrt()).collect();
+    // The weights the fit used (the bread's), not the conservative ones.
+    let w: Vec<f64> = (0..n).map(|i| curve.edf[pts[i]] / (2.0 * model[i].max(1e-300).powi(2)) * share[i]).collect();
     // G = W A (n × p)
     let g = DMatrix::from_fn(n, p, |i, c| w[i] * a[(i, cols[c])]);
     let mut meat = DMatrix::zeros(p, p);
@@ -304,6 +309,17 @@ fn sandwich(
         }
     }
     bread * meat * bread
+}
+
+/// The smallest Greenhall EDF over the noise types α = +2 … −2 at point i.
+fn conservative_edf(curve: &AllanCurve, i: usize) -> f64 {
+    let m = curve.m[i];
+    let overlapping = curve.kind == DeviationKind::Oadev;
+    // Phase points from the number of terms of the estimator.
+    let n_phase = if overlapping { curve.n_terms[i] + 2 * m } else { (curve.n_terms[i] + 1) * m + 1 };
+    (-2..=2)
+        .map(|alpha| super::edf::edf_greenhall(alpha, 2, m, n_phase, overlapping, false))
+        .fold(curve.edf[i], f64::min)
 }
 
 /// Local log-log slope at each point, from the points within ±0.15 decade.

@@ -4,7 +4,7 @@
 //!   time and Hadamard deviations, sharing work across τ through one FFT.
 //! * [`edf`]: noise identification and confidence intervals (Greenhall's
 //!   equivalent degrees of freedom, χ² intervals), as Stable32 computes them.
-//! * [`identify`]: the noise coefficients Q, N, B, K, R by the IEEE read-offs
+//! * [`identify`](mod@identify): the noise coefficients Q, N, B, K, R by the IEEE read-offs
 //!   and by a weighted non-negative least-squares fit, each with an interval.
 //! * [`report`]: a whole static recording → `allan.json`, Kalibr `imu.yaml`,
 //!   plots and a terminal table (what `tumble allan` runs).
@@ -160,6 +160,38 @@ pub fn allan_deviation_with_progress(
     curve_from_phase(&deviation::phase_of(y), tau0, opts, progress)
 }
 
+/// How many axes [`allan_deviation_axes`] works on at once.
+const AXES_AT_ONCE: usize = 2;
+
+/// Curves of several axes (e.g. the six of an IMU), two at a time in
+/// parallel: the FFT of one axis is serial, so a pair keeps two cores busy,
+/// while the working memory stays at two axes' worth (≈ 2 × 40 bytes per
+/// sample, less than the 48 bytes per sample of six-axis data).
+/// `progress` is called once per τ of each axis.
+pub fn allan_deviation_axes(
+    axes: &[&[f64]],
+    tau0: f64,
+    opts: &AllanOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Vec<AllanCurve>, AllanError> {
+    let mut out = Vec::with_capacity(axes.len());
+    for pair in axes.chunks(AXES_AT_ONCE) {
+        let results: Vec<Result<AllanCurve, AllanError>> = if pair.len() == 2 {
+            let (a, b) = rayon::join(
+                || allan_deviation_with_progress(pair[0], tau0, opts, progress),
+                || allan_deviation_with_progress(pair[1], tau0, opts, progress),
+            );
+            vec![a, b]
+        } else {
+            vec![allan_deviation_with_progress(pair[0], tau0, opts, progress)]
+        };
+        for r in results {
+            out.push(r?);
+        }
+    }
+    Ok(out)
+}
+
 /// The deviation curve from *phase* samples x(i) (time error \[s\] for clock
 /// data, or the integral of a rate: angle \[rad\] for a gyro) taken every
 /// `tau0` seconds — the form Stable32's PHASE.DAT is in.
@@ -204,7 +236,14 @@ fn curve_from_phase(
     let vars = deviation::variances(x, &ms, kind, progress);
     let d = kind.difference_order();
     use rayon::prelude::*;
-    let ids: Vec<Option<i32>> = ms.par_iter().map(|&m| edf::noise_id(x, m, d)).collect();
+    // Noise type at the octave at or below each m (it changes slowly with τ;
+    // one lag-1 test per octave costs O(N) in all instead of O(N) per τ).
+    let octave = |m: usize| 1usize << (usize::BITS - 1 - m.leading_zeros());
+    let mut octaves: Vec<usize> = ms.iter().map(|&m| octave(m)).collect();
+    octaves.dedup();
+    let octave_ids: Vec<(usize, Option<i32>)> = octaves.par_iter().map(|&p| (p, edf::noise_id(x, p, d))).collect();
+    let ids: Vec<Option<i32>> =
+        ms.iter().map(|&m| octave_ids.iter().find(|(p, _)| *p == octave(m)).and_then(|(_, id)| *id)).collect();
     let mut curve = AllanCurve {
         kind,
         tau0,

@@ -3,9 +3,7 @@
 //! and a terminal table.
 
 use super::identify::{basis, TERM_NAMES};
-use super::{
-    allan_deviation_with_progress, identify, AllanCurve, AllanError, AllanOptions, Coefficient, Identification,
-};
+use super::{identify, AllanCurve, AllanError, AllanOptions, Coefficient, Identification};
 use crate::io::{ImuRecording, Stored};
 use crate::plot::{Layer, LogLogChart, AXIS_COLORS};
 use serde_json::{json, Value};
@@ -126,21 +124,28 @@ pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanRepo
             rec.duration()
         ));
     }
+    let columns: Vec<Vec<f64>> =
+        (0..6).map(|k| if k < 3 { &rec.gyro } else { &rec.accel }.iter().map(|s| s[k % 3]).collect()).collect();
+    let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
+    let curves = super::allan_deviation_axes(&refs, tau0, &opts.allan, &|| bar.inc(1))
+        .map_err(|e| AllanError(format!("{}: {e}", rec.source_name())))?;
+    drop(columns);
+    let mut curves = curves.into_iter();
     let mut sensors = Vec::new();
-    for (name, data, stored) in [("gyro", &rec.gyro, rec.gyro_units), ("accel", &rec.accel, rec.accel_units)] {
+    for (name, stored) in [("gyro", rec.gyro_units), ("accel", rec.accel_units)] {
         let unit = match (stored, name) {
             (Stored::RawCounts, _) => "counts",
             (_, "gyro") => "rad/s",
             _ => "m/s^2",
         };
-        let mut axes = Vec::new();
-        for k in 0..3 {
-            let y: Vec<f64> = data.iter().map(|s| s[k]).collect();
-            let curve = allan_deviation_with_progress(&y, tau0, &opts.allan, &|| bar.inc(1))
-                .map_err(|e| AllanError(format!("{} {name} {}: {e}", rec.source_name(), ["x", "y", "z"][k])))?;
-            let id = identify(&curve).ok();
-            axes.push(AxisResult { curve, id });
-        }
+        let axes = curves
+            .by_ref()
+            .take(3)
+            .map(|curve| {
+                let id = identify(&curve).ok();
+                AxisResult { curve, id }
+            })
+            .collect();
         sensors.push(SensorResult { name, unit, axes });
     }
     bar.finish_and_clear();

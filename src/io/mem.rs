@@ -9,6 +9,14 @@ pub(crate) fn reserve_huge<T>(v: &mut Vec<T>, additional: usize) {
     advise_huge(v.as_ptr() as usize, v.capacity() * std::mem::size_of::<T>());
 }
 
+/// A vector of `n` copies of `value`, huge-page advised before it is touched.
+pub(crate) fn filled_huge<T: Clone>(n: usize, value: T) -> Vec<T> {
+    let mut v = Vec::new();
+    reserve_huge(&mut v, n);
+    v.resize(n, value);
+    v
+}
+
 #[cfg(target_os = "linux")]
 fn advise_huge(addr: usize, len: usize) {
     const HUGE: usize = 2 << 20;

@@ -5,7 +5,7 @@ pub mod bal;
 pub mod g2o;
 pub mod imu;
 pub mod imu_text;
-mod mem;
+pub(crate) mod mem;
 pub mod recording;
 pub mod rosbag;
 pub mod table;
