@@ -346,3 +346,101 @@ fn identifies_simulated_noise_with_honest_intervals() {
     }
     assert!(failures.is_empty(), "failed: {failures:?}");
 }
+
+/// White noise and rate random walk only: the bend between the −½ and +½
+/// slopes must not be reported as a bias instability (the error of
+/// allan_variance_ros and imu_utils).
+#[test]
+fn no_bias_instability_where_n_and_k_lines_cross() {
+    let spec = tumble::sim::AxisNoise {
+        noise_density: 1e-3,
+        random_walk: 1e-4,
+        bias_instability: 0.0,
+        bias_instability_band: [1.0, 1000.0],
+        angle_quantization: 0.0,
+    };
+    let y = tumble::sim::noise_series(&spec, 200.0, 2 * 3600 * 200, 5);
+    let curve = allan_deviation(&y, 0.005, &AllanOptions::default()).unwrap();
+    let id = identify(&curve).unwrap();
+    assert!(id.fit.B.is_none(), "fit invented B = {:?}", id.fit.B);
+    assert!(id.readoff.B.is_none(), "read-off invented B = {:?}", id.readoff.B);
+    let n = id.fit.N.unwrap();
+    let k = id.fit.K.unwrap();
+    assert!((n.value / 1e-3 - 1.0).abs() < 0.02 && n.lo <= 1e-3 && 1e-3 <= n.hi, "{n:?}");
+    assert!((k.value / 1e-4 - 1.0).abs() < 0.1 && k.lo <= 1e-4 && 1e-4 <= k.hi, "{k:?}");
+    assert!(id.notes.iter().any(|s| s.contains("only where the white-noise and random-walk lines cross")));
+}
+
+#[test]
+fn bad_input_is_an_error_not_a_panic() {
+    let mut y = vec![0.0; 1000];
+    y[17] = f64::NAN;
+    let e = allan_deviation(&y, 0.01, &AllanOptions::default()).unwrap_err();
+    assert!(e.0.contains("sample 17") && e.0.contains("NaN"), "{e}");
+    let e = allan_deviation(&[1.0, 2.0, 3.0], 0.01, &AllanOptions::default()).unwrap_err();
+    assert!(e.0.contains("too few"), "{e}");
+    let e = allan_deviation(&[0.0; 100], 0.0, &AllanOptions::default()).unwrap_err();
+    assert!(e.0.contains("sample period"), "{e}");
+    let e = allan_deviation(&[0.0; 100], f64::INFINITY, &AllanOptions::default()).unwrap_err();
+    assert!(e.0.contains("sample period"), "{e}");
+    // A constant signal has zero deviation: identification says so instead of inventing noise.
+    let curve = allan_deviation(&[0.25; 1000], 0.01, &AllanOptions::default()).unwrap();
+    assert!(curve.dev.iter().all(|&d| d == 0.0));
+    assert!(identify(&curve).is_err());
+}
+
+/// `tumble allan`'s files: allan.json with the documented layout, Kalibr's
+/// imu.yaml, and a PNG per sensor, from a simulated static recording.
+#[test]
+fn allan_stage_writes_documented_outputs() {
+    use tumble::allan::{run_allan, AllanRunOptions};
+    let mut cfg = tumble::sim::SimConfig { duration_s: Some(600.0), ..tumble::sim::SimConfig::default() };
+    cfg.imu.rate_hz = 200.0;
+    let sim = tumble::sim::simulate(tumble::sim::Scenario::Static, &cfg, 3).unwrap();
+    let rec = tumble::io::ImuRecording {
+        t: sim.imu.t.clone(),
+        gyro: sim.imu.gyro.clone(),
+        accel: sim.imu.accel.clone(),
+        ..Default::default()
+    };
+    let report = run_allan(&rec, &AllanRunOptions::default()).unwrap();
+    let dir = std::env::temp_dir().join(format!("tumble_allan_test_{}", std::process::id()));
+    let files = report.write_all(&dir).unwrap();
+    assert!(files.iter().any(|f| f.ends_with("imu.yaml")));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("allan.json")).unwrap()).unwrap();
+    for sensor in ["gyro", "accel"] {
+        for axis in ["x", "y", "z"] {
+            let a = &json[sensor][axis];
+            let n = a["tau"].as_array().unwrap().len();
+            assert!(n > 20);
+            for key in ["adev", "adev_lo", "adev_hi"] {
+                assert_eq!(a[key].as_array().unwrap().len(), n, "{sensor} {axis} {key}");
+            }
+            for method in ["fit", "readoff"] {
+                for term in ["Q", "N", "B", "K", "R"] {
+                    let t = &a[method][term];
+                    assert!(t.is_null() || (t["value"].is_f64() && t["lo"].is_f64() && t["hi"].is_f64()));
+                }
+            }
+        }
+    }
+    // White noise density of the simulated gyro x within 3 %.
+    let n = json["gyro"]["x"]["fit"]["N"]["value"].as_f64().unwrap();
+    assert!((n / cfg.imu.gyro.noise_density[0] - 1.0).abs() < 0.03, "{n}");
+    let yaml = std::fs::read_to_string(dir.join("imu.yaml")).unwrap();
+    for key in [
+        "accelerometer_noise_density:",
+        "accelerometer_random_walk:",
+        "gyroscope_noise_density:",
+        "gyroscope_random_walk:",
+        "update_rate:",
+    ] {
+        assert!(yaml.contains(key), "{key} missing in imu.yaml");
+    }
+    for png in ["allan_gyro.png", "allan_accel.png"] {
+        let bytes = std::fs::read(dir.join(png)).unwrap();
+        assert!(bytes.len() > 10_000 && bytes.starts_with(b"\x89PNG"), "{png}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

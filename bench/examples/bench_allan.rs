@@ -104,13 +104,6 @@ fn main() {
         bytes / bw,
         bytes / bw / ours
     );
-    let bytes_ours = 6.0 * (n as f64) * 8.0 * 2.0;
-    println!(
-        "tumble's own floor (read the data once, write the phase once): {:.3} s; tumble takes {:.1}× that",
-        bytes_ours / bw,
-        ours / (bytes_ours / bw)
-    );
-
     if no_peer {
         println!("allantools: not run (--no-peer)");
         return;
@@ -137,7 +130,7 @@ print(json.dumps({{"seconds": el, "taus": list(res[0][0]), "devs": [list(r[1]) f
 "#,
         path = path.display(),
     );
-    println!("running allantools.oadev on {peer_axes} axis/axes (single-threaded numpy; ≈ 22 s per axis here) …");
+    println!("running allantools.oadev on {peer_axes} axis/axes (single-threaded numpy; the issue measured ≈ 22 s per axis on its machine) …");
     match Command::new("python3").arg("-c").arg(&script).output() {
         Ok(o) if o.status.success() => {
             let v: serde_json::Value = match serde_json::from_slice(&o.stdout) {

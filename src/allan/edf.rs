@@ -17,10 +17,11 @@ use statrs::distribution::{ChiSquared, ContinuousCDF};
 /// phase from [`super::deviation::phase_of`], `dmax` the difference order of
 /// the variance (2 Allan, 3 Hadamard). None when fewer than 30 averages fit.
 pub fn noise_id(x: &[f64], m: usize, dmax: usize) -> Option<i32> {
-    let n = (x.len() - 1) / m;
-    if m == 0 || n < 30 {
+    if m == 0 || (x.len() - 1) / m < 30 {
         return None;
     }
+    // 2²⁰ averages pin the lag-1 autocorrelation to ±0.001; more add nothing.
+    let n = ((x.len() - 1) / m).min(1 << 20);
     let mut series: Vec<f64> = (0..n).map(|k| (x[(k + 1) * m] - x[k * m]) / m as f64).collect();
     detrend(&mut series);
     let mut d = 0usize;

@@ -202,18 +202,27 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
     let mut result = None;
     for _round in 0..5 {
         // Reweight from the model a few times (weights from the data would bias the fit low).
+        // Points far off the model by their own uncertainty (a vibration
+        // hump, a temperature transient) are down-weighted (Cauchy, scale 3σ)
+        // so they cannot hide the terms the rest of the curve shows.
         let mut sol = None;
-        for _ in 0..4 {
-            let w = DVector::from_fn(n, |i, _| curve.edf[pts[i]] / (2.0 * model[i].max(1e-300).powi(2)) * share[i]);
+        let mut robust = vec![1.0; n];
+        let mut w = DVector::zeros(n);
+        for _ in 0..6 {
+            w = DVector::from_fn(n, |i, _| {
+                curve.edf[pts[i]] / (2.0 * model[i].max(1e-300).powi(2)) * share[i] * robust[i]
+            });
             let Some(s) = nnls(&a, &b, &w, &allowed) else { break };
             for (i, m) in model.iter_mut().enumerate() {
                 let pred: f64 = (0..5).map(|k| a[(i, k)] * s.0[k]).sum();
                 *m = if pred > 0.0 { pred } else { b[i] };
+                let r = (b[i] - *m) / (*m * (2.0 / curve.edf[pts[i]]).sqrt());
+                robust[i] = 1.0 / (1.0 + (r / 3.0).powi(2));
             }
             sol = Some(s);
         }
         let Some((theta, bread, cols, chi2)) = sol else { break };
-        let cov = sandwich(&a, &bread, &cols, &model, curve, pts, &share);
+        let cov = sandwich(&a, &bread, &cols, &model, curve, pts, w.as_slice());
         let dof = (effective_points - cols.len() as f64).max(1.0);
         let inflate = (chi2 / dof).max(1.0);
         // Drop the least significant unsupported term, if any, and refit.
@@ -274,7 +283,8 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
 const CORRELATION_EXPONENT: f64 = 0.5;
 
 /// Covariance of the weighted fit when the σ² estimates are correlated:
-/// (AᵀWA)⁻¹ AᵀW Σ W A (AᵀWA)⁻¹ with Σ from the EDFs and the correlation model.
+/// (AᵀWA)⁻¹ AᵀW Σ W A (AᵀWA)⁻¹ with W the weights the fit used and Σ from
+/// conservative EDFs and the correlation model.
 fn sandwich(
     a: &DMatrix<f64>,
     bread: &DMatrix<f64>,
@@ -282,7 +292,7 @@ fn sandwich(
     model: &[f64],
     curve: &AllanCurve,
     pts: &[usize],
-    share: &[f64],
+    w: &[f64],
 ) -> DMatrix<f64> {
     let n = pts.len();
     let p = cols.len();
@@ -291,8 +301,6 @@ fn sandwich(
     // and a mixture (quantization under white noise, say) has fewer
     // degrees of freedom than the dominant type alone.
     let sd: Vec<f64> = (0..n).map(|i| model[i] * (2.0 / conservative_edf(curve, pts[i])).sqrt()).collect();
-    // The weights the fit used (the bread's), not the conservative ones.
-    let w: Vec<f64> = (0..n).map(|i| curve.edf[pts[i]] / (2.0 * model[i].max(1e-300).powi(2)) * share[i]).collect();
     // G = W A (n × p)
     let g = DMatrix::from_fn(n, p, |i, c| w[i] * a[(i, cols[c])]);
     let mut meat = DMatrix::zeros(p, p);
@@ -358,13 +366,18 @@ fn read_off(curve: &AllanCurve, pts: &[usize], fit: &NoiseTerms, notes: &mut Vec
     };
     for k in 0..5 {
         let pick = if k == 2 {
-            // The floor: the minimum of the curve, only when the fit finds a
-            // flicker term (otherwise the minimum is just where N meets K).
+            // The floor, only when the fit finds a flicker term (otherwise
+            // the minimum is just where N meets K).
             if fit.B.is_none() {
                 notes.push("read-off: no bias-instability floor (the minimum is only where the white-noise and random-walk lines cross)".into());
                 continue;
             }
-            pts.iter().copied().min_by(|&i, &j| curve.dev[i].total_cmp(&curve.dev[j]))
+            // The lowest point where the curve is flat (slope within ±0.1).
+            pts.iter()
+                .zip(&slopes)
+                .filter(|(_, s)| s.is_some_and(|s| s.abs() <= 0.1))
+                .map(|(&i, _)| i)
+                .min_by(|&i, &j| curve.dev[i].total_cmp(&curve.dev[j]))
         } else {
             // Among the points on this term's slope, the one with most degrees of freedom.
             pts.iter()

@@ -491,8 +491,12 @@ impl AllanReport {
                 for (term, &rt) in read_tau.iter().enumerate() {
                     if let Some(cf) = id.readoff.get(term) {
                         if term == 2 {
-                            let i = (0..c.dev.len()).min_by(|&i, &j| c.dev[i].total_cmp(&c.dev[j])).expect("non-empty");
-                            pts.push((c.tau[i], cf.value * 0.664));
+                            // Drawn where the curve is closest to the floor.
+                            let floor = cf.value * 0.664;
+                            let i = (0..c.dev.len())
+                                .min_by(|&i, &j| (c.dev[i] - floor).abs().total_cmp(&(c.dev[j] - floor).abs()))
+                                .expect("non-empty");
+                            pts.push((c.tau[i], floor));
                         } else {
                             pts.push((rt, cf.value * basis(rt)[term].sqrt()));
                         }
