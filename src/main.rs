@@ -384,6 +384,14 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // Large buffers always mmap'd, so what one stage frees goes back to the
+    // system (glibc otherwise raises its mmap threshold after the first free
+    // and keeps the memory in its heap: the Allan stage's axes would add up).
+    #[cfg(target_os = "linux")]
+    // SAFETY: called before any other thread starts; only tunes the allocator.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 20);
+    }
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

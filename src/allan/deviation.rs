@@ -250,6 +250,12 @@ fn planner() -> &'static std::sync::Mutex<RealFftPlanner<f64>> {
     PLANNER.get_or_init(|| std::sync::Mutex::new(RealFftPlanner::new()))
 }
 
+/// Serializes the transforms of parallel axes (see [`RateCorrelation::new`]).
+fn fft_lock() -> &'static std::sync::Mutex<()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    &LOCK
+}
+
 /// Block weights of the rate kernel of an order-d phase difference.
 fn block_weights(d: usize) -> &'static [f64] {
     match d {
@@ -266,20 +272,26 @@ impl<'a> RateCorrelation<'a> {
         let max_lag = max_lag.min(n.saturating_sub(1));
         let y = |j: usize| x[j + 1] - x[j];
         let nfft = fast_len(n + max_lag + 1);
-        let (fwd, inv) = {
-            let mut p = planner().lock().unwrap_or_else(|e| e.into_inner());
-            (p.plan_fft_forward(nfft), p.plan_fft_inverse(nfft))
-        };
+        let fwd = planner().lock().unwrap_or_else(|e| e.into_inner()).plan_fft_forward(nfft);
+        // One FFT at a time in the process: when several axes run in
+        // parallel, only one holds the two large transform buffers, which
+        // keeps the working memory under twice the six-axis data.
+        let fft_guard = fft_lock().lock().unwrap_or_else(|e| e.into_inner());
         let mut buf = crate::io::mem::filled_huge(nfft, 0.0);
         buf[..n].par_iter_mut().enumerate().for_each(|(j, v)| *v = y(j));
         let mut spec = crate::io::mem::filled_huge(nfft / 2 + 1, realfft::num_complex::Complex::new(0.0, 0.0));
         fwd.process(&mut buf, &mut spec).expect("buffer sizes come from the plan");
-        spec.par_iter_mut().for_each(|c| *c = realfft::num_complex::Complex::new(c.norm_sqr(), 0.0));
-        inv.process(&mut spec, &mut buf).expect("buffer sizes come from the plan");
+        // The power spectrum P is real and even, so its inverse transform is
+        // its forward transform (real part): mirror P into the real buffer
+        // and reuse the forward plan (no second plan and its twiddle table).
+        buf.par_iter_mut().enumerate().for_each(|(k, v)| *v = spec[k.min(nfft - k)].norm_sqr());
+        fwd.process(&mut buf, &mut spec).expect("buffer sizes come from the plan");
+        buf.truncate(max_lag + 1);
+        buf.par_iter_mut().enumerate().for_each(|(j, v)| *v = spec[j].re);
         drop(spec);
         let scale = 1.0 / nfft as f64;
-        buf.truncate(max_lag + 1);
         buf.shrink_to_fit();
+        drop(fft_guard);
         buf.par_iter_mut().for_each(|v| *v *= scale);
         // Exact R(0), and the FFT's round-off measured on a few lags
         // recomputed exactly, with a factor 10 of margin over the largest

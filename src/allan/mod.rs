@@ -197,8 +197,12 @@ pub fn allan_deviation_axes(
 /// `tau0` seconds — the form Stable32's PHASE.DAT is in.
 pub fn allan_deviation_from_phase(x: &[f64], tau0: f64, opts: &AllanOptions) -> Result<AllanCurve, AllanError> {
     check_input(x, tau0, 2 * opts.kind.difference_order() + 2, "phase sample", opts.kind)?;
-    // In units of frequency × samples, as `phase_of` makes it.
-    let scaled: Vec<f64> = x.iter().map(|v| v / tau0).collect();
+    // In units of frequency × samples, as `phase_of` makes it, and without
+    // the line through the end points (a frequency offset, which no Allan-type
+    // deviation sees) so the rate under it has zero mean.
+    let n = (x.len() - 1) as f64;
+    let slope = (x[x.len() - 1] - x[0]) / n;
+    let scaled: Vec<f64> = x.iter().enumerate().map(|(i, v)| (v - x[0] - slope * i as f64) / tau0).collect();
     curve_from_phase(&scaled, tau0, opts, &|| {})
 }
 
