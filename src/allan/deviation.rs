@@ -250,12 +250,6 @@ fn planner() -> &'static std::sync::Mutex<RealFftPlanner<f64>> {
     PLANNER.get_or_init(|| std::sync::Mutex::new(RealFftPlanner::new()))
 }
 
-/// Serializes the transforms of parallel axes (see [`RateCorrelation::new`]).
-fn fft_lock() -> &'static std::sync::Mutex<()> {
-    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    &LOCK
-}
-
 /// Block weights of the rate kernel of an order-d phase difference.
 fn block_weights(d: usize) -> &'static [f64] {
     match d {
@@ -273,10 +267,6 @@ impl<'a> RateCorrelation<'a> {
         let y = |j: usize| x[j + 1] - x[j];
         let nfft = fast_len(n + max_lag + 1);
         let fwd = planner().lock().unwrap_or_else(|e| e.into_inner()).plan_fft_forward(nfft);
-        // One FFT at a time in the process: when several axes run in
-        // parallel, only one holds the two large transform buffers, which
-        // keeps the working memory under twice the six-axis data.
-        let fft_guard = fft_lock().lock().unwrap_or_else(|e| e.into_inner());
         let mut buf = crate::io::mem::filled_huge(nfft, 0.0);
         buf[..n].par_iter_mut().enumerate().for_each(|(j, v)| *v = y(j));
         let mut spec = crate::io::mem::filled_huge(nfft / 2 + 1, realfft::num_complex::Complex::new(0.0, 0.0));
@@ -291,7 +281,6 @@ impl<'a> RateCorrelation<'a> {
         drop(spec);
         let scale = 1.0 / nfft as f64;
         buf.shrink_to_fit();
-        drop(fft_guard);
         buf.par_iter_mut().for_each(|v| *v *= scale);
         // Exact R(0), and the FFT's round-off measured on a few lags
         // recomputed exactly, with a factor 10 of margin over the largest
