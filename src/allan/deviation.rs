@@ -126,6 +126,26 @@ pub(crate) fn mean_compensated(y: &[f64]) -> f64 {
     }
 }
 
+/// A running sum with Kahan compensation.
+#[derive(Clone, Copy, Debug, Default)]
+struct Kahan {
+    sum: f64,
+    compensation: f64,
+}
+
+impl Kahan {
+    fn add(&mut self, v: f64) {
+        let y = v - self.compensation;
+        let t = self.sum + y;
+        self.compensation = (t - self.sum) - y;
+        self.sum = t;
+    }
+
+    fn value(&self) -> f64 {
+        self.sum
+    }
+}
+
 /// Binomial difference coefficients of order d (alternating signs), d ≤ 3.
 fn coefficients(d: usize) -> &'static [f64] {
     match d {
@@ -140,22 +160,18 @@ fn coefficients(d: usize) -> &'static [f64] {
 fn difference_sum(x: &[f64], m: usize, d: usize, stride: usize) -> (f64, usize) {
     let c = coefficients(d);
     let last = x.len() - 1 - d * m; // last start index
-    let (mut s, mut comp, mut count) = (0.0f64, 0.0f64, 0usize);
+    let (mut sum, mut count) = (Kahan::default(), 0usize);
     let mut i = 0;
     while i <= last {
         let mut v = 0.0;
         for (k, &ck) in c.iter().enumerate() {
             v += ck * x[i + k * m];
         }
-        // Kahan on the (positive) squares.
-        let yv = v * v - comp;
-        let t = s + yv;
-        comp = (t - s) - yv;
-        s = t;
+        sum.add(v * v);
         count += 1;
         i += stride;
     }
-    (s, count)
+    (sum.value(), count)
 }
 
 /// Modified Allan variance sum: Σ_j (Σ_{i=j}^{j+m−1} Δ²x(i))² over
@@ -163,30 +179,20 @@ fn difference_sum(x: &[f64], m: usize, d: usize, stride: usize) -> (f64, usize) 
 fn modified_sum(x: &[f64], m: usize) -> (f64, usize) {
     let n = x.len();
     let d2 = |i: usize| x[i + 2 * m] - 2.0 * x[i + m] + x[i];
-    let mut inner = 0.0;
-    let mut inner_c = 0.0; // compensation of the running window
+    // The running window and the sum of its squares, both compensated.
+    let mut inner = Kahan::default();
     for i in 0..m {
-        let y = d2(i) - inner_c;
-        let t = inner + y;
-        inner_c = (t - inner) - y;
-        inner = t;
+        inner.add(d2(i));
     }
     let count = n - 3 * m + 1;
-    let (mut s, mut comp) = (0.0f64, 0.0f64);
+    let mut sum = Kahan::default();
     for j in 0..count {
-        let yv = inner * inner - comp;
-        let t = s + yv;
-        comp = (t - s) - yv;
-        s = t;
+        sum.add(inner.value() * inner.value());
         if j + 1 < count {
-            let delta = d2(j + m) - d2(j);
-            let y = delta - inner_c;
-            let t = inner + y;
-            inner_c = (t - inner) - y;
-            inner = t;
+            inner.add(d2(j + m) - d2(j));
         }
     }
-    (s, count)
+    (sum.value(), count)
 }
 
 /// The variance (not deviation) for one m by the direct O(N) path, or None
@@ -294,14 +300,11 @@ impl<'a> RateCorrelation<'a> {
         let prefix = |len: usize, f: &(dyn Fn(usize) -> f64 + Sync)| -> Vec<f64> {
             let mut p = Vec::new();
             crate::io::mem::reserve_huge(&mut p, len + 1);
-            let (mut s, mut c) = (0.0f64, 0.0f64);
+            let mut sum = Kahan::default();
             p.push(0.0);
             for k in 1..=len {
-                let v = f(k) - c;
-                let t = s + v;
-                c = (t - s) - v;
-                s = t;
-                p.push(s);
+                sum.add(f(k));
+                p.push(sum.value());
             }
             p
         };
