@@ -2,18 +2,11 @@
 //! data (../shared/data; skipped with a message when absent), identification
 //! on simulated logs with known truth, and bad input.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tumble::allan::{allan_deviation, allan_deviation_from_phase, edf, identify, AllanOptions, DeviationKind, TauGrid};
 
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        eprintln!("skipped: {} not found", p.display());
-        None
-    }
-}
+mod common;
+use common::shared;
 
 /// One row of a Stable32 table.
 #[derive(Debug)]

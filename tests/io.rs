@@ -7,15 +7,8 @@ use tumble::io::trajectory::{read_trajectory, write_asl_groundtruth, write_tum, 
 use tumble::io::validate::{Duplicates, ValidateOptions};
 use tumble::io::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, Stored, TimeUnit};
 
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!("SKIPPED: {} is absent", p.display());
-        None
-    }
-}
+mod common;
+use common::shared;
 
 fn tmp(name: &str, text: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("tumble-io-{}", std::process::id()));

@@ -1,7 +1,7 @@
 //! g2o and BAL readers: every malformed input is an error naming file and line;
 //! real benchmark files reach the costs the peers print.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use tumble::io::bal::parse_bal;
 use tumble::io::g2o::{parse_g2o, read_g2o, BadInformation, G2oOptions, PoseKind};
 use tumble_solvers::{LmOptions, Optimizer};
@@ -72,15 +72,8 @@ fn bal_errors_name_file_and_line() {
     assert!(e.starts_with("b.txt:13:") && e.contains("extra data"), "{e}");
 }
 
-fn shared(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
-    if p.exists() {
-        Some(p)
-    } else {
-        println!("SKIPPED: {} is absent (the shared data folder is not beside the project)", p.display());
-        None
-    }
-}
+mod common;
+use common::shared;
 
 /// Real benchmark graphs reach the final cost GTSAM/Ceres/factrs print (0.5·χ²).
 #[test]
