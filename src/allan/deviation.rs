@@ -11,13 +11,13 @@
 //!   log (a 24-hour 1 kHz log has 8.6·10⁷ samples).
 //! * **Direct path**: one pass of length N per m (O(N) per τ).
 //! * **Correlation path** (overlapping Allan and Hadamard with many τ): the
-//!   sum of squared differences expands into autocorrelations of x at lags m,
-//!   2m, 3m over windows that differ from the full series only by O(m) samples
-//!   at the ends. One FFT gives the full autocorrelation at every lag, so each τ
-//!   then costs O(m) instead of O(N) — the work is shared across all τ. The
-//!   phase is detrended first (differences of order ≥ 2 ignore a linear trend),
-//!   the FFT's round-off is measured on a few lags recomputed exactly, and
-//!   for every τ that bound is compared with the result; where it could reach
+//!   sum of squared differences is the squared norm of the rate filtered by a
+//!   kernel of d blocks of m samples. One FFT autocorrelation R of the rate,
+//!   with prefix sums of R and δ·R, gives the full-convolution norm in O(d)
+//!   per τ; the outputs where the kernel overhangs the record's ends are
+//!   subtracted from the phase in O(m) (see [`RateCorrelation`]). The FFT's
+//!   round-off is measured on a few lags recomputed exactly, and for every τ
+//!   that bound is compared with the result; where it could reach
 //!   [`CORRELATION_TOLERANCE`] relative, that τ is computed directly.
 //!
 //! Definitions follow NIST SP 1065 (Riley, *Handbook of Frequency Stability
