@@ -33,12 +33,12 @@ struct RecordingArgs {
     /// Text files: unit of the time column (s, ms, us, ns).
     #[arg(long, default_value = "ns", value_parser = |s: &str| TimeUnit::parse(s).ok_or("use s, ms, us or ns"))]
     time_unit: TimeUnit,
-    /// Text files: gyro unit: rad/s, deg/s, counts (kept raw) or counts:SCALE[:OFFSET] (SCALE in rad/s per count).
-    #[arg(long, default_value = "rad/s", value_parser = |s: &str| GyroUnit::parse(s))]
-    gyro_unit: GyroUnit,
-    /// Text files: accelerometer unit: m/s2, g, counts or counts:SCALE[:OFFSET] (SCALE in m/s² per count).
-    #[arg(long, default_value = "m/s2", value_parser = |s: &str| AccelUnit::parse(s))]
-    accel_unit: AccelUnit,
+    /// Text files: gyro unit: rad/s (default), deg/s, counts (kept raw) or counts:SCALE[:OFFSET] (SCALE in rad/s per count).
+    #[arg(long, value_parser = |s: &str| GyroUnit::parse(s))]
+    gyro_unit: Option<GyroUnit>,
+    /// Text files: accelerometer unit: m/s2 (default), g, counts or counts:SCALE[:OFFSET] (SCALE in m/s² per count).
+    #[arg(long, value_parser = |s: &str| AccelUnit::parse(s))]
+    accel_unit: Option<AccelUnit>,
     /// imu_tk layout: the gyro file (`t x y z`); the recording argument is then the accelerometer file.
     #[arg(long)]
     gyro_file: Option<PathBuf>,
@@ -61,8 +61,8 @@ impl RecordingArgs {
         let mut o = RecordingOptions::default();
         o.format.columns = self.columns.clone();
         o.format.time_unit = self.time_unit;
-        o.format.gyro_unit = self.gyro_unit;
-        o.format.accel_unit = self.accel_unit;
+        o.format.gyro_unit = self.gyro_unit.unwrap_or(GyroUnit::RadPerS);
+        o.format.accel_unit = self.accel_unit.unwrap_or(AccelUnit::MetersPerS2);
         o.format.validate.nominal_rate = self.rate;
         o.format.validate.check_units = !self.no_unit_check;
         if self.strict_timestamps {
@@ -71,6 +71,85 @@ impl RecordingArgs {
         o.gyro_file = self.gyro_file.clone();
         o.topic = self.topic.clone();
         o
+    }
+}
+
+/// Input layouts of `calibrate` and `apply`.
+#[derive(Clone, Copy, ValueEnum, PartialEq)]
+enum InputFormat {
+    /// By the path: ASL folder, .bag/.mcap, or text with --columns.
+    Auto,
+    /// imu_tk's two files `t x y z` (time in s; raw counts or SI, recognised from the data).
+    #[value(alias = "imu_tk")]
+    ImuTk,
+}
+
+/// The recording a calibration command reads.
+#[derive(Args, Clone)]
+struct CalibInput {
+    /// ASL folder, ROS bag/MCAP or text file (or give --accel and --gyro).
+    recording: Option<PathBuf>,
+    /// imu_tk layout: the accelerometer file.
+    #[arg(long, requires = "gyro")]
+    accel: Option<PathBuf>,
+    /// imu_tk layout: the gyro file.
+    #[arg(long, requires = "accel")]
+    gyro: Option<PathBuf>,
+    /// Input layout.
+    #[arg(long, value_enum, default_value = "auto")]
+    format: InputFormat,
+    #[command(flatten)]
+    read: RecordingArgs,
+}
+
+impl CalibInput {
+    /// The main path and the reader options, imu_tk pairs resolved.
+    fn resolve(&self) -> Result<(PathBuf, RecordingOptions, bool), String> {
+        let mut o = self.read.options();
+        let imu_tk = self.format == InputFormat::ImuTk || self.accel.is_some();
+        let path = match (&self.recording, &self.accel) {
+            (Some(_), Some(_)) => return Err("give either a recording or --accel/--gyro, not both".into()),
+            (Some(p), None) => p.clone(),
+            (None, Some(a)) => {
+                o.gyro_file = self.gyro.clone();
+                a.clone()
+            }
+            (None, None) => {
+                return Err("no input: give a recording (ASL folder, bag, text) or --accel and --gyro".into())
+            }
+        };
+        if imu_tk {
+            if o.gyro_file.is_none() {
+                return Err("--format imu_tk needs --accel FILE --gyro FILE (or --gyro-file)".into());
+            }
+            if self.read.time_unit == TimeUnit::Ns {
+                o.format.time_unit = TimeUnit::S;
+            }
+            // Units recognised from the data unless declared.
+            if self.read.accel_unit.is_none() && self.read.gyro_unit.is_none() {
+                o.format.accel_unit = AccelUnit::Counts { scale: None, offset: 0.0 };
+                o.format.gyro_unit = GyroUnit::Counts { scale: None, offset: 0.0 };
+            }
+        }
+        let auto_units = imu_tk && self.read.accel_unit.is_none() && self.read.gyro_unit.is_none();
+        Ok((path, o, auto_units))
+    }
+
+    /// Read the recording; imu_tk files without declared units are SI when the
+    /// accelerometer reads ≈ 1 g at rest, raw counts otherwise.
+    fn open(&self) -> Result<(tumble::io::ImuRecording, PathBuf, RecordingOptions), Box<dyn std::error::Error>> {
+        let (path, o, auto_units) = self.resolve()?;
+        let mut rec = tumble::io::open_recording(&path, &o)?;
+        if auto_units {
+            let n = rec.len().min(((rec.mean_rate() * 5.0) as usize).max(10));
+            let m = tumble::calib::detect::mean3(&rec.accel[..n]);
+            let g = (m[0] * m[0] + m[1] * m[1] + m[2] * m[2]).sqrt();
+            if (7.0..13.0).contains(&g) {
+                rec.accel_units = tumble::io::Stored::Si;
+                rec.gyro_units = tumble::io::Stored::Si;
+            }
+        }
+        Ok((rec, path, o))
     }
 }
 
@@ -132,6 +211,58 @@ enum Command {
         /// Analyse only this time span of the recording [s from its start], e.g. 0:3600.
         #[arg(long)]
         span: Option<String>,
+    },
+    /// Calibrate accelerometer and gyroscope from one hand-tumbled recording
+    /// (≥ 50 s still, then many poses held still): writes calibration.json/.yaml,
+    /// imu_tk_acc.calib, imu_tk_gyro.calib and static_detection.png.
+    Calibrate {
+        #[command(flatten)]
+        input: CalibInput,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Local gravity [m/s²] (default: WGS-84 at --latitude/--height, else 9.80665).
+        #[arg(long, conflicts_with = "latitude")]
+        gravity: Option<f64>,
+        /// Geodetic latitude [deg] for WGS-84 normal gravity.
+        #[arg(long)]
+        latitude: Option<f64>,
+        /// Ellipsoidal height [m] for WGS-84 normal gravity (with --latitude).
+        #[arg(long, default_value_t = 0.0, requires = "latitude")]
+        height: f64,
+        /// Length of the initial static period [s].
+        #[arg(long, default_value_t = 50.0)]
+        init_static: f64,
+        /// Window of the sliding accelerometer variance [s] (imu_tk: 101 samples).
+        #[arg(long, default_value_t = 0.5)]
+        window: f64,
+        /// Shortest usable static interval [s] (imu_tk: 100 samples).
+        #[arg(long, default_value_t = 0.5)]
+        min_interval: f64,
+        /// Threshold multipliers to sweep: FIRST:LAST (integers) or a comma list.
+        #[arg(long, default_value = "2:10")]
+        multipliers: String,
+        /// Estimate the gyro bias with the other gyro parameters (default: mean of the initial static period).
+        #[arg(long)]
+        estimate_gyro_bias: bool,
+        /// Fewest static intervals accepted.
+        #[arg(long, default_value_t = 12)]
+        min_intervals: usize,
+        /// Detect static intervals from the accelerometer alone, as imu_tk does
+        /// (default: the gyro must be still too).
+        #[arg(long)]
+        accel_only_detection: bool,
+    },
+    /// Correct a recording with a calibration (paper eq. 16) and write it in the format it was read.
+    Apply {
+        #[command(flatten)]
+        input: CalibInput,
+        /// calibration.json or .yaml from `tumble calibrate`.
+        #[arg(long)]
+        calibration: PathBuf,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
     },
     /// Run the main job on embedded default data. (Temporary: until the
     /// calibration pipeline exists, this solves a simulated SE(3) pose graph
@@ -279,6 +410,99 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
             );
         }
+        Command::Calibrate {
+            input,
+            out,
+            gravity,
+            latitude,
+            height,
+            init_static,
+            window,
+            min_interval,
+            multipliers,
+            estimate_gyro_bias,
+            min_intervals,
+            accel_only_detection,
+        } => {
+            let start = std::time::Instant::now();
+            let (rec, _, _) = input.open()?;
+            for w in &rec.warnings {
+                eprintln!("warning: {w}");
+            }
+            let gravity = match (gravity, latitude) {
+                (Some(g), _) => g,
+                (None, Some(lat)) => {
+                    if !(-90.0..=90.0).contains(&lat) || !height.is_finite() {
+                        return Err(
+                            format!("--latitude must be within ±90° and --height finite, got {lat}, {height}").into()
+                        );
+                    }
+                    tumble::calib::normal_gravity(lat, height)
+                }
+                (None, None) => {
+                    eprintln!("note: no --gravity or --latitude given; using standard gravity 9.80665 m/s²");
+                    tumble::io::STANDARD_GRAVITY
+                }
+            };
+            for (v, name) in [(init_static, "--init-static"), (window, "--window"), (min_interval, "--min-interval")] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(format!("{name} must be positive, got {v}").into());
+                }
+            }
+            let opts = tumble::calib::CalibOptions {
+                gravity,
+                init_static_s: init_static,
+                window_s: window,
+                min_interval_s: min_interval,
+                multipliers: parse_multipliers(&multipliers)?,
+                estimate_gyro_bias,
+                min_intervals: min_intervals.max(10),
+                detect_with_gyro: !accel_only_detection,
+            };
+            eprintln!("read {} samples ({:.1} s) in {:.2} s", rec.len(), rec.duration(), start.elapsed().as_secs_f64());
+            let t = std::time::Instant::now();
+            let result = tumble::calib::calibrate(&rec, &opts)?;
+            let elapsed = t.elapsed().as_secs_f64();
+            print!("{}", result.summary_table());
+            for w in &result.warnings {
+                eprintln!("warning: {w}");
+            }
+            let files = result.write_all(&rec, &opts, &out)?;
+            println!(
+                "calibrated in {elapsed:.3} s; wrote {}",
+                files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+            );
+        }
+        Command::Apply { input, calibration, out } => {
+            let cal = tumble::calib::ImuCalibration::read(&calibration)?;
+            let (mut rec, path, o) = input.open()?;
+            let check = |what: &str, stored: tumble::io::Stored, expected: &str| -> Result<(), String> {
+                let got = if stored == tumble::io::Stored::RawCounts { "counts" } else { "SI" };
+                let exp = if expected == "counts" { "counts" } else { "SI" };
+                if got != exp {
+                    return Err(format!(
+                        "{}: the {what} was calibrated on {exp} input but this recording's {what} is read as {got}",
+                        calibration.display()
+                    ));
+                }
+                Ok(())
+            };
+            check("accelerometer", rec.accel_units, &cal.units.accel_input)?;
+            check("gyro", rec.gyro_units, &cal.units.gyro_input)?;
+            let corr = cal.corrector().ok_or("calibration matrices are singular")?;
+            for i in 0..rec.len() {
+                rec.accel[i] = corr.accel(rec.accel[i]);
+                rec.gyro[i] = corr.gyro(rec.gyro[i]);
+            }
+            rec.accel_units = tumble::io::Stored::Si;
+            rec.gyro_units = tumble::io::Stored::Si;
+            let written = tumble::calib::write_like_input(&rec, &path, &o, &out)?;
+            println!(
+                "corrected {} samples (eq. 16) into {}",
+                rec.len(),
+                written.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+            );
+        }
         Command::Demo => {
             println!("tumble demo (temporary): simulated SE(3) helix pose graph, 3 laps × 200 poses, known truth");
             let sim = tumble::posegraph::simulate_helix(200, 3, 5.0, 0.01, 0.05, 7);
@@ -358,6 +582,21 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
 }
 
 /// `A:B` seconds from the start of the recording (either end may be empty).
+/// `FIRST:LAST` (integer steps) or a comma-separated list of positive multipliers.
+fn parse_multipliers(s: &str) -> Result<Vec<f64>, String> {
+    let bad = || format!("--multipliers: expected FIRST:LAST or a comma list of positive numbers, got `{s}`");
+    let v: Vec<f64> = if let Some((a, b)) = s.split_once(':') {
+        let (a, b): (u32, u32) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+        (a..=b).map(f64::from).collect()
+    } else {
+        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?
+    };
+    if v.is_empty() || v.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+        return Err(bad());
+    }
+    Ok(v)
+}
+
 fn parse_span(s: &str) -> Result<(f64, f64), String> {
     let (a, b) = s.split_once(':').ok_or_else(|| format!("--span: expected START:END in seconds, got `{s}`"))?;
     let num = |v: &str, default: f64| -> Result<f64, String> {

@@ -47,3 +47,31 @@ fn snavely_autodiff_matches_numeric() {
     let cam0 = nalgebra::SVector::<f64, 9>::from_column_slice(&[0.0, 0.0, 0.0, 0.1, -0.2, -3.0, 500.0, -1e-3, 1e-6]);
     assert_ok(&f, &[&cam0, &pt]);
 }
+
+#[test]
+fn imu_calibration_factors() {
+    use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
+    use tumble_factors::{GravityNormFactor, IntegratedRotationFactor};
+    let key = tumble_solvers::Key::new('a', 0);
+    // Raw counts around 33000 with a scale of 1/415 m/s² per count, as the Xsens data.
+    let p = AccelParams::from_row_slice(&[2.41e-3, -8e-6, 2e-5, 2.43e-3, 5e-5, 2.41e-3, 33124.0, 33275.0, 32364.0]);
+    assert_ok(&GravityNormFactor::new(key, Vector3::new(33500.0, 29300.0, 33100.0), 9.81), &[&p]);
+    // A 100-sample turn of ≈ 90° about a moving axis, with misalignment and bias.
+    let raw: Vec<[f64; 3]> = (0..100)
+        .map(|i| {
+            let s = (i as f64 / 99.0 * std::f64::consts::PI).sin();
+            [1.2 * s + 0.01, -0.6 * s * s, 0.3 * s + 0.2 * (i as f64 * 0.1).cos()]
+        })
+        .collect();
+    let m = GyroMatrix::from_row_slice(&[1.01, 0.02, -0.01, -0.015, 0.99, 0.03, 0.02, -0.01, 1.005]);
+    let b = Vector3::new(0.01, -0.02, 0.005);
+    let f = IntegratedRotationFactor::new(
+        [tumble_solvers::Key::new('g', 0), tumble_solvers::Key::new('g', 1)],
+        raw,
+        vec![0.02; 99],
+        Vector3::new(0.1, 0.2, 1.0),
+        Vector3::new(0.7, -0.1, 0.6),
+    )
+    .unwrap();
+    assert_ok(&f, &[&m, &b]);
+}

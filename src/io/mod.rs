@@ -5,6 +5,7 @@ pub mod bal;
 pub mod g2o;
 pub mod imu;
 pub mod imu_text;
+pub mod imu_write;
 pub(crate) mod mem;
 pub mod recording;
 pub mod rosbag;

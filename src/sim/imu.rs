@@ -28,6 +28,21 @@ pub struct SimulatedImu {
     pub bias_accel: Vec<[f64; 3]>,
 }
 
+impl SimulatedImu {
+    /// The measurements as an in-memory [`crate::io::ImuRecording`] (SI units,
+    /// stamps from 0 s; source name `<simulation>`), as a reader would return them.
+    pub fn to_recording(&self) -> crate::io::ImuRecording {
+        crate::io::ImuRecording {
+            sources: vec!["<simulation>".into()],
+            t: self.t.clone(),
+            gyro: self.gyro.clone(),
+            accel: self.accel.clone(),
+            temperature: self.temperature.clone(),
+            ..Default::default()
+        }
+    }
+}
+
 fn rng(seed: u64, stream: u64) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(seed);
     r.set_stream(stream);

@@ -35,15 +35,6 @@ fn push_f64(out: &mut Vec<u8>, x: f64) {
     out.extend_from_slice(ryu::Buffer::new().format(x).as_bytes());
 }
 
-fn imu_header(temperature: bool) -> String {
-    let mut header = String::from("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]");
-    if temperature {
-        header.push_str(",temperature [degC]");
-    }
-    header.push('\n');
-    header
-}
-
 /// Format samples `range` of the IMU CSV, in parallel pieces, in order.
 fn format_imu_rows(imu: &SimulatedImu, t0_ns: i64, rate_hz: f64, range: std::ops::Range<usize>) -> Vec<Vec<u8>> {
     const PIECE: usize = 1 << 13;
@@ -98,7 +89,7 @@ pub fn simulate_and_write(
         let mut send = |imu: &SimulatedImu, range: std::ops::Range<usize>| {
             let mut pieces = Vec::new();
             if !header_sent {
-                pieces.push(imu_header(imu.temperature.is_some()).into_bytes());
+                pieces.push(crate::io::imu_write::asl_imu_header(imu.temperature.is_some()).into_bytes());
                 header_sent = true;
             }
             pieces.extend(format_imu_rows(imu, t0, rate, range));
@@ -118,7 +109,8 @@ pub fn simulate_and_write(
 /// Write the IMU CSV of an in-memory simulation.
 fn write_imu_csv(path: &Path, sim: &Simulation) -> Result<(), InputError> {
     let mut w = create(path)?;
-    w.write_all(imu_header(sim.imu.temperature.is_some()).as_bytes()).map_err(|e| werr(path, e))?;
+    w.write_all(crate::io::imu_write::asl_imu_header(sim.imu.temperature.is_some()).as_bytes())
+        .map_err(|e| werr(path, e))?;
     let n = sim.imu.t.len();
     for c0 in (0..n).step_by(1 << 18) {
         for piece in format_imu_rows(&sim.imu, sim.config.t0_ns, sim.config.imu.rate_hz, c0..(c0 + (1 << 18)).min(n)) {

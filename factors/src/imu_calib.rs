@@ -1,0 +1,277 @@
+//! Factors of turntable-free IMU calibration (paper §2, after Tedaldi, Pretto
+//! and Menegatti, ICRA 2014 — the method of imu_tk).
+//!
+//! Both factors work on the *inverse* sensor model, the map from raw readings
+//! to physical quantities, because it is linear in its parameters:
+//!
+//! ```text
+//! a = M_a (ã − b_a)      M_a = (T_a K_a)⁻¹, upper triangular (6 entries)
+//! ω = M_g (ω̃ − b_g)      M_g = (T_g K_g)⁻¹, full 3×3 (9 entries)
+//! ```
+//!
+//! `M = T'·K'` with unit-diagonal `T'` and diagonal `K'` is exactly imu_tk's
+//! `calibrated = T·K·(raw − b)`; the paper's `T`, `K` follow from `M⁻¹` (its
+//! diagonal is `K`). Raw readings are in the sensor's units (counts or SI);
+//! `a` is in m/s², `ω` in rad/s.
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x2, SMatrix, SVector, Vector3};
+use tumble_solvers::lie::{hat, so3_exp, so3_right_jacobian};
+use tumble_solvers::{Factor, FactorError, Key, Linearization, Vars};
+
+/// Accelerometer parameters `[m00, m01, m02, m11, m12, m22, b0, b1, b2]`: the
+/// upper triangle of `M_a` (row major) and the bias `b_a` \[raw units\].
+pub type AccelParams = SVector<f64, 9>;
+
+/// Gyroscope matrix `M_g`, row major (9 entries).
+pub type GyroMatrix = SVector<f64, 9>;
+
+/// Index pairs `(row, col)` of the upper triangle in [`AccelParams`] order.
+pub const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+
+/// `M_a` from accelerometer parameters.
+pub fn accel_matrix(p: &AccelParams) -> Matrix3<f64> {
+    let mut m = Matrix3::zeros();
+    for (k, &(r, c)) in UPPER.iter().enumerate() {
+        m[(r, c)] = p[k];
+    }
+    m
+}
+
+/// `M_g` from its row-major parameters.
+pub fn gyro_matrix(p: &GyroMatrix) -> Matrix3<f64> {
+    Matrix3::from_row_slice(p.as_slice())
+}
+
+/// Gravity-norm factor (paper eq. 5–6) of one static interval:
+/// `r = g² − ‖M_a (ā − b_a)‖²` \[m²/s⁴\], with `ā` the mean raw accelerometer
+/// reading of the interval and `g` the local gravity \[m/s²\]. One key: [`AccelParams`].
+///
+/// ```
+/// use tumble_factors::imu_calib::{AccelParams, GravityNormFactor};
+/// use tumble_solvers::{check_jacobians, Factor, Key};
+/// use nalgebra::Vector3;
+/// let f = GravityNormFactor::new(Key::new('a', 0), Vector3::new(0.1, -0.2, 9.7), 9.81);
+/// let p = AccelParams::from_row_slice(&[1.0, 0.01, 0.0, 1.0, 0.02, 1.0, 0.0, 0.1, 0.0]);
+/// assert!(check_jacobians(&f, &[&p]).unwrap().passes(1e-6));
+/// ```
+#[derive(Clone, Debug)]
+pub struct GravityNormFactor {
+    keys: [Key; 1],
+    raw_mean: Vector3<f64>,
+    gravity: f64,
+}
+
+impl GravityNormFactor {
+    /// Factor for one interval with mean raw reading `raw_mean` and gravity `gravity` \[m/s²\].
+    pub fn new(key: Key, raw_mean: Vector3<f64>, gravity: f64) -> Self {
+        GravityNormFactor { keys: [key], raw_mean, gravity }
+    }
+    /// Calibrated specific force of this interval under `p` \[m/s²\].
+    pub fn calibrated(&self, p: &AccelParams) -> Vector3<f64> {
+        accel_matrix(p) * (self.raw_mean - Vector3::new(p[6], p[7], p[8]))
+    }
+}
+
+impl Factor for GravityNormFactor {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        1
+    }
+    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+        let p: &AccelParams = vars.get(0)?;
+        Ok(DVector::from_element(1, self.gravity * self.gravity - self.calibrated(p).norm_squared()))
+    }
+    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+        let p: &AccelParams = vars.get(0)?;
+        let d = self.raw_mean - Vector3::new(p[6], p[7], p[8]);
+        let m = accel_matrix(p);
+        let c = m * d;
+        let mut j = DMatrix::zeros(1, 9);
+        for (k, &(r, col)) in UPPER.iter().enumerate() {
+            j[(0, k)] = -2.0 * c[r] * d[col];
+        }
+        let jb = 2.0 * m.transpose() * c;
+        for k in 0..3 {
+            j[(0, 6 + k)] = jb[k];
+        }
+        let r = DVector::from_element(1, self.gravity * self.gravity - c.norm_squared());
+        Ok(Linearization { residual: r, jacobians: vec![j] })
+    }
+}
+
+/// Integrated-rotation factor (paper eq. 8–9) of one motion between two static
+/// intervals: the calibrated gravity direction `g₀` of the interval before is
+/// carried by the integral of the calibrated gyro samples and compared with
+/// the direction `g₁` of the interval after.
+///
+/// `R = Π_i Exp(M_g (ū_i − b_g) Δt_i)` with `ū_i` the mean of raw samples `i`
+/// and `i+1` (exact SO(3) steps at the mid-interval rate, second order like
+/// imu_tk's RK4 on linearly interpolated rates); the residual is
+/// `r = Bᵀ Rᵀ g₀` \[rad\], `B` an orthonormal 3×2 basis orthogonal to `g₁`, i.e.
+/// the small-angle error of the predicted direction. Keys: [`GyroMatrix`] and the
+/// gyro bias (`Vector3`, raw units; hold it constant to use the static-period mean).
+///
+/// ```
+/// use tumble_factors::imu_calib::{GyroMatrix, IntegratedRotationFactor};
+/// use tumble_solvers::{check_jacobians, Key};
+/// use nalgebra::Vector3;
+/// let raw: Vec<[f64; 3]> = (0..50).map(|i| [0.3, 0.1 * (i as f64 * 0.1).sin(), -0.2]).collect();
+/// let f = IntegratedRotationFactor::new([Key::new('g', 0), Key::new('g', 1)], raw, vec![0.01; 49],
+///     Vector3::z(), Vector3::new(0.1, 0.0, 1.0).normalize()).unwrap();
+/// let m = GyroMatrix::from_row_slice(&[1.0, 0.01, 0.0, -0.01, 1.0, 0.02, 0.0, 0.0, 1.0]);
+/// let b = Vector3::new(0.01, 0.0, -0.01);
+/// assert!(check_jacobians(&f, &[&m, &b]).unwrap().passes(1e-6));
+/// ```
+#[derive(Clone, Debug)]
+pub struct IntegratedRotationFactor {
+    keys: [Key; 2],
+    raw: Vec<[f64; 3]>,
+    dt: Vec<f64>,
+    g0: Vector3<f64>,
+    basis: Matrix3x2<f64>,
+}
+
+impl IntegratedRotationFactor {
+    /// Factor over raw gyro samples `raw` (n ≥ 2) with step lengths `dt`
+    /// (n − 1, \[s\]) from unit direction `g0` to `g1` (calibrated, sensor frame).
+    pub fn new(
+        keys: [Key; 2],
+        raw: Vec<[f64; 3]>,
+        dt: Vec<f64>,
+        g0: Vector3<f64>,
+        g1: Vector3<f64>,
+    ) -> Result<Self, FactorError> {
+        if raw.len() < 2 || dt.len() + 1 != raw.len() {
+            return Err(FactorError::Other(format!(
+                "{} gyro samples need {} steps, got {}",
+                raw.len(),
+                raw.len().max(1) - 1,
+                dt.len()
+            )));
+        }
+        if dt.iter().any(|d| !(d.is_finite() && *d > 0.0)) {
+            return Err(FactorError::Other("gyro steps must be positive".into()));
+        }
+        let (n0, n1) = (g0.norm(), g1.norm());
+        if !(n0 > 0.0 && n1 > 0.0 && n0.is_finite() && n1.is_finite()) {
+            return Err(FactorError::Other("gravity directions must be finite and non-zero".into()));
+        }
+        Ok(IntegratedRotationFactor { keys, raw, dt, g0: g0 / n0, basis: orthogonal_basis(&(g1 / n1)) })
+    }
+
+    /// The same motion compared between other gravity directions.
+    pub fn with_directions(&self, g0: Vector3<f64>, g1: Vector3<f64>) -> Self {
+        IntegratedRotationFactor { g0: g0.normalize(), basis: orthogonal_basis(&g1.normalize()), ..self.clone() }
+    }
+
+    /// Rotation from the first to the last sample's frame under `M_g`, `b_g`.
+    pub fn rotation(&self, m: &Matrix3<f64>, b: &Vector3<f64>) -> Matrix3<f64> {
+        let mut r = Matrix3::identity();
+        for i in 0..self.dt.len() {
+            r *= so3_exp(&(m * (self.mid(i) - b) * self.dt[i]));
+        }
+        r
+    }
+
+    fn mid(&self, i: usize) -> Vector3<f64> {
+        let (a, b) = (self.raw[i], self.raw[i + 1]);
+        Vector3::new(a[0] + b[0], a[1] + b[1], a[2] + b[2]) * 0.5
+    }
+
+    /// The rotation and, per step `i`, `A_i = S_iᵀ J_r(φ_i) Δt_i` with `S_i` the
+    /// product of the steps after `i`: a rate error `δω_i` moves `R` to `R Exp(Σ A_i δω_i)`.
+    fn sweep(&self, m: &Matrix3<f64>, b: &Vector3<f64>) -> (Matrix3<f64>, Vec<Matrix3<f64>>) {
+        let n = self.dt.len();
+        let mut steps = Vec::with_capacity(n);
+        let mut r = Matrix3::identity();
+        for i in 0..n {
+            let phi = m * (self.mid(i) - b) * self.dt[i];
+            let e = so3_exp(&phi);
+            r *= e;
+            steps.push((e, so3_right_jacobian(&phi) * self.dt[i]));
+        }
+        let mut s = Matrix3::identity();
+        let mut a = vec![Matrix3::zeros(); n];
+        for i in (0..n).rev() {
+            a[i] = s.transpose() * steps[i].1;
+            s = steps[i].0 * s;
+        }
+        (r, a)
+    }
+
+    /// Covariance (2×2, \[rad²\]) of the residual caused by white noise of
+    /// per-sample variance `raw_var` (per raw axis) on the gyro samples, at `M_g`, `b_g`.
+    pub fn noise_covariance(
+        &self,
+        m: &Matrix3<f64>,
+        b: &Vector3<f64>,
+        raw_var: &Vector3<f64>,
+    ) -> nalgebra::Matrix2<f64> {
+        let (r, a) = self.sweep(m, b);
+        let sw = m * Matrix3::from_diagonal(raw_var) * m.transpose();
+        let cov_phi: Matrix3<f64> = a.iter().map(|ai| ai * sw * ai.transpose()).sum();
+        let d = self.basis.transpose() * hat(&(r.transpose() * self.g0));
+        d * cov_phi * d.transpose()
+    }
+
+    /// Total time integrated \[s\].
+    pub fn duration(&self) -> f64 {
+        self.dt.iter().sum()
+    }
+}
+
+/// An orthonormal basis (3×2) of the plane orthogonal to unit vector `n`.
+fn orthogonal_basis(n: &Vector3<f64>) -> Matrix3x2<f64> {
+    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let e1 = n.cross(&helper).normalize();
+    let e2 = n.cross(&e1);
+    Matrix3x2::from_columns(&[e1, e2])
+}
+
+impl Factor for IntegratedRotationFactor {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+        let p: &GyroMatrix = vars.get(0)?;
+        let b: &Vector3<f64> = vars.get(1)?;
+        let r = self.rotation(&gyro_matrix(p), b);
+        let e = self.basis.transpose() * (r.transpose() * self.g0);
+        Ok(DVector::from_column_slice(e.as_slice()))
+    }
+    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+        let p: &GyroMatrix = vars.get(0)?;
+        let b: &Vector3<f64> = vars.get(1)?;
+        let m = gyro_matrix(p);
+        let (r, steps) = self.sweep(&m, b);
+        let mut jm = SMatrix::<f64, 3, 9>::zeros();
+        let mut sum_a = Matrix3::zeros();
+        for (i, a) in steps.iter().enumerate() {
+            let u = self.mid(i) - b;
+            for row in 0..3 {
+                for col in 0..3 {
+                    let mut c = jm.column_mut(3 * row + col);
+                    c += a.column(row) * u[col];
+                }
+            }
+            sum_a += a;
+        }
+        let rg = r.transpose() * self.g0;
+        let d = self.basis.transpose() * hat(&rg);
+        let jm = d * jm;
+        let jb = -(d * sum_a * m);
+        let e = self.basis.transpose() * rg;
+        Ok(Linearization {
+            residual: DVector::from_column_slice(e.as_slice()),
+            jacobians: vec![
+                DMatrix::from_column_slice(2, 9, jm.as_slice()),
+                DMatrix::from_column_slice(2, 3, jb.as_slice()),
+            ],
+        })
+    }
+}

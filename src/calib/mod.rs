@@ -1,0 +1,37 @@
+//! Turntable-free calibration of a MEMS IMU from one hand-tumbled recording
+//! (paper §2; the method of imu_tk, Tedaldi et al. 2014), on the solver.
+//!
+//! 1. [`detect`]: static intervals where the sliding accelerometer variance is
+//!    below `k · σ²(initial static period)`, for a sweep of `k`;
+//! 2. accelerometer: one [`GravityNormFactor`](tumble_factors::GravityNormFactor)
+//!    per interval (9 parameters), for each `k`; the `k` with the lowest whitened
+//!    residual is kept;
+//! 3. gyroscope: bias from the initial static period (or estimated), then one
+//!    [`IntegratedRotationFactor`](tumble_factors::IntegratedRotationFactor) per
+//!    pair of consecutive intervals (9 parameters);
+//! 4. [`model`]: the paper's `T`, `K`, `b` with standard deviations from the
+//!    solver's covariance (inflated by χ²/dof when the residuals exceed the noise),
+//!    imu_tk's convention, correction of raw samples;
+//! 5. [`report`]: `calibration.json` / `.yaml`, imu_tk `.calib` files, a PNG of the detection.
+//!
+//! ```
+//! use tumble::calib::{calibrate, CalibOptions};
+//! use tumble::sim::{simulate, Scenario, SimConfig};
+//! let sim = simulate(Scenario::Tumble, &SimConfig::default(), 1).unwrap();
+//! let rec = sim.imu.to_recording();
+//! let result = calibrate(&rec, &CalibOptions { gravity: 9.81, ..Default::default() }).unwrap();
+//! let k_a = result.calibration.accel.k;
+//! assert!((k_a.x - sim.config.imu.accel.scale[0]).abs() < 5.0 * result.calibration.accel.k_std.x);
+//! ```
+
+pub mod apply;
+pub mod detect;
+pub mod gravity;
+pub mod model;
+pub mod report;
+pub mod solve;
+
+pub use apply::write_like_input;
+pub use gravity::normal_gravity;
+pub use model::{read_imu_tk_calib, Corrector, ImuCalibration, Triad, Units};
+pub use solve::{calibrate, CalibError, CalibOptions, CalibrationResult, RECORDING_ADVICE};

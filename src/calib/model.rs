@@ -1,0 +1,341 @@
+//! The calibrated error model in the paper's convention, its conversions to
+//! and from imu_tk's, and correction of raw samples (eq. 16).
+//!
+//! ```text
+//! paper:  ã = T_a K_a a + b_a        ω̃ = T_g K_g ω + b_g
+//! imu_tk: a = T'_a K'_a (ã − b_a)    ω = T'_g K'_g (ω̃ − b_g)
+//! ```
+//!
+//! `T_a` is upper triangular and `T_g` full, both with a unit diagonal; `K`
+//! are diagonal. `ã`, `ω̃`, `b` are in the input's units (counts or SI); `a`
+//! is in m/s², `ω` in rad/s. Both conventions describe the same map:
+//! `T' K' = (T K)⁻¹`, with the same bias.
+
+use crate::error::InputError;
+use nalgebra::{Matrix3, Vector3};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// Units of the raw input and of the corrected output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Units {
+    /// Unit of raw accelerometer readings and of `b_a` ("counts" or "m/s^2").
+    pub accel_input: String,
+    /// Unit of raw gyro readings and of `b_g` ("counts" or "rad/s").
+    pub gyro_input: String,
+    /// Unit of corrected specific force.
+    pub accel: String,
+    /// Unit of corrected angular rate.
+    pub gyro: String,
+}
+
+impl Default for Units {
+    fn default() -> Self {
+        Units { accel_input: "m/s^2".into(), gyro_input: "rad/s".into(), accel: "m/s^2".into(), gyro: "rad/s".into() }
+    }
+}
+
+/// One sensor triad's deterministic model `raw = T K x + b`, with 1-σ uncertainties.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Triad {
+    /// Misalignment `T` (unit diagonal).
+    pub t: Matrix3<f64>,
+    /// Scale: the diagonal of `K` \[raw units per SI unit\].
+    pub k: Vector3<f64>,
+    /// Bias \[raw units\].
+    pub b: Vector3<f64>,
+    /// Standard deviations of `T`'s entries (0 on the fixed ones).
+    pub t_std: Matrix3<f64>,
+    /// Standard deviations of `K`.
+    pub k_std: Vector3<f64>,
+    /// Standard deviations of `b`.
+    pub b_std: Vector3<f64>,
+}
+
+impl Triad {
+    /// The identity model (no error).
+    pub fn identity() -> Triad {
+        Triad {
+            t: Matrix3::identity(),
+            k: Vector3::repeat(1.0),
+            b: Vector3::zeros(),
+            t_std: Matrix3::zeros(),
+            k_std: Vector3::zeros(),
+            b_std: Vector3::zeros(),
+        }
+    }
+    /// `(T K)⁻¹`: maps unbiased raw readings to SI; `None` when singular.
+    pub fn inverse_matrix(&self) -> Option<Matrix3<f64>> {
+        (self.t * Matrix3::from_diagonal(&self.k)).try_inverse()
+    }
+    /// imu_tk's `(T', K', b)` with `T' K' = (T K)⁻¹`.
+    pub fn to_imu_tk(&self) -> Option<ImuTkTriad> {
+        let m = self.inverse_matrix()?;
+        let (t, k) = split_unit_diagonal(&m)?;
+        Some((t, k, self.b))
+    }
+    /// From imu_tk's `(T', K', b)`.
+    pub fn from_imu_tk(t: &Matrix3<f64>, k: &Vector3<f64>, b: &Vector3<f64>) -> Option<Triad> {
+        let n = (t * Matrix3::from_diagonal(k)).try_inverse()?;
+        let (t, k) = split_unit_diagonal(&n)?;
+        Some(Triad { t, k, b: *b, ..Triad::identity() })
+    }
+}
+
+/// imu_tk's `(T', K', b)`: misalignment, scale diagonal, bias.
+pub type ImuTkTriad = (Matrix3<f64>, Vector3<f64>, Vector3<f64>);
+
+/// Write `m = T·diag(k)` with unit-diagonal `T`: `k = diag(m)`, `T = m diag(k)⁻¹`.
+pub fn split_unit_diagonal(m: &Matrix3<f64>) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    let k = m.diagonal();
+    if k.iter().any(|x| x.abs() < 1e-300 || !x.is_finite()) {
+        return None;
+    }
+    let mut t = *m;
+    for c in 0..3 {
+        for r in 0..3 {
+            t[(r, c)] /= k[c];
+        }
+    }
+    Some((t, k))
+}
+
+/// A full IMU calibration in the paper's convention (the keys of `calibration.json`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImuCalibration {
+    /// Accelerometer (`T_a` upper triangular).
+    pub accel: Triad,
+    /// Gyroscope (`T_g` full).
+    pub gyro: Triad,
+    /// Local gravity used \[m/s²\].
+    pub gravity: f64,
+    /// Units of input and output.
+    pub units: Units,
+}
+
+/// Serialized form of [`ImuCalibration`] with the issue's key names.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[allow(non_snake_case)]
+pub struct CalibrationFile {
+    /// Accelerometer misalignment (row major).
+    pub T_a: [[f64; 3]; 3],
+    /// Its standard deviations.
+    #[serde(default)]
+    pub T_a_std: [[f64; 3]; 3],
+    /// Accelerometer scale (diagonal of `K_a`) \[input units per m/s²\].
+    pub K_a: [f64; 3],
+    /// Its standard deviations.
+    #[serde(default)]
+    pub K_a_std: [f64; 3],
+    /// Accelerometer bias \[input units\].
+    pub b_a: [f64; 3],
+    /// Its standard deviations.
+    #[serde(default)]
+    pub b_a_std: [f64; 3],
+    /// Gyro misalignment (row major).
+    pub T_g: [[f64; 3]; 3],
+    /// Its standard deviations.
+    #[serde(default)]
+    pub T_g_std: [[f64; 3]; 3],
+    /// Gyro scale (diagonal of `K_g`) \[input units per rad/s\].
+    pub K_g: [f64; 3],
+    /// Its standard deviations.
+    #[serde(default)]
+    pub K_g_std: [f64; 3],
+    /// Gyro bias \[input units\].
+    pub b_g: [f64; 3],
+    /// Its standard deviations.
+    #[serde(default)]
+    pub b_g_std: [f64; 3],
+    /// Local gravity \[m/s²\].
+    #[serde(default = "default_gravity")]
+    pub gravity: f64,
+    /// Units.
+    #[serde(default)]
+    pub units: Units,
+}
+
+fn default_gravity() -> f64 {
+    crate::io::STANDARD_GRAVITY
+}
+
+fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
+    [0, 1, 2].map(|r| [0, 1, 2].map(|c| m[(r, c)]))
+}
+fn mat(a: &[[f64; 3]; 3]) -> Matrix3<f64> {
+    Matrix3::from_fn(|r, c| a[r][c])
+}
+fn arr(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+impl From<&ImuCalibration> for CalibrationFile {
+    fn from(c: &ImuCalibration) -> Self {
+        CalibrationFile {
+            T_a: rows(&c.accel.t),
+            T_a_std: rows(&c.accel.t_std),
+            K_a: arr(&c.accel.k),
+            K_a_std: arr(&c.accel.k_std),
+            b_a: arr(&c.accel.b),
+            b_a_std: arr(&c.accel.b_std),
+            T_g: rows(&c.gyro.t),
+            T_g_std: rows(&c.gyro.t_std),
+            K_g: arr(&c.gyro.k),
+            K_g_std: arr(&c.gyro.k_std),
+            b_g: arr(&c.gyro.b),
+            b_g_std: arr(&c.gyro.b_std),
+            gravity: c.gravity,
+            units: c.units.clone(),
+        }
+    }
+}
+
+impl CalibrationFile {
+    /// Check and convert to the in-memory model.
+    pub fn to_calibration(&self) -> Result<ImuCalibration, String> {
+        let triad = |t: &[[f64; 3]; 3], ts, k: &[f64; 3], ks, b: &[f64; 3], bs, name: &str| -> Result<Triad, String> {
+            let all: Vec<f64> = t.as_flattened().iter().chain(k).chain(b).copied().collect();
+            if all.iter().any(|x| !x.is_finite()) {
+                return Err(format!("{name}: every entry of T, K and b must be finite"));
+            }
+            let tr = Triad {
+                t: mat(t),
+                k: Vector3::from(*k),
+                b: Vector3::from(*b),
+                t_std: mat(ts),
+                k_std: Vector3::from(ks),
+                b_std: Vector3::from(bs),
+            };
+            if tr.inverse_matrix().is_none_or(|m| !m.iter().all(|x| x.is_finite())) {
+                return Err(format!("{name}: T·K is singular"));
+            }
+            Ok(tr)
+        };
+        Ok(ImuCalibration {
+            accel: triad(&self.T_a, &self.T_a_std, &self.K_a, self.K_a_std, &self.b_a, self.b_a_std, "accelerometer")?,
+            gyro: triad(&self.T_g, &self.T_g_std, &self.K_g, self.K_g_std, &self.b_g, self.b_g_std, "gyro")?,
+            gravity: self.gravity,
+            units: self.units.clone(),
+        })
+    }
+}
+
+impl ImuCalibration {
+    /// Read a `calibration.json` (or `.yaml`) written by `tumble calibrate`
+    /// (diagnostic keys are ignored; the `*_std` keys are optional).
+    pub fn read(path: &Path) -> Result<ImuCalibration, InputError> {
+        let file: CalibrationFile = if path.extension().is_some_and(|e| e == "yaml" || e == "yml") {
+            crate::io::yaml::read_yaml(path)?
+        } else {
+            let text = std::fs::read_to_string(path).map_err(|e| InputError::file(path, e.to_string()))?;
+            serde_json::from_str(&text).map_err(|e| InputError::at(path, e.line(), e.to_string()))?
+        };
+        file.to_calibration().map_err(|m| InputError::file(path, m))
+    }
+
+    /// A [`Corrector`] applying eq. 16 to raw samples; `None` when a matrix is singular.
+    pub fn corrector(&self) -> Option<Corrector> {
+        Some(Corrector {
+            accel: self.accel.inverse_matrix()?,
+            b_a: self.accel.b,
+            gyro: self.gyro.inverse_matrix()?,
+            b_g: self.gyro.b,
+        })
+    }
+}
+
+/// Eq. 16 with the inverses precomputed: `a = (T_a K_a)⁻¹(ã − b_a)`, `ω = (T_g K_g)⁻¹(ω̃ − b_g)`.
+#[derive(Debug, Clone, Copy)]
+pub struct Corrector {
+    accel: Matrix3<f64>,
+    b_a: Vector3<f64>,
+    gyro: Matrix3<f64>,
+    b_g: Vector3<f64>,
+}
+
+impl Corrector {
+    /// Corrected specific force \[m/s²\] from a raw accelerometer reading.
+    pub fn accel(&self, raw: [f64; 3]) -> [f64; 3] {
+        arr(&(self.accel * (Vector3::from(raw) - self.b_a)))
+    }
+    /// Corrected angular rate \[rad/s\] from a raw gyro reading.
+    pub fn gyro(&self, raw: [f64; 3]) -> [f64; 3] {
+        arr(&(self.gyro * (Vector3::from(raw) - self.b_g)))
+    }
+}
+
+/// imu_tk's `.calib` text: `T'` (3 rows), a blank line, `K'` as a 3×3 diagonal
+/// matrix, a blank line, `b` (3 rows).
+pub fn imu_tk_calib_text(t: &Matrix3<f64>, k: &Vector3<f64>, b: &Vector3<f64>) -> String {
+    let mut s = String::new();
+    let row = |s: &mut String, v: [f64; 3]| {
+        s.push_str(&format!("{:>24} {:>24} {:>24}\n", v[0], v[1], v[2]));
+    };
+    for r in 0..3 {
+        row(&mut s, [t[(r, 0)], t[(r, 1)], t[(r, 2)]]);
+    }
+    s.push('\n');
+    for r in 0..3 {
+        let mut v = [0.0; 3];
+        v[r] = k[r];
+        row(&mut s, v);
+    }
+    s.push('\n');
+    for r in 0..3 {
+        s.push_str(&format!("{:>24}\n", b[r]));
+    }
+    s
+}
+
+/// Read an imu_tk `.calib` file: `(T', K', b)` (21 numbers: 9, 9, 3).
+pub fn read_imu_tk_calib(path: &Path) -> Result<ImuTkTriad, InputError> {
+    let text = std::fs::read_to_string(path).map_err(|e| InputError::file(path, e.to_string()))?;
+    let mut v = Vec::with_capacity(21);
+    for (i, line) in text.lines().enumerate() {
+        for tok in line.split_whitespace() {
+            let x: f64 = tok.parse().map_err(|_| InputError::at(path, i + 1, format!("'{tok}' is not a number")))?;
+            if !x.is_finite() {
+                return Err(InputError::at(path, i + 1, format!("'{tok}' is not finite")));
+            }
+            v.push(x);
+        }
+    }
+    if v.len() != 21 {
+        return Err(InputError::file(
+            path,
+            format!("has {} numbers; an imu_tk .calib file has 21 (T 3×3, K 3×3, b 3)", v.len()),
+        ));
+    }
+    let t = Matrix3::from_row_slice(&v[0..9]);
+    let kk = Matrix3::from_row_slice(&v[9..18]);
+    if (0..3).any(|r| (0..3).any(|c| r != c && kk[(r, c)] != 0.0)) {
+        return Err(InputError::file(path, "the scale matrix K (numbers 10–18) is not diagonal"));
+    }
+    Ok((t, kk.diagonal(), Vector3::new(v[18], v[19], v[20])))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn conventions_round_trip() {
+        let tr = Triad {
+            t: Matrix3::new(1.0, -0.01, 0.02, 0.003, 1.0, 0.01, -0.02, 0.005, 1.0),
+            k: Vector3::new(1.01, 0.99, 1.002),
+            b: Vector3::new(0.1, -0.2, 0.3),
+            ..Triad::identity()
+        };
+        let (t, k, b) = tr.to_imu_tk().unwrap();
+        let back = Triad::from_imu_tk(&t, &k, &b).unwrap();
+        assert!((back.t - tr.t).amax() < 1e-14 && (back.k - tr.k).amax() < 1e-14);
+        let text = imu_tk_calib_text(&t, &k, &b);
+        let dir = std::env::temp_dir().join(format!("tumble-calib-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("x.calib");
+        std::fs::write(&p, text).unwrap();
+        let (t2, k2, b2) = read_imu_tk_calib(&p).unwrap();
+        assert_eq!((t2, k2, b2), (t, k, b));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,284 @@
+//! Turntable-free calibration: simulated recordings with known truth, the two
+//! real imu_tk data sets against imu_tk's printed results, and bad recordings.
+
+mod common;
+
+use nalgebra::{Matrix3, Vector3};
+use tumble::calib::{calibrate, CalibOptions, CalibrationResult, ImuCalibration, Triad};
+use tumble::sim::{simulate, Scenario, SimConfig};
+
+/// (estimate − truth) / std for every free parameter of one triad, and the
+/// largest absolute misalignment/scale error.
+#[allow(clippy::needless_range_loop)]
+fn normalized_errors(
+    est: &Triad,
+    truth_t: &[[f64; 3]; 3],
+    truth_k: &[f64; 3],
+    truth_b: &[f64; 3],
+    upper: bool,
+) -> (Vec<f64>, f64) {
+    let mut z = Vec::new();
+    let mut worst: f64 = 0.0;
+    for r in 0..3 {
+        for c in 0..3 {
+            if r == c || (upper && r > c) {
+                continue;
+            }
+            let e = est.t[(r, c)] - truth_t[r][c];
+            worst = worst.max(e.abs());
+            z.push(e / est.t_std[(r, c)]);
+        }
+        let e = est.k[r] - truth_k[r];
+        worst = worst.max(e.abs());
+        z.push(e / est.k_std[r]);
+        z.push((est.b[r] - truth_b[r]) / est.b_std[r]);
+    }
+    (z, worst)
+}
+
+fn sim_config() -> SimConfig {
+    SimConfig::default()
+}
+
+/// Upper 95 % quantile of χ² with `n` degrees of freedom (Wilson–Hilferty).
+fn chi2_95(n: f64) -> f64 {
+    let a = 2.0 / (9.0 * n);
+    n * (1.0 - a + 1.644_854 * a.sqrt()).powi(3)
+}
+
+fn run_seed(cfg: &SimConfig, seed: u64) -> (CalibrationResult, tumble::sim::Simulation) {
+    let sim = simulate(Scenario::Tumble, cfg, seed).unwrap();
+    let rec = sim.imu.to_recording();
+    let res = calibrate(&rec, &CalibOptions { gravity: cfg.gravity, ..Default::default() }).unwrap();
+    (res, sim)
+}
+
+#[test]
+fn simulated_bmi055_errors_match_reported_uncertainty() {
+    let cfg = sim_config();
+    let m = &cfg.imu;
+    let mut za = Vec::new();
+    let mut zg = Vec::new();
+    let (mut worst_a, mut worst_g) = (0.0f64, 0.0f64);
+    for seed in 0..20 {
+        let (res, sim) = run_seed(&cfg, seed);
+        let c = &res.calibration;
+        // The simulator's turn-on bias is the constant part; random walk and
+        // instability move it, so compare with the mean true bias of the recording.
+        let mean_bias = |v: &[[f64; 3]]| -> [f64; 3] {
+            let n = v.len() as f64;
+            [0, 1, 2].map(|k| v.iter().map(|s| s[k]).sum::<f64>() / n)
+        };
+        let ba = mean_bias(&sim.imu.bias_accel);
+        let n_init = sim.imu.bias_gyro.len() * 50 / (sim.imu.t.len() / 200).max(1);
+        let bg = mean_bias(&sim.imu.bias_gyro[..n_init.min(sim.imu.bias_gyro.len())]);
+        let (z, w) = normalized_errors(&c.accel, &m.accel.misalignment, &m.accel.scale, &ba, true);
+        za.extend(z);
+        worst_a = worst_a.max(w);
+        let (z, w) = normalized_errors(&c.gyro, &m.gyro.misalignment, &m.gyro.scale, &bg, false);
+        zg.extend(z);
+        worst_g = worst_g.max(w);
+        eprintln!(
+            "seed {seed}: {} intervals, accel χ²/dof {:.2}, gyro χ²/dof {:.2}",
+            res.intervals.len(),
+            res.accel_fit.chi2_per_dof,
+            res.gyro_fit.chi2_per_dof
+        );
+    }
+    for (name, z) in [("accel", &za), ("gyro", &zg)] {
+        let chi2: f64 = z.iter().map(|x| x * x).sum();
+        let n = z.len() as f64;
+        eprintln!("{name}: Σz² = {chi2:.1} over {n} normalized errors (95 % bound {:.1})", chi2_95(n));
+        assert!(chi2 < chi2_95(n), "{name}: errors exceed their reported uncertainty: Σz² = {chi2:.1}");
+        // Reported uncertainties must not be wildly pessimistic either.
+        assert!(chi2 > 0.5 * n, "{name}: reported uncertainties too large: Σz² = {chi2:.1} over {n}");
+    }
+    // With the paper's Table 1 noise a 3-minute tumble determines misalignment
+    // and scale to ≈ 1e-3 (the reported σ); the 2e-4 of the issue needs ≈ 25× more data.
+    eprintln!("worst misalignment/scale error: accel {worst_a:.2e}, gyro {worst_g:.2e}");
+    assert!(worst_a < 6e-3 && worst_g < 1e-2);
+}
+
+/// imu_tk's printed result on its Xsens sample data (raw counts), `calibrated = T·K·(raw − b)`.
+const XSENS_ACC: ([[f64; 3]; 3], [f64; 3], [f64; 3]) = (
+    [[1.0, -0.0033593, -0.00890639], [0.0, 1.0, -0.0213341], [0.0, 0.0, 1.0]],
+    [0.00241278, 0.00242712, 0.00241168],
+    [33124.2, 33275.2, 32364.4],
+);
+const XSENS_GYRO: ([[f64; 3]; 3], [f64; 3], [f64; 3]) = (
+    [[1.0, 0.00593634, 0.00111101], [0.00808812, 1.0, -0.0535569], [0.0253067, -0.0025513, 1.0]],
+    [2.09295e-4, 2.09899e-4, 2.09483e-4],
+    [32777.1, 32459.8, 32511.8],
+);
+
+/// Largest |ΔT|, relative |ΔK| and relative |Δb| between our triad (in imu_tk's convention) and imu_tk's.
+fn imu_tk_diff(ours: &Triad, theirs: &([[f64; 3]; 3], [f64; 3], [f64; 3])) -> (f64, f64, f64) {
+    let (t, k, b) = ours.to_imu_tk().unwrap();
+    let dt = (0..9).map(|i| (t[(i / 3, i % 3)] - theirs.0[i / 3][i % 3]).abs()).fold(0.0, f64::max);
+    let dk = (0..3).map(|i| (k[i] / theirs.1[i] - 1.0).abs()).fold(0.0, f64::max);
+    let db = (0..3).map(|i| (b[i] / theirs.2[i] - 1.0).abs()).fold(0.0, f64::max);
+    (dt, dk, db)
+}
+
+fn read_pair(dir: &std::path::Path, acc: &str, gyr: &str, raw: bool) -> tumble::io::ImuRecording {
+    use tumble::io::{AccelUnit, GyroUnit, RecordingOptions, TimeUnit};
+    let mut o = RecordingOptions::default();
+    o.format.time_unit = TimeUnit::S;
+    if raw {
+        o.format.accel_unit = AccelUnit::Counts { scale: None, offset: 0.0 };
+        o.format.gyro_unit = GyroUnit::Counts { scale: None, offset: 0.0 };
+    }
+    o.gyro_file = Some(dir.join(gyr));
+    tumble::io::open_recording(&dir.join(acc), &o).unwrap()
+}
+
+#[test]
+fn xsens_agrees_with_imu_tk_and_factory_gains() {
+    let Some(dir) = common::shared("imu_tk_xsens") else { return };
+    let rec = read_pair(&dir, "xsens_acc.mat", "xsens_gyro.mat", true);
+    let res = calibrate(&rec, &CalibOptions { gravity: 9.81744, ..Default::default() }).unwrap();
+    let c = &res.calibration;
+    let (dt, dk, db) = imu_tk_diff(&c.accel, &XSENS_ACC);
+    eprintln!("accel vs imu_tk: |ΔT| {dt:.2e}, |ΔK|/K {dk:.2e}, |Δb|/b {db:.2e}");
+    assert!(dt < 5e-4 && dk < 1e-3 && db < 1e-3);
+    let (dt, dk, db) = imu_tk_diff(&c.gyro, &XSENS_GYRO);
+    eprintln!("gyro vs imu_tk: |ΔT| {dt:.2e}, |ΔK|/K {dk:.2e}, |Δb|/b {db:.2e}");
+    assert!(dt < 5e-4 && dk < 1e-3 && db < 1e-3);
+    // Xsens factory gains [counts per SI unit] are the paper's K.
+    for (k, f) in c.accel.k.iter().zip([415.0, 413.0, 415.0]) {
+        assert!((k / f - 1.0).abs() < 0.01, "accel gain {k} vs factory {f}");
+    }
+    for (k, f) in c.gyro.k.iter().zip([4778.0, 4758.0, 4766.0]) {
+        assert!((k / f - 1.0).abs() < 0.01, "gyro gain {k} vs factory {f}");
+    }
+    eprintln!(
+        "imu_tk-style costs: accel {:.4} (100 samples per interval), gyro {:.6}",
+        res.accel_fit.imu_tk_cost, res.gyro_fit.imu_tk_cost
+    );
+}
+
+#[test]
+fn t265_agrees_with_imu_tk_within_uncertainty() {
+    let Some(dir) = common::shared("imu_tk_t265") else { return };
+    let rec = read_pair(&dir, "t265_acc.mat", "t265_gyr.mat", false);
+    assert!(rec.warnings.iter().any(|w| w.contains("duplicated timestamps")));
+    let res = calibrate(&rec, &CalibOptions { gravity: 9.8016, ..Default::default() }).unwrap();
+    assert!(res.warnings.iter().any(|w| w.contains("disturbed")), "{:?}", res.warnings);
+    let their = |f: &str| tumble::calib::read_imu_tk_calib(&dir.join(f)).unwrap();
+    for (ours, (t, k, b), name) in [
+        (&res.calibration.accel, their("t265_test_imu_acc.calib"), "accel"),
+        (&res.calibration.gyro, their("t265_test_imu_gyro.calib"), "gyro"),
+    ] {
+        let theirs = Triad::from_imu_tk(&t, &k, &b).unwrap();
+        // This recording determines the scales only to ≈ 0.1 % and the misalignments
+        // to ≈ 1e-2 (our reported σ; imu_tk's log gives none): agreement within 3σ
+        // (scales: or 0.15 %; measured 0.07, 0.07, 0.13 % for the accelerometer).
+        for i in 0..3 {
+            let dk = (ours.k[i] - theirs.k[i]).abs();
+            eprintln!(
+                "{name} K{i}: {:.6} vs imu_tk {:.6} ({:.3} %, σ {:.3} %)",
+                ours.k[i],
+                theirs.k[i],
+                100.0 * dk / theirs.k[i],
+                100.0 * ours.k_std[i] / ours.k[i]
+            );
+            assert!(
+                dk < (3.0 * ours.k_std[i]).max(1.5e-3 * ours.k[i]),
+                "{name} K{i}: {} vs {}",
+                ours.k[i],
+                theirs.k[i]
+            );
+            assert!((ours.b[i] - theirs.b[i]).abs() < 3.0 * ours.b_std[i].max(1e-4), "{name} b{i}");
+            for j in 0..3 {
+                let d = (ours.t[(i, j)] - theirs.t[(i, j)]).abs();
+                assert!(
+                    d <= 3.0 * ours.t_std[(i, j)] + 1e-12,
+                    "{name} T{i}{j}: {d:.2e} vs σ {:.2e}",
+                    ours.t_std[(i, j)]
+                );
+            }
+        }
+    }
+}
+
+fn tumble_recording(seed: u64) -> tumble::io::ImuRecording {
+    simulate(Scenario::Tumble, &SimConfig::default(), seed).unwrap().imu.to_recording()
+}
+
+#[track_caller]
+fn error_of(rec: &tumble::io::ImuRecording) -> String {
+    match calibrate(rec, &CalibOptions { gravity: 9.81, ..Default::default() }) {
+        Ok(r) => panic!("calibrated a bad recording ({} intervals)", r.intervals.len()),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn bad_recordings_give_clear_errors() {
+    let rec = tumble_recording(3);
+    // No initial static period: the recording starts with the tumbling.
+    let e = error_of(&rec.slice_time(50.5, 1e9));
+    assert!(e.contains("not static") && e.contains("line"), "{e}");
+    // Motion that never stops.
+    let mut never = rec.clone();
+    for i in 0..never.len() {
+        let t = never.t[i];
+        if t > 50.0 {
+            never.accel[i][0] += (t * 7.0).sin() * 5.0;
+            never.gyro[i][1] += (t * 5.0).sin() * 1.5;
+        }
+    }
+    let e = error_of(&never);
+    assert!(e.contains("usable static intervals") && e.contains("hint"), "{e}");
+    // All poses alike: only the initial period and repeats of it.
+    let mut alike = rec.clone();
+    let n = alike.len();
+    let calm = alike.accel[..n / 4].to_vec();
+    let calm_g = alike.gyro[..n / 4].to_vec();
+    for i in 0..n {
+        alike.accel[i] = calm[i % calm.len()];
+        alike.gyro[i] = calm_g[i % calm_g.len()];
+        if (i / 500) % 2 == 1 && alike.t[i] > 50.0 {
+            alike.accel[i][0] += ((i % 500) as f64 * 0.05).sin();
+        }
+    }
+    let e = error_of(&alike);
+    assert!(
+        e.contains("do not excite") || e.contains("usable static intervals") || e.contains("gravity by more"),
+        "{e}"
+    );
+    // A NaN sample.
+    let mut nan = rec.clone();
+    nan.accel[1234][2] = f64::NAN;
+    assert!(error_of(&nan).contains("sample 1234"));
+    // Too short.
+    let short = rec.slice_time(0.0, 40.0);
+    assert!(error_of(&short).contains("initial static period"));
+}
+
+#[test]
+fn apply_inverts_the_model_and_files_round_trip() {
+    let dir = std::env::temp_dir().join(format!("tumble-apply-{}", std::process::id()));
+    let sim = simulate(Scenario::Tumble, &SimConfig::default(), 5).unwrap();
+    let rec = sim.imu.to_recording();
+    let opts = CalibOptions { gravity: 9.81, ..Default::default() };
+    let res = calibrate(&rec, &opts).unwrap();
+    let files = res.write_all(&rec, &opts, &dir).unwrap();
+    assert_eq!(files.len(), 5);
+    let back = ImuCalibration::read(&dir.join("calibration.json")).unwrap();
+    assert!((back.accel.t - res.calibration.accel.t).amax() < 1e-15);
+    let yaml = ImuCalibration::read(&dir.join("calibration.yaml")).unwrap();
+    assert!((yaml.gyro.k - res.calibration.gyro.k).amax() < 1e-12);
+    // Eq. 16 undoes eq. 1 for a noise-free sample.
+    let m = &sim.config.imu.gyro;
+    let t = Matrix3::from_fn(|r, c| m.misalignment[r][c]);
+    let w = Vector3::new(0.3, -0.2, 0.5);
+    let raw = t * Matrix3::from_diagonal(&Vector3::from(m.scale)) * w + res.calibration.gyro.b;
+    let corrected = res.calibration.corrector().unwrap().gyro([raw.x, raw.y, raw.z]);
+    assert!((Vector3::from(corrected) - w).amax() < 5e-3, "{corrected:?}");
+    // Bad calibration files are refused with the file named.
+    std::fs::write(dir.join("bad.json"), "{\"T_a\": 3}").unwrap();
+    let e = ImuCalibration::read(&dir.join("bad.json")).unwrap_err().to_string();
+    assert!(e.contains("bad.json"), "{e}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
