@@ -23,23 +23,9 @@ impl Interval {
     }
 }
 
-/// Norm of the per-axis variance of `x[range]` \[raw units²\].
+/// Norm of the per-axis variance of `x` \[raw units²\].
 pub fn variance_norm(x: &[[f64; 3]]) -> f64 {
-    let n = x.len().max(1) as f64;
-    let mut m = [0.0; 3];
-    for v in x {
-        for k in 0..3 {
-            m[k] += v[k];
-        }
-    }
-    m.iter_mut().for_each(|s| *s /= n);
-    let mut var = [0.0; 3];
-    for v in x {
-        for k in 0..3 {
-            var[k] += (v[k] - m[k]) * (v[k] - m[k]);
-        }
-    }
-    var.iter().map(|s| (s / n) * (s / n)).sum::<f64>().sqrt()
+    var3(x).iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
 /// Per-axis mean of `x`.

@@ -3,7 +3,7 @@
 //! gyroscope with integrated-rotation factors, both on the solver, and turn
 //! the estimates and their covariances into the paper's convention.
 
-use super::detect::{intervals_below, mean3, sliding_variance_norm, var3, variance_norm, Interval};
+use super::detect::{intervals_below, mean3, sliding_variance_norm, var3, Interval};
 use super::model::{split_unit_diagonal, ImuCalibration, Triad, Units};
 use crate::io::{ImuRecording, Stored};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
@@ -245,17 +245,20 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     }
 
     let score = sliding_variance_norm(&rec.accel, w);
-    let var_init = variance_norm(&rec.accel[..n_init]);
-    check_initial_static(rec, &score, n_init, var_init, &mut warnings).map_err(|(m, h)| err(m, Some(h)))?;
+    let gyro_score = sliding_variance_norm(&rec.gyro, w);
     let var_a = var3(&rec.accel[..n_init]);
     let var_g = var3(&rec.gyro[..n_init]);
+    let norm = |v: &[f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let var_init = norm(&var_a);
+    check_initial_static(rec, &score, &gyro_score, n_init, half, var_init, &mut warnings)
+        .map_err(|(m, h)| err(m, Some(h)))?;
     let base = var_init.max(1e-300);
     // Detection score: windowed variance relative to the initial period's, the larger of
     // accelerometer and gyro (the gyro catches slow turns the accelerometer hardly sees).
     let mut ratio: Vec<f64> = score.iter().map(|s| s / base).collect();
     if opts.detect_with_gyro {
-        let gyro_base = variance_norm(&rec.gyro[..n_init]).max(1e-300);
-        for (r, g) in ratio.iter_mut().zip(sliding_variance_norm(&rec.gyro, w)) {
+        let gyro_base = norm(&var_g).max(1e-300);
+        for (r, g) in ratio.iter_mut().zip(&gyro_score) {
             *r = r.max(g / gyro_base);
         }
     }
@@ -346,19 +349,19 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
 
 /// The first period must be still: its windowed variance must be uniform and
 /// as low as the quietest parts of the recording.
+#[allow(clippy::too_many_arguments)]
 fn check_initial_static(
     rec: &ImuRecording,
     score: &[f64],
+    gyro_score: &[f64],
     n_init: usize,
+    half: usize,
     var_init: f64,
     warnings: &mut Vec<String>,
 ) -> Result<(), (String, &'static str)> {
-    let mut init: Vec<f64> = score
-        [..n_init.saturating_sub(score.iter().position(|x| x.is_finite()).unwrap_or(0)).max(1)]
-        .iter()
-        .copied()
-        .filter(|x| x.is_finite())
-        .collect();
+    // Windows wholly inside the initial period.
+    let inside = n_init.saturating_sub(half).max(1);
+    let mut init: Vec<f64> = score[..inside].iter().copied().filter(|x| x.is_finite()).collect();
     let mut all: Vec<f64> = score.iter().copied().filter(|x| x.is_finite()).collect();
     if init.is_empty() || all.is_empty() {
         return Ok(());
@@ -372,12 +375,9 @@ fn check_initial_static(
                   (--init-static sets its length)";
     // A rotation shows in the gyro (compared with its quietest windows anywhere in the
     // recording); a knock or vibration only in the accelerometer.
-    let half = score.iter().position(|x| x.is_finite()).unwrap_or(0);
-    let gyro_score = sliding_variance_norm(&rec.gyro, 2 * half + 1);
     let mut g: Vec<f64> = gyro_score.iter().copied().filter(|x| x.is_finite()).collect();
     g.sort_by(f64::total_cmp);
     let g_quiet = g.get(g.len() / 20).copied().unwrap_or(0.0).max(1e-300);
-    let inside = n_init.saturating_sub(half).max(1);
     if let Some(i) = gyro_score[..inside].iter().position(|&x| x.is_finite() && x > 10.0 * g_quiet) {
         return Err((
             format!(
