@@ -14,6 +14,7 @@
 //! assert!((xy[0] - 0.05).abs() < 1e-9 && (xy[1] + 0.025).abs() < 1e-9);
 //! ```
 
+use num_dual::{Derivative, DualSVec64};
 use tumble_solvers::Real;
 
 /// Lens distortion of a [`CameraModel`].
@@ -97,6 +98,23 @@ impl CameraModel {
         }
         let [xd, yd] = self.distort(p[0] / p[2], p[1] / p[2]);
         Some([xd * self.fx + self.cx, yd * self.fy + self.cy])
+    }
+
+    /// [`CameraModel::project`] with its 2×3 Jacobian with respect to the point
+    /// (forward-mode dual numbers through the distortion); rows u, v.
+    pub fn project_with_jacobian(&self, p: &[f64; 3]) -> Option<([f64; 2], [[f64; 3]; 2])> {
+        let lift = |k: usize| {
+            let mut e = nalgebra::SVector::<f64, 3>::zeros();
+            e[k] = 1.0;
+            DualSVec64::<3>::new(p[k], Derivative::some(e))
+        };
+        let uv = self.project(&[lift(0), lift(1), lift(2)])?;
+        let mut j = [[0.0; 3]; 2];
+        for (row, d) in uv.iter().enumerate() {
+            let eps = d.eps.unwrap_generic(nalgebra::Const::<3>, nalgebra::Const::<1>);
+            j[row] = [eps[0], eps[1], eps[2]];
+        }
+        Some(([uv[0].re, uv[1].re], j))
     }
 
     /// Pixel to normalized undistorted coordinates `[x/z, y/z]` (Gauss–Newton

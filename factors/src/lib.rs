@@ -7,6 +7,8 @@
 //! - [`BetweenFactor`]: `r = Log(Z⁻¹ · X₁⁻¹ X₂)`, relative measurement (odometry, loop closures).
 //! - [`camera::CameraModel`]: pinhole with radial–tangential or equidistant distortion.
 //! - [`imu_calib`]: gravity-norm and integrated-rotation factors of turntable-free IMU calibration.
+//! - [`imu_preint`]: IMU preintegration (GTSAM's zero-order hold or VINS-Mono's midpoint), [`ImuFactor`], [`bias_random_walk`].
+//! - [`InverseDepthReprojection`]: VINS-Mono's inverse-depth reprojection through any [`camera::CameraModel`].
 //! - [`SnavelyReprojection`]: the Bundle-Adjustment-in-the-Large camera model (autodiff).
 //!
 //! Every factor's Jacobians are verified against central differences in tests.
@@ -15,10 +17,15 @@ pub mod bal;
 pub mod between;
 pub mod camera;
 pub mod imu_calib;
+pub mod imu_factor;
+pub mod imu_preint;
 pub mod prior;
+pub mod reprojection;
 
 pub use bal::SnavelyReprojection;
 pub use between::BetweenFactor;
 pub use imu_calib::{GravityNormFactor, IntegratedRotationFactor};
+pub use imu_factor::{bias_random_walk, ImuFactor};
 pub use prior::PriorFactor;
+pub use reprojection::InverseDepthReprojection;
 pub use tumble_solvers::LieGroup;

@@ -75,3 +75,62 @@ fn imu_calibration_factors() {
     .unwrap();
     assert_ok(&f, &[&m, &b]);
 }
+
+/// A preintegration over 0.5 s of a turning, accelerating motion.
+fn preintegration(scheme: tumble_factors::imu_preint::Scheme) -> tumble_factors::imu_preint::Preintegrated {
+    use tumble_factors::imu_preint::{Preintegrated, PreintegrationParams};
+    let params = PreintegrationParams { scheme, ..Default::default() };
+    let mut p = Preintegrated::new(params, Vector3::new(0.05, -0.02, 0.1), Vector3::new(0.01, 0.003, -0.02));
+    for k in 0..100 {
+        let t = k as f64 * 0.005;
+        p.integrate(
+            Vector3::new(0.8 * (2.0 * t).sin(), 0.3, 9.81 + 0.5 * t),
+            Vector3::new(0.4, -0.3 * (3.0 * t).cos(), 0.7 * t),
+            0.005,
+        );
+    }
+    p
+}
+
+#[test]
+fn imu_factor_and_bias_random_walk() {
+    use std::sync::Arc;
+    use tumble_factors::imu_preint::Scheme;
+    use tumble_factors::{bias_random_walk, ImuFactor};
+    use tumble_solvers::{B, V};
+    let xi = Isometry3F64::exp(Vector6::new(0.3, -0.2, 1.0, 1.0, 2.0, 0.5));
+    let xj = Isometry3F64::exp(Vector6::new(0.5, -0.1, 1.3, 1.4, 2.2, 0.3));
+    let (vi, vj) = (Vector3::new(0.3, -0.2, 0.1), Vector3::new(0.5, 0.1, -0.2));
+    let b = Vector6::new(0.08, -0.01, 0.12, 0.012, 0.001, -0.018);
+    for scheme in [Scheme::ZeroOrderHold, Scheme::Midpoint] {
+        let f = ImuFactor::new(
+            [X(0), V(0), B(0), X(1), V(1)],
+            Arc::new(preintegration(scheme)),
+            Vector3::new(0.0, 0.0, -9.81),
+        );
+        assert_ok(&f, &[&xi, &vi, &b, &xj, &vj]);
+        assert!(f.noise_model().is_ok());
+    }
+    let (rw, noise) = bias_random_walk(B(0), B(1), 3e-3, 2e-5, 0.5).unwrap();
+    assert_eq!(noise.dim(), Some(6));
+    assert_ok(&rw, &[&b, &(b * 1.1)]);
+}
+
+#[test]
+fn inverse_depth_reprojection_for_every_camera_model() {
+    use nalgebra::Vector1;
+    use tumble_factors::camera::{CameraModel, Distortion};
+    use tumble_factors::InverseDepthReprojection;
+    let t_bc = Isometry3F64::exp(Vector6::new(0.05, -0.02, 0.01, 1.2, -1.2, 1.2));
+    let xa = Isometry3F64::exp(Vector6::new(0.3, -0.2, 1.0, 1.0, 2.0, 0.5));
+    let xj = Isometry3F64::exp(Vector6::new(0.35, -0.1, 1.0, 1.02, 2.1, 0.45));
+    for distortion in [
+        Distortion::None,
+        Distortion::RadTan { k1: -0.28, k2: 0.07, p1: 2e-4, p2: 1.8e-5 },
+        Distortion::Equidistant { k1: 0.01, k2: -0.005, k3: 0.001, k4: -0.0002 },
+    ] {
+        let cam = CameraModel { fx: 458.0, fy: 457.0, cx: 367.0, cy: 248.0, distortion };
+        let f = InverseDepthReprojection::new([X(0), X(1), L(3)], [0.1, -0.08], [400.0, 200.0], cam, &t_bc);
+        assert_ok(&f, &[&xa, &xj, &Vector1::new(0.35)]);
+    }
+}

@@ -27,9 +27,22 @@ pub fn so3_exp(w: &Vector3<f64>) -> Matrix3<f64> {
 }
 
 /// SO(3) logarithm of a rotation matrix, angle in \[0, π\].
+///
+/// Closed form (Shepperd's quaternion extraction, then `2 atan2(|v|, w)`), accurate
+/// to rounding at every angle; `r` must be a rotation matrix.
 pub fn so3_log(r: &Matrix3<f64>) -> Vector3<f64> {
-    let q = nalgebra::UnitQuaternion::from_matrix(r);
-    q.scaled_axis()
+    let q = nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(*r));
+    let (mut w, mut v) = (q.w, q.vector().into_owned());
+    if w < 0.0 {
+        w = -w;
+        v = -v;
+    }
+    let s = v.norm();
+    if s < 1e-300 {
+        return v * 2.0;
+    }
+    let angle = 2.0 * s.atan2(w);
+    v * (angle / s)
 }
 
 /// Right Jacobian of SO(3): `Exp(w + δ) ≈ Exp(w) Exp(Jr(w) δ)`.

@@ -1,0 +1,115 @@
+//! Reprojection of a landmark parametrized by its inverse depth in the first
+//! keyframe that observed it (VINS-Mono's parametrization).
+//!
+//! The landmark is `p_Ca = f_a / ρ` in the anchor camera, with `f_a = [x, y, 1]`
+//! the anchor observation's undistorted normalized coordinates and `ρ` \[1/m\]
+//! the inverse depth (a `Vector1` variable). Poses are body-in-world SE(3)
+//! (`Isometry3F64`, right perturbation); `body_from_camera` is the fixed
+//! camera-to-IMU extrinsic `T_BC`. The residual is `π(p_Cj) − uv_j` in pixels
+//! of the given [`CameraModel`] (pinhole, radial–tangential or equidistant);
+//! for tracks already in normalized coordinates use a model with unit focal
+//! lengths and no distortion. Pair it with a Huber loss.
+//!
+//! ```
+//! use nalgebra::{Vector1, Vector3};
+//! use tumble_factors::camera::{CameraModel, Distortion};
+//! use tumble_factors::InverseDepthReprojection;
+//! use tumble_solvers::{check_jacobians, se3_from_quaternion, X, L};
+//! let cam = CameraModel { fx: 460.0, fy: 460.0, cx: 376.0, cy: 240.0,
+//!     distortion: Distortion::RadTan { k1: -0.28, k2: 0.07, p1: 2e-4, p2: 2e-5 } };
+//! let t_bc = se3_from_quaternion([1.0, 0.0, 0.0, 0.0], Vector3::new(0.05, 0.0, 0.0));
+//! let f = InverseDepthReprojection::new([X(0), X(1), L(7)], [0.1, -0.05], [380.0, 230.0], cam, &t_bc);
+//! let xa = se3_from_quaternion([1.0, 0.0, 0.0, 0.0], Vector3::zeros());
+//! let xj = se3_from_quaternion([0.999, 0.02, -0.03, 0.01], Vector3::new(0.2, 0.05, -0.1));
+//! let rho = Vector1::new(0.4);
+//! assert!(check_jacobians(&f, &[&xa, &xj, &rho]).unwrap().passes(1e-6));
+//! ```
+
+use crate::camera::CameraModel;
+use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Vector1, Vector3};
+use tumble_solvers::lie::hat;
+use tumble_solvers::sophus_lie::prelude::*;
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::{Factor, FactorError, Key, Linearization, Vars};
+
+/// Reprojection factor on `[X_anchor, X_j, ρ]`; see the module docs.
+#[derive(Clone, Debug)]
+pub struct InverseDepthReprojection {
+    keys: [Key; 3],
+    bearing: Vector3<f64>,
+    measured: [f64; 2],
+    camera: CameraModel,
+    r_bc: Matrix3<f64>,
+    t_bc: Vector3<f64>,
+}
+
+impl InverseDepthReprojection {
+    /// Factor on `[X_anchor, X_j, L]`: anchor observation `anchor_xy` (undistorted
+    /// normalized), observation `measured_uv` \[px\] in frame j, camera model and `T_BC`.
+    pub fn new(
+        keys: [Key; 3],
+        anchor_xy: [f64; 2],
+        measured_uv: [f64; 2],
+        camera: CameraModel,
+        body_from_camera: &Isometry3F64,
+    ) -> Self {
+        InverseDepthReprojection {
+            keys,
+            bearing: Vector3::new(anchor_xy[0], anchor_xy[1], 1.0),
+            measured: measured_uv,
+            camera,
+            r_bc: body_from_camera.rotation().matrix(),
+            t_bc: body_from_camera.translation(),
+        }
+    }
+
+    fn evaluate(&self, vars: Vars<'_>, jac: bool) -> Result<Linearization, FactorError> {
+        let xa: &Isometry3F64 = vars.get(0)?;
+        let xj: &Isometry3F64 = vars.get(1)?;
+        let rho: &Vector1<f64> = vars.get(2)?;
+        let (ra, pa) = (xa.rotation().matrix(), xa.translation());
+        let (rj, pj) = (xj.rotation().matrix(), xj.translation());
+        let inv = 1.0 / rho[0];
+        let p_ca = self.bearing * inv;
+        let p_ba = self.r_bc * p_ca + self.t_bc;
+        let p_w = ra * p_ba + pa;
+        let p_bj = rj.transpose() * (p_w - pj);
+        let p_cj = self.r_bc.transpose() * (p_bj - self.t_bc);
+        let Some((uv, jp)) = self.camera.project_with_jacobian(&[p_cj.x, p_cj.y, p_cj.z]) else {
+            return Err(FactorError::Other(format!("landmark behind camera (depth {:.3} m)", p_cj.z)));
+        };
+        let residual = DVector::from_vec(vec![uv[0] - self.measured[0], uv[1] - self.measured[1]]);
+        if !residual.iter().all(|x| x.is_finite()) {
+            return Err(FactorError::NonFinite);
+        }
+        if !jac {
+            return Ok(Linearization { residual, jacobians: Vec::new() });
+        }
+        let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
+        let rcb_rjt = self.r_bc.transpose() * rj.transpose();
+        let mut jxa = DMatrix::zeros(2, 6);
+        jxa.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * rcb_rjt * ra * (-hat(&p_ba))));
+        jxa.fixed_view_mut::<2, 3>(0, 3).copy_from(&(jpi * rcb_rjt * ra));
+        let mut jxj = DMatrix::zeros(2, 6);
+        jxj.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * self.r_bc.transpose() * hat(&p_bj)));
+        jxj.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jpi * self.r_bc.transpose()));
+        let d_rho = jpi * rcb_rjt * ra * self.r_bc * (-self.bearing * (inv * inv));
+        let jl = DMatrix::from_column_slice(2, 1, d_rho.as_slice());
+        Ok(Linearization { residual, jacobians: vec![jxa, jxj, jl] })
+    }
+}
+
+impl Factor for InverseDepthReprojection {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+        Ok(self.evaluate(vars, false)?.residual)
+    }
+    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+        self.evaluate(vars, true)
+    }
+}
