@@ -12,6 +12,7 @@ pub mod io;
 pub mod plot;
 pub mod posegraph;
 pub mod sim;
+pub mod vio;
 
 pub use error::InputError;
 pub use tumble_factors as factors;

@@ -264,6 +264,46 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Visual-inertial bias estimation (sliding window, paper §4): writes
+    /// trajectory.txt (TUM), biases.csv and summary.json.
+    Vio {
+        /// ASL folder with imu0/ and cam0/{sensor.yaml,tracks.csv} (e.g. from
+        /// `tumble sim walk`), or an EqVIO processed .csv.
+        input: PathBuf,
+        /// calibration.json from `tumble calibrate` (eq. 16 applied to every sample).
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// Kalibr imu.yaml with the noise (from `tumble allan`); default: imu0/sensor.yaml's figures.
+        #[arg(long)]
+        noise: Option<PathBuf>,
+        /// Ground truth (ASL CSV) for evaluation; an ASL folder's own is used when present.
+        #[arg(long)]
+        groundtruth: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Start from the ground-truth state at the first frame (evaluation aid only).
+        #[arg(long)]
+        init_from_groundtruth: bool,
+        /// Keyframes in the window.
+        #[arg(long, default_value_t = 10)]
+        window: usize,
+        /// Feature observation noise [px].
+        #[arg(long, default_value_t = 1.0)]
+        pixel_sigma: f64,
+        /// Integrate with VINS-Mono's midpoint rule instead of GTSAM's zero-order hold.
+        #[arg(long)]
+        midpoint: bool,
+        /// Gravity magnitude [m/s²].
+        #[arg(long, default_value_t = 9.81)]
+        gravity: f64,
+        /// Raise the IMU noise to what the static start measured (vibration).
+        #[arg(long)]
+        noise_from_static: bool,
+        /// Bias errors are averaged from this many seconds after initialization.
+        #[arg(long, default_value_t = 10.0)]
+        bias_after: f64,
+    },
     /// Run the main job on embedded default data. (Temporary: until the
     /// calibration pipeline exists, this solves a simulated SE(3) pose graph
     /// with known truth and prints the solver summary.)
@@ -503,6 +543,88 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 written.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
             );
         }
+        Command::Vio {
+            input,
+            calibration,
+            noise,
+            groundtruth,
+            out,
+            init_from_groundtruth,
+            window,
+            pixel_sigma,
+            midpoint,
+            gravity,
+            noise_from_static,
+            bias_after,
+        } => {
+            use tumble::vio::{ImuNoise, VioInput, VioOptions};
+            let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
+            let mut opts = VioOptions { window, pixel_sigma, gravity, noise_from_static, ..VioOptions::default() };
+            if midpoint {
+                opts.imu.scheme = tumble::factors::imu_preint::Scheme::Midpoint;
+            }
+            let is_csv = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+            let mut vin = if is_csv {
+                if cal.is_some() {
+                    eprintln!("warning: EqVIO files hold corrected samples already; --calibration is not applied");
+                }
+                tumble::vio::read_eqvio(&input, groundtruth.as_deref())?
+            } else {
+                let mut v = VioInput::from_asl(&input, cal.as_ref())?;
+                if let Some(g) = &groundtruth {
+                    v.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
+                }
+                if noise.is_none() {
+                    let root = tumble::io::asl::resolve_mav0(&input)?;
+                    let y = root.join("imu0").join("sensor.yaml");
+                    if let Ok(s) = tumble::io::asl::read_imu_sensor(&y) {
+                        if let (Some(a), Some(b), Some(c), Some(d)) = (
+                            s.accelerometer_noise_density,
+                            s.accelerometer_random_walk,
+                            s.gyroscope_noise_density,
+                            s.gyroscope_random_walk,
+                        ) {
+                            ImuNoise {
+                                accelerometer_noise_density: a,
+                                accelerometer_random_walk: b,
+                                gyroscope_noise_density: c,
+                                gyroscope_random_walk: d,
+                            }
+                            .apply(&mut opts.imu);
+                            println!("noise from {}", y.display());
+                        }
+                    }
+                }
+                v
+            };
+            match &noise {
+                Some(p) => ImuNoise::read(p)?.apply(&mut opts.imu),
+                None if is_csv => println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)"),
+                None => {}
+            }
+            if init_from_groundtruth {
+                opts.init = ground_truth_init(&vin)?;
+            }
+            vin.name = input.display().to_string();
+            let bar = indicatif::ProgressBar::new(vin.frames.len() as u64);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "vio [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})",
+                )
+                .expect("static template")
+                .progress_chars("=> "),
+            );
+            let mut tick = |done: usize, _: usize| bar.set_position(done as u64);
+            let result = tumble::vio::run(&vin, &opts, Some(&mut tick))?;
+            bar.finish_and_clear();
+            let summary = tumble::vio::summarize(&vin, &opts, &result, bias_after);
+            for w in &result.warnings {
+                eprintln!("warning: {w}");
+            }
+            println!("{}", summary.table());
+            let files = tumble::vio::write_outputs(&out, &vin, &result, &summary)?;
+            println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+        }
         Command::Demo => {
             println!("tumble demo (temporary): simulated SE(3) helix pose graph, 3 laps × 200 poses, known truth");
             let sim = tumble::posegraph::simulate_helix(200, 3, 5.0, 0.01, 0.05, 7);
@@ -638,4 +760,20 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// The ground-truth state at the first frame, as an initialization (evaluation aid).
+fn ground_truth_init(v: &tumble::vio::VioInput) -> Result<tumble::vio::Init, String> {
+    let gt = v.groundtruth.as_ref().ok_or("--init-from-groundtruth needs ground truth (--groundtruth FILE)")?;
+    let t_first = v.frames.first().ok_or("no frames")?.t;
+    let want = v.t0_ns + (t_first * 1e9).round() as i64;
+    let k = gt.t_ns.partition_point(|&s| s < want);
+    if k >= gt.len() {
+        return Err("the ground truth ends before the first frame".into());
+    }
+    let t = (gt.t_ns[k] - v.t0_ns) as f64 * 1e-9;
+    let vel = gt.v.as_ref().map_or([0.0; 3], |x| x[k]);
+    let ba = gt.bias_accel.as_ref().map_or([0.0; 3], |x| x[k]);
+    let bg = gt.bias_gyro.as_ref().map_or([0.0; 3], |x| x[k]);
+    Ok(tumble::vio::Init::Given { q: gt.q[k], p: gt.p[k], v: vel, bias_accel: ba, bias_gyro: bg, t })
 }

@@ -1,0 +1,743 @@
+//! The sliding-window estimator: window bookkeeping, graph building,
+//! keyframe decisions, marginalization, failure detection.
+
+use super::geometry::{gravity_aligned, parts, pose, preintegrate, triangulate};
+use super::{Init, VioInput, VioOptions};
+use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector1, Vector3, Vector6};
+use std::collections::{BTreeMap, HashMap};
+use std::sync::Arc;
+use std::time::Instant;
+use tumble_factors::imu_preint::Preintegrated;
+use tumble_factors::{bias_random_walk, ImuFactor, InverseDepthReprojection, PriorFactor};
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::{
+    covariances, marginalize, Graph, Huber, LmOptions, MarginalPrior, NoiseModel, Optimizer, Values, B, L, V, X,
+};
+
+/// The estimate at one camera frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameEstimate {
+    /// Frame time \[s\] (input time axis).
+    pub t: f64,
+    /// Whether the frame became a keyframe.
+    pub keyframe: bool,
+    /// Body position in the world frame \[m\].
+    pub position: [f64; 3],
+    /// Rotation world←body `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+    /// Velocity in the world frame \[m/s\].
+    pub velocity: [f64; 3],
+    /// Accelerometer bias \[m/s²\].
+    pub bias_accel: [f64; 3],
+    /// Gyro bias \[rad/s\].
+    pub bias_gyro: [f64; 3],
+    /// Marginal standard deviations: rotation (body, rad), position (m),
+    /// velocity (m/s), b_a (m/s²), b_g (rad/s); NaN when not recovered.
+    pub std: [[f64; 3]; 5],
+    /// Landmarks in the window.
+    pub landmarks: usize,
+    /// Time spent on this frame's solve \[s\].
+    pub solve_s: f64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone, Default)]
+pub struct VioResult {
+    /// One estimate per frame after initialization.
+    pub estimates: Vec<FrameEstimate>,
+    /// Warnings (gaps, resets, noise raised, frames without features), in order.
+    pub warnings: Vec<String>,
+    /// Number of failure resets.
+    pub resets: usize,
+    /// Time at which the estimator initialized \[s\].
+    pub init_time: Option<f64>,
+    /// Wall time of the whole run \[s\].
+    pub wall_s: f64,
+}
+
+struct State {
+    sid: u64,
+    t: f64,
+    zero_velocity: bool,
+}
+
+struct Obs {
+    sid: u64,
+    uv: [f64; 2],
+    xy: [f64; 2],
+}
+
+#[derive(Default)]
+struct Track {
+    obs: Vec<Obs>,
+    /// Landmark id and its anchor state.
+    landmark: Option<(u64, u64)>,
+}
+
+struct InitPrior {
+    sid: u64,
+    pose: Isometry3F64,
+    pose_cov: DMatrix<f64>,
+    v: Vector3<f64>,
+    v_sigma: f64,
+    b: Vector6<f64>,
+    b_sigma: [f64; 6],
+}
+
+/// The sliding-window estimator; feed it frames in time order with [`Estimator::process`].
+pub struct Estimator<'a> {
+    opts: VioOptions,
+    input: &'a VioInput,
+    values: Values,
+    states: Vec<State>,
+    links: Vec<(Arc<Preintegrated>, f64)>,
+    tracks: BTreeMap<u64, Track>,
+    next_sid: u64,
+    next_lid: u64,
+    marginal: Option<MarginalPrior>,
+    init_prior: Option<InitPrior>,
+    last_keyframe_obs: HashMap<u64, [f64; 2]>,
+    prev_frame_obs: HashMap<u64, [f64; 2]>,
+    prev_frame_rotation: Matrix3<f64>,
+    last_good: Option<(Isometry3F64, Vector3<f64>, Vector6<f64>)>,
+    /// Warnings so far.
+    pub warnings: Vec<String>,
+    /// Resets so far.
+    pub resets: usize,
+    /// Time of initialization.
+    pub init_time: Option<f64>,
+    gravity: Vector3<f64>,
+    no_feature_since: Option<f64>,
+}
+
+fn vec3(v: &Vector3<f64>) -> [f64; 3] {
+    [v.x, v.y, v.z]
+}
+
+impl<'a> Estimator<'a> {
+    /// An estimator over `input` (frames are given to [`Estimator::process`] by index).
+    pub fn new(input: &'a VioInput, opts: &VioOptions) -> Self {
+        Estimator {
+            gravity: Vector3::new(0.0, 0.0, -opts.gravity),
+            opts: opts.clone(),
+            input,
+            values: Values::new(),
+            states: Vec::new(),
+            links: Vec::new(),
+            tracks: BTreeMap::new(),
+            next_sid: 0,
+            next_lid: 0,
+            marginal: None,
+            init_prior: None,
+            last_keyframe_obs: HashMap::new(),
+            prev_frame_obs: HashMap::new(),
+            prev_frame_rotation: Matrix3::identity(),
+            last_good: None,
+            warnings: Vec::new(),
+            resets: 0,
+            init_time: None,
+            no_feature_since: None,
+        }
+    }
+
+    fn warn(&mut self, msg: String) {
+        self.warnings.push(msg);
+    }
+
+    /// Try to initialize at time `t`; returns the initial state when it worked.
+    fn initialize(&mut self, t: f64) -> Option<(Isometry3F64, Vector3<f64>, Vector6<f64>)> {
+        let imu = &self.input.imu;
+        match &self.opts.init {
+            Init::Given { q, p, v, bias_accel, bias_gyro, t: t0 } => {
+                if t < *t0 {
+                    return None;
+                }
+                let uq = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+                let b =
+                    Vector6::new(bias_accel[0], bias_accel[1], bias_accel[2], bias_gyro[0], bias_gyro[1], bias_gyro[2]);
+                Some((pose(uq.to_rotation_matrix().matrix(), &Vector3::from(*p)), Vector3::from(*v), b))
+            }
+            Init::Static => {
+                let w = self.opts.init_window_s;
+                let (i0, i1) = (imu.t.partition_point(|&s| s < t - w), imu.t.partition_point(|&s| s <= t));
+                if t - w < imu.t.first().copied().unwrap_or(f64::INFINITY) - 1e-9 || i1 < i0 + 10 {
+                    return None;
+                }
+                // At rest, means over quarters of the window agree (vibration averages out).
+                let quarter = (i1 - i0) / 4;
+                let mean = |a: usize, b: usize, g: bool| -> Vector3<f64> {
+                    let s: Vector3<f64> = (a..b).map(|k| if g { imu.gyro[k] } else { imu.acc[k] }).sum();
+                    s / (b - a) as f64
+                };
+                let (mut dg, mut da) = (0.0f64, 0.0f64);
+                let (gm, am) = (mean(i0, i1, true), mean(i0, i1, false));
+                for q in 0..4 {
+                    let (a, b) = (i0 + q * quarter, i0 + (q + 1) * quarter);
+                    dg = dg.max((mean(a, b, true) - gm).amax());
+                    da = da.max((mean(a, b, false) - am).amax());
+                }
+                if dg > 0.02 || da > 0.3 {
+                    return None;
+                }
+                {
+                    let rate = (i1 - i0) as f64 / w;
+                    let std = |g: bool, m: &Vector3<f64>| -> f64 {
+                        let s: f64 =
+                            (i0..i1).map(|k| (if g { imu.gyro[k] } else { imu.acc[k] } - m).norm_squared() / 3.0).sum();
+                        (s / (i1 - i0) as f64).sqrt()
+                    };
+                    let (sa, sg) = (std(false, &am) / rate.sqrt(), std(true, &gm) / rate.sqrt());
+                    let apply = self.opts.noise_from_static;
+                    let action = if apply { "using the measured value" } else { "kept (--noise-from-static uses it)" };
+                    if sa > 1.5 * self.opts.imu.accel_noise_density {
+                        self.warnings.push(format!(
+                            "the accelerometer at rest is noisier than the noise model says ({sa:.2e} vs {:.2e} m/s²/√Hz, vibration?): {action}",
+                            self.opts.imu.accel_noise_density
+                        ));
+                        if apply {
+                            self.opts.imu.accel_noise_density = sa;
+                        }
+                    }
+                    if sg > 1.5 * self.opts.imu.gyro_noise_density {
+                        self.warnings.push(format!(
+                            "the gyroscope at rest is noisier than the noise model says ({sg:.2e} vs {:.2e} rad/s/√Hz): {action}",
+                            self.opts.imu.gyro_noise_density
+                        ));
+                        if apply {
+                            self.opts.imu.gyro_noise_density = sg;
+                        }
+                    }
+                }
+                let r = gravity_aligned(&am);
+                let b = Vector6::new(0.0, 0.0, 0.0, gm.x, gm.y, gm.z);
+                Some((pose(&r, &Vector3::zeros()), Vector3::zeros(), b))
+            }
+        }
+    }
+
+    fn start(&mut self, t: f64, x: Isometry3F64, v: Vector3<f64>, b: Vector6<f64>, v_sigma: f64) {
+        let sid = self.next_sid;
+        self.next_sid += 1;
+        self.values = Values::new();
+        self.values.insert(X(sid), x);
+        self.values.insert(V(sid), v);
+        self.values.insert(B(sid), b);
+        self.states = vec![State { sid, t, zero_velocity: false }];
+        self.links.clear();
+        self.tracks.clear();
+        self.marginal = None;
+        // Roll and pitch as uncertain as an accelerometer bias makes them; yaw and
+        // position fixed (the gauge of VIO).
+        let (r, _) = parts(&x);
+        let tilt = (self.opts.init_bias_accel_sigma / self.opts.gravity).max(1e-3);
+        let u = r.transpose() * Vector3::z();
+        let rot_cov = Matrix3::identity() * tilt * tilt + u * u.transpose() * (1e-6 - tilt * tilt);
+        let mut pose_cov = DMatrix::identity(6, 6) * 1e-6;
+        pose_cov.view_mut((0, 0), (3, 3)).copy_from(&rot_cov);
+        let sa = self.opts.init_bias_accel_sigma;
+        let sg = 5e-3;
+        self.init_prior = Some(InitPrior { sid, pose: x, pose_cov, v, v_sigma, b, b_sigma: [sa, sa, sa, sg, sg, sg] });
+        self.last_good = Some((x, v, b));
+    }
+
+    fn state_values(&self, sid: u64) -> (Isometry3F64, Vector3<f64>, Vector6<f64>) {
+        (
+            *self.values.get::<Isometry3F64>(X(sid)).expect("window state"),
+            *self.values.get::<Vector3<f64>>(V(sid)).expect("window state"),
+            *self.values.get::<Vector6<f64>>(B(sid)).expect("window state"),
+        )
+    }
+
+    fn build_graph(&self) -> Graph {
+        let mut g = Graph::new();
+        if let Some(p) = &self.init_prior {
+            if let Ok(n) = NoiseModel::from_covariance(&p.pose_cov) {
+                g.add(PriorFactor::new(X(p.sid), p.pose), n);
+            }
+            g.add(PriorFactor::new(V(p.sid), p.v), NoiseModel::isotropic(3, p.v_sigma).expect("positive"));
+            g.add(PriorFactor::new(B(p.sid), p.b), NoiseModel::diagonal(&p.b_sigma).expect("positive"));
+        }
+        if let Some(m) = &self.marginal {
+            g.add(m.clone(), NoiseModel::Unit);
+        }
+        for (i, (pim, scale)) in self.links.iter().enumerate() {
+            let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
+            let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
+            let c = pim.covariance() * *scale;
+            if let Ok(n) = NoiseModel::from_covariance(&DMatrix::from_fn(9, 9, |r, k| c[(r, k)])) {
+                g.add(f, n);
+            }
+            let dt = pim.delta_t().max(1e-3);
+            if let Ok((rw, n)) =
+                bias_random_walk(B(a), B(b), self.opts.imu.accel_random_walk, self.opts.imu.gyro_random_walk, dt)
+            {
+                g.add(rw, n);
+            }
+        }
+        for s in &self.states {
+            if s.zero_velocity {
+                g.add(PriorFactor::new(V(s.sid), Vector3::zeros()), NoiseModel::isotropic(3, 0.01).expect("positive"));
+            }
+        }
+        let noise = NoiseModel::isotropic(2, self.opts.pixel_sigma).expect("positive pixel sigma");
+        let huber = Arc::new(Huber(self.opts.huber));
+        for tr in self.tracks.values() {
+            let Some((lid, anchor)) = tr.landmark else { continue };
+            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
+            for o in tr.obs.iter().filter(|o| o.sid != anchor) {
+                let f = InverseDepthReprojection::new(
+                    [X(anchor), X(o.sid), L(lid)],
+                    a.xy,
+                    o.uv,
+                    self.input.camera,
+                    &self.input.body_from_camera,
+                );
+                g.add_entry(tumble_solvers::FactorEntry {
+                    factor: Box::new(f),
+                    noise: noise.clone(),
+                    loss: Some(huber.clone()),
+                });
+            }
+        }
+        g
+    }
+
+    fn landmark_count(&self) -> usize {
+        self.tracks.values().filter(|t| t.landmark.is_some()).count()
+    }
+
+    /// Triangulate tracks seen from two or more window states.
+    fn triangulate_new(&mut self) {
+        let (r_bc, t_bc) = parts(&self.input.body_from_camera);
+        let min_angle = self.opts.min_triangulation_deg.to_radians();
+        let mut poses: HashMap<u64, (Matrix3<f64>, Vector3<f64>)> = HashMap::new();
+        for s in &self.states {
+            let (x, _, _) = self.state_values(s.sid);
+            let (r, p) = parts(&x);
+            poses.insert(s.sid, (r * r_bc, r * t_bc + p));
+        }
+        for tr in self.tracks.values_mut() {
+            if tr.landmark.is_some() || tr.obs.len() < 2 {
+                continue;
+            }
+            let (mut c, mut d) = (Vec::new(), Vec::new());
+            for o in &tr.obs {
+                let (rc, pc) = poses[&o.sid];
+                c.push(pc);
+                d.push((rc * Vector3::new(o.xy[0], o.xy[1], 1.0)).normalize());
+            }
+            let Some((pw, angle)) = triangulate(&c, &d) else { continue };
+            if angle < min_angle {
+                continue;
+            }
+            // In front of every camera, and not absurdly far.
+            let ok = tr.obs.iter().all(|o| {
+                let (rc, pc) = poses[&o.sid];
+                let z = (rc.transpose() * (pw - pc)).z;
+                z > 0.1 && z < 200.0
+            });
+            if !ok {
+                continue;
+            }
+            let anchor = tr.obs[0].sid;
+            let (rc, pc) = poses[&anchor];
+            let z = (rc.transpose() * (pw - pc)).z;
+            let lid = self.next_lid;
+            self.next_lid += 1;
+            self.values.insert(L(lid), Vector1::new(1.0 / z));
+            tr.landmark = Some((lid, anchor));
+        }
+    }
+
+    /// Drop observations with large errors and landmarks with invalid depth.
+    fn reject_outliers(&mut self) {
+        let limit = self.opts.outlier_sigmas * self.opts.pixel_sigma;
+        let mut drop_landmarks = Vec::new();
+        for (&id, tr) in self.tracks.iter_mut() {
+            let Some((lid, anchor)) = tr.landmark else { continue };
+            let rho = self.values.get::<Vector1<f64>>(L(lid)).map(|v| v[0]).unwrap_or(f64::NAN);
+            if !(rho > 1.0 / 200.0 && rho < 10.0) {
+                drop_landmarks.push(id);
+                continue;
+            }
+            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor).map(|o| o.xy) else { continue };
+            let xa = *self.values.get::<Isometry3F64>(X(anchor)).expect("anchor");
+            let mut keep = Vec::with_capacity(tr.obs.len());
+            for o in tr.obs.drain(..) {
+                if o.sid != anchor {
+                    let f = InverseDepthReprojection::new(
+                        [X(anchor), X(o.sid), L(lid)],
+                        a,
+                        o.uv,
+                        self.input.camera,
+                        &self.input.body_from_camera,
+                    );
+                    let xj = *self.values.get::<Isometry3F64>(X(o.sid)).expect("state");
+                    let rho_v = Vector1::new(rho);
+                    let vars: [&dyn tumble_solvers::DynVariable; 3] = [&xa, &xj, &rho_v];
+                    let r = tumble_solvers::Factor::residual(&f, tumble_solvers::Vars::new(&vars));
+                    if r.map_or(true, |r| r.norm() > limit) {
+                        continue;
+                    }
+                }
+                keep.push(o);
+            }
+            tr.obs = keep;
+        }
+        for id in drop_landmarks {
+            if let Some(tr) = self.tracks.get_mut(&id) {
+                if let Some((lid, _)) = tr.landmark.take() {
+                    self.values.remove(L(lid));
+                }
+                // Keep only the newest observation: the track may be triangulated again.
+                let last = tr.obs.pop();
+                tr.obs.clear();
+                tr.obs.extend(last);
+            }
+        }
+    }
+
+    /// Remove the newest state (a frame that is not a keyframe).
+    fn drop_newest(&mut self) {
+        let s = self.states.pop().expect("a newest state");
+        self.links.pop();
+        for k in [X(s.sid), V(s.sid), B(s.sid)] {
+            self.values.remove(k);
+        }
+        for tr in self.tracks.values_mut() {
+            tr.obs.retain(|o| o.sid != s.sid);
+        }
+    }
+
+    /// Marginalize the oldest state and the landmarks anchored in it.
+    fn marginalize_oldest(&mut self) {
+        let old = self.states[0].sid;
+        let mut keys = vec![X(old), V(old), B(old)];
+        let anchored: Vec<u64> = self
+            .tracks
+            .iter()
+            .filter(|(_, t)| matches!(t.landmark, Some((_, a)) if a == old))
+            .map(|(&id, _)| id)
+            .collect();
+        for id in &anchored {
+            keys.push(L(self.tracks[id].landmark.expect("anchored").0));
+        }
+        let graph = self.build_graph();
+        match marginalize(&graph, &self.values, &keys) {
+            Ok(m) => self.marginal = Some(m.prior),
+            Err(e) => {
+                let msg = format!("marginalization failed ({e}); the window restarts from its newest state");
+                self.warn(msg);
+                self.reset_to_newest();
+                return;
+            }
+        }
+        if self.init_prior.as_ref().is_some_and(|p| p.sid == old) {
+            self.init_prior = None;
+        }
+        for k in keys {
+            self.values.remove(k);
+        }
+        for id in anchored {
+            let tr = self.tracks.get_mut(&id).expect("track");
+            tr.landmark = None;
+            // Every observation went into the prior: only new ones may be used again.
+            tr.obs.clear();
+        }
+        for tr in self.tracks.values_mut() {
+            tr.obs.retain(|o| o.sid != old);
+        }
+        self.states.remove(0);
+        self.links.remove(0);
+    }
+
+    fn reset_to_newest(&mut self) {
+        let (x, v, b) = self.last_good.expect("initialized");
+        let t = self.states.last().map_or(0.0, |s| s.t);
+        self.resets += 1;
+        self.start(t, x, v, b, 0.5);
+        if let Some(p) = self.init_prior.as_mut() {
+            // Position and yaw stay the gauge; roll, pitch and biases loosen.
+            p.b_sigma = [0.2, 0.2, 0.2, 0.02, 0.02, 0.02];
+        }
+    }
+
+    fn failed(&self, sid: u64, predicted: &Isometry3F64) -> Option<String> {
+        let (x, v, b) = self.state_values(sid);
+        let (r, p) = parts(&x);
+        if !(p.iter().chain(v.iter()).chain(b.iter()).all(|z| z.is_finite())) {
+            return Some("non-finite state".into());
+        }
+        if b.fixed_rows::<3>(0).norm() > 2.5 {
+            return Some(format!("accelerometer bias grew to {:.2} m/s²", b.fixed_rows::<3>(0).norm()));
+        }
+        if b.fixed_rows::<3>(3).norm() > 1.0 {
+            return Some(format!("gyro bias grew to {:.2} rad/s", b.fixed_rows::<3>(3).norm()));
+        }
+        let (rp, pp) = parts(predicted);
+        let jump = (p - pp).norm();
+        if jump > 5.0 {
+            return Some(format!("the newest position jumped {jump:.1} m from the IMU prediction"));
+        }
+        let ang = tumble_solvers::lie::so3_log(&(rp.transpose() * r)).norm().to_degrees();
+        if ang > 50.0 {
+            return Some(format!("the newest rotation jumped {ang:.0}° from the IMU prediction"));
+        }
+        None
+    }
+
+    /// Process camera frame `index` of the input; returns its estimate once initialized.
+    pub fn process(&mut self, index: usize) -> Option<FrameEstimate> {
+        let frame = &self.input.frames[index];
+        let t = frame.t;
+        let t_start = Instant::now();
+        if self.states.is_empty() {
+            let (x, v, b) = self.initialize(t)?;
+            self.init_time = Some(t);
+            self.start(t, x, v, b, 0.01);
+            self.add_observations(index);
+            self.last_keyframe_obs = self.frame_obs(index);
+            self.prev_frame_obs = self.last_keyframe_obs.clone();
+            self.prev_frame_rotation = parts(&x).0;
+            return Some(self.estimate(self.states[0].sid, true, t_start, None));
+        }
+        // IMU from the newest window state to this frame.
+        let last = self.states.last().expect("state");
+        let (ta, last_sid) = (last.t, last.sid);
+        if t <= ta {
+            return None;
+        }
+        let (xl, vl, bl) = self.state_values(last_sid);
+        let bias = (bl.fixed_rows::<3>(0).into_owned(), bl.fixed_rows::<3>(3).into_owned());
+        let (pim, gap) = preintegrate(&self.input.imu, ta, t, bias, self.opts.imu);
+        let mut scale = 1.0;
+        if gap > self.opts.max_imu_gap_s {
+            self.warn(format!(
+                "IMU gap of {:.0} ms before the frame at {t:.3} s: that interval's IMU factor is weakened",
+                gap * 1e3
+            ));
+            scale = (gap / self.opts.max_imu_gap_s).powi(2) * 100.0;
+        }
+        if pim.is_empty() || pim.delta_t() <= 0.0 {
+            self.warn(format!("no IMU samples before the frame at {t:.3} s: frame skipped"));
+            return None;
+        }
+        // Predict the new state.
+        let (ri, pi) = parts(&xl);
+        let dt = pim.delta_t();
+        let rj = ri * pim.delta_rotation();
+        let vj = vl + self.gravity * dt + ri * pim.delta_velocity();
+        let pj = pi + vl * dt + self.gravity * (0.5 * dt * dt) + ri * pim.delta_position();
+        let predicted = pose(&rj, &pj);
+        let sid = self.next_sid;
+        self.next_sid += 1;
+        self.values.insert(X(sid), predicted);
+        self.values.insert(V(sid), vj);
+        self.values.insert(B(sid), bl);
+        let obs = self.frame_obs(index);
+        // Keyframe and zero-velocity decisions from the feature motion.
+        let fx = self.input.camera.fx;
+        // Parallax with the rotation (IMU-predicted) taken out: only translation triangulates.
+        let (r_bc, _) = parts(&self.input.body_from_camera);
+        let parallax = |a: &HashMap<u64, [f64; 2]>, r_then: &Matrix3<f64>| -> (f64, usize) {
+            let rel = (r_then * r_bc).transpose() * (rj * r_bc);
+            let (mut s, mut n) = (0.0, 0);
+            for (id, xy) in &obs {
+                if let Some(q) = a.get(id) {
+                    let f = rel.transpose() * Vector3::new(q[0], q[1], 1.0);
+                    if f.z > 1e-6 {
+                        s += ((xy[0] - f.x / f.z).powi(2) + (xy[1] - f.y / f.z).powi(2)).sqrt() * fx;
+                        n += 1;
+                    }
+                }
+            }
+            (if n > 0 { s / n as f64 } else { f64::INFINITY }, n)
+        };
+        let (par_kf, common_kf) = parallax(&self.last_keyframe_obs, &ri);
+        let (par_prev, common_prev) = parallax(&self.prev_frame_obs, &self.prev_frame_rotation);
+        let zero_velocity = common_prev >= 10 && par_prev < self.opts.zero_velocity_px;
+        let kf_t = self.states.last().map_or(t, |s| s.t);
+        let keyframe = par_kf >= self.opts.keyframe_parallax_px
+            || t - kf_t >= self.opts.keyframe_max_interval_s
+            || common_kf * 2 < self.last_keyframe_obs.len()
+            || common_kf < 10;
+        if obs.is_empty() {
+            if self.no_feature_since.is_none() {
+                self.no_feature_since = Some(t);
+                self.warn(format!("no features from {t:.3} s on: IMU only until features return"));
+            }
+        } else if let Some(t0) = self.no_feature_since.take() {
+            self.warn(format!("features back at {t:.3} s after {:.2} s without", t - t0));
+        }
+        self.states.push(State { sid, t, zero_velocity });
+        self.links.push((Arc::new(pim), scale));
+        self.add_observations(index);
+        self.prev_frame_obs = obs.clone();
+        self.prev_frame_rotation = rj;
+        self.triangulate_new();
+        // Solve.
+        let graph = self.build_graph();
+        let lm = LmOptions {
+            max_iterations: self.opts.max_iterations,
+            function_tolerance: self.opts.function_tolerance,
+            eliminate: vec!['l'],
+            log_iterations: false,
+            ..LmOptions::default()
+        };
+        let tb = Instant::now();
+        let solved = Optimizer::new(lm).optimize(&graph, &self.values);
+        if std::env::var("VIO_PROFILE").is_ok() {
+            if let Ok((_, s)) = &solved {
+                eprintln!(
+                    "frame {index}: graph {} factors built in {:.2} ms; solve {:.2} ms: it {} lin {:.2} build {:.2} fact {:.2} solve {:.2} reduced {}",
+                    graph.len(), (tb - t_start).as_secs_f64() * 1e3, tb.elapsed().as_secs_f64() * 1e3, s.iterations,
+                    s.time_linearize * 1e3, s.time_build * 1e3, s.time_factorize * 1e3, s.time_solve * 1e3, s.reduced_dim
+                );
+            }
+        }
+        let failure = match solved {
+            Ok((v, _)) => {
+                self.values = v;
+                self.failed(sid, &predicted)
+            }
+            Err(e) => Some(format!("the solver failed: {e}")),
+        };
+        if let Some(why) = failure {
+            self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
+            self.last_good = Some((predicted, vj, bl));
+            self.reset_to_newest();
+            self.add_observations(index);
+            self.last_keyframe_obs = obs;
+            return Some(self.estimate(self.states[0].sid, true, t_start, None));
+        }
+        self.reintegrate_if_needed();
+        self.reject_outliers();
+        let est = self.estimate(sid, keyframe, t_start, Some(&graph));
+        self.last_good = Some(self.state_values(sid));
+        if keyframe {
+            self.last_keyframe_obs = obs;
+            if self.states.len() > self.opts.window {
+                self.marginalize_oldest();
+            }
+        } else {
+            self.drop_newest();
+        }
+        Some(est)
+    }
+
+    fn reintegrate_if_needed(&mut self) {
+        for i in 0..self.links.len() {
+            let sid = self.states[i].sid;
+            let b = *self.values.get::<Vector6<f64>>(B(sid)).expect("state");
+            let (ba, bg) = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
+            let (la, lg) = self.links[i].0.bias();
+            if (ba - la).norm() > 0.05 || (bg - lg).norm() > 0.005 {
+                let mut p = (*self.links[i].0).clone();
+                p.reintegrate(ba, bg);
+                self.links[i].0 = Arc::new(p);
+            }
+        }
+    }
+
+    fn frame_obs(&self, index: usize) -> HashMap<u64, [f64; 2]> {
+        let cam = &self.input.camera;
+        self.input.frames[index].features.iter().filter_map(|(id, uv)| cam.unproject(*uv).map(|xy| (*id, xy))).collect()
+    }
+
+    fn add_observations(&mut self, index: usize) {
+        let sid = self.states.last().expect("state").sid;
+        let cam = self.input.camera;
+        let (r_bc, t_bc) = parts(&self.input.body_from_camera);
+        let (rj, pj) = parts(self.values.get::<Isometry3F64>(X(sid)).expect("newest state"));
+        for (id, uv) in &self.input.frames[index].features {
+            let Some(xy) = cam.unproject(*uv) else { continue };
+            let tr = self.tracks.entry(*id).or_default();
+            // A landmark the predicted pose would see behind the camera: skip the observation.
+            if let Some((lid, anchor)) = tr.landmark {
+                let (Some(a), Ok(x), Ok(rho)) = (
+                    tr.obs.iter().find(|o| o.sid == anchor),
+                    self.values.get::<Isometry3F64>(X(anchor)),
+                    self.values.get::<Vector1<f64>>(L(lid)),
+                ) else {
+                    continue;
+                };
+                let (ra, pa) = parts(x);
+                let pw = ra * (r_bc * (Vector3::new(a.xy[0], a.xy[1], 1.0) / rho[0]) + t_bc) + pa;
+                if (r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc)).z < 0.05 {
+                    continue;
+                }
+            }
+            tr.obs.push(Obs { sid, uv: *uv, xy });
+        }
+        // Forget tracks that are no longer seen and have no landmark.
+        let seen: std::collections::HashSet<u64> = self.input.frames[index].features.iter().map(|f| f.0).collect();
+        self.tracks.retain(|id, t| seen.contains(id) || t.landmark.is_some());
+    }
+
+    fn estimate(&self, sid: u64, keyframe: bool, t0: Instant, graph: Option<&Graph>) -> FrameEstimate {
+        let (x, v, b) = self.state_values(sid);
+        let (r, p) = parts(&x);
+        let q = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r));
+        let mut std = [[f64::NAN; 3]; 5];
+        if let (true, Some(g)) = (self.opts.covariances, graph) {
+            if let Ok(c) = covariances(g, &self.values, &[X(sid), V(sid), B(sid)]) {
+                let d = |k, i: usize| c.get(k).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt());
+                let blocks = [(X(sid), 0), (X(sid), 3), (V(sid), 0), (B(sid), 0), (B(sid), 3)];
+                for (row, (key, off)) in std.iter_mut().zip(blocks) {
+                    for (i, s) in row.iter_mut().enumerate() {
+                        *s = d(key, i + off);
+                    }
+                }
+            }
+        }
+        let state = self.states.iter().find(|s| s.sid == sid).expect("state");
+        FrameEstimate {
+            t: state.t,
+            keyframe,
+            position: vec3(&p),
+            rotation: [q.w, q.i, q.j, q.k],
+            velocity: vec3(&v),
+            bias_accel: [b[0], b[1], b[2]],
+            bias_gyro: [b[3], b[4], b[5]],
+            std,
+            landmarks: self.landmark_count(),
+            solve_s: t0.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+/// Run the estimator over every frame of `input`. `progress` is called with
+/// `(frames done, frames total)`.
+pub fn run(
+    input: &VioInput,
+    opts: &VioOptions,
+    mut progress: Option<&mut dyn FnMut(usize, usize)>,
+) -> Result<VioResult, String> {
+    input.check()?;
+    let t0 = Instant::now();
+    let mut est = Estimator::new(input, opts);
+    let mut out = VioResult::default();
+    for i in 0..input.frames.len() {
+        if let Some(e) = est.process(i) {
+            out.estimates.push(e);
+        }
+        if let Some(p) = progress.as_mut() {
+            p(i + 1, input.frames.len());
+        }
+    }
+    if est.init_time.is_none() {
+        return Err(match opts.init {
+            Init::Static => format!(
+                "could not initialize: no {:.1} s window at rest before any frame (the static initialization needs the recording to start at rest; \
+                 give --init-from-groundtruth to evaluate from a known state)",
+                opts.init_window_s
+            ),
+            Init::Given { t, .. } => format!("could not initialize: no frame after the given initial state at {t:.3} s"),
+        });
+    }
+    out.warnings = est.warnings;
+    out.resets = est.resets;
+    out.init_time = est.init_time;
+    out.wall_s = t0.elapsed().as_secs_f64();
+    Ok(out)
+}

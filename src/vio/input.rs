@@ -1,0 +1,288 @@
+//! What the estimator consumes: calibrated IMU samples, frames of feature
+//! observations, the camera model and extrinsic, optional ground truth — from a
+//! simulation, an ASL folder with a `tracks.csv`, or EqVIO's processed CSV.
+
+use crate::calib::model::ImuCalibration;
+use crate::io::trajectory::read_asl_groundtruth;
+use crate::io::{asl, trajectory::Trajectory};
+use crate::sim::Simulation;
+use crate::InputError;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use std::collections::BTreeMap;
+use std::path::Path;
+use tumble_factors::camera::{CameraModel, Distortion};
+use tumble_solvers::sophus_lie::Isometry3F64;
+
+/// Calibrated IMU samples in the body (IMU) frame.
+#[derive(Debug, Clone, Default)]
+pub struct ImuData {
+    /// Sample times \[s\] (input time axis, strictly increasing).
+    pub t: Vec<f64>,
+    /// Angular rate \[rad/s\].
+    pub gyro: Vec<Vector3<f64>>,
+    /// Specific force \[m/s²\].
+    pub acc: Vec<Vector3<f64>>,
+}
+
+/// One camera frame: its time and the features seen, as `(track id, pixel [u, v])`.
+#[derive(Debug, Clone, Default)]
+pub struct Frame {
+    /// Frame time \[s\] on the IMU's time axis.
+    pub t: f64,
+    /// Observed features.
+    pub features: Vec<(u64, [f64; 2])>,
+}
+
+/// Everything the estimator needs for one run.
+#[derive(Debug, Clone)]
+pub struct VioInput {
+    /// Name for messages and reports.
+    pub name: String,
+    /// Absolute time of `t = 0` \[ns\].
+    pub t0_ns: i64,
+    /// Calibrated IMU.
+    pub imu: ImuData,
+    /// Frames in time order.
+    pub frames: Vec<Frame>,
+    /// Camera model of the pixel coordinates in `frames`.
+    pub camera: CameraModel,
+    /// Camera pose in the body (IMU) frame, `T_BC`.
+    pub body_from_camera: Isometry3F64,
+    /// Ground truth (body poses, and biases when known), for evaluation only.
+    pub groundtruth: Option<Trajectory>,
+}
+
+fn isometry(r: &Matrix3<f64>, t: &Vector3<f64>) -> Isometry3F64 {
+    super::geometry::pose(r, t)
+}
+
+impl VioInput {
+    /// Check what a run needs: samples, frames in order, finite numbers.
+    pub fn check(&self) -> Result<(), String> {
+        let name = &self.name;
+        if self.imu.t.len() < 10 {
+            return Err(format!("{name}: fewer than 10 IMU samples"));
+        }
+        if self.frames.is_empty() {
+            return Err(format!("{name}: no camera frames (feature tracks) to fuse"));
+        }
+        if let Some(i) = self.imu.t.windows(2).position(|w| w[1] <= w[0]) {
+            return Err(format!("{name}: IMU sample {} is not later than the one before", i + 1));
+        }
+        if let Some(i) = self.frames.windows(2).position(|w| w[1].t <= w[0].t) {
+            return Err(format!("{name}: frame {} is not later than the one before", i + 1));
+        }
+        if let Some(i) = (0..self.imu.t.len())
+            .find(|&i| !(self.imu.gyro[i].iter().chain(self.imu.acc[i].iter()).all(|x| x.is_finite())))
+        {
+            return Err(format!("{name}: IMU sample {i} is not finite"));
+        }
+        Ok(())
+    }
+
+    /// The simulator's walk or flight: IMU corrected with the true `T`, `K`
+    /// (the calibration a perfect `tumble calibrate` would give), so the
+    /// remaining biases are the simulated turn-on bias and its drift; tracks in
+    /// pixels; ground truth at the frame times with the true biases in the body frame.
+    pub fn from_simulation(sim: &Simulation) -> Result<VioInput, String> {
+        let tracks = sim.tracks.as_ref().ok_or("the simulation has no camera")?;
+        let m = &sim.config.imu;
+        let inv = |t: &crate::sim::TriadModel| -> Result<Matrix3<f64>, String> {
+            let tm = Matrix3::from_fn(|r, c| t.misalignment[r][c]);
+            (tm * Matrix3::from_diagonal(&Vector3::from(t.scale))).try_inverse().ok_or("singular T K".to_string())
+        };
+        let (ma, mg) = (inv(&m.accel)?, inv(&m.gyro)?);
+        let imu = ImuData {
+            t: sim.imu.t.clone(),
+            gyro: sim.imu.gyro.iter().map(|g| mg * Vector3::from(*g)).collect(),
+            acc: sim.imu.accel.iter().map(|a| ma * Vector3::from(*a)).collect(),
+        };
+        let mut frames: Vec<Frame> = tracks.frames.iter().map(|&t| Frame { t, features: Vec::new() }).collect();
+        let mut fi = 0;
+        for o in &tracks.observations {
+            while fi + 1 < frames.len() && frames[fi].t < o.t {
+                fi += 1;
+            }
+            frames[fi].features.push((o.track, o.uv));
+        }
+        let cs = &sim.config.camera;
+        let bc = cs.body_from_camera();
+        let body_from_camera = isometry(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
+        let mut gt = Trajectory::default();
+        let (mut bga, mut baa) = (Vec::new(), Vec::new());
+        for &t in &tracks.frames {
+            let k = sim.motion.at(t);
+            let q = UnitQuaternion::from_matrix(&k.rotation);
+            gt.t_ns.push(sim.config.t0_ns + (t * 1e9).round() as i64);
+            gt.p.push([k.position.x, k.position.y, k.position.z]);
+            gt.q.push([q.w, q.i, q.j, q.k]);
+            let i = ((t * m.rate_hz).round() as usize / sim.imu.bias_every).min(sim.imu.bias_gyro.len() - 1);
+            let bg = mg * Vector3::from(sim.imu.bias_gyro[i]);
+            let ba = ma * Vector3::from(sim.imu.bias_accel[i]);
+            bga.push([bg.x, bg.y, bg.z]);
+            baa.push([ba.x, ba.y, ba.z]);
+        }
+        gt.bias_gyro = Some(bga);
+        gt.bias_accel = Some(baa);
+        Ok(VioInput {
+            name: format!("simulated {:?} (seed {})", sim.scenario, sim.seed).to_lowercase(),
+            t0_ns: sim.config.t0_ns,
+            imu,
+            frames,
+            camera: cs.model(),
+            body_from_camera,
+            groundtruth: Some(gt),
+        })
+    }
+
+    /// An ASL folder with `imu0/`, `cam0/sensor.yaml` and `cam0/tracks.csv`
+    /// (as `tumble sim walk` writes, or a frontend's output), corrected with
+    /// `calibration` when given.
+    pub fn from_asl(path: &Path, calibration: Option<&ImuCalibration>) -> Result<VioInput, InputError> {
+        let ds = asl::read_asl(path, &crate::io::imu_text::ImuTextFormat::default())?;
+        let cam = ds.cameras.first().ok_or_else(|| {
+            InputError::file(&ds.root, "no cam0/ folder: the estimator needs feature tracks")
+                .with_hint("simulate one with `tumble sim walk --out DIR`, or give an EqVIO .csv")
+        })?;
+        let cam_dir = ds.root.join(&cam.name);
+        let camera =
+            cam.model.ok_or_else(|| InputError::file(&cam_dir.join("sensor.yaml"), "camera intrinsics missing"))?;
+        let tracks_path = cam_dir.join("tracks.csv");
+        if !tracks_path.is_file() {
+            return Err(InputError::file(&tracks_path, "no feature tracks").with_hint(
+                "images need the visual frontend (next release); give tracks as `t[ns],track_id,u,v` in cam0/tracks.csv",
+            ));
+        }
+        let obs = asl::read_tracks(&tracks_path)?;
+        let t0 = ds.imu.t0_ns;
+        let mut frames: BTreeMap<i64, Vec<(u64, [f64; 2])>> = BTreeMap::new();
+        for (t, id, uv) in obs {
+            frames.entry(t).or_default().push((id, uv));
+        }
+        let frames = frames.into_iter().map(|(t, features)| Frame { t: (t - t0) as f64 * 1e-9, features }).collect();
+        let imu_t_bs = ds.imu_sensor.as_ref().map(|s| s.t_bs);
+        let cam_t_bs = cam.t_bs.unwrap_or_else(nalgebra::Isometry3::identity);
+        let t_ic = imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs);
+        let body_from_camera = isometry(t_ic.rotation.to_rotation_matrix().matrix(), &t_ic.translation.vector);
+        let imu = imu_data(&ds.imu, calibration);
+        Ok(VioInput {
+            name: ds.root.display().to_string(),
+            t0_ns: t0,
+            imu,
+            frames,
+            camera,
+            body_from_camera,
+            groundtruth: ds.groundtruth,
+        })
+    }
+}
+
+/// Calibrated IMU samples from a recording (eq. 16 when a calibration is given).
+pub fn imu_data(rec: &crate::io::ImuRecording, calibration: Option<&ImuCalibration>) -> ImuData {
+    let corr = calibration.and_then(|c| c.corrector());
+    let (gyro, acc) = match corr {
+        Some(c) => (
+            rec.gyro.iter().map(|g| Vector3::from(c.gyro(*g))).collect(),
+            rec.accel.iter().map(|a| Vector3::from(c.accel(*a))).collect(),
+        ),
+        None => (
+            rec.gyro.iter().map(|g| Vector3::from(*g)).collect(),
+            rec.accel.iter().map(|a| Vector3::from(*a)).collect(),
+        ),
+    };
+    ImuData { t: rec.t.clone(), gyro, acc }
+}
+
+/// Read EqVIO's processed CSV (`row_type,t_abs,…`; IMU rows in rad/s and m/s²,
+/// features in normalized coordinates, intrinsics and `T_ci` in `meta` rows).
+/// Features are returned in pixels of an undistorted pinhole camera with the
+/// file's intrinsics. `groundtruth`, when given, is an ASL ground-truth CSV.
+pub fn read_eqvio(path: &Path, groundtruth: Option<&Path>) -> Result<VioInput, InputError> {
+    let text = std::fs::read_to_string(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
+    let mut meta: BTreeMap<String, String> = BTreeMap::new();
+    let mut imu_rows: Vec<(f64, [f64; 6])> = Vec::new();
+    let mut feats: Vec<(f64, u64, [f64; 2])> = Vec::new();
+    let num = |s: &str, line: usize, what: &str| -> Result<f64, InputError> {
+        let v: f64 =
+            s.trim().parse().map_err(|_| InputError::at(path, line, format!("{what}: '{s}' is not a number")))?;
+        if !v.is_finite() {
+            return Err(InputError::at(path, line, format!("{what} is not finite")));
+        }
+        Ok(v)
+    };
+    for (i, l) in text.lines().enumerate() {
+        let line = i + 1;
+        let c: Vec<&str> = l.split(',').collect();
+        match c[0] {
+            "row_type" | "" => {}
+            "meta" => {
+                if c.len() >= 22 {
+                    meta.insert(c[20].to_string(), c[21].to_string());
+                }
+            }
+            "imu" | "vision_feature" if c.len() < 20 => {
+                return Err(InputError::at(path, line, format!("{} columns, expected at least 20", c.len())));
+            }
+            "imu" => {
+                let t = num(c[1], line, "t_abs")?;
+                let mut v = [0.0; 6];
+                for (k, x) in v.iter_mut().enumerate() {
+                    *x = num(c[6 + k], line, "IMU value")?;
+                }
+                imu_rows.push((t, v));
+            }
+            "vision_feature" => {
+                let t = num(c[1], line, "t_abs")?;
+                let id = num(c[5], line, "landmark_id")?;
+                if id < 0.0 || id.fract() != 0.0 {
+                    return Err(InputError::at(path, line, format!("landmark_id {id} is not a non-negative integer")));
+                }
+                feats.push((t, id as u64, [num(c[18], line, "u_norm")?, num(c[19], line, "v_norm")?]));
+            }
+            other => return Err(InputError::at(path, line, format!("unknown row type '{other}'"))),
+        }
+    }
+    let m = |k: &str| -> Result<f64, InputError> {
+        let s = meta.get(k).ok_or_else(|| InputError::file(path, format!("meta key {k} missing")))?;
+        s.parse().map_err(|_| InputError::file(path, format!("meta key {k}: '{s}' is not a number")))
+    };
+    if imu_rows.is_empty() {
+        return Err(InputError::file(path, "no imu rows"));
+    }
+    let (fx, fy, cx, cy) = (m("camera_fx")?, m("camera_fy")?, m("camera_cx")?, m("camera_cy")?);
+    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+        m("T_ci_qw")?,
+        m("T_ci_qx")?,
+        m("T_ci_qy")?,
+        m("T_ci_qz")?,
+    ));
+    let t_ci = Vector3::new(m("T_ci_tx")?, m("T_ci_ty")?, m("T_ci_tz")?);
+    let t0 = imu_rows[0].0;
+    let t0_ns = (t0 * 1e9).round() as i64;
+    let imu = ImuData {
+        t: imu_rows.iter().map(|r| r.0 - t0).collect(),
+        gyro: imu_rows.iter().map(|r| Vector3::new(r.1[0], r.1[1], r.1[2])).collect(),
+        acc: imu_rows.iter().map(|r| Vector3::new(r.1[3], r.1[4], r.1[5])).collect(),
+    };
+    let mut frames: Vec<Frame> = Vec::new();
+    for (t, id, xy) in feats {
+        let t = t - t0;
+        if frames.last().is_none_or(|f| (f.t - t).abs() > 1e-6) {
+            if frames.last().is_some_and(|f| t < f.t) {
+                return Err(InputError::file(path, format!("feature rows go back in time at t = {t:.6} s")));
+            }
+            frames.push(Frame { t, features: Vec::new() });
+        }
+        frames.last_mut().expect("frame").features.push((id, [xy[0] * fx + cx, xy[1] * fy + cy]));
+    }
+    let groundtruth = groundtruth.map(read_asl_groundtruth).transpose()?;
+    Ok(VioInput {
+        name: path.display().to_string(),
+        t0_ns,
+        imu,
+        frames,
+        camera: CameraModel { fx, fy, cx, cy, distortion: Distortion::None },
+        body_from_camera: isometry(q.to_rotation_matrix().matrix(), &t_ci),
+        groundtruth,
+    })
+}
