@@ -22,15 +22,8 @@ fn main() {
             std::process::exit(1);
         }
     };
-    let mut opts = VioOptions::default();
     // EqVIO's tuned pixel noise for this file (σ² = 3.72 px²).
-    opts.pixel_sigma = 1.93;
-    if std::env::var("VIO_NOINFL").is_ok() {
-        opts.noise_from_static = false;
-    }
-    if let Ok(w) = std::env::var("VIO_WINDOW") {
-        opts.window = w.parse().unwrap();
-    }
+    let opts = VioOptions { pixel_sigma: 1.93, ..VioOptions::default() };
     let out = match run(&input, &opts, None) {
         Ok(o) => o,
         Err(e) => {

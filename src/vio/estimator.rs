@@ -584,17 +584,7 @@ impl<'a> Estimator<'a> {
             log_iterations: false,
             ..LmOptions::default()
         };
-        let tb = Instant::now();
         let solved = Optimizer::new(lm).optimize(&graph, &self.values);
-        if std::env::var("VIO_PROFILE").is_ok() {
-            if let Ok((_, s)) = &solved {
-                eprintln!(
-                    "frame {index}: graph {} factors built in {:.2} ms; solve {:.2} ms: it {} lin {:.2} build {:.2} fact {:.2} solve {:.2} reduced {}",
-                    graph.len(), (tb - t_start).as_secs_f64() * 1e3, tb.elapsed().as_secs_f64() * 1e3, s.iterations,
-                    s.time_linearize * 1e3, s.time_build * 1e3, s.time_factorize * 1e3, s.time_solve * 1e3, s.reduced_dim
-                );
-            }
-        }
         let failure = match solved {
             Ok((v, _)) => {
                 self.values = v;

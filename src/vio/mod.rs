@@ -138,6 +138,17 @@ impl Default for VioOptions {
     }
 }
 
+impl VioOptions {
+    /// Defaults with the noise, gravity and pixel noise a simulation was made with
+    /// (what `tumble allan` and the camera's specification would tell).
+    pub fn for_simulation(cfg: &crate::sim::SimConfig) -> VioOptions {
+        let mut o =
+            VioOptions { gravity: cfg.gravity, pixel_sigma: cfg.camera.pixel_noise_px.max(0.1), ..Default::default() };
+        ImuNoise::from_model(&cfg.imu).apply(&mut o.imu);
+        o
+    }
+}
+
 /// Kalibr `imu.yaml` noise parameters (continuous time, SI).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ImuNoise {

@@ -1,0 +1,53 @@
+//! Speed of the VIO backend at EuRoC rates (200 Hz IMU, 20 Hz camera, 150
+//! tracked features per frame) on one core, against the target of 20×
+//! real time. VINS-Mono itself (C++, ROS, Ceres) cannot be built here, so the
+//! peer figure is the target rate; the real-data run on EqVIO's V1_01 tracks
+//! is printed too. Covariance recovery is included (each frame's σ).
+//!
+//! `cargo run --release -p tumble-bench --example bench_vio [-- --duration S]`
+
+use tumble::sim::{simulate, Scenario, SimConfig};
+use tumble::vio::{read_eqvio, run, summarize, VioInput, VioOptions};
+
+const TARGET_REALTIME: f64 = 20.0;
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let duration: f64 =
+        args.iter().position(|a| a == "--duration").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(60.0);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("thread pool");
+    let cfg = SimConfig { duration_s: Some(duration.max(20.0)), ..SimConfig::default() };
+    let sim = simulate(Scenario::Flight, &cfg, 11).expect("simulation");
+    let input = VioInput::from_simulation(&sim).expect("input");
+    let per_frame = input.frames.iter().map(|f| f.features.len()).sum::<usize>() as f64 / input.frames.len() as f64;
+    let opts = VioOptions::for_simulation(&cfg);
+    let report = |name: &str, input: &VioInput, opts: &VioOptions| {
+        let out = pool.install(|| run(input, opts, None)).expect("vio");
+        let s = summarize(input, opts, &out, 10.0);
+        println!("{name}:");
+        println!("  {}", s.table().replace('\n', "\n  "));
+        println!(
+            "  backend speed on one core: {:.1}× real time vs target {TARGET_REALTIME:.0}× → ratio {:.2}",
+            s.realtime_factor,
+            s.realtime_factor / TARGET_REALTIME
+        );
+    };
+    println!(
+        "simulated EuRoC-like flight: {:.0} s, IMU 200 Hz, camera 20 Hz, {per_frame:.0} features per frame",
+        input.frames.last().map_or(0.0, |f| f.t)
+    );
+    report("simulated flight", &input, &opts);
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/euroc");
+    let csv = data.join("eqvio_V1_01_30s.csv");
+    if csv.is_file() {
+        let gt = data.join("groundtruth/V1_01_easy.csv");
+        let real = read_eqvio(&csv, gt.is_file().then_some(gt.as_path())).expect("eqvio");
+        report(
+            "EuRoC V1_01 (EqVIO tracks, 12–38 per frame)",
+            &real,
+            &VioOptions { pixel_sigma: 1.93, ..VioOptions::default() },
+        );
+    } else {
+        println!("SKIPPED the real-data run: {} is absent", csv.display());
+    }
+}
