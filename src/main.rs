@@ -574,33 +574,15 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 if let Some(g) = &groundtruth {
                     v.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
                 }
-                if noise.is_none() {
-                    let root = tumble::io::asl::resolve_mav0(&input)?;
-                    let y = root.join("imu0").join("sensor.yaml");
-                    if let Ok(s) = tumble::io::asl::read_imu_sensor(&y) {
-                        if let (Some(a), Some(b), Some(c), Some(d)) = (
-                            s.accelerometer_noise_density,
-                            s.accelerometer_random_walk,
-                            s.gyroscope_noise_density,
-                            s.gyroscope_random_walk,
-                        ) {
-                            ImuNoise {
-                                accelerometer_noise_density: a,
-                                accelerometer_random_walk: b,
-                                gyroscope_noise_density: c,
-                                gyroscope_random_walk: d,
-                            }
-                            .apply(&mut opts.imu);
-                            println!("noise from {}", y.display());
-                        }
-                    }
-                }
                 v
             };
-            match &noise {
-                Some(p) => ImuNoise::read(p)?.apply(&mut opts.imu),
-                None if is_csv => println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)"),
-                None => {}
+            match (&noise, vin.noise) {
+                (Some(p), _) => ImuNoise::read(p)?.apply(&mut opts.imu),
+                (None, Some(n)) => {
+                    n.apply(&mut opts.imu);
+                    println!("noise: the figures of the dataset's imu0/sensor.yaml");
+                }
+                (None, None) => println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)"),
             }
             if init_from_groundtruth {
                 opts.init = ground_truth_init(&vin)?;

@@ -61,7 +61,12 @@ impl ImuFactor {
     }
     /// Noise model from the preintegration covariance.
     pub fn noise_model(&self) -> Result<NoiseModel, NoiseError> {
-        let c = self.pim.covariance();
+        self.noise_model_scaled(1.0)
+    }
+    /// Noise model from the preintegration covariance times `scale` (> 1
+    /// weakens the factor, e.g. across an IMU gap).
+    pub fn noise_model_scaled(&self, scale: f64) -> Result<NoiseModel, NoiseError> {
+        let c = self.pim.covariance() * scale;
         NoiseModel::from_covariance(&DMatrix::from_fn(9, 9, |i, j| c[(i, j)]))
     }
 

@@ -189,22 +189,19 @@ impl<'a> Estimator<'a> {
                     let (sa, sg) = (std(false, &am) / rate.sqrt(), std(true, &gm) / rate.sqrt());
                     let apply = self.opts.noise_from_static;
                     let action = if apply { "using the measured value" } else { "kept (--noise-from-static uses it)" };
-                    if sa > 1.5 * self.opts.imu.accel_noise_density {
-                        self.warnings.push(format!(
-                            "the accelerometer at rest is noisier than the noise model says ({sa:.2e} vs {:.2e} m/s²/√Hz, vibration?): {action}",
-                            self.opts.imu.accel_noise_density
-                        ));
-                        if apply {
-                            self.opts.imu.accel_noise_density = sa;
-                        }
-                    }
-                    if sg > 1.5 * self.opts.imu.gyro_noise_density {
-                        self.warnings.push(format!(
-                            "the gyroscope at rest is noisier than the noise model says ({sg:.2e} vs {:.2e} rad/s/√Hz): {action}",
-                            self.opts.imu.gyro_noise_density
-                        ));
-                        if apply {
-                            self.opts.imu.gyro_noise_density = sg;
+                    let params = &mut self.opts.imu;
+                    for (what, unit, measured, density) in [
+                        ("accelerometer", "m/s²/√Hz, vibration?", sa, &mut params.accel_noise_density),
+                        ("gyroscope", "rad/s/√Hz", sg, &mut params.gyro_noise_density),
+                    ] {
+                        if measured > 1.5 * *density {
+                            self.warnings.push(format!(
+                                "the {what} at rest is noisier than the noise model says ({measured:.2e} vs {:.2e} {unit}): {action}",
+                                *density
+                            ));
+                            if apply {
+                                *density = measured;
+                            }
                         }
                     }
                 }
@@ -263,8 +260,7 @@ impl<'a> Estimator<'a> {
         for (i, (pim, scale)) in self.links.iter().enumerate() {
             let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
             let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
-            let c = pim.covariance() * *scale;
-            if let Ok(n) = NoiseModel::from_covariance(&DMatrix::from_fn(9, 9, |r, k| c[(r, k)])) {
+            if let Ok(n) = f.noise_model_scaled(*scale) {
                 g.add(f, n);
             }
             let dt = pim.delta_t().max(1e-3);
@@ -285,13 +281,7 @@ impl<'a> Estimator<'a> {
             let Some((lid, anchor)) = tr.landmark else { continue };
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             for o in tr.obs.iter().filter(|o| o.sid != anchor) {
-                let f = InverseDepthReprojection::new(
-                    [X(anchor), X(o.sid), L(lid)],
-                    a.xy,
-                    o.uv,
-                    self.input.camera,
-                    &self.input.body_from_camera,
-                );
+                let f = self.reprojection(anchor, o.sid, lid, a.xy, o.uv);
                 g.add_entry(tumble_solvers::FactorEntry {
                     factor: Box::new(f),
                     noise: noise.clone(),
@@ -300,6 +290,25 @@ impl<'a> Estimator<'a> {
             }
         }
         g
+    }
+
+    /// The reprojection factor of observation `uv` in state `sid` of landmark `lid`
+    /// anchored in state `anchor` with anchor observation `anchor_xy`.
+    fn reprojection(
+        &self,
+        anchor: u64,
+        sid: u64,
+        lid: u64,
+        anchor_xy: [f64; 2],
+        uv: [f64; 2],
+    ) -> InverseDepthReprojection {
+        InverseDepthReprojection::new(
+            [X(anchor), X(sid), L(lid)],
+            anchor_xy,
+            uv,
+            self.input.camera,
+            &self.input.body_from_camera,
+        )
     }
 
     fn landmark_count(&self) -> usize {
@@ -353,7 +362,8 @@ impl<'a> Estimator<'a> {
     fn reject_outliers(&mut self) {
         let limit = self.opts.outlier_sigmas * self.opts.pixel_sigma;
         let mut drop_landmarks = Vec::new();
-        for (&id, tr) in self.tracks.iter_mut() {
+        let mut drop_obs: Vec<(u64, u64)> = Vec::new();
+        for (&id, tr) in &self.tracks {
             let Some((lid, anchor)) = tr.landmark else { continue };
             let rho = self.values.get::<Vector1<f64>>(L(lid)).map(|v| v[0]).unwrap_or(f64::NAN);
             if !(rho > 1.0 / 200.0 && rho < 10.0) {
@@ -362,27 +372,21 @@ impl<'a> Estimator<'a> {
             }
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor).map(|o| o.xy) else { continue };
             let xa = *self.values.get::<Isometry3F64>(X(anchor)).expect("anchor");
-            let mut keep = Vec::with_capacity(tr.obs.len());
-            for o in tr.obs.drain(..) {
-                if o.sid != anchor {
-                    let f = InverseDepthReprojection::new(
-                        [X(anchor), X(o.sid), L(lid)],
-                        a,
-                        o.uv,
-                        self.input.camera,
-                        &self.input.body_from_camera,
-                    );
-                    let xj = *self.values.get::<Isometry3F64>(X(o.sid)).expect("state");
-                    let rho_v = Vector1::new(rho);
-                    let vars: [&dyn tumble_solvers::DynVariable; 3] = [&xa, &xj, &rho_v];
-                    let r = tumble_solvers::Factor::residual(&f, tumble_solvers::Vars::new(&vars));
-                    if r.map_or(true, |r| r.norm() > limit) {
-                        continue;
-                    }
+            let rho_v = Vector1::new(rho);
+            for o in tr.obs.iter().filter(|o| o.sid != anchor) {
+                let f = self.reprojection(anchor, o.sid, lid, a, o.uv);
+                let xj = *self.values.get::<Isometry3F64>(X(o.sid)).expect("state");
+                let vars: [&dyn tumble_solvers::DynVariable; 3] = [&xa, &xj, &rho_v];
+                let r = tumble_solvers::Factor::residual(&f, tumble_solvers::Vars::new(&vars));
+                if r.map_or(true, |r| r.norm() > limit) {
+                    drop_obs.push((id, o.sid));
                 }
-                keep.push(o);
             }
-            tr.obs = keep;
+        }
+        for (id, sid) in drop_obs {
+            if let Some(tr) = self.tracks.get_mut(&id) {
+                tr.obs.retain(|o| o.sid != sid);
+            }
         }
         for id in drop_landmarks {
             if let Some(tr) = self.tracks.get_mut(&id) {
@@ -495,9 +499,10 @@ impl<'a> Estimator<'a> {
             let (x, v, b) = self.initialize(t)?;
             self.init_time = Some(t);
             self.start(t, x, v, b, 0.01);
-            self.add_observations(index);
-            self.last_keyframe_obs = self.frame_obs(index);
-            self.prev_frame_obs = self.last_keyframe_obs.clone();
+            let obs = self.frame_obs(index);
+            self.add_observations(index, &obs);
+            self.last_keyframe_obs = obs.clone();
+            self.prev_frame_obs = obs;
             self.prev_frame_rotation = parts(&x).0;
             return Some(self.estimate(self.states[0].sid, true, t_start, None));
         }
@@ -571,7 +576,7 @@ impl<'a> Estimator<'a> {
         }
         self.states.push(State { sid, t, zero_velocity });
         self.links.push((Arc::new(pim), scale));
-        self.add_observations(index);
+        self.add_observations(index, &obs);
         self.prev_frame_obs = obs.clone();
         self.prev_frame_rotation = rj;
         self.triangulate_new();
@@ -596,7 +601,7 @@ impl<'a> Estimator<'a> {
             self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
             self.last_good = Some((predicted, vj, bl));
             self.reset_to_newest();
-            self.add_observations(index);
+            self.add_observations(index, &obs);
             self.last_keyframe_obs = obs;
             return Some(self.estimate(self.states[0].sid, true, t_start, None));
         }
@@ -634,13 +639,13 @@ impl<'a> Estimator<'a> {
         self.input.frames[index].features.iter().filter_map(|(id, uv)| cam.unproject(*uv).map(|xy| (*id, xy))).collect()
     }
 
-    fn add_observations(&mut self, index: usize) {
+    /// Add frame `index`'s observations (undistorted `obs` by track) to the newest state.
+    fn add_observations(&mut self, index: usize, obs: &HashMap<u64, [f64; 2]>) {
         let sid = self.states.last().expect("state").sid;
-        let cam = self.input.camera;
         let (r_bc, t_bc) = parts(&self.input.body_from_camera);
         let (rj, pj) = parts(self.values.get::<Isometry3F64>(X(sid)).expect("newest state"));
         for (id, uv) in &self.input.frames[index].features {
-            let Some(xy) = cam.unproject(*uv) else { continue };
+            let Some(&xy) = obs.get(id) else { continue };
             let tr = self.tracks.entry(*id).or_default();
             // A landmark the predicted pose would see behind the camera: skip the observation.
             if let Some((lid, anchor)) = tr.landmark {

@@ -2,6 +2,8 @@
 //! observations, the camera model and extrinsic, optional ground truth — from a
 //! simulation, an ASL folder with a `tracks.csv`, or EqVIO's processed CSV.
 
+use super::geometry::pose;
+use super::ImuNoise;
 use crate::calib::model::ImuCalibration;
 use crate::io::trajectory::read_asl_groundtruth;
 use crate::io::{asl, trajectory::Trajectory};
@@ -50,10 +52,9 @@ pub struct VioInput {
     pub body_from_camera: Isometry3F64,
     /// Ground truth (body poses, and biases when known), for evaluation only.
     pub groundtruth: Option<Trajectory>,
-}
-
-fn isometry(r: &Matrix3<f64>, t: &Vector3<f64>) -> Isometry3F64 {
-    super::geometry::pose(r, t)
+    /// IMU noise figures the input itself gives (ASL `imu0/sensor.yaml`, the
+    /// simulator's model), if any.
+    pub noise: Option<ImuNoise>,
 }
 
 impl VioInput {
@@ -107,7 +108,7 @@ impl VioInput {
         }
         let cs = &sim.config.camera;
         let bc = cs.body_from_camera();
-        let body_from_camera = isometry(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
+        let body_from_camera = pose(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
         let mut gt = Trajectory::default();
         let (mut bga, mut baa) = (Vec::new(), Vec::new());
         for &t in &tracks.frames {
@@ -132,6 +133,7 @@ impl VioInput {
             camera: cs.model(),
             body_from_camera,
             groundtruth: Some(gt),
+            noise: Some(ImuNoise::from_model(m)),
         })
     }
 
@@ -163,8 +165,16 @@ impl VioInput {
         let imu_t_bs = ds.imu_sensor.as_ref().map(|s| s.t_bs);
         let cam_t_bs = cam.t_bs.unwrap_or_else(nalgebra::Isometry3::identity);
         let t_ic = imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs);
-        let body_from_camera = isometry(t_ic.rotation.to_rotation_matrix().matrix(), &t_ic.translation.vector);
+        let body_from_camera = pose(t_ic.rotation.to_rotation_matrix().matrix(), &t_ic.translation.vector);
         let imu = imu_data(&ds.imu, calibration);
+        let noise = ds.imu_sensor.as_ref().and_then(|s| {
+            Some(ImuNoise {
+                accelerometer_noise_density: s.accelerometer_noise_density?,
+                accelerometer_random_walk: s.accelerometer_random_walk?,
+                gyroscope_noise_density: s.gyroscope_noise_density?,
+                gyroscope_random_walk: s.gyroscope_random_walk?,
+            })
+        });
         Ok(VioInput {
             name: ds.root.display().to_string(),
             t0_ns: t0,
@@ -173,6 +183,7 @@ impl VioInput {
             camera,
             body_from_camera,
             groundtruth: ds.groundtruth,
+            noise,
         })
     }
 }
@@ -282,7 +293,8 @@ pub fn read_eqvio(path: &Path, groundtruth: Option<&Path>) -> Result<VioInput, I
         imu,
         frames,
         camera: CameraModel { fx, fy, cx, cy, distortion: Distortion::None },
-        body_from_camera: isometry(q.to_rotation_matrix().matrix(), &t_ci),
+        body_from_camera: pose(q.to_rotation_matrix().matrix(), &t_ci),
         groundtruth,
+        noise: None,
     })
 }
