@@ -6,6 +6,7 @@
 //! [`tumble_factors`]. This crate holds the pipelines, data I/O and the CLI.
 
 pub mod allan;
+pub mod audit;
 pub mod calib;
 pub mod error;
 pub mod io;

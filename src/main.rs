@@ -175,6 +175,12 @@ enum Command {
         /// Print the default config as YAML and exit (a starting point for --config).
         #[arg(long)]
         print_config: bool,
+        /// Hide an effect the calibration model lacks (for `tumble audit`): EFFECT or
+        /// EFFECT:STRENGTH with EFFECT one of g_sensitivity, temperature_bias,
+        /// temperature_scale, gyro_nonlinearity, accel_nonlinearity, bias_drift
+        /// (repeatable; STRENGTH multiplies the model's coefficients, default 1).
+        #[arg(long)]
+        hide: Vec<String>,
     },
     /// Read an IMU recording, check it, and print what it holds and what looks wrong.
     Inspect {
@@ -264,6 +270,35 @@ enum Command {
         #[arg(long)]
         out: PathBuf,
     },
+    /// Model-discrepancy audit of a calibration recording: find the effect the
+    /// calibration lacks, add it, show the gap shrink. Writes audit.json,
+    /// audit.md, calibration.json (with the effects) and figures.
+    Audit {
+        #[command(flatten)]
+        input: CalibInput,
+        /// calibration.json or .yaml from `tumble calibrate` (or imu_tk's, converted by it).
+        #[arg(long)]
+        calibration: PathBuf,
+        /// Kalibr imu.yaml with the noise (from `tumble allan`): its bias random walks set how
+        /// far biases may wander (default: generous consumer-MEMS values).
+        #[arg(long)]
+        noise: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        /// Family-wise significance level (each candidate is tested at alpha / candidates).
+        #[arg(long, default_value_t = 1e-3)]
+        alpha: f64,
+        /// Most effects to add.
+        #[arg(long, default_value_t = 4)]
+        max_effects: usize,
+        /// Candidates to test, comma separated (default: all the sensor model holds).
+        #[arg(long, value_delimiter = ',')]
+        candidates: Vec<String>,
+        /// Length of the initial static period [s] (for the static-interval detection).
+        #[arg(long, default_value_t = 50.0)]
+        init_static: f64,
+    },
     /// Visual-inertial bias estimation (sliding window, paper §4): writes
     /// trajectory.txt (TUM), biases.csv and summary.json.
     Vio {
@@ -349,11 +384,21 @@ fn print_log(s: &Summary) {
 
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     match cli.command {
-        Command::Sim { scenario, out, config, seed, duration, print_config } => {
+        Command::Sim { scenario, out, config, seed, duration, print_config, hide } => {
             let mut cfg = match &config {
                 Some(p) => tumble::sim::SimConfig::read(p)?,
                 None => tumble::sim::SimConfig::default(),
             };
+            for h in &hide {
+                let (name, strength) = match h.split_once(':') {
+                    Some((n, s)) => (
+                        n,
+                        s.parse::<f64>().map_err(|e| format!("--hide {h}: strength `{s}` is not a number ({e})"))?,
+                    ),
+                    None => (h.as_str(), 1.0),
+                };
+                tumble::sim::hide_effect(&mut cfg, name, strength).map_err(|e| format!("--hide {h}: {e}"))?;
+            }
             if print_config {
                 print!("{}", serde_saphyr::to_string(&cfg)?);
                 return Ok(());
@@ -513,6 +558,45 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
             );
         }
+        Command::Audit { input, calibration, noise, out, alpha, max_effects, candidates, init_static } => {
+            use tumble::audit::{audit, AuditOptions, Effect};
+            let cal = tumble::calib::ImuCalibration::read(&calibration)?;
+            let (rec, _, _) = input.open()?;
+            for w in &rec.warnings {
+                eprintln!("warning: {w}");
+            }
+            if !(alpha > 0.0 && alpha < 1.0) {
+                return Err(format!("--alpha must be in (0, 1), got {alpha}").into());
+            }
+            if !(init_static.is_finite() && init_static > 0.0) {
+                return Err(format!("--init-static must be positive, got {init_static}").into());
+            }
+            let mut opts = AuditOptions { alpha, max_effects, ..AuditOptions::default() };
+            opts.detection.init_static_s = init_static;
+            if !candidates.is_empty() {
+                opts.candidates = candidates
+                    .iter()
+                    .map(|c| {
+                        Effect::from_id(c.trim()).ok_or_else(|| {
+                            let ids: Vec<&str> = Effect::ALL.iter().map(|e| e.id()).collect();
+                            format!("--candidates: unknown effect `{c}` (known: {})", ids.join(", "))
+                        })
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
+            if let Some(p) = &noise {
+                opts.noise = Some(tumble::vio::ImuNoise::read(p)?);
+            }
+            let t = std::time::Instant::now();
+            let result = audit(&rec, &cal, &opts)?;
+            print!("{}", tumble::audit::report::summary_table(&result));
+            for n in &result.notes {
+                eprintln!("note: {n}");
+            }
+            let files = tumble::audit::report::write(&result, &out)?;
+            println!("{}", result.verdict());
+            println!("audited in {:.2} s; wrote {} in {}", t.elapsed().as_secs_f64(), files.join(", "), out.display());
+        }
         Command::Apply { input, calibration, out } => {
             let cal = tumble::calib::ImuCalibration::read(&calibration)?;
             let (mut rec, path, o) = input.open()?;
@@ -530,16 +614,17 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             check("accelerometer", rec.accel_units, &cal.units.accel_input)?;
             check("gyro", rec.gyro_units, &cal.units.gyro_input)?;
             let corr = cal.corrector().ok_or("calibration matrices are singular")?;
-            for i in 0..rec.len() {
-                rec.accel[i] = corr.accel(rec.accel[i]);
-                rec.gyro[i] = corr.gyro(rec.gyro[i]);
+            for w in corr.warnings_for(&rec) {
+                eprintln!("warning: {w}");
             }
+            (rec.accel, rec.gyro) = corr.correct_recording(&rec);
             rec.accel_units = tumble::io::Stored::Si;
             rec.gyro_units = tumble::io::Stored::Si;
             let written = tumble::calib::write_like_input(&rec, &path, &o, &out)?;
             println!(
-                "corrected {} samples (eq. 16) into {}",
+                "corrected {} samples (eq. 16{}) into {}",
                 rec.len(),
+                if corr.has_effects() { format!(" + {}", cal.effect_ids().join(", ")) } else { String::new() },
                 written.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
             );
         }

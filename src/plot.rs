@@ -144,3 +144,91 @@ impl LogLogChart {
         Ok(())
     }
 }
+
+/// One set of markers on a [`ScatterChart`].
+pub struct Series {
+    /// Legend label (empty: none).
+    pub label: String,
+    /// Color.
+    pub color: RGBColor,
+    /// Points in data coordinates.
+    pub points: Vec<(f64, f64)>,
+    /// Join the points with a line instead of drawing markers.
+    pub line: bool,
+}
+
+/// A chart with linear axes: markers or polylines.
+pub struct ScatterChart {
+    /// Title on top.
+    pub title: String,
+    /// Label of the horizontal axis.
+    pub x_label: String,
+    /// Label of the vertical axis.
+    pub y_label: String,
+    /// What to draw, in order.
+    pub series: Vec<Series>,
+}
+
+impl ScatterChart {
+    /// Render to a PNG file of `width`×`height` pixels (axes span the finite data, with 5 % margins).
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), String> {
+        ensure_font();
+        let pts = || self.series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for &(x, y) in pts() {
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+        if !(x0.is_finite() && y0.is_finite()) {
+            return Err(format!("{}: nothing to plot", path.display()));
+        }
+        let pad = |a: f64, b: f64| {
+            let d = if b > a { 0.05 * (b - a) } else { 0.5 * a.abs().max(1e-12) };
+            (a - d, b + d)
+        };
+        let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
+        let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+        let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| err(&e))?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&self.title, ("sans-serif", 20))
+            .margin(14)
+            .x_label_area_size(48)
+            .y_label_area_size(78)
+            .build_cartesian_2d(x0..x1, y0..y1)
+            .map_err(|e| err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc(&self.x_label)
+            .y_desc(&self.y_label)
+            .x_label_formatter(&|v| format!("{v:.3}"))
+            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .label_style(("sans-serif", 14))
+            .axis_desc_style(("sans-serif", 16))
+            .light_line_style(RGBColor(235, 235, 235))
+            .draw()
+            .map_err(|e| err(&e))?;
+        for s in &self.series {
+            let c = s.color;
+            let pts: Vec<(f64, f64)> =
+                s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
+            let drawn = if s.line {
+                chart.draw_series(LineSeries::new(pts, c.stroke_width(2))).map_err(|e| err(&e))?
+            } else {
+                chart.draw_series(pts.into_iter().map(move |p| Circle::new(p, 3, c.filled()))).map_err(|e| err(&e))?
+            };
+            if !s.label.is_empty() {
+                drawn.label(s.label.as_str()).legend(move |(x, y)| Circle::new((x + 9, y), 4, c.filled()));
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.3))
+            .label_font(("sans-serif", 13))
+            .draw()
+            .map_err(|e| err(&e))?;
+        root.present().map_err(|e| err(&e))?;
+        Ok(())
+    }
+}

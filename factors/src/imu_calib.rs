@@ -223,7 +223,7 @@ impl IntegratedRotationFactor {
 }
 
 /// An orthonormal basis (3×2) of the plane orthogonal to unit vector `n`.
-fn orthogonal_basis(n: &Vector3<f64>) -> Matrix3x2<f64> {
+pub(crate) fn orthogonal_basis(n: &Vector3<f64>) -> Matrix3x2<f64> {
     let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
     let e1 = n.cross(&helper).normalize();
     let e2 = n.cross(&e1);

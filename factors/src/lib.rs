@@ -17,6 +17,7 @@ pub mod bal;
 pub mod between;
 pub mod camera;
 pub mod imu_calib;
+pub mod imu_effects;
 pub mod imu_factor;
 pub mod imu_preint;
 pub mod prior;

@@ -134,3 +134,62 @@ fn inverse_depth_reprojection_for_every_camera_model() {
         assert_ok(&f, &[&xa, &xj, &Vector1::new(0.35)]);
     }
 }
+
+/// The audit's factors with every modelled effect switched on at once, with
+/// realistic magnitudes and a non-trivial temperature and time.
+#[test]
+fn audit_factors_with_every_effect() {
+    use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
+    use tumble_factors::imu_effects::{Context, Effect, Layout, MotionFactor, MotionSamples, StaticFactor};
+    use tumble_solvers::{DynVector, Key};
+    let effects: Vec<Effect> = Effect::ALL.into_iter().filter(|e| e.in_sensor_model()).collect();
+    let layout = Layout { effects: effects.clone() };
+    let values: Vec<DynVector> = effects
+        .iter()
+        .map(|e| {
+            DynVector::from_slice(
+                &(0..e.dim()).map(|i| 1e-3 * (1.0 + i as f64) * (-1f64).powi(i as i32)).collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    let a = AccelParams::from_row_slice(&[1.01, 0.01, -0.02, 0.99, 0.015, 1.003, 0.05, 0.1, -0.07]);
+    let g = GyroMatrix::from_row_slice(&[1.0, 0.01, 0.0, -0.01, 0.995, 0.02, 0.01, 0.0, 1.004]);
+    let (b0, b1) = (Vector3::new(0.01, -0.002, 0.003), Vector3::new(0.0105, -0.0018, 0.0031));
+    let (w0, w1) = (Vector3::new(0.001, 0.0, -0.002), Vector3::new(0.0, 0.003, 0.001));
+    let key = |i: u64| Key::new('k', i);
+    let mut vars: Vec<&dyn DynVariable> = vec![&a, &g, &b0, &w0];
+    vars.extend(values.iter().map(|v| v as &dyn DynVariable));
+    let keys = (0..vars.len() as u64).map(key).collect();
+    let ctx = Context { dtemp: 6.5, time: 42.0 };
+    let f = StaticFactor::new(
+        keys,
+        layout.clone(),
+        Vector3::new(3.1, -4.0, 8.1),
+        Vector3::new(0.013, -0.004, 0.002),
+        ctx,
+        9.81,
+    )
+    .unwrap();
+    assert_ok(&f, &vars);
+    let n = 60;
+    let samples = MotionSamples {
+        raw_gyro: (0..n).map(|i| Vector3::new(1.1 * (i as f64 * 0.05).sin(), 0.7, -0.4 + 0.01 * i as f64)).collect(),
+        raw_accel: (0..n).map(|i| Vector3::new(1.0 + 0.05 * i as f64, 2.0, 9.0 - 0.03 * i as f64)).collect(),
+        context: (0..n).map(|i| Context { dtemp: 6.0 + 0.01 * i as f64, time: 40.0 + 0.005 * i as f64 }).collect(),
+        dt: vec![0.005; n - 1],
+    };
+    let mut vars: Vec<&dyn DynVariable> = vec![&a, &g, &b0, &b1, &w0, &w1];
+    vars.extend(values.iter().map(|v| v as &dyn DynVariable));
+    let keys = (0..vars.len() as u64).map(key).collect();
+    let ends = [Vector3::new(0.5, 2.0, 9.6), Vector3::new(2.5, 1.0, 9.4)];
+    let f = MotionFactor::new(
+        keys,
+        layout,
+        samples,
+        ends,
+        [Context { dtemp: 5.9, time: 39.0 }, Context { dtemp: 6.7, time: 41.0 }],
+        [300, 300],
+    )
+    .unwrap();
+    assert_ok(&f, &vars);
+}

@@ -53,7 +53,7 @@ pub use marginal::{covariances, marginalize, Covariances, MarginalPrior, Margina
 pub use noise::NoiseModel;
 pub use optimizer::{IterationLog, LmOptions, Method, Optimizer, Summary, Termination};
 pub use values::Values;
-pub use variable::{se2, se3_from_quaternion, DynVariable, Variable};
+pub use variable::{se2, se3_from_quaternion, DynVariable, DynVector, Variable};
 
 pub use nalgebra;
 pub use sophus_lie;

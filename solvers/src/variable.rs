@@ -6,6 +6,8 @@
 //!
 //! Built in:
 //! - `nalgebra::SVector<f64, N>`: R^N, `x ⊞ δ = x + δ`.
+//! - [`DynVector`]: R^n with `n` chosen at run time (e.g. a model whose
+//!   parameter count depends on the terms switched on).
 //! - [`Rotation3F64`] (SO(3), from sophus-rs): tangent ω \[rad\], body frame.
 //! - [`Isometry3F64`] (SE(3), from sophus-rs): tangent `[ω, ν]`, rotation first.
 //! - [`Isometry2F64`] (SE(2), from sophus-rs): tangent `[θ, νx, νy]`, rotation first.
@@ -130,6 +132,57 @@ impl<const N: usize> Variable for SVector<f64, N> {
     }
     fn params_jacobian(&self) -> DMatrix<f64> {
         DMatrix::identity(N, N)
+    }
+}
+
+/// R^n with the dimension chosen at run time, `x ⊞ δ = x + δ`. It implements
+/// [`DynVariable`] directly (the [`Variable`] trait needs a compile-time `DIM`),
+/// so it enters a value store with [`crate::Values::insert_dyn`].
+///
+/// ```
+/// use tumble_solvers::{DynVector, Values, Key};
+/// let mut values = Values::new();
+/// values.insert_dyn(Key::new('e', 0), Box::new(DynVector::from_slice(&[0.1, 0.2, 0.3, 0.4])));
+/// assert_eq!(values.get_dyn(Key::new('e', 0)).unwrap().dim(), 4);
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct DynVector(pub nalgebra::DVector<f64>);
+
+impl DynVector {
+    /// A vector with these entries.
+    pub fn from_slice(x: &[f64]) -> Self {
+        DynVector(nalgebra::DVector::from_column_slice(x))
+    }
+}
+
+impl DynVariable for DynVector {
+    fn dim(&self) -> usize {
+        self.0.len()
+    }
+    fn retract_dyn(&self, delta: &[f64]) -> Box<dyn DynVariable> {
+        Box::new(DynVector(&self.0 + nalgebra::DVector::from_column_slice(delta)))
+    }
+    fn local_dyn(&self, other: &dyn DynVariable) -> Option<Vec<f64>> {
+        let o = other.as_any().downcast_ref::<DynVector>()?;
+        (o.0.len() == self.0.len()).then(|| (&o.0 - &self.0).as_slice().to_vec())
+    }
+    fn params_dyn(&self) -> Vec<f64> {
+        self.0.as_slice().to_vec()
+    }
+    fn params_jacobian_dyn(&self) -> DMatrix<f64> {
+        DMatrix::identity(self.0.len(), self.0.len())
+    }
+    fn params_are_tangent(&self) -> bool {
+        true
+    }
+    fn clone_box(&self) -> Box<dyn DynVariable> {
+        Box::new(self.clone())
+    }
+    fn as_any(&self) -> &dyn Any {
+        self
+    }
+    fn type_name(&self) -> &'static str {
+        "DynVector"
     }
 }
 

@@ -14,7 +14,10 @@
 use crate::error::InputError;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
 use std::path::Path;
+use tumble_factors::imu_calib::{AccelParams, GyroMatrix, UPPER};
+use tumble_factors::imu_effects::{correct, Context, Effect, Layout, ModelParams};
 
 /// Units of the raw input and of the corrected output.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -111,6 +114,67 @@ pub struct ImuCalibration {
     pub gravity: f64,
     /// Units of input and output.
     pub units: Units,
+    /// Effects beyond eq. (1) found by `tumble audit` (`None`: the plain model).
+    pub effects: Option<ModelEffects>,
+}
+
+/// Effects beyond the paper's model, with the references they are measured from
+/// (see [`tumble_factors::imu_effects`] for each effect's equation and units).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelEffects {
+    /// Temperature where the temperature effects are zero \[°C\].
+    pub reference_temperature_c: f64,
+    /// Recording time where the bias drift is zero \[s\] (only meaningful for the recording it was fitted on).
+    pub reference_time_s: f64,
+    /// The effects, in the order they were found.
+    pub effects: Vec<EffectTerm>,
+}
+
+/// One effect's parameters (names from [`Effect::param_names`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EffectTerm {
+    /// Identifier from the audit vocabulary (`gyro_g_sensitivity`, …).
+    pub id: String,
+    /// Parameter values.
+    pub params: BTreeMap<String, f64>,
+    /// Their standard deviations.
+    #[serde(default)]
+    pub std: BTreeMap<String, f64>,
+}
+
+impl EffectTerm {
+    /// A term from values in [`Effect::param_names`] order.
+    pub fn new(effect: Effect, values: &[f64], std: Option<&[f64]>) -> EffectTerm {
+        let names = effect.param_names();
+        EffectTerm {
+            id: effect.id().to_string(),
+            params: names.iter().zip(values).map(|(n, v)| (n.to_string(), *v)).collect(),
+            std: std.map(|s| names.iter().zip(s).map(|(n, v)| (n.to_string(), *v)).collect()).unwrap_or_default(),
+        }
+    }
+
+    /// The effect and its values in parameter order; errors name what is wrong.
+    pub fn values(&self) -> Result<(Effect, Vec<f64>), String> {
+        let effect = Effect::from_id(&self.id).ok_or_else(|| format!("unknown effect `{}`", self.id))?;
+        if !effect.in_sensor_model() {
+            return Err(format!("effect `{}` is not applied to IMU samples", self.id));
+        }
+        let names = effect.param_names();
+        if let Some(k) = self.params.keys().find(|k| !names.contains(&k.as_str())) {
+            return Err(format!("effect `{}` has no parameter `{k}` (it has {})", self.id, names.join(", ")));
+        }
+        let values = names
+            .iter()
+            .map(|n| match self.params.get(*n) {
+                Some(v) if v.is_finite() => Ok(*v),
+                Some(v) => Err(format!("effect `{}`: {n} = {v} is not finite", self.id)),
+                None => Err(format!("effect `{}` lacks parameter `{n}`", self.id)),
+            })
+            .collect::<Result<_, _>>()?;
+        Ok((effect, values))
+    }
 }
 
 /// Serialized form of [`ImuCalibration`] with the issue's key names.
@@ -153,6 +217,9 @@ pub struct CalibrationFile {
     /// Units.
     #[serde(default)]
     pub units: Units,
+    /// Effects found by `tumble audit`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub effects: Option<ModelEffects>,
 }
 
 fn default_gravity() -> f64 {
@@ -186,6 +253,7 @@ impl From<&ImuCalibration> for CalibrationFile {
             b_g_std: arr(&c.gyro.b_std),
             gravity: c.gravity,
             units: c.units.clone(),
+            effects: c.effects.clone(),
         }
     }
 }
@@ -211,11 +279,30 @@ impl CalibrationFile {
             }
             Ok(tr)
         };
+        let accel = triad(&self.T_a, &self.T_a_std, &self.K_a, self.K_a_std, &self.b_a, self.b_a_std, "accelerometer")?;
+        if self.effects.as_ref().is_some_and(|e| !e.effects.is_empty()) {
+            let m = accel.inverse_matrix().unwrap_or_else(Matrix3::identity);
+            if [(1, 0), (2, 0), (2, 1)].iter().any(|&(r, c)| m[(r, c)].abs() > 1e-9 * m.amax()) {
+                return Err("effects need an upper-triangular accelerometer misalignment T_a".into());
+            }
+        }
         Ok(ImuCalibration {
-            accel: triad(&self.T_a, &self.T_a_std, &self.K_a, self.K_a_std, &self.b_a, self.b_a_std, "accelerometer")?,
+            accel,
             gyro: triad(&self.T_g, &self.T_g_std, &self.K_g, self.K_g_std, &self.b_g, self.b_g_std, "gyro")?,
             gravity: self.gravity,
             units: self.units.clone(),
+            effects: match &self.effects {
+                Some(e) => {
+                    for t in &e.effects {
+                        t.values()?;
+                    }
+                    if !(e.reference_temperature_c.is_finite() && e.reference_time_s.is_finite()) {
+                        return Err("effects: the reference temperature and time must be finite".into());
+                    }
+                    Some(e.clone())
+                }
+                None => None,
+            },
         })
     }
 }
@@ -233,32 +320,146 @@ impl ImuCalibration {
         file.to_calibration().map_err(|m| InputError::file(path, m))
     }
 
-    /// A [`Corrector`] applying eq. 16 to raw samples; `None` when a matrix is singular.
+    /// A [`Corrector`] applying eq. 16 (and the audit's effects, if any) to raw
+    /// samples; `None` when a matrix is singular.
     pub fn corrector(&self) -> Option<Corrector> {
+        let extended = match &self.effects {
+            Some(e) if !e.effects.is_empty() => {
+                let terms: Vec<(Effect, Vec<f64>)> =
+                    e.effects.iter().map(|t| t.values().ok()).collect::<Option<_>>()?;
+                let ma = self.accel.inverse_matrix()?;
+                let mut accel = AccelParams::zeros();
+                for (k, &(r, c)) in UPPER.iter().enumerate() {
+                    accel[k] = ma[(r, c)];
+                }
+                for k in 0..3 {
+                    accel[6 + k] = self.accel.b[k];
+                }
+                Some(Box::new(Extended {
+                    layout: Layout { effects: terms.iter().map(|t| t.0).collect() },
+                    values: terms.into_iter().map(|t| t.1).collect(),
+                    accel,
+                    gyro: GyroMatrix::from_row_slice(self.gyro.inverse_matrix()?.transpose().as_slice()),
+                    b_g: self.gyro.b,
+                    reference_temperature: e.reference_temperature_c,
+                    reference_time: e.reference_time_s,
+                }))
+            }
+            _ => None,
+        };
         Some(Corrector {
             accel: self.accel.inverse_matrix()?,
             b_a: self.accel.b,
             gyro: self.gyro.inverse_matrix()?,
             b_g: self.gyro.b,
+            extended,
         })
+    }
+
+    /// Names of the effects the calibration carries.
+    pub fn effect_ids(&self) -> Vec<String> {
+        self.effects.as_ref().map(|e| e.effects.iter().map(|t| t.id.clone()).collect()).unwrap_or_default()
     }
 }
 
-/// Eq. 16 with the inverses precomputed: `a = (T_a K_a)⁻¹(ã − b_a)`, `ω = (T_g K_g)⁻¹(ω̃ − b_g)`.
-#[derive(Debug, Clone, Copy)]
+/// The audit's extended model, ready to apply.
+#[derive(Debug, Clone)]
+struct Extended {
+    layout: Layout,
+    values: Vec<Vec<f64>>,
+    accel: AccelParams,
+    gyro: GyroMatrix,
+    b_g: Vector3<f64>,
+    reference_temperature: f64,
+    reference_time: f64,
+}
+
+/// Eq. 16 with the inverses precomputed: `a = (T_a K_a)⁻¹(ã − b_a)`, `ω = (T_g K_g)⁻¹(ω̃ − b_g)`,
+/// plus the audit's effects when the calibration has them ([`Corrector::sample`]).
+#[derive(Debug, Clone)]
 pub struct Corrector {
     accel: Matrix3<f64>,
     b_a: Vector3<f64>,
     gyro: Matrix3<f64>,
     b_g: Vector3<f64>,
+    extended: Option<Box<Extended>>,
 }
 
 impl Corrector {
-    /// Corrected specific force \[m/s²\] from a raw accelerometer reading.
+    /// Whether the calibration carries effects beyond eq. (1).
+    pub fn has_effects(&self) -> bool {
+        self.extended.is_some()
+    }
+
+    /// Whether an effect needs the temperature column.
+    pub fn needs_temperature(&self) -> bool {
+        self.extended.as_ref().is_some_and(|x| x.layout.effects.iter().any(|e| e.needs_temperature()))
+    }
+
+    /// Corrected specific force \[m/s²\] and rate \[rad/s\] of one sample with every
+    /// effect of the calibration: `temperature` \[°C\] (`None`: the reference, i.e.
+    /// no temperature correction) and recording time `t` \[s\] (for the bias drift).
+    pub fn sample(
+        &self,
+        raw_accel: [f64; 3],
+        raw_gyro: [f64; 3],
+        temperature: Option<f64>,
+        t: f64,
+    ) -> ([f64; 3], [f64; 3]) {
+        let Some(x) = &self.extended else {
+            return (self.accel(raw_accel), self.gyro(raw_gyro));
+        };
+        let p = ModelParams {
+            accel: &x.accel,
+            gyro: &x.gyro,
+            gyro_bias: x.b_g,
+            wander: Vector3::zeros(),
+            effects: &x.values,
+        };
+        let ctx = Context {
+            dtemp: temperature.map(|c| c - x.reference_temperature).unwrap_or(0.0),
+            time: t - x.reference_time,
+        };
+        let c = correct(&x.layout, &p, &Vector3::from(raw_accel), &Vector3::from(raw_gyro), ctx, false);
+        (arr(&c.accel), arr(&c.gyro))
+    }
+
+    /// Correct every sample of a recording with [`Corrector::sample`] (its
+    /// temperature column, when present, and its time stamps): specific forces
+    /// \[m/s²\] and rates \[rad/s\].
+    pub fn correct_recording(&self, rec: &crate::io::ImuRecording) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let temps = rec.temperature.as_deref();
+        (0..rec.len()).map(|i| self.sample(rec.accel[i], rec.gyro[i], temps.map(|t| t[i]), rec.t[i])).unzip()
+    }
+
+    /// Problems applying the effects to `rec` (missing temperature, a drift
+    /// fitted on another recording), for the user.
+    pub fn warnings_for(&self, rec: &crate::io::ImuRecording) -> Vec<String> {
+        let mut w = Vec::new();
+        if let Some(x) = &self.extended {
+            if self.needs_temperature() && rec.temperature.is_none() {
+                w.push(
+                    "the calibration has temperature effects but the recording has no temperature column: \
+                        they are not applied"
+                        .to_string(),
+                );
+            }
+            if x.layout.effects.contains(&Effect::BiasDrift) {
+                w.push(format!(
+                    "the calibration has a bias drift (zero at t = {:.1} s of the recording it was fitted on): it is \
+                     applied with this recording's time stamps",
+                    x.reference_time
+                ));
+            }
+        }
+        w
+    }
+
+    /// Corrected specific force \[m/s²\] from a raw accelerometer reading (eq. 16 only).
     pub fn accel(&self, raw: [f64; 3]) -> [f64; 3] {
         arr(&(self.accel * (Vector3::from(raw) - self.b_a)))
     }
-    /// Corrected angular rate \[rad/s\] from a raw gyro reading.
+    /// Corrected angular rate \[rad/s\] from a raw gyro reading (eq. 16 only).
     pub fn gyro(&self, raw: [f64; 3]) -> [f64; 3] {
         arr(&(self.gyro * (Vector3::from(raw) - self.b_g)))
     }

@@ -332,7 +332,13 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         })
         .collect();
     Ok(CalibrationResult {
-        calibration: ImuCalibration { accel: accel_triad, gyro: gyro_triad, gravity: opts.gravity, units },
+        calibration: ImuCalibration {
+            accel: accel_triad,
+            gyro: gyro_triad,
+            gravity: opts.gravity,
+            units,
+            effects: None,
+        },
         multiplier,
         threshold: multiplier * base,
         ratio,
@@ -886,7 +892,7 @@ fn triad_from(y: &[f64], s: &[f64], b: Vector3<f64>, b_std: Vector3<f64>) -> Tri
     }
 }
 
-fn accel_triad(p: &AccelParams, cov: &DMatrix<f64>, inflation: f64) -> Triad {
+pub(crate) fn accel_triad(p: &AccelParams, cov: &DMatrix<f64>, inflation: f64) -> Triad {
     let f = |x: &[f64]| {
         let mut m = Matrix3::zeros();
         for (k, &(r, c)) in UPPER.iter().enumerate() {
@@ -901,7 +907,7 @@ fn accel_triad(p: &AccelParams, cov: &DMatrix<f64>, inflation: f64) -> Triad {
     triad_from(&y, &s, Vector3::new(p[6], p[7], p[8]), b_std)
 }
 
-fn gyro_triad(x: &[f64; 12], cov: &DMatrix<f64>) -> Triad {
+pub(crate) fn gyro_triad(x: &[f64; 12], cov: &DMatrix<f64>) -> Triad {
     let f = |x: &[f64]| paper_tk(&Matrix3::from_row_slice(&x[..9]));
     let y = f(x);
     let s = propagate_std(&f, &x[..9], &cov.view((0, 0), (9, 9)).into_owned());

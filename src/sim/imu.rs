@@ -56,6 +56,8 @@ struct AxisGen {
     turn_on: f64,
     rw_step: f64,
     rw: f64,
+    drift_step: f64,
+    drift: f64,
     gm: Vec<(f64, f64, f64)>, // (φ, innovation std, state)
     white: f64,
 }
@@ -79,6 +81,8 @@ impl AxisGen {
             turn_on: if e.bias { t.bias[k] } else { 0.0 },
             rw_step: if e.random_walk { t.random_walk[k] * dt.sqrt() } else { 0.0 },
             rw: 0.0,
+            drift_step: if e.bias_drift { t.bias_drift[k] * dt } else { 0.0 },
+            drift: 0.0,
             gm,
             white: if e.white_noise { t.noise_density[k] * m.rate_hz.sqrt() } else { 0.0 },
         }
@@ -88,7 +92,8 @@ impl AxisGen {
     fn fill(&mut self, bias: &mut [f64], noise: &mut [f64]) {
         let normal = |r: &mut ChaCha8Rng| -> f64 { StandardNormal.sample(r) };
         for (b, nz) in bias.iter_mut().zip(noise.iter_mut()) {
-            let mut x = self.turn_on + self.rw;
+            let mut x = self.turn_on + self.rw + self.drift;
+            self.drift += self.drift_step;
             if self.rw_step > 0.0 {
                 self.rw += self.rw_step * normal(&mut self.rng);
             }

@@ -109,6 +109,65 @@ impl SimConfig {
     }
 }
 
+/// Switch on one effect the calibration model lacks, as the audit's tests and
+/// `tumble demo` hide it: `g_sensitivity`, `temperature_bias`,
+/// `temperature_scale`, `gyro_nonlinearity`, `accel_nonlinearity`,
+/// `bias_drift`, or `none`, with the model's coefficients of that effect
+/// multiplied by `strength`. Temperature effects also get a warm-up from 10 °C
+/// to 50 °C (time constant 150 s) so the temperature changes during a tumble
+/// recording; the nonlinearity of the other triad stays zero.
+pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Result<(), String> {
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(format!("effect strength must be ≥ 0, found {strength}"));
+    }
+    let m = &mut config.imu;
+    let scale3 = |v: &mut [f64; 3]| v.iter_mut().for_each(|x| *x *= strength);
+    for t in [&mut m.gyro, &mut m.accel] {
+        scale3(&mut t.nonlinearity);
+        scale3(&mut t.temperature_bias);
+        scale3(&mut t.temperature_scale);
+        scale3(&mut t.bias_drift);
+    }
+    m.g_sensitivity.iter_mut().for_each(scale3);
+    let e = &mut config.imu.effects;
+    let warm = |c: &mut SimConfig| {
+        c.imu.temperature =
+            TemperatureTrace { start: 10.0, end: 50.0, warmup_s: 150.0, reference: 10.0, ..Default::default() };
+    };
+    match effect {
+        "none" => {}
+        "g_sensitivity" => e.g_sensitivity = true,
+        "gyro_nonlinearity" => {
+            e.nonlinearity = true;
+            config.imu.accel.nonlinearity = [0.0; 3];
+        }
+        "accel_nonlinearity" => {
+            e.nonlinearity = true;
+            config.imu.gyro.nonlinearity = [0.0; 3];
+        }
+        "bias_drift" => e.bias_drift = true,
+        "temperature_bias" => {
+            e.temperature = true;
+            config.imu.accel.temperature_scale = [0.0; 3];
+            config.imu.gyro.temperature_scale = [0.0; 3];
+            warm(config);
+        }
+        "temperature_scale" => {
+            e.temperature = true;
+            config.imu.accel.temperature_bias = [0.0; 3];
+            config.imu.gyro.temperature_bias = [0.0; 3];
+            warm(config);
+        }
+        other => {
+            return Err(format!(
+                "unknown effect `{other}`: use g_sensitivity, temperature_bias, temperature_scale, gyro_nonlinearity, \
+                 accel_nonlinearity, bias_drift or none"
+            ))
+        }
+    }
+    Ok(())
+}
+
 /// Rate of the written ground truth \[Hz\] (IMU rate when moving, 10 Hz for static logs).
 pub fn groundtruth_rate(scenario: Scenario, config: &SimConfig) -> f64 {
     config.groundtruth_rate_hz.unwrap_or(if scenario == Scenario::Static { 10.0 } else { config.imu.rate_hz })

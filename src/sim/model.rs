@@ -43,6 +43,9 @@ pub struct TriadModel {
     pub temperature_bias: [f64; 3],
     /// Temperature scale coefficient \[1/°C\] (relative change of K).
     pub temperature_scale: [f64; 3],
+    /// Deterministic bias drift: the bias grows linearly from power-on \[unit/s\]
+    /// (gyro rad/s², accelerometer m/s³); applied when `effects.bias_drift` is on.
+    pub bias_drift: [f64; 3],
     /// Quantization step (LSB) \[unit\]; 0 for none.
     pub lsb: f64,
     /// Measurement range ±range \[unit\]; values beyond are clipped.
@@ -75,6 +78,8 @@ pub struct Effects {
     pub quantization: bool,
     /// Saturation at ±range.
     pub saturation: bool,
+    /// Deterministic linear bias drift (`TriadModel::bias_drift`).
+    pub bias_drift: bool,
     /// Sample-time jitter.
     pub jitter: bool,
 }
@@ -97,6 +102,7 @@ impl Default for Effects {
             g_sensitivity: false,
             quantization: true,
             saturation: true,
+            bias_drift: false,
             jitter: false,
         }
     }
@@ -117,6 +123,7 @@ impl Effects {
             g_sensitivity: false,
             quantization: false,
             saturation: false,
+            bias_drift: false,
             jitter: false,
         }
     }
@@ -208,6 +215,7 @@ impl Default for TriadModel {
             bias_instability_band: [1.0, 1000.0],
             temperature_bias: [0.0; 3],
             temperature_scale: [0.0; 3],
+            bias_drift: [0.0; 3],
             lsb: 0.0,
             range: f64::MAX,
         }
@@ -242,6 +250,7 @@ impl ImuModel {
             bias_instability_band: [1.0, 1000.0],
             temperature_bias: [2e-4, -1.5e-4, 1e-4],
             temperature_scale: [3e-4, -2e-4, 2.5e-4],
+            bias_drift: [1e-5, -8e-6, 6e-6],
             lsb: 2000f64.to_radians() / 32768.0,
             range: 2000f64.to_radians(),
         };
@@ -256,6 +265,7 @@ impl ImuModel {
             bias_instability_band: [1.0, 1000.0],
             temperature_bias: [1.5e-3, -1e-3, 2e-3],
             temperature_scale: [2e-4, 1.5e-4, -1e-4],
+            bias_drift: [1e-4, -8e-5, 6e-5],
             lsb: 8.0 * 9.80665 / 4096.0,
             range: 4.0 * 9.80665,
         };
@@ -278,8 +288,12 @@ impl ImuModel {
         for (t, name) in [(&self.gyro, "gyro"), (&self.accel, "accel")] {
             let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
             let nonneg = |v: &[f64]| v.iter().all(|x| x.is_finite() && *x >= 0.0);
-            if !finite(t.misalignment.as_flattened()) || !finite(&t.bias) || !finite(&t.nonlinearity) {
-                return Err(format!("{name}: misalignment, bias and nonlinearity must be finite"));
+            if !finite(t.misalignment.as_flattened())
+                || !finite(&t.bias)
+                || !finite(&t.nonlinearity)
+                || !finite(&t.bias_drift)
+            {
+                return Err(format!("{name}: misalignment, bias, bias_drift and nonlinearity must be finite"));
             }
             if t.scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
                 return Err(format!("{name}.scale must be positive, found {:?}", t.scale));

@@ -188,14 +188,14 @@ impl VioInput {
     }
 }
 
-/// Calibrated IMU samples from a recording (eq. 16 when a calibration is given).
+/// Calibrated IMU samples from a recording (eq. 16 and the audit's effects when a calibration is given).
 pub fn imu_data(rec: &crate::io::ImuRecording, calibration: Option<&ImuCalibration>) -> ImuData {
     let corr = calibration.and_then(|c| c.corrector());
     let (gyro, acc) = match corr {
-        Some(c) => (
-            rec.gyro.iter().map(|g| Vector3::from(c.gyro(*g))).collect(),
-            rec.accel.iter().map(|a| Vector3::from(c.accel(*a))).collect(),
-        ),
+        Some(c) => {
+            let (a, g) = c.correct_recording(rec);
+            (g.into_iter().map(Vector3::from).collect(), a.into_iter().map(Vector3::from).collect())
+        }
         None => (
             rec.gyro.iter().map(|g| Vector3::from(*g)).collect(),
             rec.accel.iter().map(|a| Vector3::from(*a)).collect(),
