@@ -263,12 +263,17 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         }
     }
 
+    // A steady turn about gravity keeps both windowed variances low: an interval whose
+    // mean rate is far above the initial period's noise is a turn, not a pose.
+    let b_init = Vector3::from(mean3(&rec.gyro[..n_init]));
+    let floor = if rec.gyro_units == Stored::RawCounts { 0.0 } else { MIN_TURN_RATE };
+    let turn_limit = Vector3::from(var_g.map(|v| (TURN_SIGMAS * v.sqrt()).max(floor)));
     // Threshold sweep: one accelerometer fit per multiplier.
     let candidates: Vec<(f64, Vec<Interval>, Option<AccelFit>)> = opts
         .multipliers
         .par_iter()
         .map(|&k| {
-            let iv = intervals_below(&ratio, k, min_len);
+            let iv = not_turning(rec, intervals_below(&ratio, k, min_len), &b_init, turn_limit);
             let fit = (iv.len() >= opts.min_intervals).then(|| fit_accel(rec, &iv, opts.gravity, &var_a)).flatten();
             (k, iv, fit)
         })
@@ -351,6 +356,29 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         score,
         warnings,
     })
+}
+
+/// An interval whose mean gyro reading differs from the initial period's on some
+/// axis by more than this many per-sample standard deviations of that axis in
+/// that period is a steady turn.
+const TURN_SIGMAS: f64 = 30.0;
+/// Smallest such difference per axis \[rad/s\] for gyros read in SI units (3 °/s).
+const MIN_TURN_RATE: f64 = 0.05;
+
+/// `intervals` without the steady turns (see [`TURN_SIGMAS`]).
+fn not_turning(
+    rec: &ImuRecording,
+    intervals: Vec<Interval>,
+    b_init: &Vector3<f64>,
+    limit: Vector3<f64>,
+) -> Vec<Interval> {
+    intervals
+        .into_iter()
+        .filter(|iv| {
+            let d = Vector3::from(mean3(&rec.gyro[iv.start..iv.end])) - b_init;
+            (0..3).all(|k| d[k].abs() <= limit[k])
+        })
+        .collect()
 }
 
 /// The first period must be still: its windowed variance must be uniform and
