@@ -8,6 +8,7 @@
 pub mod allan;
 pub mod audit;
 pub mod calib;
+pub mod demo;
 pub mod error;
 pub mod io;
 pub mod plot;

@@ -4,7 +4,7 @@
 use super::data::AuditData;
 use nalgebra::{DMatrix, Vector3};
 use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
-use tumble_factors::imu_effects::{Effect, Layout, MotionFactor, StaticFactor};
+use tumble_factors::imu_effects::{Layout, MotionFactor, StaticFactor};
 use tumble_factors::BetweenFactor;
 use tumble_solvers::{covariances, DynVector, Graph, Key, LmOptions, NoiseModel, Optimizer, Values, Vars};
 
@@ -264,11 +264,6 @@ pub fn start_values(data: &AuditData, accel: AccelParams, gyro: GyroMatrix, gyro
     }
     values.set_constant(key_wander(0), true);
     values
-}
-
-/// Keys of the effects a layout switches on, with their effect.
-pub fn effect_list(layout: &Layout) -> Vec<(Key, Effect)> {
-    layout.effects.iter().enumerate().map(|(j, e)| (key_effect(j), *e)).collect()
 }
 
 /// Raw (unwhitened) residuals at `values` under `layout`: per static interval

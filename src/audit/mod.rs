@@ -41,7 +41,7 @@ use fit::{Fit, Noise};
 use nalgebra::{DMatrix, Vector3};
 use rayon::prelude::*;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
-use tumble_factors::imu_calib::{AccelParams, GyroMatrix, UPPER};
+use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
 use tumble_factors::imu_effects::Layout;
 
 /// Bias random walks assumed without a noise file: gyro \[rad/s²/√Hz\] and
@@ -172,31 +172,10 @@ impl std::fmt::Display for AuditError {
 }
 impl std::error::Error for AuditError {}
 
-/// The calibration as the audit's inverse-model parameters: `M_a` (upper
-/// triangle) and `b_a`, `M_g`, `b_g`.
-fn inverse_params(cal: &ImuCalibration) -> Result<(AccelParams, GyroMatrix, Vector3<f64>), String> {
-    let ma = cal.accel.inverse_matrix().ok_or("accelerometer T·K is singular")?;
-    let scale = ma.amax().max(1e-300);
-    if [(1, 0), (2, 0), (2, 1)].iter().any(|&(r, c)| ma[(r, c)].abs() > 1e-9 * scale) {
-        return Err("the accelerometer's (T_a K_a)⁻¹ is not upper triangular: the audit needs the paper's \
-                    upper-triangular accelerometer misalignment (as tumble calibrate and imu_tk write it)"
-            .into());
-    }
-    let mut a = AccelParams::zeros();
-    for (k, &(r, c)) in UPPER.iter().enumerate() {
-        a[k] = ma[(r, c)];
-    }
-    for k in 0..3 {
-        a[6 + k] = cal.accel.b[k];
-    }
-    let mg = cal.gyro.inverse_matrix().ok_or("gyro T·K is singular")?;
-    Ok((a, GyroMatrix::from_row_slice(mg.transpose().as_slice()), cal.gyro.b))
-}
-
 /// Run the audit of a calibration recording against `calibration`.
 pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptions) -> Result<Audit, AuditError> {
     let fail = |m: String| AuditError(format!("{}: {m}", rec.source_name()));
-    let (accel, gyro, gyro_bias) = inverse_params(calibration).map_err(&fail)?;
+    let (accel, gyro, gyro_bias) = calibration.inverse_params().map_err(&fail)?;
     let detection = CalibOptions { gravity: calibration.gravity, ..opts.detection.clone() };
     let detected = calibrate(rec, &detection).map_err(|e| fail(format!("static intervals: {}", e.message)))?;
     let mut notes = Vec::new();

@@ -280,13 +280,7 @@ impl CalibrationFile {
             Ok(tr)
         };
         let accel = triad(&self.T_a, &self.T_a_std, &self.K_a, self.K_a_std, &self.b_a, self.b_a_std, "accelerometer")?;
-        if self.effects.as_ref().is_some_and(|e| !e.effects.is_empty()) {
-            let m = accel.inverse_matrix().unwrap_or_else(Matrix3::identity);
-            if [(1, 0), (2, 0), (2, 1)].iter().any(|&(r, c)| m[(r, c)].abs() > 1e-9 * m.amax()) {
-                return Err("effects need an upper-triangular accelerometer misalignment T_a".into());
-            }
-        }
-        Ok(ImuCalibration {
+        let cal = ImuCalibration {
             accel,
             gyro: triad(&self.T_g, &self.T_g_std, &self.K_g, self.K_g_std, &self.b_g, self.b_g_std, "gyro")?,
             gravity: self.gravity,
@@ -303,7 +297,11 @@ impl CalibrationFile {
                 }
                 None => None,
             },
-        })
+        };
+        if cal.effects.as_ref().is_some_and(|e| !e.effects.is_empty()) {
+            cal.inverse_params().map_err(|m| format!("effects: {m}"))?;
+        }
+        Ok(cal)
     }
 }
 
@@ -327,20 +325,13 @@ impl ImuCalibration {
             Some(e) if !e.effects.is_empty() => {
                 let terms: Vec<(Effect, Vec<f64>)> =
                     e.effects.iter().map(|t| t.values().ok()).collect::<Option<_>>()?;
-                let ma = self.accel.inverse_matrix()?;
-                let mut accel = AccelParams::zeros();
-                for (k, &(r, c)) in UPPER.iter().enumerate() {
-                    accel[k] = ma[(r, c)];
-                }
-                for k in 0..3 {
-                    accel[6 + k] = self.accel.b[k];
-                }
+                let (accel, gyro, b_g) = self.inverse_params().ok()?;
                 Some(Box::new(Extended {
                     layout: Layout { effects: terms.iter().map(|t| t.0).collect() },
                     values: terms.into_iter().map(|t| t.1).collect(),
                     accel,
-                    gyro: GyroMatrix::from_row_slice(self.gyro.inverse_matrix()?.transpose().as_slice()),
-                    b_g: self.gyro.b,
+                    gyro,
+                    b_g,
                     reference_temperature: e.reference_temperature_c,
                     reference_time: e.reference_time_s,
                 }))
@@ -354,6 +345,30 @@ impl ImuCalibration {
             b_g: self.gyro.b,
             extended,
         })
+    }
+
+    /// The inverse model's parameters ([`tumble_factors::imu_calib`]): `M_a`
+    /// (upper triangle) with `b_a`, `M_g` row major, `b_g`. Errors when a matrix
+    /// is singular or `(T_a K_a)⁻¹` is not upper triangular.
+    pub fn inverse_params(&self) -> Result<(AccelParams, GyroMatrix, Vector3<f64>), String> {
+        let ma = self.accel.inverse_matrix().ok_or("accelerometer T·K is singular")?;
+        let scale = ma.amax().max(1e-300);
+        if [(1, 0), (2, 0), (2, 1)].iter().any(|&(r, c)| ma[(r, c)].abs() > 1e-9 * scale) {
+            return Err(
+                "the accelerometer's (T_a K_a)⁻¹ is not upper triangular: the extended model needs the \
+                        paper's upper-triangular accelerometer misalignment (as tumble calibrate and imu_tk write it)"
+                    .into(),
+            );
+        }
+        let mut a = AccelParams::zeros();
+        for (k, &(r, c)) in UPPER.iter().enumerate() {
+            a[k] = ma[(r, c)];
+        }
+        for k in 0..3 {
+            a[6 + k] = self.accel.b[k];
+        }
+        let mg = self.gyro.inverse_matrix().ok_or("gyro T·K is singular")?;
+        Ok((a, GyroMatrix::from_row_slice(mg.transpose().as_slice()), self.gyro.b))
     }
 
     /// Names of the effects the calibration carries.
