@@ -161,6 +161,13 @@ fn bad_input_gives_clear_errors() {
     rec.temperature.as_mut().unwrap()[20_000] = f64::NAN;
     let e = audit(&rec, &cal, &AuditOptions::default()).err().expect("NaN temperature must be refused");
     assert!(e.0.contains("temperature") && e.0.contains("not finite"), "{e}");
+    // A constant temperature column: the temperature effects cannot be tested, and it says so.
+    let sim = simulate(Scenario::Tumble, &cfg, 7).unwrap();
+    let mut flat = sim.imu.to_recording();
+    flat.temperature = Some(vec![25.0; flat.len()]);
+    let cal7 = calibrate(&flat, &CalibOptions { gravity: 9.81, ..Default::default() }).unwrap().calibration;
+    let a = audit(&flat, &cal7, &AuditOptions::default()).unwrap();
+    assert!(a.notes.iter().any(|n| n.contains("varies by only")), "{:?}", a.notes);
     // Unknown effects in a calibration file name the effect.
     let dir = std::env::temp_dir().join(format!("tumble_audit_bad_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();

@@ -49,6 +49,9 @@ use tumble_factors::imu_effects::Layout;
 /// is not mistaken for drift.
 pub const DEFAULT_RANDOM_WALK: (f64, f64) = (1e-4, 1e-3);
 
+/// Smallest temperature span over the static intervals for testing temperature effects \[°C\].
+pub const MIN_TEMPERATURE_SPAN: f64 = 1.0;
+
 /// Options of [`audit`].
 #[derive(Clone, Debug)]
 pub struct AuditOptions {
@@ -202,6 +205,23 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
             notes.push(format!("no temperature column: {} not tested", skipped.join(", ")));
         }
         candidates.retain(|e| !e.needs_temperature());
+    }
+    if data.has_temperature {
+        let (lo, hi) = data
+            .statics
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(lo, hi), s| (lo.min(s.context.dtemp), hi.max(s.context.dtemp)));
+        if hi - lo < MIN_TEMPERATURE_SPAN {
+            let skipped: Vec<&str> = candidates.iter().filter(|e| e.needs_temperature()).map(|e| e.id()).collect();
+            if !skipped.is_empty() {
+                notes.push(format!(
+                    "the temperature varies by only {:.2} °C between static intervals: {} not tested",
+                    hi - lo,
+                    skipped.join(", ")
+                ));
+            }
+            candidates.retain(|e| !e.needs_temperature());
+        }
     }
     for e in &opts.candidates {
         if !e.in_sensor_model() {
