@@ -11,8 +11,9 @@
 use crate::allan::{run_allan, AllanRunOptions};
 use crate::audit::{audit, AuditOptions};
 use crate::calib::{calibrate, CalibOptions, Triad};
+use crate::io::ImuNoise;
 use crate::sim::{hide_effect, simulate, Scenario, SimConfig, TriadModel};
-use crate::vio::{run as run_vio, summarize, ImuNoise, VioInput, VioOptions};
+use crate::vio::{run as run_vio, summarize, VioInput, VioOptions};
 use std::fmt::Write as _;
 
 /// What the demo simulates.

@@ -35,8 +35,8 @@ pub use data::AuditData;
 pub use tumble_factors::imu_effects::Effect;
 
 use crate::calib::{calibrate, CalibOptions, ImuCalibration};
+use crate::io::ImuNoise;
 use crate::io::ImuRecording;
-use crate::vio::ImuNoise;
 use fit::{Fit, Noise};
 use nalgebra::{DMatrix, Vector3};
 use rayon::prelude::*;

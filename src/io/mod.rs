@@ -7,6 +7,7 @@ pub mod imu;
 pub mod imu_text;
 pub mod imu_write;
 pub(crate) mod mem;
+pub mod noise;
 pub mod recording;
 pub mod rosbag;
 pub mod table;
@@ -17,5 +18,6 @@ pub mod yaml;
 
 pub use imu::{ImuRecording, Stored};
 pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, STANDARD_GRAVITY};
+pub use noise::ImuNoise;
 pub use recording::{open_recording, RecordingOptions};
 pub use table::TimeUnit;
