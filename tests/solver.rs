@@ -363,6 +363,20 @@ fn schur_complement_matches_full_solve() {
     }
     // The constant camera did not move.
     assert_eq!(a.get::<SVector<f64, 9>>(C(0)).unwrap()[3], cams[0][3] + 0.01);
+    // Camera covariances from the Schur-reduced system equal those of the full
+    // system (a second constant camera fixes the scale).
+    let mut a = a;
+    a.set_constant(C(1), true);
+    let keys = [C(2), C(3)];
+    let full = tumble_solvers::covariances(&g, &a, &keys).unwrap();
+    let reduced = tumble_solvers::covariances_eliminating(&g, &a, &keys, &['l']).unwrap();
+    for x in keys {
+        for y in keys {
+            let (f, r) = (full.block(x, y).unwrap(), reduced.block(x, y).unwrap());
+            assert_relative_eq!(f, r, epsilon = 1e-12 * f.amax().max(1.0), max_relative = 1e-7);
+        }
+    }
+    assert!(tumble_solvers::covariances_eliminating(&g, &a, &[L(0)], &['l']).is_err());
 }
 
 /// Results are bit-identical whatever the number of threads.

@@ -49,7 +49,7 @@ pub use key::{Key, B, C, L, P, V, X};
 pub use lie::LieGroup;
 pub use linear::LinearSolver;
 pub use loss::{Cauchy, Huber, RobustLoss, Tukey};
-pub use marginal::{covariances, marginalize, Covariances, MarginalPrior, Marginalization};
+pub use marginal::{covariances, covariances_eliminating, marginalize, Covariances, MarginalPrior, Marginalization};
 pub use noise::NoiseModel;
 pub use optimizer::{IterationLog, LmOptions, Method, Optimizer, Summary, Termination};
 pub use values::Values;

@@ -529,40 +529,7 @@ impl Structure {
     pub fn solve(&mut self, sys: &System, damping: Option<&[f64]>) -> Result<(Vec<f64>, f64, f64, f64), SolveError> {
         let t_build = std::time::Instant::now();
         let mut h = std::mem::take(&mut self.scratch);
-        h.clear();
-        h.extend_from_slice(&sys.h);
-        let mut g = sys.g.clone();
-        if let Some(d) = damping {
-            for (k, &p) in self.diag_positions.iter().enumerate() {
-                h[p] += d[k];
-            }
-        }
-        // Schur complement of the eliminated blocks.
-        let mut elim_inv = Vec::with_capacity(sys.elim.len());
-        for (e, ElimBlock { hll, gl, hcl }) in sys.elim.iter().enumerate() {
-            let off = self.elim_offsets[e];
-            let mut a = hll.clone();
-            if let Some(d) = damping {
-                for k in 0..a.nrows() {
-                    a[(k, k)] += d[off + k];
-                }
-            }
-            let inv = nalgebra::Cholesky::new(a)
-                .ok_or_else(|| SolveError::Singular(format!("eliminated block {e} is not positive definite")))?
-                .inverse();
-            let w: Vec<DMatrix<f64>> = hcl.iter().map(|m| m * &inv).collect();
-            for &(sa, sb, pair) in &self.elim_pairs[e] {
-                self.sub_w_ht(&mut h, pair, &w[sa], &hcl[sb]);
-            }
-            for (s, &c) in self.elim_cams[e].iter().enumerate() {
-                let v = &w[s] * gl;
-                let o = self.kept_offsets[c];
-                for (k, x) in v.iter().enumerate() {
-                    g[o + k] -= x;
-                }
-            }
-            elim_inv.push(inv);
-        }
+        let (g, elim_inv) = self.reduce(sys, damping, &mut h)?;
         let build_s = t_build.elapsed().as_secs_f64();
 
         let t_fact = std::time::Instant::now();
@@ -610,6 +577,51 @@ impl Structure {
         Ok((x, fact_s, solve_s + t_back.elapsed().as_secs_f64(), build_s))
     }
 
+    /// The reduced system: `h` ← upper triangle of `H + diag(damping)` over the
+    /// kept unknowns minus the Schur complement of the eliminated blocks; returns
+    /// the reduced gradient and each eliminated block's (damped) inverse.
+    fn reduce(
+        &self,
+        sys: &System,
+        damping: Option<&[f64]>,
+        h: &mut Vec<f64>,
+    ) -> Result<(Vec<f64>, Vec<DMatrix<f64>>), SolveError> {
+        h.clear();
+        h.extend_from_slice(&sys.h);
+        let mut g = sys.g.clone();
+        if let Some(d) = damping {
+            for (k, &p) in self.diag_positions.iter().enumerate() {
+                h[p] += d[k];
+            }
+        }
+        let mut elim_inv = Vec::with_capacity(sys.elim.len());
+        for (e, ElimBlock { hll, gl, hcl }) in sys.elim.iter().enumerate() {
+            let off = self.elim_offsets[e];
+            let mut a = hll.clone();
+            if let Some(d) = damping {
+                for k in 0..a.nrows() {
+                    a[(k, k)] += d[off + k];
+                }
+            }
+            let inv = nalgebra::Cholesky::new(a)
+                .ok_or_else(|| SolveError::Singular(format!("eliminated block {e} is not positive definite")))?
+                .inverse();
+            let w: Vec<DMatrix<f64>> = hcl.iter().map(|m| m * &inv).collect();
+            for &(sa, sb, pair) in &self.elim_pairs[e] {
+                self.sub_w_ht(h, pair, &w[sa], &hcl[sb]);
+            }
+            for (s, &c) in self.elim_cams[e].iter().enumerate() {
+                let v = &w[s] * gl;
+                let o = self.kept_offsets[c];
+                for (k, x) in v.iter().enumerate() {
+                    g[o + k] -= x;
+                }
+            }
+            elim_inv.push(inv);
+        }
+        Ok((g, elim_inv))
+    }
+
     /// `Hδ` for the predicted decrease, over kept then eliminated unknowns (undamped H).
     pub fn h_times(&self, sys: &System, x: &[f64]) -> Vec<f64> {
         let mut y = vec![0.0; x.len()];
@@ -643,14 +655,14 @@ impl Structure {
         y
     }
 
-    /// Selected columns of H⁻¹ over kept unknowns (for a system without eliminated blocks).
+    /// Selected columns of H⁻¹ over kept unknowns. With eliminated blocks, the
+    /// inverse of their Schur complement: the same columns of the full inverse.
     pub fn inverse_columns(&mut self, sys: &System, cols: &[usize]) -> Result<DMatrix<f64>, SolveError> {
-        if !sys.elim.is_empty() {
-            return Err(SolveError::Config("covariance recovery needs a system without eliminated blocks".into()));
-        }
+        let mut h = Vec::new();
+        self.reduce(sys, None, &mut h)?;
         let mut out = DMatrix::zeros(self.n, cols.len());
         if self.dense || self.n == 0 {
-            let ch = nalgebra::Cholesky::new(self.dense_matrix(&sys.h))
+            let ch = nalgebra::Cholesky::new(self.dense_matrix(&h))
                 .ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
             for (j, &c) in cols.iter().enumerate() {
                 let mut e = DVector::zeros(self.n);
@@ -662,7 +674,7 @@ impl Structure {
         let mut factor = SparseFactor::new(self.n, &self.col_ptr, &self.row_idx)?;
         let mut rhs = faer::Mat::<f64>::from_fn(self.n, cols.len(), |i, j| if i == cols[j] { 1.0 } else { 0.0 });
         factor
-            .factor_solve(&self.col_ptr, &self.row_idx, &sys.h, rhs.as_mut())
+            .factor_solve(&self.col_ptr, &self.row_idx, &h, rhs.as_mut())
             .map_err(|_| SolveError::Singular("information matrix is singular (unobservable variables?)".into()))?;
         for j in 0..cols.len() {
             for i in 0..self.n {

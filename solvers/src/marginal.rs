@@ -205,7 +205,20 @@ impl Covariances {
 /// Covariance blocks (inverse of the Gauss–Newton information JᵀJ, robust
 /// weights included) of `keys` at `values`. Constant variables are conditioned on.
 pub fn covariances(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Covariances, SolveError> {
-    let layout = Layout::new(graph, values, &[])?;
+    covariances_eliminating(graph, values, keys, &[])
+}
+
+/// [`covariances`], eliminating the variables whose key characters are in
+/// `eliminate` first (landmarks of a bundle-adjustment-like graph): the blocks
+/// are the same, computed from the much smaller reduced system. The requested
+/// keys must not be eliminated.
+pub fn covariances_eliminating(
+    graph: &Graph,
+    values: &Values,
+    keys: &[Key],
+    eliminate: &[char],
+) -> Result<Covariances, SolveError> {
+    let layout = Layout::new(graph, values, eliminate)?;
     let vars: Vec<Box<dyn DynVariable>> =
         layout.keys.iter().map(|&k| values.get_dyn(k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
     let mut structure = layout.structure(&vars, LinearSolver::Auto)?;
@@ -218,6 +231,9 @@ pub fn covariances(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Covar
             layout.keys.iter().position(|x| x == k).ok_or(SolveError::Config(format!("key {k} is in no factor")))?;
         let b = match layout.roles[vi] {
             crate::linear::Role::Kept(b) => b,
+            crate::linear::Role::Elim(_) => {
+                return Err(SolveError::Config(format!("key {k} is eliminated: its covariance is not kept")))
+            }
             _ => return Err(SolveError::Config(format!("key {k} is held constant"))),
         };
         let o = structure.kept_offset(b);

@@ -11,7 +11,8 @@ use tumble_factors::imu_preint::Preintegrated;
 use tumble_factors::{bias_random_walk, ImuFactor, InverseDepthReprojection, PriorFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{
-    covariances, marginalize, Graph, Huber, LmOptions, MarginalPrior, NoiseModel, Optimizer, Values, B, L, V, X,
+    covariances_eliminating, marginalize, Graph, Huber, LmOptions, MarginalPrior, NoiseModel, Optimizer, Values, B, L,
+    V, X,
 };
 
 /// The estimate at one camera frame.
@@ -675,7 +676,7 @@ impl<'a> Estimator<'a> {
         let q = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r));
         let mut std = [[f64::NAN; 3]; 5];
         if let (true, Some(g)) = (self.opts.covariances, graph) {
-            if let Ok(c) = covariances(g, &self.values, &[X(sid), V(sid), B(sid)]) {
+            if let Ok(c) = covariances_eliminating(g, &self.values, &[X(sid), V(sid), B(sid)], &['l']) {
                 let d = |k, i: usize| c.get(k).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt());
                 let blocks = [(X(sid), 0), (X(sid), 3), (V(sid), 0), (B(sid), 0), (B(sid), 3)];
                 for (row, (key, off)) in std.iter_mut().zip(blocks) {
