@@ -199,29 +199,23 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
     let mean_k = |k: &Vector3<f64>| k.iter().map(|x| x.abs()).sum::<f64>() / 3.0;
     let random_walk = (rw_g * mean_k(&calibration.gyro.k), rw_a * mean_k(&calibration.accel.k));
     let mut candidates: Vec<Effect> = opts.candidates.iter().copied().filter(|e| e.in_sensor_model()).collect();
-    if !data.has_temperature {
+    let span = data
+        .statics
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(lo, hi), s| (lo.min(s.context.dtemp), hi.max(s.context.dtemp)));
+    let no_temperature = if !data.has_temperature {
+        Some("no temperature column".to_string())
+    } else if span.1 - span.0 < MIN_TEMPERATURE_SPAN {
+        Some(format!("the temperature varies by only {:.2} °C between static intervals", span.1 - span.0))
+    } else {
+        None
+    };
+    if let Some(why) = no_temperature {
         let skipped: Vec<&str> = candidates.iter().filter(|e| e.needs_temperature()).map(|e| e.id()).collect();
         if !skipped.is_empty() {
-            notes.push(format!("no temperature column: {} not tested", skipped.join(", ")));
+            notes.push(format!("{why}: {} not tested", skipped.join(", ")));
         }
         candidates.retain(|e| !e.needs_temperature());
-    }
-    if data.has_temperature {
-        let (lo, hi) = data
-            .statics
-            .iter()
-            .fold((f64::MAX, f64::MIN), |(lo, hi), s| (lo.min(s.context.dtemp), hi.max(s.context.dtemp)));
-        if hi - lo < MIN_TEMPERATURE_SPAN {
-            let skipped: Vec<&str> = candidates.iter().filter(|e| e.needs_temperature()).map(|e| e.id()).collect();
-            if !skipped.is_empty() {
-                notes.push(format!(
-                    "the temperature varies by only {:.2} °C between static intervals: {} not tested",
-                    hi - lo,
-                    skipped.join(", ")
-                ));
-            }
-            candidates.retain(|e| !e.needs_temperature());
-        }
     }
     for e in &opts.candidates {
         if !e.in_sensor_model() {
