@@ -9,8 +9,6 @@ use tumble_factors::imu_effects::{Context, MotionSamples};
 /// One static interval, summarized.
 #[derive(Clone, Debug)]
 pub struct StaticData {
-    /// First and last sample time \[s\].
-    pub span_s: [f64; 2],
     /// Samples averaged.
     pub samples: usize,
     /// Mean raw accelerometer reading \[raw units\].
@@ -73,7 +71,6 @@ impl AuditData {
                     (a + c.dtemp, b + c.time)
                 });
                 StaticData {
-                    span_s: [rec.t[iv.start], rec.t[iv.end - 1]],
                     samples: iv.len(),
                     raw_accel: Vector3::from(mean3(&rec.accel[iv.start..iv.end])),
                     raw_gyro: Vector3::from(mean3(&rec.gyro[iv.start..iv.end])),
