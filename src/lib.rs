@@ -10,6 +10,7 @@ pub mod audit;
 pub mod calib;
 pub mod demo;
 pub mod error;
+pub mod eval;
 pub mod io;
 pub mod plot;
 pub mod posegraph;

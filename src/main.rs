@@ -339,6 +339,34 @@ enum Command {
         #[arg(long, default_value_t = 10.0)]
         bias_after: f64,
     },
+    /// Evaluate a trajectory against ground truth: ATE after alignment, RPE over
+    /// distances, bias errors; writes metrics.json and plots.
+    Eval {
+        /// Estimated trajectory: TUM (`t[s] x y z qx qy qz qw`) or ASL CSV.
+        #[arg(long)]
+        estimate: PathBuf,
+        /// Ground truth: EuRoC/ASL CSV (with bias columns for bias errors) or TUM.
+        #[arg(long)]
+        groundtruth: PathBuf,
+        /// Alignment before the absolute errors: se3, sim3, posyaw (VIO's gauge) or none.
+        #[arg(long, default_value = "posyaw", value_parser = |s: &str| tumble::eval::Alignment::parse(s))]
+        align: tumble::eval::Alignment,
+        /// Bias track (`tumble vio`'s biases.csv); default: biases.csv beside the estimate, if there.
+        #[arg(long)]
+        biases: Option<PathBuf>,
+        /// Relative-error distances [m], comma separated; default 10–50 % of the path.
+        #[arg(long, value_delimiter = ',')]
+        rpe_distances: Vec<f64>,
+        /// Bias errors count from this many seconds after the first estimate.
+        #[arg(long, default_value_t = 10.0)]
+        bias_after: f64,
+        /// Largest ground-truth gap to interpolate across [s].
+        #[arg(long, default_value_t = 0.1)]
+        max_gap: f64,
+        /// Output folder (default: `eval/` beside the estimate).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
     /// The whole chain on simulated recordings with known truth: calibrate a hand
     /// tumble with a hidden effect, identify the noise (Allan), audit, and run the
     /// VIO on the 6-minute walk; prints every estimate next to the truth.
@@ -690,6 +718,37 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             }
             println!("{}", summary.table());
             let files = tumble::vio::write_outputs(&out, &vin, &result, &summary)?;
+            println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+        }
+        Command::Eval { estimate, groundtruth, align, biases, rpe_distances, bias_after, max_gap, out } => {
+            use tumble::io::{biases::read_biases, trajectory::read_trajectory};
+            if let Some(d) = rpe_distances.iter().find(|d| !(d.is_finite() && **d > 0.0)) {
+                return Err(format!("--rpe-distances: {d} is not a positive distance in metres").into());
+            }
+            let est = read_trajectory(&estimate)?;
+            let gt = read_trajectory(&groundtruth)?;
+            let beside = estimate.with_file_name("biases.csv");
+            let biases = match biases {
+                Some(b) => Some(read_biases(&b)?),
+                None if beside.is_file() => {
+                    println!("biases: {}", beside.display());
+                    Some(read_biases(&beside)?)
+                }
+                None => None,
+            };
+            let opts = tumble::eval::EvalOptions {
+                alignment: align,
+                rpe_distances,
+                bias_after_s: bias_after,
+                max_gap_s: max_gap,
+            };
+            let ev = tumble::eval::evaluate(&est, biases.as_ref(), &gt, &opts)?;
+            for w in &ev.metrics.warnings {
+                eprintln!("warning: {w}");
+            }
+            print!("{}", ev.metrics.table());
+            let dir = out.unwrap_or_else(|| estimate.with_file_name("eval"));
+            let files = tumble::eval::write_report(&dir, &ev)?;
             println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
         }
         Command::Demo => {

@@ -138,7 +138,7 @@ impl LogLogChart {
 
 /// Draw the legend (upper right) and write the file.
 fn finish<'a, DB, CT>(
-    mut chart: ChartContext<'a, DB, CT>,
+    chart: ChartContext<'a, DB, CT>,
     root: &DrawingArea<DB, plotters::coord::Shift>,
     path: &Path,
 ) -> Result<(), String>
@@ -146,7 +146,16 @@ where
     DB: DrawingBackend + 'a,
     CT: plotters::coord::CoordTranslate,
 {
-    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    legend(chart, path)?;
+    root.present().map_err(|e| format!("{}: {e}", path.display()))
+}
+
+/// Draw the legend (upper right) of a chart.
+fn legend<'a, DB, CT>(mut chart: ChartContext<'a, DB, CT>, path: &Path) -> Result<(), String>
+where
+    DB: DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
     chart
         .configure_series_labels()
         .position(SeriesLabelPosition::UpperRight)
@@ -154,11 +163,12 @@ where
         .border_style(BLACK.mix(0.3))
         .label_font(("sans-serif", 13))
         .draw()
-        .map_err(|e| err(&e))?;
-    root.present().map_err(|e| err(&e))
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(())
 }
 
-/// One set of markers on a [`ScatterChart`].
+/// One set of markers or a polyline on a [`ScatterChart`].
+#[derive(Clone, Default)]
 pub struct Series {
     /// Legend label (empty: none).
     pub label: String,
@@ -170,7 +180,17 @@ pub struct Series {
     pub line: bool,
 }
 
-/// A chart with linear axes: markers or polylines.
+/// A shaded band `(x, lo, hi)` on a [`ScatterChart`], drawn under the series.
+#[derive(Clone, Default)]
+pub struct Band {
+    /// Color (drawn at 20 % opacity).
+    pub color: RGBColor,
+    /// `(x, lower, upper)` in data coordinates, ordered by x.
+    pub points: Vec<(f64, f64, f64)>,
+}
+
+/// A chart with linear axes: shaded bands, markers or polylines.
+#[derive(Clone, Default)]
 pub struct ScatterChart {
     /// Title on top.
     pub title: String,
@@ -180,50 +200,96 @@ pub struct ScatterChart {
     pub y_label: String,
     /// What to draw, in order.
     pub series: Vec<Series>,
+    /// Bands drawn before the series.
+    pub bands: Vec<Band>,
+    /// Same scale on both axes (top views of trajectories).
+    pub equal_aspect: bool,
+}
+
+fn finite2(p: &(f64, f64)) -> bool {
+    p.0.is_finite() && p.1.is_finite()
+}
+
+/// Tick labels that suit the axis range: plain decimals for 0.01–10⁴, scientific otherwise.
+fn tick_format(lo: f64, hi: f64) -> impl Fn(&f64) -> String {
+    let m = lo.abs().max(hi.abs());
+    let span = hi - lo;
+    let plain = (1e-2..1e4).contains(&m);
+    let digits = if span > 0.0 { (2.0 - span.log10().floor()).clamp(0.0, 4.0) as usize } else { 3 };
+    move |v: &f64| if plain { format!("{v:.digits$}") } else { format!("{v:.2e}") }
 }
 
 impl ScatterChart {
-    /// Render to a PNG file of `width`×`height` pixels (axes span the finite data, with 5 % margins).
-    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), String> {
-        ensure_font();
-        let pts = || self.series.iter().flat_map(|s| s.points.iter()).filter(|p| p.0.is_finite() && p.1.is_finite());
+    /// The axis ranges: the finite data with 5 % margins (widened to equal scales when asked).
+    fn ranges(&self, width: u32, height: u32) -> Option<((f64, f64), (f64, f64))> {
         let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
-        for &(x, y) in pts() {
-            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        let mut grow = |x: f64, y: f64| {
+            if x.is_finite() && y.is_finite() {
+                (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+            }
+        };
+        self.series.iter().flat_map(|s| s.points.iter()).for_each(|&(x, y)| grow(x, y));
+        for &(x, lo, hi) in self.bands.iter().flat_map(|b| b.points.iter()) {
+            grow(x, lo);
+            grow(x, hi);
         }
         if !(x0.is_finite() && y0.is_finite()) {
-            return Err(format!("{}: nothing to plot", path.display()));
+            return None;
         }
         let pad = |a: f64, b: f64| {
             let d = if b > a { 0.05 * (b - a) } else { 0.5 * a.abs().max(1e-12) };
             (a - d, b + d)
         };
-        let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
+        let ((mut x0, mut x1), (mut y0, mut y1)) = (pad(x0, x1), pad(y0, y1));
+        if self.equal_aspect {
+            // Plot area ≈ the image minus the label areas and margins.
+            let (pw, ph) = ((width as f64 - 120.0).max(1.0), (height as f64 - 100.0).max(1.0));
+            let scale = ((x1 - x0) / pw).max((y1 - y0) / ph);
+            let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+            (x0, x1, y0, y1) =
+                (cx - 0.5 * scale * pw, cx + 0.5 * scale * pw, cy - 0.5 * scale * ph, cy + 0.5 * scale * ph);
+        }
+        Some(((x0, x1), (y0, y1)))
+    }
+
+    /// Draw onto an area of a bitmap (`path` only names errors).
+    fn draw_on(&self, area: &DrawingArea<BitMapBackend, plotters::coord::Shift>, path: &Path) -> Result<(), String> {
+        let (width, height) = area.dim_in_pixel();
+        let ((x0, x1), (y0, y1)) =
+            self.ranges(width, height).ok_or_else(|| format!("{}: nothing to plot", path.display()))?;
         let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
-        let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| err(&e))?;
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(area)
             .caption(&self.title, ("sans-serif", 20))
             .margin(14)
             .x_label_area_size(48)
             .y_label_area_size(78)
             .build_cartesian_2d(x0..x1, y0..y1)
             .map_err(|e| err(&e))?;
+        let (fx, fy) = (tick_format(x0, x1), tick_format(y0, y1));
         chart
             .configure_mesh()
             .x_desc(&self.x_label)
             .y_desc(&self.y_label)
-            .x_label_formatter(&|v| format!("{v:.3}"))
-            .y_label_formatter(&|v| format!("{v:.2e}"))
+            .x_label_formatter(&fx)
+            .y_label_formatter(&fy)
             .label_style(("sans-serif", 14))
             .axis_desc_style(("sans-serif", 16))
             .light_line_style(RGBColor(235, 235, 235))
             .draw()
             .map_err(|e| err(&e))?;
+        for b in &self.bands {
+            let pts: Vec<(f64, f64)> = b
+                .points
+                .iter()
+                .map(|p| (p.0, p.1))
+                .chain(b.points.iter().rev().map(|p| (p.0, p.2)))
+                .filter(finite2)
+                .collect();
+            chart.draw_series(std::iter::once(Polygon::new(pts, b.color.mix(0.2).filled()))).map_err(|e| err(&e))?;
+        }
         for s in &self.series {
             let c = s.color;
-            let pts: Vec<(f64, f64)> =
-                s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()).collect();
+            let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(finite2).collect();
             let drawn = if s.line {
                 chart.draw_series(LineSeries::new(pts, c.stroke_width(2))).map_err(|e| err(&e))?
             } else {
@@ -233,6 +299,26 @@ impl ScatterChart {
                 drawn.label(s.label.as_str()).legend(move |(x, y)| Circle::new((x + 9, y), 4, c.filled()));
             }
         }
-        finish(chart, &root, path)
+        legend(chart, path)
     }
+
+    /// Render to a PNG file of `width`×`height` pixels (axes span the finite data, with 5 % margins).
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), String> {
+        write_panels(path, std::slice::from_ref(self), width, height)
+    }
+}
+
+/// Render charts stacked vertically into one PNG of `width`×`height` pixels.
+pub fn write_panels(path: &Path, charts: &[ScatterChart], width: u32, height: u32) -> Result<(), String> {
+    ensure_font();
+    if charts.is_empty() {
+        return Err(format!("{}: nothing to plot", path.display()));
+    }
+    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| err(&e))?;
+    for (chart, area) in charts.iter().zip(root.split_evenly((charts.len(), 1))) {
+        chart.draw_on(&area, path)?;
+    }
+    root.present().map_err(|e| err(&e))
 }

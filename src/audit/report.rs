@@ -129,6 +129,7 @@ fn gap_figure(a: &Audit, path: &Path) -> Result<String, String> {
             Series { label: String::new(), color: RGBColor(90, 90, 90), points: pts.clone(), line: true },
             Series { label: "gap".into(), color: AXIS_COLORS[2], points: pts, line: false },
         ],
+        ..Default::default()
     }
     .write_png(path, 900, 500)?;
     Ok("audit_gap.png".into())
@@ -205,8 +206,14 @@ fn effect_figure(a: &Audit, prev: &Fit, next: &Fit, effect: Effect, path: &Path)
             line: false,
         });
     }
-    ScatterChart { title: format!("{label}: before and after adding {effect}"), x_label, y_label: label.into(), series }
-        .write_png(path, 900, 560)
+    ScatterChart {
+        title: format!("{label}: before and after adding {effect}"),
+        x_label,
+        y_label: label.into(),
+        series,
+        ..Default::default()
+    }
+    .write_png(path, 900, 560)
 }
 
 fn markdown(a: &Audit, figures: &[String]) -> String {

@@ -2,6 +2,7 @@
 
 pub mod asl;
 pub mod bal;
+pub mod biases;
 pub mod g2o;
 pub mod imu;
 pub mod imu_text;

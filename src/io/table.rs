@@ -66,6 +66,9 @@ pub struct TableSpec {
     pub triads: Vec<[usize; 3]>,
     /// What each triad is (for messages), same length as `triads`.
     pub triad_names: Vec<String>,
+    /// Accept `NaN` values (meaning "unknown", e.g. an uncomputed standard
+    /// deviation); infinities are refused all the same.
+    pub allow_nan: bool,
 }
 
 /// Source line of each row, stored as anchors: from row `r` on, rows sit on
@@ -604,7 +607,7 @@ fn slow_row(
                 format!("{name} (column {}): '{}' is not a number", c + 1, String::from_utf8_lossy(text)),
             )
         })?;
-        if !v.is_finite() {
+        if !(v.is_finite() || spec.allow_nan && v.is_nan()) {
             return Err(InputError::at(
                 path,
                 line_no,

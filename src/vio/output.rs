@@ -3,6 +3,8 @@
 
 use super::geometry::preintegrate;
 use super::{FrameEstimate, VioInput, VioOptions, VioResult};
+use crate::eval::{evaluate, write_report, Alignment, EvalOptions, Evaluation};
+use crate::io::biases::{write_biases, BiasTrack};
 use crate::io::trajectory::{write_tum, Trajectory};
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
@@ -43,6 +45,9 @@ pub struct Summary {
     pub bias_rmse_from_s: f64,
     /// Warnings of the run.
     pub warnings: Vec<String>,
+    /// The evaluation against the ground truth (written to `eval/`), when known.
+    #[serde(skip)]
+    pub evaluation: Option<Evaluation>,
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -51,51 +56,6 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     }
     v.sort_by(|a, b| a.total_cmp(b));
     v[((v.len() - 1) as f64 * p).round() as usize]
-}
-
-/// Ground truth at time `t` \[s since t0\]: position (linear interpolation),
-/// rotation (nearest), biases (nearest); None outside its span.
-#[allow(clippy::type_complexity)]
-fn truth_at(
-    gt: &Trajectory,
-    t0_ns: i64,
-    t: f64,
-) -> Option<(Vector3<f64>, [f64; 4], Option<[f64; 3]>, Option<[f64; 3]>)> {
-    let ns = t0_ns as f64 + t * 1e9;
-    let k = gt.t_ns.partition_point(|&s| (s as f64) < ns);
-    if k == 0 || k >= gt.len() {
-        if k < gt.len() && (gt.t_ns[k] as f64 - ns).abs() < 1e6 {
-            let p = Vector3::from(gt.p[k]);
-            return Some((p, gt.q[k], gt.bias_gyro.as_ref().map(|b| b[k]), gt.bias_accel.as_ref().map(|b| b[k])));
-        }
-        return None;
-    }
-    let (a, b) = (gt.t_ns[k - 1] as f64, gt.t_ns[k] as f64);
-    if b - a > 0.2e9 {
-        return None;
-    }
-    let w = (ns - a) / (b - a);
-    let p = Vector3::from(gt.p[k - 1]) * (1.0 - w) + Vector3::from(gt.p[k]) * w;
-    let n = if w < 0.5 { k - 1 } else { k };
-    Some((p, gt.q[n], gt.bias_gyro.as_ref().map(|b| b[n]), gt.bias_accel.as_ref().map(|b| b[n])))
-}
-
-/// Position + yaw alignment (4 DOF, the gauge of VIO) of `est` onto `gt`;
-/// returns the RMSE of the aligned positions \[m\].
-pub fn ate_posyaw(est: &[Vector3<f64>], gt: &[Vector3<f64>]) -> f64 {
-    let n = est.len() as f64;
-    let ce: Vector3<f64> = est.iter().sum::<Vector3<f64>>() / n;
-    let cg: Vector3<f64> = gt.iter().sum::<Vector3<f64>>() / n;
-    let (mut s, mut c) = (0.0, 0.0);
-    for (e, g) in est.iter().zip(gt) {
-        let (e, g) = (e - ce, g - cg);
-        s += e.x * g.y - e.y * g.x;
-        c += e.x * g.x + e.y * g.y;
-    }
-    let yaw = s.atan2(c);
-    let r = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
-    let se: f64 = est.iter().zip(gt).map(|(e, g)| (r * (e - ce) + cg - g).norm_squared()).sum();
-    (se / n).sqrt()
 }
 
 /// IMU-only dead reckoning from the first estimate to the last frame time:
@@ -130,31 +90,18 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         _ => f64::NAN,
     };
     let mut solve: Vec<f64> = e.iter().map(|x| x.solve_s * 1e3).collect();
-    let (mut ate, mut bg_rmse, mut ba_rmse, mut returns) = (None, None, None, None);
-    let t_from = first.map_or(0.0, |f| f.t) + bias_from_s;
-    if let Some(gt) = &input.groundtruth {
-        let (mut pe, mut pg) = (Vec::new(), Vec::new());
-        let (mut sg, mut sa, mut nb) = (0.0, 0.0, 0usize);
-        for x in e {
-            if let Some((p, _, bgt, bat)) = truth_at(gt, input.t0_ns, x.t) {
-                pe.push(Vector3::from(x.position));
-                pg.push(p);
-                if let (Some(bgt), Some(bat), true) = (bgt, bat, x.t >= t_from) {
-                    sg += (Vector3::from(x.bias_gyro) - Vector3::from(bgt)).norm_squared();
-                    sa += (Vector3::from(x.bias_accel) - Vector3::from(bat)).norm_squared();
-                    nb += 1;
-                }
-            }
-        }
-        if pe.len() >= 3 {
-            ate = Some(ate_posyaw(&pe, &pg));
-            returns = Some((pg[0] - pg[pg.len() - 1]).norm() < 0.05);
-        }
-        if nb > 0 {
-            bg_rmse = Some((sg / nb as f64).sqrt());
-            ba_rmse = Some((sa / nb as f64).sqrt());
-        }
-    }
+    let mut warnings = result.warnings.clone();
+    let evaluation = input.groundtruth.as_ref().and_then(|gt| {
+        let opts = EvalOptions { alignment: Alignment::PosYaw, bias_after_s: bias_from_s, ..EvalOptions::default() };
+        evaluate(&trajectory(input, result), Some(&bias_track(input, result)), gt, &opts)
+            .map_err(|err| warnings.push(format!("evaluation against the ground truth: {err}")))
+            .ok()
+    });
+    let m = evaluation.as_ref().map(|ev| &ev.metrics);
+    let returns = evaluation.as_ref().map(|ev| {
+        let (a, b) = (ev.pairs[0].gt.translation.vector, ev.pairs[ev.pairs.len() - 1].gt.translation.vector);
+        (a - b).norm() < 0.05
+    });
     Summary {
         duration_s,
         distance_m,
@@ -167,11 +114,12 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         resets: result.resets,
         solve_ms_median: percentile(&mut solve, 0.5),
         solve_ms_p95: percentile(&mut solve, 0.95),
-        ate_rmse_m: ate,
-        bias_rmse_gyro: bg_rmse,
-        bias_rmse_accel: ba_rmse,
-        bias_rmse_from_s: t_from,
-        warnings: result.warnings.clone(),
+        ate_rmse_m: m.map(|m| m.ate_rmse_m),
+        bias_rmse_gyro: m.and_then(|m| m.bias_rmse_gyro),
+        bias_rmse_accel: m.and_then(|m| m.bias_rmse_accel),
+        bias_rmse_from_s: first.map_or(0.0, |f| f.t) + bias_from_s,
+        warnings,
+        evaluation,
     }
 }
 
@@ -204,7 +152,32 @@ impl Summary {
     }
 }
 
-/// Write `trajectory.txt` (TUM), `biases.csv` and `summary.json` into `dir`.
+/// The estimated trajectory of a run (TUM times: `t0_ns` + frame time).
+pub fn trajectory(input: &VioInput, result: &VioResult) -> Trajectory {
+    let e = &result.estimates;
+    Trajectory {
+        t_ns: e.iter().map(|x| input.t0_ns + (x.t * 1e9).round() as i64).collect(),
+        p: e.iter().map(|x| x.position).collect(),
+        q: e.iter().map(|x| x.rotation).collect(),
+        ..Default::default()
+    }
+}
+
+/// The estimated biases of a run with their marginal σ.
+pub fn bias_track(input: &VioInput, result: &VioResult) -> BiasTrack {
+    let e = &result.estimates;
+    BiasTrack {
+        t_ns: e.iter().map(|x| input.t0_ns + (x.t * 1e9).round() as i64).collect(),
+        accel: e.iter().map(|x| x.bias_accel).collect(),
+        gyro: e.iter().map(|x| x.bias_gyro).collect(),
+        accel_std: Some(e.iter().map(|x| x.std[3]).collect()),
+        gyro_std: Some(e.iter().map(|x| x.std[4]).collect()),
+        keyframe: Some(e.iter().map(|x| x.keyframe).collect()),
+    }
+}
+
+/// Write `trajectory.txt` (TUM), `biases.csv` and `summary.json` into `dir`,
+/// and with a ground truth the evaluation (`eval/metrics.json` and plots).
 pub fn write_outputs(
     dir: &Path,
     input: &VioInput,
@@ -212,42 +185,16 @@ pub fn write_outputs(
     summary: &Summary,
 ) -> Result<Vec<PathBuf>, String> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let e = &result.estimates;
-    let tr = Trajectory {
-        t_ns: e.iter().map(|x| input.t0_ns + (x.t * 1e9).round() as i64).collect(),
-        p: e.iter().map(|x| x.position).collect(),
-        q: e.iter().map(|x| x.rotation).collect(),
-        ..Default::default()
-    };
     let traj = dir.join("trajectory.txt");
-    write_tum(&traj, &tr).map_err(|e| e.to_string())?;
-    let mut csv = String::from(
-        "#timestamp [ns],b_a_x [m/s^2],b_a_y,b_a_z,b_g_x [rad/s],b_g_y,b_g_z,std_b_a_x,std_b_a_y,std_b_a_z,std_b_g_x,std_b_g_y,std_b_g_z,keyframe\n",
-    );
-    for x in e {
-        let s = &x.std;
-        csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-            input.t0_ns + (x.t * 1e9).round() as i64,
-            x.bias_accel[0],
-            x.bias_accel[1],
-            x.bias_accel[2],
-            x.bias_gyro[0],
-            x.bias_gyro[1],
-            x.bias_gyro[2],
-            s[3][0],
-            s[3][1],
-            s[3][2],
-            s[4][0],
-            s[4][1],
-            s[4][2],
-            u8::from(x.keyframe)
-        ));
-    }
+    write_tum(&traj, &trajectory(input, result)).map_err(|e| e.to_string())?;
     let biases = dir.join("biases.csv");
-    std::fs::write(&biases, csv).map_err(|e| format!("{}: {e}", biases.display()))?;
+    write_biases(&biases, &bias_track(input, result)).map_err(|e| e.to_string())?;
     let sj = dir.join("summary.json");
     let text = serde_json::to_string_pretty(summary).map_err(|e| e.to_string())?;
     std::fs::write(&sj, text).map_err(|e| format!("{}: {e}", sj.display()))?;
-    Ok(vec![traj, biases, sj])
+    let mut files = vec![traj, biases, sj];
+    if let Some(ev) = &summary.evaluation {
+        files.extend(write_report(&dir.join("eval"), ev)?);
+    }
+    Ok(files)
 }

@@ -1,0 +1,448 @@
+//! Trajectory evaluation the way the field reports it (`tumble eval`):
+//! absolute trajectory error after alignment ([`Alignment`], Umeyama),
+//! relative pose error over travelled distances, and bias errors against
+//! EuRoC's ground-truth bias columns, with plots and `metrics.json`.
+//!
+//! The estimate is paired with the ground truth at the estimate's times: the
+//! ground-truth position and biases are interpolated linearly, its rotation by
+//! slerp, between samples at most [`EvalOptions::max_gap_s`] apart.
+//!
+//! ```
+//! use tumble::eval::{evaluate, Alignment, EvalOptions};
+//! use tumble::io::trajectory::Trajectory;
+//! let gt = Trajectory {
+//!     t_ns: (0..200).map(|i| i * 5_000_000).collect(),
+//!     p: (0..200).map(|i| { let a = i as f64 * 0.03; [a.cos(), a.sin(), 0.01 * i as f64] }).collect(),
+//!     q: vec![[1.0, 0.0, 0.0, 0.0]; 200],
+//!     ..Default::default()
+//! };
+//! // The estimate: every 10th pose, shifted by 1 m.
+//! let mut est = Trajectory::default();
+//! for i in (0..200).step_by(10) {
+//!     est.t_ns.push(gt.t_ns[i]);
+//!     est.p.push([gt.p[i][0] + 1.0, gt.p[i][1], gt.p[i][2]]);
+//!     est.q.push(gt.q[i]);
+//! }
+//! let e = evaluate(&est, None, &gt, &EvalOptions { alignment: Alignment::Se3, ..Default::default() }).unwrap();
+//! assert!(e.metrics.ate_rmse_m < 1e-9);
+//! ```
+
+mod align;
+mod report;
+
+pub use align::{align, Alignment, Similarity};
+pub use report::write_report;
+
+use crate::io::biases::BiasTrack;
+use crate::io::trajectory::Trajectory;
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+
+/// What to evaluate and how.
+#[derive(Debug, Clone)]
+pub struct EvalOptions {
+    /// The alignment before the absolute errors (default position+yaw, VIO's gauge).
+    pub alignment: Alignment,
+    /// Distances for the relative pose error \[m\]; empty: 10, 20, 30, 40 and 50 % of the path.
+    pub rpe_distances: Vec<f64>,
+    /// Bias errors count from this many seconds after the first estimate (convergence skipped) \[s\].
+    pub bias_after_s: f64,
+    /// Largest ground-truth gap to interpolate across \[s\].
+    pub max_gap_s: f64,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        EvalOptions { alignment: Alignment::PosYaw, rpe_distances: Vec::new(), bias_after_s: 0.0, max_gap_s: 0.1 }
+    }
+}
+
+/// Relative pose error over one travelled distance.
+#[derive(Debug, Clone, Serialize)]
+pub struct RpeEntry {
+    /// Travelled distance along the ground truth between the two poses \[m\].
+    pub distance_m: f64,
+    /// Pose pairs measured.
+    pub pairs: usize,
+    /// RMS of the relative translation error \[m\].
+    pub trans_rmse_m: f64,
+    /// Mean relative translation error \[m\].
+    pub trans_mean_m: f64,
+    /// Median relative translation error \[m\].
+    pub trans_median_m: f64,
+    /// Mean relative translation error as a percentage of the distance \[%\].
+    pub trans_mean_percent: f64,
+    /// Mean relative rotation error \[deg\].
+    pub rot_mean_deg: f64,
+}
+
+/// The figures of an evaluation (`metrics.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Metrics {
+    /// Alignment used.
+    pub alignment: Alignment,
+    /// Scale of the alignment (1 unless sim3).
+    pub scale: f64,
+    /// Estimated poses paired with the ground truth.
+    pub matched: usize,
+    /// Estimated poses outside the ground truth's span or in its gaps.
+    pub unmatched: usize,
+    /// Time from the first to the last paired pose \[s\].
+    pub duration_s: f64,
+    /// Ground-truth path length over the paired span \[m\].
+    pub distance_m: f64,
+    /// RMS of the aligned position errors (absolute trajectory error) \[m\].
+    pub ate_rmse_m: f64,
+    /// Mean aligned position error \[m\].
+    pub ate_mean_m: f64,
+    /// Median aligned position error \[m\].
+    pub ate_median_m: f64,
+    /// Largest aligned position error \[m\].
+    pub ate_max_m: f64,
+    /// RMS of the aligned rotation errors \[deg\].
+    pub rotation_rmse_deg: f64,
+    /// Relative pose errors, one entry per distance.
+    pub rpe: Vec<RpeEntry>,
+    /// RMS of the gyro bias error norm after `bias_from_s` \[rad/s\] (ground truth with biases only).
+    pub bias_rmse_gyro: Option<f64>,
+    /// RMS of the accelerometer bias error norm after `bias_from_s` \[m/s²\].
+    pub bias_rmse_accel: Option<f64>,
+    /// Per-axis gyro bias RMSE \[rad/s\].
+    pub bias_rmse_gyro_axes: Option<[f64; 3]>,
+    /// Per-axis accelerometer bias RMSE \[m/s²\].
+    pub bias_rmse_accel_axes: Option<[f64; 3]>,
+    /// Bias samples compared.
+    pub bias_samples: usize,
+    /// Bias errors count from this time, seconds after the first estimate \[s\].
+    pub bias_from_s: f64,
+    /// What the reader should know (unmatched poses, missing bias columns, …).
+    pub warnings: Vec<String>,
+}
+
+/// One estimated pose paired with the ground truth.
+#[derive(Debug, Clone, Copy)]
+pub struct Pair {
+    /// Seconds since the first estimated pose.
+    pub t: f64,
+    /// Estimated pose (world ← body), before alignment.
+    pub est: Isometry3<f64>,
+    /// Ground-truth pose at the same time.
+    pub gt: Isometry3<f64>,
+}
+
+/// An evaluation: the figures and what the plots need.
+#[derive(Debug, Clone)]
+pub struct Evaluation {
+    /// The figures.
+    pub metrics: Metrics,
+    /// The paired poses.
+    pub pairs: Vec<Pair>,
+    /// The alignment applied to the estimate.
+    pub similarity: Similarity,
+    /// Aligned position error of each pair \[m\].
+    pub position_errors: Vec<f64>,
+    /// The whole ground-truth trajectory (for the top view), times in seconds since the first estimate.
+    pub groundtruth: Trajectory,
+    /// Bias comparison rows: time \[s since the first estimate\], estimate, its σ, ground truth — gyro then accel.
+    pub bias_rows: Vec<BiasRow>,
+}
+
+/// Estimated and true biases at one time.
+#[derive(Debug, Clone, Copy)]
+pub struct BiasRow {
+    /// Seconds since the first estimated pose.
+    pub t: f64,
+    /// Estimated gyro bias \[rad/s\] and its σ (NaN when unknown).
+    pub gyro: ([f64; 3], [f64; 3]),
+    /// Estimated accelerometer bias \[m/s²\] and its σ (NaN when unknown).
+    pub accel: ([f64; 3], [f64; 3]),
+    /// Ground-truth gyro and accelerometer biases, when the ground truth has them.
+    pub truth: Option<([f64; 3], [f64; 3])>,
+}
+
+fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+}
+
+fn iso(p: [f64; 3], q: [f64; 4]) -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), quat(q))
+}
+
+fn lerp3(a: [f64; 3], b: [f64; 3], w: f64) -> [f64; 3] {
+    [a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), a[2] + w * (b[2] - a[2])]
+}
+
+/// Where `t_ns` falls in `t`: `(k, w)` with the value `(1−w)·x[k] + w·x[k+1]`,
+/// or None outside the span or across a gap longer than `max_gap_ns`.
+fn bracket(t: &[i64], t_ns: i64, max_gap_ns: f64) -> Option<(usize, f64)> {
+    let k = t.partition_point(|&s| s <= t_ns);
+    if k == 0 {
+        return None;
+    }
+    if t[k - 1] == t_ns {
+        return Some((k - 1, 0.0));
+    }
+    if k >= t.len() || (t[k] - t[k - 1]) as f64 > max_gap_ns {
+        return None;
+    }
+    Some((k - 1, (t_ns - t[k - 1]) as f64 / (t[k] - t[k - 1]) as f64))
+}
+
+/// Ground-truth pose at `t_ns` (None outside its span or in a gap).
+fn pose_at(gt: &Trajectory, t_ns: i64, max_gap_ns: f64) -> Option<Isometry3<f64>> {
+    let (k, w) = bracket(&gt.t_ns, t_ns, max_gap_ns)?;
+    if w == 0.0 {
+        return Some(iso(gt.p[k], gt.q[k]));
+    }
+    let q = quat(gt.q[k]).slerp(&quat(gt.q[k + 1]), w);
+    let p = lerp3(gt.p[k], gt.p[k + 1], w);
+    Some(Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), q))
+}
+
+fn stats(v: &[f64]) -> (f64, f64, f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN, f64::NAN, f64::NAN);
+    }
+    let n = v.len() as f64;
+    let rmse = (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt();
+    let mean = v.iter().sum::<f64>() / n;
+    let mut s = v.to_vec();
+    s.sort_by(|a, b| a.total_cmp(b));
+    let median = s[s.len() / 2];
+    (rmse, mean, median, s[s.len() - 1])
+}
+
+/// Relative pose errors over `distances` (metres along the ground truth);
+/// the estimate's translations are multiplied by `scale` first.
+fn relative_errors(pairs: &[Pair], distances: &[f64], scale: f64) -> Vec<RpeEntry> {
+    let mut along = vec![0.0; pairs.len()];
+    for i in 1..pairs.len() {
+        along[i] = along[i - 1] + (pairs[i].gt.translation.vector - pairs[i - 1].gt.translation.vector).norm();
+    }
+    let scaled = |x: &Isometry3<f64>| {
+        let mut x = *x;
+        x.translation.vector *= scale;
+        x
+    };
+    distances
+        .iter()
+        .filter_map(|&d| {
+            let (mut trans, mut rot, mut pct) = (Vec::new(), Vec::new(), Vec::new());
+            for i in 0..pairs.len() {
+                let j = along.partition_point(|&a| a < along[i] + d);
+                if j >= pairs.len() {
+                    break;
+                }
+                let dg = pairs[i].gt.inverse() * pairs[j].gt;
+                let de = scaled(&pairs[i].est).inverse() * scaled(&pairs[j].est);
+                let e = dg.inverse() * de;
+                trans.push(e.translation.vector.norm());
+                rot.push(e.rotation.angle().to_degrees());
+                pct.push(100.0 * e.translation.vector.norm() / (along[j] - along[i]).max(1e-12));
+            }
+            if trans.is_empty() {
+                return None;
+            }
+            let (rmse, mean, median, _) = stats(&trans);
+            Some(RpeEntry {
+                distance_m: d,
+                pairs: trans.len(),
+                trans_rmse_m: rmse,
+                trans_mean_m: mean,
+                trans_median_m: median,
+                trans_mean_percent: stats(&pct).1,
+                rot_mean_deg: stats(&rot).1,
+            })
+        })
+        .collect()
+}
+
+/// The default relative-error distances: 10–50 % of the path, rounded to two significant digits.
+fn default_distances(path_m: f64) -> Vec<f64> {
+    if path_m.is_nan() || path_m <= 0.0 {
+        return Vec::new();
+    }
+    [0.1, 0.2, 0.3, 0.4, 0.5].iter().map(|f| format!("{:.1e}", f * path_m).parse().unwrap_or(f * path_m)).collect()
+}
+
+/// Compare bias estimates with the ground truth's bias columns.
+fn compare_biases(
+    biases: &BiasTrack,
+    gt: &Trajectory,
+    t0_ns: i64,
+    opts: &EvalOptions,
+    m: &mut Metrics,
+) -> Vec<BiasRow> {
+    let max_gap_ns = opts.max_gap_s * 1e9;
+    let truth = gt.bias_gyro.as_ref().zip(gt.bias_accel.as_ref());
+    if truth.is_none() {
+        m.warnings.push("the ground truth has no bias columns: bias errors not computed".into());
+    }
+    let nan = [f64::NAN; 3];
+    let mut rows = Vec::with_capacity(biases.t_ns.len());
+    let (mut sg, mut sa, mut n) = ([0.0; 3], [0.0; 3], 0usize);
+    for i in 0..biases.t_ns.len() {
+        let t = (biases.t_ns[i] - t0_ns) as f64 * 1e-9;
+        let at = truth.and_then(|(bg, ba)| {
+            let (k, w) = bracket(&gt.t_ns, biases.t_ns[i], max_gap_ns)?;
+            let k1 = (k + 1).min(gt.len() - 1);
+            Some((lerp3(bg[k], bg[k1], w), lerp3(ba[k], ba[k1], w)))
+        });
+        if let (Some((bg, ba)), true) = (at, t >= opts.bias_after_s) {
+            for a in 0..3 {
+                sg[a] += (biases.gyro[i][a] - bg[a]).powi(2);
+                sa[a] += (biases.accel[i][a] - ba[a]).powi(2);
+            }
+            n += 1;
+        }
+        rows.push(BiasRow {
+            t,
+            gyro: (biases.gyro[i], biases.gyro_std.as_ref().map_or(nan, |s| s[i])),
+            accel: (biases.accel[i], biases.accel_std.as_ref().map_or(nan, |s| s[i])),
+            truth: at,
+        });
+    }
+    m.bias_samples = n;
+    if n > 0 {
+        let axes = |s: [f64; 3]| s.map(|x| (x / n as f64).sqrt());
+        m.bias_rmse_gyro = Some((sg.iter().sum::<f64>() / n as f64).sqrt());
+        m.bias_rmse_accel = Some((sa.iter().sum::<f64>() / n as f64).sqrt());
+        m.bias_rmse_gyro_axes = Some(axes(sg));
+        m.bias_rmse_accel_axes = Some(axes(sa));
+    } else if truth.is_some() {
+        m.warnings.push(format!(
+            "no bias estimate falls inside the ground truth after {:.1} s: bias errors not computed",
+            opts.bias_after_s
+        ));
+    }
+    rows
+}
+
+/// Evaluate `est` (and optionally its bias track) against `gt`.
+///
+/// Errors when fewer than 3 estimated poses fall inside the ground truth
+/// (with both spans in the message — usually different clocks or time units)
+/// or when the geometry does not determine the alignment.
+pub fn evaluate(
+    est: &Trajectory,
+    biases: Option<&BiasTrack>,
+    gt: &Trajectory,
+    opts: &EvalOptions,
+) -> Result<Evaluation, String> {
+    if est.is_empty() || gt.is_empty() {
+        return Err(format!("nothing to compare: {} estimated poses, {} ground-truth poses", est.len(), gt.len()));
+    }
+    let t0_ns = est.t_ns[0];
+    let max_gap_ns = opts.max_gap_s * 1e9;
+    let mut pairs = Vec::with_capacity(est.len());
+    for i in 0..est.len() {
+        if let Some(g) = pose_at(gt, est.t_ns[i], max_gap_ns) {
+            pairs.push(Pair { t: (est.t_ns[i] - t0_ns) as f64 * 1e-9, est: iso(est.p[i], est.q[i]), gt: g });
+        }
+    }
+    let span = |t: &[i64]| format!("{:.3}–{:.3} s", t[0] as f64 * 1e-9, t[t.len() - 1] as f64 * 1e-9);
+    if pairs.len() < 3 {
+        return Err(format!(
+            "only {} of {} estimated poses fall inside the ground truth (estimate {}, ground truth {}); \
+             are both on the same clock and in the same time unit?",
+            pairs.len(),
+            est.len(),
+            span(&est.t_ns),
+            span(&gt.t_ns)
+        ));
+    }
+    let pe: Vec<Vector3<f64>> = pairs.iter().map(|p| p.est.translation.vector).collect();
+    let pg: Vec<Vector3<f64>> = pairs.iter().map(|p| p.gt.translation.vector).collect();
+    let sim = align(&pe, &pg, opts.alignment)?;
+    let position_errors: Vec<f64> = pe.iter().zip(&pg).map(|(e, g)| (sim.apply(e) - g).norm()).collect();
+    let align_q = UnitQuaternion::from_rotation_matrix(&sim.rotation);
+    let rot_err: Vec<f64> =
+        pairs.iter().map(|p| (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees()).collect();
+    let distance_m: f64 = pg.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let distances =
+        if opts.rpe_distances.is_empty() { default_distances(distance_m) } else { opts.rpe_distances.clone() };
+    let (ate_rmse_m, ate_mean_m, ate_median_m, ate_max_m) = stats(&position_errors);
+    let mut metrics = Metrics {
+        alignment: opts.alignment,
+        scale: sim.scale,
+        matched: pairs.len(),
+        unmatched: est.len() - pairs.len(),
+        duration_s: pairs[pairs.len() - 1].t - pairs[0].t,
+        distance_m,
+        ate_rmse_m,
+        ate_mean_m,
+        ate_median_m,
+        ate_max_m,
+        rotation_rmse_deg: stats(&rot_err).0,
+        rpe: relative_errors(&pairs, &distances, sim.scale),
+        bias_rmse_gyro: None,
+        bias_rmse_accel: None,
+        bias_rmse_gyro_axes: None,
+        bias_rmse_accel_axes: None,
+        bias_samples: 0,
+        bias_from_s: opts.bias_after_s,
+        warnings: Vec::new(),
+    };
+    if metrics.unmatched > 0 {
+        metrics.warnings.push(format!(
+            "{} of {} estimated poses lie outside the ground truth ({}) or in its gaps > {} s; they are not counted",
+            metrics.unmatched,
+            est.len(),
+            span(&gt.t_ns),
+            opts.max_gap_s
+        ));
+    }
+    if metrics.rpe.len() < distances.len() {
+        metrics.warnings.push(format!(
+            "relative errors over {} m skipped: the paired path is only {:.2} m long",
+            distances
+                .iter()
+                .filter(|d| !metrics.rpe.iter().any(|r| r.distance_m == **d))
+                .map(|d| format!("{d}"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            distance_m
+        ));
+    }
+    let bias_rows = match biases {
+        Some(b) => compare_biases(b, gt, t0_ns, opts, &mut metrics),
+        None => Vec::new(),
+    };
+    let mut groundtruth = gt.clone();
+    groundtruth.t_ns.iter_mut().for_each(|t| *t -= t0_ns);
+    Ok(Evaluation { metrics, pairs, similarity: sim, position_errors, groundtruth, bias_rows })
+}
+
+impl Metrics {
+    /// A few lines for the terminal.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "{} poses paired over {:.1} s and {:.2} m of ground truth ({} unpaired)\n\
+             ATE ({} aligned{}): RMSE {:.4} m, mean {:.4} m, median {:.4} m, max {:.4} m; rotation RMSE {:.3}°\n",
+            self.matched,
+            self.duration_s,
+            self.distance_m,
+            self.unmatched,
+            self.alignment.name(),
+            if self.alignment == Alignment::Sim3 { format!(", scale {:.4}", self.scale) } else { String::new() },
+            self.ate_rmse_m,
+            self.ate_mean_m,
+            self.ate_median_m,
+            self.ate_max_m,
+            self.rotation_rmse_deg
+        );
+        for r in &self.rpe {
+            s.push_str(&format!(
+                "RPE over {:>6.2} m ({:>5} pairs): translation RMSE {:.4} m (mean {:.2} %), rotation mean {:.3}°\n",
+                r.distance_m, r.pairs, r.trans_rmse_m, r.trans_mean_percent, r.rot_mean_deg
+            ));
+        }
+        if let (Some(g), Some(a)) = (self.bias_rmse_gyro, self.bias_rmse_accel) {
+            s.push_str(&format!(
+                "bias RMSE after {:.1} s ({} samples): gyro {:.3e} rad/s, accel {:.3e} m/s²\n",
+                self.bias_from_s, self.bias_samples, g, a
+            ));
+        }
+        s
+    }
+}
