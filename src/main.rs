@@ -74,6 +74,66 @@ impl RecordingArgs {
     }
 }
 
+/// Settings of the visual frontend (`track`, and `vio` on image folders).
+#[derive(Args, Clone)]
+struct FrontendArgs {
+    /// Features kept per frame.
+    #[arg(long, default_value_t = 150)]
+    max_features: usize,
+    /// Smallest distance between two features [px].
+    #[arg(long, default_value_t = 30.0)]
+    min_distance: f64,
+    /// Largest forward–backward KLT disagreement [px].
+    #[arg(long, default_value_t = 0.5)]
+    fb_threshold: f64,
+    /// RANSAC epipolar threshold [px of the undistorted image].
+    #[arg(long, default_value_t = 1.0)]
+    ransac_threshold: f64,
+    /// Equalize images (CLAHE) before tracking: for dark or low-contrast sequences (costs track accuracy).
+    #[arg(long)]
+    equalize: bool,
+}
+
+impl FrontendArgs {
+    fn options(&self) -> tumble::vio::frontend::FrontendOptions {
+        tumble::vio::frontend::FrontendOptions {
+            max_features: self.max_features,
+            min_distance: self.min_distance,
+            fb_threshold: self.fb_threshold,
+            ransac_threshold: self.ransac_threshold,
+            equalize: self.equalize,
+            ..Default::default()
+        }
+    }
+}
+
+/// Track an ASL folder's camera with a progress bar; writes tracks.csv, frontend.json, tracks.png into `dir`.
+fn run_frontend(
+    ds: &tumble::io::asl::AslDataset,
+    camera: usize,
+    args: &FrontendArgs,
+    dir: &std::path::Path,
+) -> Result<Vec<tumble::vio::frontend::Observation>, String> {
+    let n = ds.cameras.get(camera).map_or(0, |c| c.frames.len());
+    let bar = progress_bar(n as u64, "track [{bar:40}] {pos}/{len} images {elapsed_precise} (eta {eta})");
+    let (obs, stats, files) = tumble::vio::frontend::track_asl_into(ds, camera, &args.options(), dir, &mut |d, _| {
+        bar.set_position(d as u64)
+    })?;
+    bar.finish_and_clear();
+    for w in &stats.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!("frontend: {}", stats.line());
+    println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+    Ok(obs)
+}
+
+fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("static template").progress_chars("=> "));
+    bar
+}
+
 /// Input layouts of `calibrate` and `apply`.
 #[derive(Clone, Copy, ValueEnum, PartialEq)]
 enum InputFormat {
@@ -302,8 +362,9 @@ enum Command {
     /// Visual-inertial bias estimation (sliding window, paper §4): writes
     /// trajectory.txt (TUM), biases.csv and summary.json.
     Vio {
-        /// ASL folder with imu0/ and cam0/{sensor.yaml,tracks.csv} (e.g. from
-        /// `tumble sim walk`), or an EqVIO processed .csv.
+        /// ASL folder with imu0/ and cam0/sensor.yaml plus either cam0/tracks.csv
+        /// (e.g. from `tumble sim walk` or `tumble track`) or the images (tracked
+        /// by the visual frontend, feature `opencv`), or an EqVIO processed .csv.
         input: PathBuf,
         /// calibration.json from `tumble calibrate` (eq. 16 applied to every sample).
         #[arg(long)]
@@ -338,6 +399,23 @@ enum Command {
         /// Bias errors are averaged from this many seconds after initialization.
         #[arg(long, default_value_t = 10.0)]
         bias_after: f64,
+        /// The visual frontend, used when cam0 has images but no tracks.csv.
+        #[command(flatten)]
+        frontend: FrontendArgs,
+    },
+    /// Track features in an ASL folder's camera images (visual frontend, cargo
+    /// feature `opencv`): writes tracks.csv, frontend.json and tracks.png.
+    Track {
+        /// ASL folder (mav0/ or its parent) with camN/data.csv and the images.
+        input: PathBuf,
+        /// Camera folder to track.
+        #[arg(long, default_value = "cam0")]
+        camera: String,
+        /// Output folder.
+        #[arg(long)]
+        out: PathBuf,
+        #[command(flatten)]
+        frontend: FrontendArgs,
     },
     /// Evaluate a trajectory against ground truth: ATE after alignment, RPE over
     /// distances, bias errors; writes metrics.json and plots.
@@ -669,6 +747,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             gravity,
             noise_from_static,
             bias_after,
+            frontend,
         } => {
             use tumble::vio::{ImuNoise, VioInput, VioOptions};
             let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
@@ -683,7 +762,16 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 }
                 tumble::vio::read_eqvio(&input, groundtruth.as_deref())?
             } else {
-                let mut v = VioInput::from_asl(&input, cal.as_ref())?;
+                let ds = tumble::io::asl::read_asl(&input, &Default::default())?;
+                let needs_frontend = ds
+                    .cameras
+                    .first()
+                    .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
+                let tracks = match needs_frontend {
+                    true => Some(run_frontend(&ds, 0, &frontend, &out)?),
+                    false => None,
+                };
+                let mut v = VioInput::from_dataset(ds, cal.as_ref(), tracks)?;
                 if let Some(g) = &groundtruth {
                     v.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
                 }
@@ -701,19 +789,15 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 opts.init = ground_truth_init(&vin)?;
             }
             vin.name = input.display().to_string();
-            let bar = indicatif::ProgressBar::new(vin.frames.len() as u64);
-            bar.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "vio [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})",
-                )
-                .expect("static template")
-                .progress_chars("=> "),
+            let bar = progress_bar(
+                vin.frames.len() as u64,
+                "vio [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})",
             );
             let mut tick = |done: usize, _: usize| bar.set_position(done as u64);
             let result = tumble::vio::run(&vin, &opts, Some(&mut tick))?;
             bar.finish_and_clear();
             let summary = tumble::vio::summarize(&vin, &opts, &result, bias_after);
-            for w in &result.warnings {
+            for w in &summary.warnings {
                 eprintln!("warning: {w}");
             }
             println!("{}", summary.table());
@@ -750,6 +834,14 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             let dir = out.unwrap_or_else(|| estimate.with_file_name("eval"));
             let files = tumble::eval::write_report(&dir, &ev)?;
             println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+        }
+        Command::Track { input, camera, out, frontend } => {
+            let ds = tumble::io::asl::read_asl(&input, &Default::default())?;
+            let k = ds.cameras.iter().position(|c| c.name == camera).ok_or_else(|| {
+                let names: Vec<&str> = ds.cameras.iter().map(|c| c.name.as_str()).collect();
+                format!("{}: no camera '{camera}' (found: {})", ds.root.display(), names.join(", "))
+            })?;
+            run_frontend(&ds, k, &frontend, &out)?;
         }
         Command::Demo => {
             println!("tumble demo: the whole chain on simulated recordings with known truth (BMI055-like IMU)");

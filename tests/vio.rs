@@ -137,3 +137,23 @@ fn malformed_eqvio_files_name_file_and_line() {
         assert!(e.contains("bad.csv") && e.contains(want), "{e}");
     }
 }
+
+/// An ASL folder with images but no tracks: the estimator says how to get tracks;
+/// the frontend tracks them (feature `opencv`) or names the feature to enable.
+#[test]
+fn image_folders_go_through_the_frontend() {
+    let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
+    let err = VioInput::from_asl(&micro, None).unwrap_err().to_string();
+    assert!(err.contains("tracks.csv") && err.contains("frontend"), "{err}");
+    let ds = tumble::io::asl::read_asl(&micro, &Default::default()).unwrap();
+    let opts = tumble::vio::frontend::FrontendOptions::default();
+    let tracked = tumble::vio::frontend::track_asl(&ds, 0, &opts, &mut |_, _| {});
+    if cfg!(feature = "opencv") {
+        let (obs, stats) = tracked.unwrap();
+        let input = VioInput::from_dataset(ds, None, Some(obs)).unwrap();
+        assert_eq!(input.frames.len(), stats.frames);
+    } else {
+        let err = tracked.unwrap_err();
+        assert!(err.contains("--features opencv") && err.contains("libopencv-dev"), "{err}");
+    }
+}

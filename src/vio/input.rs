@@ -142,6 +142,17 @@ impl VioInput {
     /// `calibration` when given.
     pub fn from_asl(path: &Path, calibration: Option<&ImuCalibration>) -> Result<VioInput, InputError> {
         let ds = asl::read_asl(path, &crate::io::imu_text::ImuTextFormat::default())?;
+        Self::from_dataset(ds, calibration, None)
+    }
+
+    /// As [`VioInput::from_asl`] on a loaded dataset, with the cam0
+    /// observations given (e.g. from the [`frontend`](super::frontend) on the
+    /// folder's images) or, when None, read from `cam0/tracks.csv`.
+    pub fn from_dataset(
+        ds: asl::AslDataset,
+        calibration: Option<&ImuCalibration>,
+        tracks: Option<Vec<(i64, u64, [f64; 2])>>,
+    ) -> Result<VioInput, InputError> {
         let cam = ds.cameras.first().ok_or_else(|| {
             InputError::file(&ds.root, "no cam0/ folder: the estimator needs feature tracks")
                 .with_hint("simulate one with `tumble sim walk --out DIR`, or give an EqVIO .csv")
@@ -149,13 +160,22 @@ impl VioInput {
         let cam_dir = ds.root.join(&cam.name);
         let camera =
             cam.model.ok_or_else(|| InputError::file(&cam_dir.join("sensor.yaml"), "camera intrinsics missing"))?;
-        let tracks_path = cam_dir.join("tracks.csv");
-        if !tracks_path.is_file() {
-            return Err(InputError::file(&tracks_path, "no feature tracks").with_hint(
-                "images need the visual frontend (next release); give tracks as `t[ns],track_id,u,v` in cam0/tracks.csv",
-            ));
-        }
-        let obs = asl::read_tracks(&tracks_path)?;
+        let obs = match tracks {
+            Some(t) => t,
+            None => {
+                let tracks_path = cam_dir.join("tracks.csv");
+                if !tracks_path.is_file() {
+                    let hint = if cam.frames.is_empty() {
+                        "give tracks as `t[ns],track_id,u,v` in cam0/tracks.csv"
+                    } else {
+                        "the folder has images: `tumble vio` tracks them with the visual frontend (cargo feature `opencv`), \
+                         or `tumble track` writes cam0's tracks"
+                    };
+                    return Err(InputError::file(&tracks_path, "no feature tracks").with_hint(hint));
+                }
+                asl::read_tracks(&tracks_path)?
+            }
+        };
         let t0 = ds.imu.t0_ns;
         let mut frames: BTreeMap<i64, Vec<(u64, [f64; 2])>> = BTreeMap::new();
         for (t, id, uv) in obs {

@@ -30,6 +30,7 @@
 //! ```
 
 pub mod estimator;
+pub mod frontend;
 pub mod geometry;
 pub mod input;
 pub mod output;
