@@ -399,6 +399,13 @@ enum Command {
         /// Bias errors are averaged from this many seconds after initialization.
         #[arg(long, default_value_t = 10.0)]
         bias_after: f64,
+        /// No camera data: simulate a camera flying the ground-truth path (real IMU,
+        /// simulated vision; an evaluation aid for IMU + ground-truth recordings).
+        #[arg(long)]
+        simulate_camera: bool,
+        /// Seed of the simulated camera's landmarks and noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
         /// The visual frontend, used when cam0 has images but no tracks.csv.
         #[command(flatten)]
         frontend: FrontendArgs,
@@ -747,6 +754,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             gravity,
             noise_from_static,
             bias_after,
+            simulate_camera,
+            seed,
             frontend,
         } => {
             use tumble::vio::{ImuNoise, VioInput, VioOptions};
@@ -763,20 +772,25 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 tumble::vio::read_eqvio(&input, groundtruth.as_deref())?
             } else {
                 let ds = tumble::io::asl::read_asl(&input, &Default::default())?;
-                let needs_frontend = ds
-                    .cameras
-                    .first()
-                    .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
-                let tracks = match needs_frontend {
-                    true => Some(run_frontend(&ds, 0, &frontend, &out)?),
-                    false => None,
-                };
-                let mut v = VioInput::from_dataset(ds, cal.as_ref(), tracks)?;
-                if let Some(g) = &groundtruth {
-                    v.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
+                if simulate_camera {
+                    let cam = tumble::sim::CameraSettings::default();
+                    println!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}");
+                    VioInput::from_dataset_with_simulated_camera(ds, cal.as_ref(), &cam, seed)?
+                } else {
+                    let needs_frontend = ds
+                        .cameras
+                        .first()
+                        .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
+                    let tracks = match needs_frontend {
+                        true => Some(run_frontend(&ds, 0, &frontend, &out)?),
+                        false => None,
+                    };
+                    VioInput::from_dataset(ds, cal.as_ref(), tracks)?
                 }
-                v
             };
+            if let (Some(g), false) = (&groundtruth, is_csv) {
+                vin.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
+            }
             match (&noise, vin.noise) {
                 (Some(p), _) => ImuNoise::read(p)?.apply(&mut opts.imu),
                 (None, Some(n)) => {
@@ -808,6 +822,9 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             use tumble::io::{biases::read_biases, trajectory::read_trajectory};
             if let Some(d) = rpe_distances.iter().find(|d| !(d.is_finite() && **d > 0.0)) {
                 return Err(format!("--rpe-distances: {d} is not a positive distance in metres").into());
+            }
+            if !(max_gap.is_finite() && max_gap > 0.0) {
+                return Err(format!("--max-gap: {max_gap} is not a positive time in seconds").into());
             }
             let est = read_trajectory(&estimate)?;
             let gt = read_trajectory(&groundtruth)?;

@@ -157,3 +157,25 @@ fn image_folders_go_through_the_frontend() {
         assert!(err.contains("--features opencv") && err.contains("libopencv-dev"), "{err}");
     }
 }
+
+/// Real V1_02 IMU (40 s) with a simulated camera flying its ground-truth path
+/// (the shared data hold no V1_02 images): real inertial errors, simulated vision.
+#[test]
+fn real_v1_02_imu_with_a_simulated_camera() {
+    let Some(dir) = common::shared("euroc/V1_02_medium_40s") else { return };
+    let ds = tumble::io::asl::read_asl(&dir, &Default::default()).unwrap();
+    let cam = tumble::sim::CameraSettings::default();
+    let input = VioInput::from_dataset_with_simulated_camera(ds, None, &cam, 1).unwrap();
+    let opts = VioOptions::default();
+    let out = run(&input, &opts, None).unwrap();
+    let s = summarize(&input, &opts, &out, 10.0);
+    println!("V1_02, 40 s real IMU + simulated camera:\n{}", s.table());
+    assert_eq!(s.resets, 0);
+    assert!(s.duration_s > 35.0 && s.ate_rmse_m.unwrap() < 0.15, "{}", s.table());
+    assert!(s.bias_rmse_gyro.unwrap() < 3e-3 && s.bias_rmse_accel.unwrap() < 0.15, "{}", s.table());
+    // Without a ground truth there is nothing to fly along.
+    let mut bare = tumble::io::asl::read_asl(&dir, &Default::default()).unwrap();
+    bare.groundtruth = None;
+    let err = VioInput::from_dataset_with_simulated_camera(bare, None, &cam, 1).unwrap_err().to_string();
+    assert!(err.contains("no ground truth"), "{err}");
+}

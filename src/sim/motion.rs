@@ -392,3 +392,62 @@ mod tests {
         }
     }
 }
+
+/// A recorded trajectory replayed as a motion (e.g. EuRoC's ground truth), so
+/// that a simulated camera can observe a real path: position linear, rotation
+/// slerp between samples; velocity, acceleration and rate by central
+/// differences. Time 0 is the recording's `t0_ns`.
+#[derive(Debug, Clone)]
+pub struct Replay {
+    t: Vec<f64>,
+    p: Vec<Vector3<f64>>,
+    q: Vec<UnitQuaternion<f64>>,
+}
+
+impl Replay {
+    /// Replay `tr` with time measured from `t0_ns` \[ns\]; samples before `t0_ns` are dropped.
+    /// Errors on fewer than two samples after `t0_ns`.
+    pub fn new(tr: &crate::io::trajectory::Trajectory, t0_ns: i64) -> Result<Replay, String> {
+        let (mut t, mut p, mut q) = (Vec::new(), Vec::new(), Vec::new());
+        for i in 0..tr.len() {
+            if tr.t_ns[i] < t0_ns {
+                continue;
+            }
+            t.push((tr.t_ns[i] - t0_ns) as f64 * 1e-9);
+            p.push(Vector3::from(tr.p[i]));
+            let [w, x, y, z] = tr.q[i];
+            q.push(UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z)));
+        }
+        if t.len() < 2 {
+            return Err("the trajectory has fewer than two samples after the start time".into());
+        }
+        Ok(Replay { t, p, q })
+    }
+
+    /// Mean position \[m\] (the centre of the simulated room).
+    pub fn p_mean(&self) -> Vector3<f64> {
+        self.p.iter().sum::<Vector3<f64>>() / self.p.len() as f64
+    }
+
+    fn pose(&self, t: f64) -> (Vector3<f64>, UnitQuaternion<f64>) {
+        let t = t.clamp(self.t[0], self.t[self.t.len() - 1]);
+        let k = self.t.partition_point(|&s| s <= t).clamp(1, self.t.len() - 1);
+        let w = ((t - self.t[k - 1]) / (self.t[k] - self.t[k - 1])).clamp(0.0, 1.0);
+        (self.p[k - 1].lerp(&self.p[k], w), self.q[k - 1].slerp(&self.q[k], w))
+    }
+}
+
+impl Motion for Replay {
+    fn at(&self, t: f64) -> Kinematics {
+        let h = 1e-3;
+        let (p, q) = self.pose(t);
+        let ((pm, qm), (pp, qp)) = (self.pose(t - h), self.pose(t + h));
+        let velocity = (pp - pm) / (2.0 * h);
+        let acceleration = (pp - 2.0 * p + pm) / (h * h);
+        let omega = (qm.inverse() * qp).scaled_axis() / (2.0 * h);
+        Kinematics { rotation: *q.to_rotation_matrix().matrix(), position: p, velocity, acceleration, omega }
+    }
+    fn duration(&self) -> f64 {
+        self.t[self.t.len() - 1]
+    }
+}

@@ -145,6 +145,53 @@ impl VioInput {
         Self::from_dataset(ds, calibration, None)
     }
 
+    /// A dataset with an IMU and a ground truth but no camera, seen by a
+    /// simulated camera (`cam`) that flies the ground-truth path through a room
+    /// of random landmarks around it: real IMU, simulated vision — for
+    /// evaluating the estimator on real inertial data without images.
+    pub fn from_dataset_with_simulated_camera(
+        ds: asl::AslDataset,
+        calibration: Option<&ImuCalibration>,
+        cam: &crate::sim::CameraSettings,
+        seed: u64,
+    ) -> Result<VioInput, InputError> {
+        let gt = ds.groundtruth.as_ref().ok_or_else(|| {
+            InputError::file(&ds.root, "no ground truth (state_groundtruth_estimate0/, gt0/ or mocap0/)")
+                .with_hint("a simulated camera needs the true path to look from")
+        })?;
+        let t0 = ds.imu.t0_ns;
+        let motion = crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e))?;
+        let centre = motion.p_mean();
+        let tracks = crate::sim::camera::simulate_tracks(&motion, cam, centre, seed);
+        // Frames where both the ground truth and the IMU are.
+        let start = (gt.t_ns.iter().copied().find(|&t| t >= t0).unwrap_or(t0) - t0) as f64 * 1e-9;
+        let end = match ds.imu.len() {
+            0 => 0.0,
+            n => (ds.imu.t_ns(n - 1) - t0) as f64 * 1e-9,
+        };
+        let mut frames: Vec<Frame> = Vec::new();
+        for o in tracks.observations.iter().filter(|o| o.t >= start && o.t <= end) {
+            match frames.last_mut() {
+                Some(f) if f.t == o.t => f.features.push((o.track, o.uv)),
+                _ => frames.push(Frame { t: o.t, features: vec![(o.track, o.uv)] }),
+            }
+        }
+        let bc = cam.body_from_camera();
+        let body_from_camera = pose(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
+        let imu = imu_data(&ds.imu, calibration);
+        let noise = sensor_noise(&ds);
+        Ok(VioInput {
+            name: format!("{} (simulated camera)", ds.root.display()),
+            t0_ns: t0,
+            imu,
+            frames,
+            camera: cam.model(),
+            body_from_camera,
+            groundtruth: ds.groundtruth,
+            noise,
+        })
+    }
+
     /// As [`VioInput::from_asl`] on a loaded dataset, with the cam0
     /// observations given (e.g. from the [`frontend`](super::frontend) on the
     /// folder's images) or, when None, read from `cam0/tracks.csv`.
@@ -187,14 +234,7 @@ impl VioInput {
         let t_ic = imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs);
         let body_from_camera = pose(t_ic.rotation.to_rotation_matrix().matrix(), &t_ic.translation.vector);
         let imu = imu_data(&ds.imu, calibration);
-        let noise = ds.imu_sensor.as_ref().and_then(|s| {
-            Some(ImuNoise {
-                accelerometer_noise_density: s.accelerometer_noise_density?,
-                accelerometer_random_walk: s.accelerometer_random_walk?,
-                gyroscope_noise_density: s.gyroscope_noise_density?,
-                gyroscope_random_walk: s.gyroscope_random_walk?,
-            })
-        });
+        let noise = sensor_noise(&ds);
         Ok(VioInput {
             name: ds.root.display().to_string(),
             t0_ns: t0,
@@ -206,6 +246,17 @@ impl VioInput {
             noise,
         })
     }
+}
+
+/// The noise figures of the dataset's `imu0/sensor.yaml`, when it gives all four.
+fn sensor_noise(ds: &asl::AslDataset) -> Option<ImuNoise> {
+    let s = ds.imu_sensor.as_ref()?;
+    Some(ImuNoise {
+        accelerometer_noise_density: s.accelerometer_noise_density?,
+        accelerometer_random_walk: s.accelerometer_random_walk?,
+        gyroscope_noise_density: s.gyroscope_noise_density?,
+        gyroscope_random_walk: s.gyroscope_random_walk?,
+    })
 }
 
 /// Calibrated IMU samples from a recording (eq. 16 and the audit's effects when a calibration is given).
