@@ -183,12 +183,16 @@ pub fn track_asl_into(
     let mut files = vec![tracks, json];
     #[cfg(feature = "opencv")]
     {
-        let frames: Vec<&(i64, std::path::PathBuf)> =
-            ds.cameras[camera].frames.iter().filter(|f| f.1.is_file()).collect();
-        let (t, image) = frames[frames.len() / 2];
-        let png = dir.join("tracks.png");
-        draw_tracks(image, *t, &obs, 10, &png)?;
-        files.push(png);
+        // The middle tracked frame (observations are in time order).
+        let mut times: Vec<i64> = obs.iter().map(|o| o.0).collect();
+        times.dedup();
+        if let Some(&t) = times.get(times.len() / 2) {
+            if let Some((_, image)) = ds.cameras[camera].frames.iter().find(|f| f.0 == t) {
+                let png = dir.join("tracks.png");
+                draw_tracks(image, t, &obs, 10, &png)?;
+                files.push(png);
+            }
+        }
     }
     Ok((obs, stats, files))
 }
