@@ -4,17 +4,17 @@
 //! with a camera on the paper's 6-minute walk.
 //!
 //! ```no_run
-//! let report = tumble::demo::run(&tumble::demo::DemoOptions::default(), &mut |stage| eprintln!("{stage}")).unwrap();
+//! let opts = tumble::demo::DemoOptions::default();
+//! let report = tumble::demo::run(&opts, "tumble-demo".as_ref(), &mut |stage| eprintln!("{stage}")).unwrap();
 //! print!("{}", report.table());
 //! ```
 
-use crate::allan::{run_allan, AllanRunOptions};
-use crate::audit::{audit, AuditOptions};
-use crate::calib::{calibrate, CalibOptions, Triad};
-use crate::io::ImuNoise;
+use crate::calib::{CalibOptions, Triad};
+use crate::pipeline::{run_chain, ChainInputs, ChainOptions, Progress, Status};
 use crate::sim::{hide_effect, simulate, Scenario, SimConfig, TriadModel};
-use crate::vio::{run as run_vio, summarize, VioInput, VioOptions};
+use crate::vio::{VioInput, VioOptions};
 use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
 /// What the demo simulates.
 #[derive(Clone, Debug)]
@@ -69,6 +69,8 @@ pub struct DemoReport {
     pub walk_errors: (Option<f64>, Option<f64>, Option<f64>),
     /// Wall time per stage \[s\].
     pub stage_s: Vec<(String, f64)>,
+    /// The chain's `report.md` with every table and figure.
+    pub report: PathBuf,
 }
 
 fn triad_rows(out: &mut Vec<Row>, name: &str, truth: &TriadModel, est: &Triad, audited: &Triad) {
@@ -90,95 +92,81 @@ fn triad_rows(out: &mut Vec<Row>, name: &str, truth: &TriadModel, est: &Triad, a
     }
 }
 
-/// Run the chain; `stage` is told what starts.
-pub fn run(opts: &DemoOptions, stage: &mut dyn FnMut(&str)) -> Result<DemoReport, String> {
-    let mut times = Vec::new();
-    let mut clock = std::time::Instant::now();
-    let mut lap = |name: &str, times: &mut Vec<(String, f64)>| {
-        times.push((name.to_string(), clock.elapsed().as_secs_f64()));
-        clock = std::time::Instant::now();
-    };
+/// Simulate the three recordings and run the chain of [`crate::pipeline`] on
+/// them into `out` (which gets `report.md`); `stage` is told what starts.
+pub fn run(opts: &DemoOptions, out: &Path, stage: &mut dyn FnMut(&str)) -> Result<DemoReport, String> {
     let mut cfg = SimConfig::default();
     hide_effect(&mut cfg, &opts.hidden.0, opts.hidden.1)?;
-
-    stage(&format!("1/4 calibrate: simulated hand tumble with {} ×{} hidden", opts.hidden.0, opts.hidden.1));
+    let t = std::time::Instant::now();
+    stage(&format!(
+        "simulating: a hand tumble, a {:.0}-minute static log and a {:.0}-minute walk with a camera, \
+         one BMI055-like IMU with {} ×{} hidden",
+        opts.static_s / 60.0,
+        opts.walk_s / 60.0,
+        opts.hidden.0,
+        opts.hidden.1
+    ));
     let tumble = simulate(Scenario::Tumble, &cfg, opts.seed)?;
-    let rec = tumble.imu.to_recording();
-    let cal = calibrate(&rec, &CalibOptions { gravity: cfg.gravity, ..Default::default() }).map_err(|e| e.message)?;
-    lap("calibrate", &mut times);
-
-    stage(&format!("2/4 allan: simulated static log of {:.0} min", opts.static_s / 60.0));
     let still = simulate(Scenario::Static, &SimConfig { duration_s: Some(opts.static_s), ..cfg.clone() }, opts.seed)?;
-    let report = run_allan(&still.imu.to_recording(), &AllanRunOptions { progress: false, ..Default::default() })
-        .map_err(|e| e.to_string())?;
-    let k = report.kalibr.as_ref().ok_or("the Allan stage gave no noise coefficients")?;
-    let max = |v: [f64; 3]| v.iter().fold(0.0f64, |a, b| a.max(*b));
-    let noise = vec![
-        Row {
-            name: "gyro N [rad/s/√Hz]".into(),
-            truth: max(cfg.imu.gyro.noise_density),
-            estimate: k.gyroscope_noise_density,
-            std: f64::NAN,
-            audited: None,
-        },
-        Row {
-            name: "gyro K [rad/s²/√Hz]".into(),
-            truth: max(cfg.imu.gyro.random_walk),
-            estimate: k.gyroscope_random_walk,
-            std: f64::NAN,
-            audited: None,
-        },
-        Row {
-            name: "accel N [m/s²/√Hz]".into(),
-            truth: max(cfg.imu.accel.noise_density),
-            estimate: k.accelerometer_noise_density,
-            std: f64::NAN,
-            audited: None,
-        },
-        Row {
-            name: "accel K [m/s³/√Hz]".into(),
-            truth: max(cfg.imu.accel.random_walk),
-            estimate: k.accelerometer_random_walk,
-            std: f64::NAN,
-            audited: None,
-        },
-    ];
-    let imu_noise = ImuNoise {
-        accelerometer_noise_density: k.accelerometer_noise_density,
-        accelerometer_random_walk: k.accelerometer_random_walk,
-        gyroscope_noise_density: k.gyroscope_noise_density,
-        gyroscope_random_walk: k.gyroscope_random_walk,
-    };
-    lap("allan", &mut times);
+    let wcfg = SimConfig { duration_s: Some(opts.walk_s), ..cfg.clone() };
+    let walk = simulate(Scenario::Walk, &wcfg, opts.seed)?;
+    let simulate_s = t.elapsed().as_secs_f64();
 
-    stage("3/4 audit: is something missing from the calibration?");
-    let audited = audit(&rec, &cal.calibration, &AuditOptions { noise: Some(imu_noise), ..Default::default() })
-        .map_err(|e| e.to_string())?;
-    let found = audited.effects_added().iter().map(|e| e.id().to_string()).collect();
-    let gap = (audited.base.gap(), audited.final_fit().gap());
+    let inputs = ChainInputs {
+        tumble: Some(tumble.imu.to_recording()),
+        still: Some(still.imu.to_recording()),
+        vio: Some(Box::new(move |cal| VioInput::from_simulation_calibrated(&walk, cal))),
+        ..Default::default()
+    };
+    let chain_opts = ChainOptions {
+        calib: CalibOptions { gravity: cfg.gravity, ..Default::default() },
+        vio: VioOptions::for_simulation(&wcfg),
+        bias_after_s: 20.0,
+        ..Default::default()
+    };
+    let chain = run_chain(inputs, &chain_opts, out, &mut |p| {
+        if let Progress::Stage(s, line) = p {
+            stage(&format!("{}: {line}", s.id()));
+        }
+    })?;
+
+    let cal = chain.calibration.as_ref().ok_or("the calibrate stage did not run")?;
+    let audited = chain.audit.as_ref().ok_or("the audit stage did not run")?;
+    let k = chain.allan.as_ref().and_then(|a| a.kalibr.as_ref()).ok_or("the Allan stage gave no noise coefficients")?;
+    let (_, _, s) = chain.vio.as_ref().ok_or("the vio stage did not run")?;
+    let max = |v: [f64; 3]| v.iter().fold(0.0f64, |a, b| a.max(*b));
+    let noise_row = |name: &str, truth: [f64; 3], estimate: f64| Row {
+        name: name.into(),
+        truth: max(truth),
+        estimate,
+        std: f64::NAN,
+        audited: None,
+    };
+    let noise = vec![
+        noise_row("gyro N [rad/s/√Hz]", cfg.imu.gyro.noise_density, k.gyroscope_noise_density),
+        noise_row("gyro K [rad/s²/√Hz]", cfg.imu.gyro.random_walk, k.gyroscope_random_walk),
+        noise_row("accel N [m/s²/√Hz]", cfg.imu.accel.noise_density, k.accelerometer_noise_density),
+        noise_row("accel K [m/s³/√Hz]", cfg.imu.accel.random_walk, k.accelerometer_random_walk),
+    ];
     let mut calibration = Vec::new();
     let after = &audited.calibration;
     triad_rows(&mut calibration, "accel", &cfg.imu.accel, &cal.calibration.accel, &after.accel);
     triad_rows(&mut calibration, "gyro", &cfg.imu.gyro, &cal.calibration.gyro, &after.gyro);
-    lap("audit", &mut times);
-
-    stage(&format!("4/4 vio: simulated {:.0}-minute hand-held walk with a camera", opts.walk_s / 60.0));
-    let wcfg = SimConfig { duration_s: Some(opts.walk_s), ..SimConfig::default() };
-    let walk = simulate(Scenario::Walk, &wcfg, opts.seed)?;
-    let input = VioInput::from_simulation(&walk)?;
-    let vopts = VioOptions::for_simulation(&wcfg);
-    let out = run_vio(&input, &vopts, None)?;
-    let s = summarize(&input, &vopts, &out, 20.0);
-    lap("vio", &mut times);
+    let mut stage_s = vec![("simulate".to_string(), simulate_s)];
+    stage_s.extend(chain.stages.iter().filter_map(|st| match st.status {
+        Status::Ran(secs) => Some((st.stage.id().to_string(), secs)),
+        _ => None,
+    }));
     Ok(DemoReport {
         calibration,
         noise,
         hidden: opts.hidden.0.clone(),
-        found,
-        gap,
+        found: audited.effects_added().iter().map(|e| e.id().to_string()).collect(),
+        gap: (audited.base.gap(), audited.final_fit().gap()),
         walk: (s.distance_m, s.closed_loop_error_m, s.imu_only_closed_loop_error_m),
         walk_errors: (s.ate_rmse_m, s.bias_rmse_gyro, s.bias_rmse_accel),
-        stage_s: times,
+        stage_s,
+        report: chain.report_path.clone(),
     })
 }
 
@@ -238,6 +226,7 @@ impl DemoReport {
         }
         let times: Vec<String> = self.stage_s.iter().map(|(n, t)| format!("{n} {t:.1} s")).collect();
         let _ = writeln!(s, "\ntime: {}", times.join(", "));
+        let _ = writeln!(s, "report with figures: {}", self.report.display());
         s
     }
 }

@@ -12,6 +12,7 @@ pub mod demo;
 pub mod error;
 pub mod eval;
 pub mod io;
+pub mod pipeline;
 pub mod plot;
 pub mod posegraph;
 pub mod sim;

@@ -452,10 +452,62 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// The whole chain on your recordings: calibrate → allan → audit → vio, each
+    /// stage in its own folder of --out, then report.md with every table and figure.
+    Run {
+        /// Hand-tumbled calibration recording (ASL folder, bag/MCAP, text; with
+        /// --gyro-file for imu_tk's two files): the calibrate and audit stages.
+        #[arg(long)]
+        tumble: Option<PathBuf>,
+        /// Static recording (hours, for the bias random walk): the allan stage.
+        #[arg(long = "static")]
+        still: Option<PathBuf>,
+        /// VIO data (ASL folder with tracks or images, or an EqVIO .csv): the vio stage.
+        #[arg(long)]
+        vio: Option<PathBuf>,
+        /// Output folder (gets calibrate/, allan/, audit/, vio/ and report.md).
+        #[arg(long)]
+        out: PathBuf,
+        /// Stages not to run, comma separated (calibrate, allan, audit, vio): their
+        /// results come from --calibration/--noise or from an earlier run's files in --out.
+        #[arg(long, value_delimiter = ',')]
+        skip: Vec<String>,
+        /// Calibration to use instead of the calibrate stage.
+        #[arg(long)]
+        calibration: Option<PathBuf>,
+        /// Kalibr imu.yaml to use instead of the allan stage.
+        #[arg(long)]
+        noise: Option<PathBuf>,
+        /// Local gravity [m/s²] (default: WGS-84 at --latitude, else 9.80665).
+        #[arg(long, conflicts_with = "latitude")]
+        gravity: Option<f64>,
+        /// Geodetic latitude [deg] for WGS-84 normal gravity (at sea level).
+        #[arg(long)]
+        latitude: Option<f64>,
+        /// Length of the tumble's initial static period [s].
+        #[arg(long, default_value_t = 50.0)]
+        init_static: f64,
+        /// Ground truth (ASL CSV) for the vio stage; an ASL folder's own is used when present.
+        #[arg(long)]
+        groundtruth: Option<PathBuf>,
+        /// vio stage without camera data: a simulated camera flies the ground truth.
+        #[arg(long)]
+        simulate_camera: bool,
+        /// How to read text recordings (both --tumble and --static).
+        #[command(flatten)]
+        read: RecordingArgs,
+        /// The visual frontend, used when the vio folder has images but no tracks.
+        #[command(flatten)]
+        frontend: FrontendArgs,
+    },
     /// The whole chain on simulated recordings with known truth: calibrate a hand
     /// tumble with a hidden effect, identify the noise (Allan), audit, and run the
     /// VIO on the 6-minute walk; prints every estimate next to the truth.
-    Demo,
+    Demo {
+        /// Folder for the chain's files and report.md.
+        #[arg(long, default_value = "tumble-demo")]
+        out: PathBuf,
+    },
     /// Solve a g2o pose graph (.g2o) or a Bundle Adjustment in the Large file (other extensions).
     Solve {
         /// Input file.
@@ -627,21 +679,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             for w in &rec.warnings {
                 eprintln!("warning: {w}");
             }
-            let gravity = match (gravity, latitude) {
-                (Some(g), _) => g,
-                (None, Some(lat)) => {
-                    if !(-90.0..=90.0).contains(&lat) || !height.is_finite() {
-                        return Err(
-                            format!("--latitude must be within ±90° and --height finite, got {lat}, {height}").into()
-                        );
-                    }
-                    tumble::calib::normal_gravity(lat, height)
-                }
-                (None, None) => {
-                    eprintln!("note: no --gravity or --latitude given; using standard gravity 9.80665 m/s²");
-                    tumble::io::STANDARD_GRAVITY
-                }
-            };
+            let gravity = gravity_arg(gravity, latitude, height)?;
             for (v, name) in [(init_static, "--init-static"), (window, "--window"), (min_interval, "--min-interval")] {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(format!("{name} must be positive, got {v}").into());
@@ -758,39 +796,13 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             seed,
             frontend,
         } => {
-            use tumble::vio::{ImuNoise, VioInput, VioOptions};
+            use tumble::vio::{ImuNoise, VioOptions};
             let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
             let mut opts = VioOptions { window, pixel_sigma, gravity, noise_from_static, ..VioOptions::default() };
             if midpoint {
                 opts.imu.scheme = tumble::factors::imu_preint::Scheme::Midpoint;
             }
-            let is_csv = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
-            let mut vin = if is_csv {
-                if cal.is_some() {
-                    eprintln!("warning: EqVIO files hold corrected samples already; --calibration is not applied");
-                }
-                tumble::vio::read_eqvio(&input, groundtruth.as_deref())?
-            } else {
-                let ds = tumble::io::asl::read_asl(&input, &Default::default())?;
-                if simulate_camera {
-                    let cam = tumble::sim::CameraSettings::default();
-                    println!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}");
-                    VioInput::from_dataset_with_simulated_camera(ds, cal.as_ref(), &cam, seed)?
-                } else {
-                    let needs_frontend = ds
-                        .cameras
-                        .first()
-                        .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
-                    let tracks = match needs_frontend {
-                        true => Some(run_frontend(&ds, 0, &frontend, &out)?),
-                        false => None,
-                    };
-                    VioInput::from_dataset(ds, cal.as_ref(), tracks)?
-                }
-            };
-            if let (Some(g), false) = (&groundtruth, is_csv) {
-                vin.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
-            }
+            let vin = vio_input(&input, cal.as_ref(), groundtruth.as_deref(), simulate_camera, seed, &frontend, &out)?;
             match (&noise, vin.noise) {
                 (Some(p), _) => ImuNoise::read(p)?.apply(&mut opts.imu),
                 (None, Some(n)) => {
@@ -802,7 +814,6 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if init_from_groundtruth {
                 opts.init = ground_truth_init(&vin)?;
             }
-            vin.name = input.display().to_string();
             let bar = progress_bar(
                 vin.frames.len() as u64,
                 "vio [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})",
@@ -860,9 +871,96 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             })?;
             run_frontend(&ds, k, &frontend, &out)?;
         }
-        Command::Demo => {
+        Command::Run {
+            tumble: tumble_rec,
+            still,
+            vio,
+            out,
+            skip,
+            calibration,
+            noise,
+            gravity,
+            latitude,
+            init_static,
+            groundtruth,
+            simulate_camera,
+            read,
+            frontend,
+        } => {
+            use tumble::pipeline::{run_chain, ChainInputs, ChainOptions, Progress, Stage};
+            let skip = skip
+                .iter()
+                .map(|s| Stage::parse(s))
+                .collect::<Result<Vec<_>, _>>()
+                .map_err(|e| format!("--skip: {e}"))?;
+            if tumble_rec.is_none() && still.is_none() && vio.is_none() && calibration.is_none() {
+                return Err("nothing to do: give --tumble, --static and/or --vio (see `tumble run --help`)".into());
+            }
+            if !(init_static.is_finite() && init_static > 0.0) {
+                return Err(format!("--init-static must be positive, got {init_static}").into());
+            }
+            let mut opts = ChainOptions { skip, ..Default::default() };
+            opts.calib.init_static_s = init_static;
+            opts.allan.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
+            if tumble_rec.is_some() && !opts.skip.contains(&Stage::Calibrate) {
+                opts.calib.gravity = gravity_arg(gravity, latitude, 0.0)?;
+            }
+            opts.audit.detection = opts.calib.clone();
+            let mut inputs = ChainInputs::default();
+            if let Some(p) = &tumble_rec {
+                let input = CalibInput {
+                    recording: Some(p.clone()),
+                    accel: None,
+                    gyro: None,
+                    format: if read.gyro_file.is_some() { InputFormat::ImuTk } else { InputFormat::Auto },
+                    read: read.clone(),
+                };
+                let (rec, _, _) = input.open()?;
+                for w in &rec.warnings {
+                    eprintln!("warning: {}: {w}", p.display());
+                }
+                inputs.tumble = Some(rec);
+            }
+            if let Some(p) = &still {
+                let mut o = read.options();
+                o.gyro_file = None;
+                let rec = tumble::io::open_recording(p, &o)?;
+                for w in &rec.warnings {
+                    eprintln!("warning: {}: {w}", p.display());
+                }
+                inputs.still = Some(rec);
+            }
+            inputs.calibration = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
+            inputs.noise = noise.as_deref().map(tumble::io::ImuNoise::read).transpose()?;
+            if let Some(p) = vio {
+                let vio_dir = out.join(Stage::Vio.id());
+                inputs.vio = Some(Box::new(move |cal| {
+                    vio_input(&p, cal, groundtruth.as_deref(), simulate_camera, 1, &frontend, &vio_dir)
+                        .map_err(|e| e.to_string())
+                }));
+            }
+            let bar = progress_bar(0, "vio [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})");
+            bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+            let report = run_chain(inputs, &opts, &out, &mut |p| match p {
+                Progress::Stage(stage, line) => eprintln!("{}: {line}", stage.id()),
+                Progress::Frames(done, total) => {
+                    if bar.is_hidden() {
+                        bar.set_draw_target(indicatif::ProgressDrawTarget::stderr());
+                        bar.set_length(total as u64);
+                    }
+                    bar.set_position(done as u64);
+                }
+            })?;
+            bar.finish_and_clear();
+            for w in &report.warnings {
+                eprintln!("warning: {w}");
+            }
+            print!("\n{}", report.summary());
+        }
+        Command::Demo { out } => {
             println!("tumble demo: the whole chain on simulated recordings with known truth (BMI055-like IMU)");
-            let report = tumble::demo::run(&tumble::demo::DemoOptions::default(), &mut |stage| eprintln!("{stage}"))?;
+            let report =
+                tumble::demo::run(&tumble::demo::DemoOptions::default(), &out, &mut |stage| eprintln!("{stage}"))?;
             print!("{}", report.table());
         }
         Command::Solve {
@@ -924,7 +1022,68 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// `A:B` seconds from the start of the recording (either end may be empty).
+/// The VIO's input from the command line: an EqVIO .csv, or an ASL folder with
+/// tracks, with images (run through the frontend into `out`), or with only a
+/// ground truth (`simulate_camera`).
+fn vio_input(
+    input: &std::path::Path,
+    cal: Option<&tumble::calib::ImuCalibration>,
+    groundtruth: Option<&std::path::Path>,
+    simulate_camera: bool,
+    seed: u64,
+    frontend: &FrontendArgs,
+    out: &std::path::Path,
+) -> Result<tumble::vio::VioInput, Box<dyn std::error::Error>> {
+    use tumble::vio::VioInput;
+    let is_csv = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+    let mut vin = if is_csv {
+        if cal.is_some() {
+            eprintln!("warning: EqVIO files hold corrected samples already; the calibration is not applied");
+        }
+        tumble::vio::read_eqvio(input, groundtruth)?
+    } else {
+        let ds = tumble::io::asl::read_asl(input, &Default::default())?;
+        if simulate_camera {
+            let cam = tumble::sim::CameraSettings::default();
+            println!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}");
+            VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?
+        } else {
+            let needs_frontend = ds
+                .cameras
+                .first()
+                .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
+            let tracks = match needs_frontend {
+                true => Some(run_frontend(&ds, 0, frontend, out)?),
+                false => None,
+            };
+            VioInput::from_dataset(ds, cal, tracks)?
+        }
+    };
+    if let (Some(g), false) = (groundtruth, is_csv) {
+        vin.groundtruth = Some(tumble::io::trajectory::read_asl_groundtruth(g)?);
+    }
+    vin.name = input.display().to_string();
+    Ok(vin)
+}
+
+/// Gravity from `--gravity`, or WGS-84 normal gravity at `--latitude`/`--height`,
+/// or standard gravity with a note.
+fn gravity_arg(gravity: Option<f64>, latitude: Option<f64>, height: f64) -> Result<f64, String> {
+    Ok(match (gravity, latitude) {
+        (Some(g), _) => g,
+        (None, Some(lat)) => {
+            if !(-90.0..=90.0).contains(&lat) || !height.is_finite() {
+                return Err(format!("--latitude must be within ±90° and --height finite, got {lat}, {height}"));
+            }
+            tumble::calib::normal_gravity(lat, height)
+        }
+        (None, None) => {
+            eprintln!("note: no --gravity or --latitude given; using standard gravity 9.80665 m/s²");
+            tumble::io::STANDARD_GRAVITY
+        }
+    })
+}
+
 /// `FIRST:LAST` (integer steps) or a comma-separated list of positive multipliers.
 fn parse_multipliers(s: &str) -> Result<Vec<f64>, String> {
     let bad = || format!("--multipliers: expected FIRST:LAST or a comma list of positive numbers, got `{s}`");
@@ -940,6 +1099,7 @@ fn parse_multipliers(s: &str) -> Result<Vec<f64>, String> {
     Ok(v)
 }
 
+/// `A:B` seconds from the start of the recording (either end may be empty).
 fn parse_span(s: &str) -> Result<(f64, f64), String> {
     let (a, b) = s.split_once(':').ok_or_else(|| format!("--span: expected START:END in seconds, got `{s}`"))?;
     let num = |v: &str, default: f64| -> Result<f64, String> {

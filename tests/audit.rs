@@ -190,8 +190,11 @@ fn bad_input_gives_clear_errors() {
 fn demo_chain_finds_the_hidden_effect() {
     let opts = tumble::demo::DemoOptions { static_s: 1200.0, walk_s: 40.0, ..Default::default() };
     let mut stages = Vec::new();
-    let r = tumble::demo::run(&opts, &mut |s| stages.push(s.to_string())).unwrap();
-    assert_eq!(stages.len(), 4);
+    let dir = std::env::temp_dir().join(format!("tumble_demo_test_{}", std::process::id()));
+    let r = tumble::demo::run(&opts, &dir, &mut |s| stages.push(s.to_string())).unwrap();
+    assert_eq!(stages.len(), 5, "{stages:?}");
+    let report = std::fs::read_to_string(&r.report).unwrap();
+    assert!(report.contains("![audit/audit_gyro_g_sensitivity.png]") && report.contains("ATE"), "{report}");
     assert_eq!(r.found, vec!["gyro_g_sensitivity".to_string()]);
     assert!(r.gap.1 < 0.2 * r.gap.0, "{:?}", r.gap);
     assert!(r.walk.0 > 1.0 && r.walk.1.is_finite());
@@ -205,4 +208,5 @@ fn demo_chain_finds_the_hidden_effect() {
             .sum::<f64>()
     };
     assert!(err(&r.calibration, true) < err(&r.calibration, false));
+    std::fs::remove_dir_all(&dir).ok();
 }

@@ -68,6 +68,18 @@ pub struct KalibrNoise {
     pub notes: Vec<String>,
 }
 
+impl KalibrNoise {
+    /// The four coefficients as the audit and the VIO take them.
+    pub fn imu_noise(&self) -> crate::io::ImuNoise {
+        crate::io::ImuNoise {
+            accelerometer_noise_density: self.accelerometer_noise_density,
+            accelerometer_random_walk: self.accelerometer_random_walk,
+            gyroscope_noise_density: self.gyroscope_noise_density,
+            gyroscope_random_walk: self.gyroscope_random_walk,
+        }
+    }
+}
+
 /// Everything the Allan stage found.
 #[derive(Clone, Debug)]
 pub struct AllanReport {

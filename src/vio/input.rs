@@ -86,17 +86,40 @@ impl VioInput {
     /// remaining biases are the simulated turn-on bias and its drift; tracks in
     /// pixels; ground truth at the frame times with the true biases in the body frame.
     pub fn from_simulation(sim: &Simulation) -> Result<VioInput, String> {
+        Self::from_simulation_calibrated(sim, None)
+    }
+
+    /// As [`VioInput::from_simulation`], but the IMU corrected with an
+    /// estimated `calibration` (e.g. from `tumble calibrate` on the same
+    /// simulated IMU's tumble) instead of the true `T`, `K`: what a user's
+    /// pipeline does. The ground-truth biases are then what the calibration
+    /// leaves of the simulated ones, `(T K)⁻¹_est (b_true − b_est)`.
+    pub fn from_simulation_calibrated(
+        sim: &Simulation,
+        calibration: Option<&ImuCalibration>,
+    ) -> Result<VioInput, String> {
         let tracks = sim.tracks.as_ref().ok_or("the simulation has no camera")?;
         let m = &sim.config.imu;
         let inv = |t: &crate::sim::TriadModel| -> Result<Matrix3<f64>, String> {
             let tm = Matrix3::from_fn(|r, c| t.misalignment[r][c]);
             (tm * Matrix3::from_diagonal(&Vector3::from(t.scale))).try_inverse().ok_or("singular T K".to_string())
         };
-        let (ma, mg) = (inv(&m.accel)?, inv(&m.gyro)?);
-        let imu = ImuData {
-            t: sim.imu.t.clone(),
-            gyro: sim.imu.gyro.iter().map(|g| mg * Vector3::from(*g)).collect(),
-            acc: sim.imu.accel.iter().map(|a| ma * Vector3::from(*a)).collect(),
+        // Raw-bias-to-body maps and the bias the correction already removes.
+        let (ma, mg, ba0, bg0, imu) = match calibration {
+            Some(cal) => {
+                let ma = cal.accel.inverse_matrix().ok_or("calibration: singular accelerometer T K")?;
+                let mg = cal.gyro.inverse_matrix().ok_or("calibration: singular gyro T K")?;
+                (ma, mg, cal.accel.b, cal.gyro.b, imu_data(&sim.imu.to_recording(), Some(cal)))
+            }
+            None => {
+                let (ma, mg) = (inv(&m.accel)?, inv(&m.gyro)?);
+                let imu = ImuData {
+                    t: sim.imu.t.clone(),
+                    gyro: sim.imu.gyro.iter().map(|g| mg * Vector3::from(*g)).collect(),
+                    acc: sim.imu.accel.iter().map(|a| ma * Vector3::from(*a)).collect(),
+                };
+                (ma, mg, Vector3::zeros(), Vector3::zeros(), imu)
+            }
         };
         let mut frames: Vec<Frame> = tracks.frames.iter().map(|&t| Frame { t, features: Vec::new() }).collect();
         let mut fi = 0;
@@ -118,8 +141,8 @@ impl VioInput {
             gt.p.push([k.position.x, k.position.y, k.position.z]);
             gt.q.push([q.w, q.i, q.j, q.k]);
             let i = ((t * m.rate_hz).round() as usize / sim.imu.bias_every).min(sim.imu.bias_gyro.len() - 1);
-            let bg = mg * Vector3::from(sim.imu.bias_gyro[i]);
-            let ba = ma * Vector3::from(sim.imu.bias_accel[i]);
+            let bg = mg * (Vector3::from(sim.imu.bias_gyro[i]) - bg0);
+            let ba = ma * (Vector3::from(sim.imu.bias_accel[i]) - ba0);
             bga.push([bg.x, bg.y, bg.z]);
             baa.push([ba.x, ba.y, ba.z]);
         }

@@ -1,0 +1,468 @@
+//! `tumble run`: the stages chained — calibrate a hand tumble, identify the
+//! noise from a static log (Allan), audit the calibration for a missing effect,
+//! and estimate biases online with a camera (VIO) — each stage writing into its
+//! own folder of the output directory and the next one reading what it found.
+//! Ends with `report.md`, every stage's tables and figures in one page.
+//!
+//! Stages can be skipped. A skipped stage's result comes from what the caller
+//! gives ([`ChainInputs::calibration`], [`ChainInputs::noise`]) or else from the
+//! files an earlier run left in the output folder (`calibrate/calibration.json`,
+//! `allan/imu.yaml`, `audit/calibration.json`) — but never from a folder whose
+//! upstream stage has just been re-run, which would mix two runs.
+//!
+//! ```no_run
+//! use tumble::pipeline::{run_chain, ChainInputs, ChainOptions};
+//! use tumble::io::{open_recording, RecordingOptions};
+//! let o = RecordingOptions::default();
+//! let inputs = ChainInputs {
+//!     tumble: Some(open_recording("tumble_session/".as_ref(), &o)?),
+//!     still: Some(open_recording("static_2h.csv".as_ref(), &o)?),
+//!     ..Default::default()
+//! };
+//! let report = run_chain(inputs, &ChainOptions::default(), "out".as_ref(), &mut |_| {})?;
+//! print!("{}", report.summary());
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use crate::allan::{run_allan, AllanReport, AllanRunOptions};
+use crate::audit::{audit, Audit, AuditOptions};
+use crate::calib::model::ImuCalibration;
+use crate::calib::{calibrate, CalibOptions, CalibrationResult};
+use crate::io::{ImuNoise, ImuRecording};
+use crate::vio::{summarize, write_outputs, Summary, VioInput, VioOptions, VioResult};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// One stage of the chain, in chain order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Stage {
+    /// Turntable-free calibration of the tumble recording (`calibrate/`).
+    Calibrate,
+    /// Noise identification from the static recording (`allan/`).
+    Allan,
+    /// Model-discrepancy audit of the calibration (`audit/`).
+    Audit,
+    /// Visual-inertial bias estimation (`vio/`).
+    Vio,
+}
+
+impl Stage {
+    /// Every stage in chain order.
+    pub const ALL: [Stage; 4] = [Stage::Calibrate, Stage::Allan, Stage::Audit, Stage::Vio];
+
+    /// Its name on the command line and its folder in the output directory.
+    pub fn id(self) -> &'static str {
+        match self {
+            Stage::Calibrate => "calibrate",
+            Stage::Allan => "allan",
+            Stage::Audit => "audit",
+            Stage::Vio => "vio",
+        }
+    }
+
+    /// The stage named `s` (as [`Stage::id`]).
+    pub fn parse(s: &str) -> Result<Stage, String> {
+        Stage::ALL
+            .into_iter()
+            .find(|st| st.id() == s.trim())
+            .ok_or_else(|| format!("unknown stage `{s}` (stages: {})", Stage::ALL.map(|s| s.id()).join(", ")))
+    }
+}
+
+/// Builds the VIO's input once the chain knows the calibration to correct the
+/// IMU with (None: no calibration available, samples used as read).
+pub type VioSource = Box<dyn FnOnce(Option<&ImuCalibration>) -> Result<VioInput, String>>;
+
+/// What the chain works on; every part optional.
+#[derive(Default)]
+pub struct ChainInputs {
+    /// The hand-tumbled calibration recording (for `calibrate` and `audit`).
+    pub tumble: Option<ImuRecording>,
+    /// The static recording (for `allan`), hours long for the bias random walk.
+    pub still: Option<ImuRecording>,
+    /// The VIO data (for `vio`).
+    pub vio: Option<VioSource>,
+    /// A calibration to use when `calibrate` does not run (e.g. `--calibration FILE`).
+    pub calibration: Option<ImuCalibration>,
+    /// Noise to use when `allan` does not run (e.g. `--noise imu.yaml`).
+    pub noise: Option<ImuNoise>,
+}
+
+/// Settings of every stage.
+#[derive(Clone, Debug)]
+pub struct ChainOptions {
+    /// Stages not to run (their results are taken from the inputs or earlier files).
+    pub skip: Vec<Stage>,
+    /// Calibration settings.
+    pub calib: CalibOptions,
+    /// Allan settings.
+    pub allan: AllanRunOptions,
+    /// Audit settings (its `noise` is replaced by the chain's when the chain has one).
+    pub audit: AuditOptions,
+    /// VIO settings (its IMU noise is replaced by the chain's when the chain has one).
+    pub vio: VioOptions,
+    /// VIO bias errors are averaged from this many seconds after initialization.
+    pub bias_after_s: f64,
+}
+
+impl Default for ChainOptions {
+    fn default() -> Self {
+        ChainOptions {
+            skip: Vec::new(),
+            calib: CalibOptions::default(),
+            allan: AllanRunOptions::default(),
+            audit: AuditOptions::default(),
+            vio: VioOptions::default(),
+            bias_after_s: 10.0,
+        }
+    }
+}
+
+/// What the chain reports while it works.
+#[derive(Clone, Copy, Debug)]
+pub enum Progress<'a> {
+    /// A stage starts, with a line saying what it does.
+    Stage(Stage, &'a str),
+    /// VIO frames done out of total.
+    Frames(usize, usize),
+}
+
+/// How a stage ended.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Status {
+    /// It ran, taking this many seconds.
+    Ran(f64),
+    /// It did not run; its result was taken from here (a file, or "given").
+    Reused(String),
+    /// It did not run and nothing stands in for it, because of this.
+    Skipped(String),
+}
+
+/// One stage's line of the report.
+#[derive(Clone, Debug)]
+pub struct StageReport {
+    /// Which stage.
+    pub stage: Stage,
+    /// Ran, reused or skipped.
+    pub status: Status,
+    /// Its main figures in one line (empty when skipped).
+    pub headline: String,
+    /// Its section of `report.md` (markdown, links relative to the output folder).
+    pub markdown: String,
+}
+
+/// Everything the chain did and found.
+pub struct ChainReport {
+    /// One entry per stage, in chain order.
+    pub stages: Vec<StageReport>,
+    /// The calibration stage's result, when it ran.
+    pub calibration: Option<CalibrationResult>,
+    /// The Allan stage's result, when it ran.
+    pub allan: Option<AllanReport>,
+    /// The audit's result, when it ran.
+    pub audit: Option<Audit>,
+    /// The VIO's input, result and figures, when it ran.
+    pub vio: Option<(VioInput, VioResult, Summary)>,
+    /// The calibration the VIO used (the audited one when there is one).
+    pub final_calibration: Option<ImuCalibration>,
+    /// The noise the audit and the VIO used.
+    pub noise: Option<ImuNoise>,
+    /// Problems met on the way that did not stop the chain.
+    pub warnings: Vec<String>,
+    /// `report.md`.
+    pub report_path: PathBuf,
+}
+
+/// Markdown image links for the files of `files` that are PNGs, relative to `root`.
+fn figures(root: &Path, files: &[PathBuf]) -> String {
+    let mut s = String::new();
+    for f in files.iter().filter(|f| f.extension().is_some_and(|e| e == "png")) {
+        let rel = f.strip_prefix(root).unwrap_or(f).display().to_string();
+        let _ = writeln!(s, "![{rel}]({rel})\n");
+    }
+    s
+}
+
+fn code(text: &str) -> String {
+    format!("```text\n{}\n```\n\n", text.trim_end())
+}
+
+/// An earlier run's file, unless `stale` (its inputs have just changed).
+fn earlier(path: PathBuf, stale: bool) -> Option<PathBuf> {
+    (!stale && path.is_file()).then_some(path)
+}
+
+/// Run the chain into `out` (created) and write `out/report.md`.
+///
+/// Errors of a stage that runs stop the chain (a stage's output is the next
+/// one's input); a stage without input is skipped with the reason in the report.
+pub fn run_chain(
+    inputs: ChainInputs,
+    opts: &ChainOptions,
+    out: &Path,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<ChainReport, String> {
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
+    let wanted = |s: Stage| !opts.skip.contains(&s);
+    let mut stages = Vec::new();
+    let mut warnings = Vec::new();
+    let ChainInputs { tumble, still, vio, calibration: given_cal, noise: given_noise } = inputs;
+
+    // 1. calibrate
+    let dir = out.join(Stage::Calibrate.id());
+    let mut calibration = None;
+    let mut cal: Option<(ImuCalibration, String)> = None;
+    let calibrated_now = wanted(Stage::Calibrate) && tumble.is_some();
+    if let (true, Some(rec)) = (wanted(Stage::Calibrate), &tumble) {
+        progress(Progress::Stage(Stage::Calibrate, "calibrating the hand tumble (paper eq. 1)"));
+        let t = Instant::now();
+        let r = calibrate(rec, &opts.calib).map_err(|e| format!("calibrate: {}", e.message))?;
+        let files = r.write_all(rec, &opts.calib, &dir).map_err(|e| format!("calibrate: {e}"))?;
+        let secs = t.elapsed().as_secs_f64();
+        warnings.extend(r.warnings.iter().map(|w| format!("calibrate: {w}")));
+        let headline = format!(
+            "{} static intervals; residual RMS accel {:.2e} m/s², gyro {:.2e} rad",
+            r.static_intervals.len(),
+            r.accel_fit.rms,
+            r.gyro_fit.rms
+        );
+        let md = format!("{}{}", code(&r.summary_table()), figures(out, &files));
+        stages.push(StageReport { stage: Stage::Calibrate, status: Status::Ran(secs), headline, markdown: md });
+        cal = Some((r.calibration.clone(), "calibrate".into()));
+        calibration = Some(r);
+    } else if let Some(c) = given_cal {
+        stages.push(reused(Stage::Calibrate, "given".into(), out));
+        cal = Some((c, "given".into()));
+    } else if let Some(p) = earlier(dir.join("calibration.json"), false) {
+        let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
+        stages.push(reused(Stage::Calibrate, p.display().to_string(), out));
+        cal = Some((c, p.display().to_string()));
+    } else {
+        let why = if wanted(Stage::Calibrate) { "no tumble recording" } else { "skipped" };
+        stages.push(skipped(Stage::Calibrate, format!("{why}; no calibration given or found in {}", dir.display())));
+    }
+
+    // 2. allan
+    let dir = out.join(Stage::Allan.id());
+    let mut allan = None;
+    let mut noise: Option<ImuNoise> = None;
+    if let (true, Some(rec)) = (wanted(Stage::Allan), &still) {
+        progress(Progress::Stage(Stage::Allan, "identifying the noise by Allan variance"));
+        let t = Instant::now();
+        let r = run_allan(rec, &opts.allan).map_err(|e| format!("allan: {e}"))?;
+        let files = r.write_all(&dir).map_err(|e| format!("allan: {e}"))?;
+        let secs = t.elapsed().as_secs_f64();
+        warnings.extend(r.warnings.iter().map(|w| format!("allan: {w}")));
+        let headline = match &r.kalibr {
+            Some(k) => format!(
+                "gyro N {:.2e} rad/s/√Hz, K {:.2e}; accel N {:.2e} m/s²/√Hz, K {:.2e}",
+                k.gyroscope_noise_density,
+                k.gyroscope_random_walk,
+                k.accelerometer_noise_density,
+                k.accelerometer_random_walk
+            ),
+            None => "curves only (raw counts: no imu.yaml)".into(),
+        };
+        noise = r.kalibr.as_ref().map(|k| k.imu_noise());
+        let md = format!("{}{}", code(&r.summary_table()), figures(out, &files));
+        stages.push(StageReport { stage: Stage::Allan, status: Status::Ran(secs), headline, markdown: md });
+        allan = Some(r);
+    } else if let Some(n) = given_noise {
+        stages.push(reused(Stage::Allan, "given".into(), out));
+        noise = Some(n);
+    } else if let Some(p) = earlier(dir.join("imu.yaml"), false) {
+        noise = Some(ImuNoise::read(&p).map_err(|e| e.to_string())?);
+        stages.push(reused(Stage::Allan, p.display().to_string(), out));
+    } else {
+        let why = if wanted(Stage::Allan) { "no static recording" } else { "skipped" };
+        stages.push(skipped(Stage::Allan, format!("{why}; no noise given or found in {}", dir.display())));
+    }
+
+    // 3. audit
+    let dir = out.join(Stage::Audit.id());
+    let mut audited = None;
+    let mut final_cal = cal.clone();
+    match (wanted(Stage::Audit), &tumble, &cal) {
+        (true, Some(rec), Some((c, _))) => {
+            progress(Progress::Stage(Stage::Audit, "auditing the calibration for a missing effect"));
+            let t = Instant::now();
+            let mut aopts = opts.audit.clone();
+            if noise.is_some() {
+                aopts.noise = noise;
+            }
+            let a = audit(rec, c, &aopts).map_err(|e| format!("audit: {e}"))?;
+            let files = crate::audit::report::write(&a, &dir).map_err(|e| format!("audit: {e}"))?;
+            let files: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
+            let secs = t.elapsed().as_secs_f64();
+            warnings.extend(a.notes.iter().map(|n| format!("audit: {n}")));
+            let md = format!(
+                "**{}**\n\n{}{}",
+                a.verdict(),
+                code(&crate::audit::report::summary_table(&a)),
+                figures(out, &files)
+            );
+            stages.push(StageReport {
+                stage: Stage::Audit,
+                status: Status::Ran(secs),
+                headline: a.verdict(),
+                markdown: md,
+            });
+            final_cal = Some((a.calibration.clone(), "audit".into()));
+            audited = Some(a);
+        }
+        (want, rec, c) => {
+            // An earlier audit is stale when the calibration it audited is no longer the one in use.
+            let stale = calibrated_now || cal.as_ref().is_some_and(|(_, from)| from == "given");
+            match earlier(dir.join("calibration.json"), stale) {
+                Some(p) => {
+                    let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
+                    stages.push(reused(Stage::Audit, p.display().to_string(), out));
+                    final_cal = Some((c, p.display().to_string()));
+                }
+                None => {
+                    let why = match (want, rec, c) {
+                        (false, ..) => "skipped",
+                        (_, None, _) => "no tumble recording",
+                        _ => "no calibration to audit",
+                    };
+                    stages.push(skipped(Stage::Audit, why.into()));
+                }
+            }
+        }
+    }
+
+    // 4. vio
+    let dir = out.join(Stage::Vio.id());
+    let mut vio_out = None;
+    match (wanted(Stage::Vio), vio) {
+        (true, Some(source)) => {
+            let input = source(final_cal.as_ref().map(|(c, _)| c)).map_err(|e| format!("vio: {e}"))?;
+            let mut vopts = opts.vio.clone();
+            let noise_from = match (noise, input.noise) {
+                (Some(n), _) => {
+                    n.apply(&mut vopts.imu);
+                    "the Allan stage"
+                }
+                (None, Some(n)) => {
+                    n.apply(&mut vopts.imu);
+                    "the dataset's sensor.yaml"
+                }
+                (None, None) => "the built-in defaults",
+            };
+            let cal_from = final_cal.as_ref().map_or("none (samples used as read)".to_string(), |(_, f)| f.clone());
+            let line = format!("fusing IMU and camera ({} frames); calibration: {cal_from}", input.frames.len());
+            progress(Progress::Stage(Stage::Vio, &line));
+            let t = Instant::now();
+            let mut tick = |done: usize, total: usize| progress(Progress::Frames(done, total));
+            let result = crate::vio::run(&input, &vopts, Some(&mut tick)).map_err(|e| format!("vio: {e}"))?;
+            let summary = summarize(&input, &vopts, &result, opts.bias_after_s);
+            let files = write_outputs(&dir, &input, &result, &summary).map_err(|e| format!("vio: {e}"))?;
+            let secs = t.elapsed().as_secs_f64();
+            warnings.extend(summary.warnings.iter().map(|w| format!("vio: {w}")));
+            let mut headline = format!(
+                "{:.1} m in {:.0} s, closed loop {:.3} m (IMU only {:.1} m)",
+                summary.distance_m,
+                summary.duration_s,
+                summary.closed_loop_error_m,
+                summary.imu_only_closed_loop_error_m
+            );
+            if let Some(ate) = summary.ate_rmse_m {
+                let _ = write!(headline, ", ATE {ate:.3} m");
+            }
+            let md = format!(
+                "Input `{}`; calibration: {cal_from}; noise from {noise_from}.\n\n{}{}",
+                input.name,
+                code(&summary.table()),
+                figures(out, &files)
+            );
+            stages.push(StageReport { stage: Stage::Vio, status: Status::Ran(secs), headline, markdown: md });
+            vio_out = Some((input, result, summary));
+        }
+        (want, _) => {
+            let why = if want { "no VIO data given" } else { "skipped" };
+            stages.push(skipped(Stage::Vio, why.into()));
+        }
+    }
+
+    let report_path = out.join("report.md");
+    let report = ChainReport {
+        stages,
+        calibration,
+        allan,
+        audit: audited,
+        vio: vio_out,
+        final_calibration: final_cal.map(|(c, _)| c),
+        noise,
+        warnings,
+        report_path: report_path.clone(),
+    };
+    std::fs::write(&report_path, report.markdown()).map_err(|e| format!("{}: {e}", report_path.display()))?;
+    Ok(report)
+}
+
+/// A stage that did not run; `from` names where its result came from. When
+/// that is an earlier run's folder, its figures are linked again.
+fn reused(stage: Stage, from: String, out: &Path) -> StageReport {
+    let dir = out.join(stage.id());
+    let mut md = format!("Not run: taken from {from}.\n\n");
+    if Path::new(&from).starts_with(&dir) {
+        let mut pngs: Vec<PathBuf> =
+            std::fs::read_dir(&dir).map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect()).unwrap_or_default();
+        pngs.sort();
+        md.push_str(&figures(out, &pngs));
+    }
+    StageReport { stage, status: Status::Reused(from), headline: String::new(), markdown: md }
+}
+
+fn skipped(stage: Stage, why: String) -> StageReport {
+    let md = format!("Not run: {why}.\n\n");
+    StageReport { stage, status: Status::Skipped(why), headline: String::new(), markdown: md }
+}
+
+impl ChainReport {
+    /// A few lines for the terminal: per stage what happened and its main figures.
+    pub fn summary(&self) -> String {
+        let mut s = String::new();
+        for st in &self.stages {
+            let what = match &st.status {
+                Status::Ran(secs) => format!("{:>6.1} s  {}", secs, st.headline),
+                Status::Reused(from) => format!("  reused  {from}"),
+                Status::Skipped(why) => format!(" skipped  {why}"),
+            };
+            let _ = writeln!(s, "{:<10}{what}", st.stage.id());
+        }
+        let _ = writeln!(s, "report: {}", self.report_path.display());
+        s
+    }
+
+    /// `report.md`: a table of the stages, then each stage's tables and figures.
+    pub fn markdown(&self) -> String {
+        let mut s = String::from("# tumble run\n\n| stage | status | result |\n|---|---|---|\n");
+        for st in &self.stages {
+            let status = match &st.status {
+                Status::Ran(secs) => format!("ran in {secs:.1} s"),
+                Status::Reused(from) => format!("reused `{from}`"),
+                Status::Skipped(why) => format!("skipped: {why}"),
+            };
+            let _ = writeln!(s, "| [{0}](#{0}) | {status} | {1} |", st.stage.id(), st.headline);
+        }
+        let titles = [
+            "Calibration (hand tumble, eq. 1)",
+            "Noise (Allan deviation of the static log)",
+            "Model-discrepancy audit",
+            "Online bias estimation (VIO)",
+        ];
+        for st in &self.stages {
+            let title = titles[Stage::ALL.iter().position(|x| *x == st.stage).unwrap_or(0)];
+            let _ = write!(s, "\n<a id=\"{}\"></a>\n## {title}\n\n{}", st.stage.id(), st.markdown);
+        }
+        if !self.warnings.is_empty() {
+            let _ = writeln!(s, "\n## Warnings\n");
+            for w in &self.warnings {
+                let _ = writeln!(s, "- {w}");
+            }
+        }
+        s
+    }
+}
