@@ -124,8 +124,13 @@ fn run_frontend(
         eprintln!("warning: {w}");
     }
     println!("frontend: {}", stats.line());
-    println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+    println!("wrote {}", paths(&files));
     Ok(obs)
+}
+
+/// Paths for a "wrote …" line.
+fn paths(files: &[PathBuf]) -> String {
+    files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
 }
 
 fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
@@ -655,10 +660,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             let elapsed = t.elapsed().as_secs_f64();
             print!("{}", report.summary_table());
             let files = report.write_all(&out)?;
-            println!(
-                "\ncomputed in {elapsed:.2} s; wrote {}",
-                files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
-            );
+            println!("\ncomputed in {elapsed:.2} s; wrote {}", paths(&files));
         }
         Command::Calibrate {
             input,
@@ -704,10 +706,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 eprintln!("warning: {w}");
             }
             let files = result.write_all(&rec, &opts, &out)?;
-            println!(
-                "calibrated in {elapsed:.3} s; wrote {}",
-                files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
-            );
+            println!("calibrated in {elapsed:.3} s; wrote {}", paths(&files));
         }
         Command::Audit { input, calibration, noise, out, alpha, max_effects, candidates, init_static } => {
             use tumble::audit::{audit, AuditOptions, Effect};
@@ -776,7 +775,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 "corrected {} samples (eq. 16{}) into {}",
                 rec.len(),
                 if corr.has_effects() { format!(" + {}", cal.effect_ids().join(", ")) } else { String::new() },
-                written.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+                paths(&written)
             );
         }
         Command::Vio {
@@ -803,13 +802,13 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 opts.imu.scheme = tumble::factors::imu_preint::Scheme::Midpoint;
             }
             let vin = vio_input(&input, cal.as_ref(), groundtruth.as_deref(), simulate_camera, seed, &frontend, &out)?;
-            match (&noise, vin.noise) {
-                (Some(p), _) => ImuNoise::read(p)?.apply(&mut opts.imu),
-                (None, Some(n)) => {
-                    n.apply(&mut opts.imu);
-                    println!("noise: the figures of the dataset's imu0/sensor.yaml");
+            let given = noise.as_deref().map(ImuNoise::read).transpose()?;
+            match vin.apply_noise(given, &mut opts.imu) {
+                tumble::vio::NoiseSource::Given => {}
+                tumble::vio::NoiseSource::Input => println!("noise: the figures of the dataset's imu0/sensor.yaml"),
+                tumble::vio::NoiseSource::Default => {
+                    println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)")
                 }
-                (None, None) => println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)"),
             }
             if init_from_groundtruth {
                 opts.init = ground_truth_init(&vin)?;
@@ -827,7 +826,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             }
             println!("{}", summary.table());
             let files = tumble::vio::write_outputs(&out, &vin, &result, &summary)?;
-            println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+            println!("wrote {}", paths(&files));
         }
         Command::Eval { estimate, groundtruth, align, biases, rpe_distances, bias_after, max_gap, out } => {
             use tumble::io::{biases::read_biases, trajectory::read_trajectory};
@@ -861,7 +860,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             print!("{}", ev.metrics.table());
             let dir = out.unwrap_or_else(|| estimate.with_file_name("eval"));
             let files = tumble::eval::write_report(&dir, &ev)?;
-            println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+            println!("wrote {}", paths(&files));
         }
         Command::Track { input, camera, out, frontend } => {
             let ds = tumble::io::asl::read_asl(&input, &Default::default())?;

@@ -29,7 +29,7 @@ use crate::audit::{audit, Audit, AuditOptions};
 use crate::calib::model::ImuCalibration;
 use crate::calib::{calibrate, CalibOptions, CalibrationResult};
 use crate::io::{ImuNoise, ImuRecording};
-use crate::vio::{summarize, write_outputs, Summary, VioInput, VioOptions, VioResult};
+use crate::vio::{summarize, write_outputs, NoiseSource, Summary, VioInput, VioOptions, VioResult};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -188,9 +188,9 @@ fn code(text: &str) -> String {
     format!("```text\n{}\n```\n\n", text.trim_end())
 }
 
-/// An earlier run's file, unless `stale` (its inputs have just changed).
-fn earlier(path: PathBuf, stale: bool) -> Option<PathBuf> {
-    (!stale && path.is_file()).then_some(path)
+/// An earlier run's file, if there is one.
+fn earlier(path: PathBuf) -> Option<PathBuf> {
+    path.is_file().then_some(path)
 }
 
 /// Run the chain into `out` (created) and write `out/report.md`.
@@ -213,7 +213,6 @@ pub fn run_chain(
     let dir = out.join(Stage::Calibrate.id());
     let mut calibration = None;
     let mut cal: Option<(ImuCalibration, String)> = None;
-    let calibrated_now = wanted(Stage::Calibrate) && tumble.is_some();
     if let (true, Some(rec)) = (wanted(Stage::Calibrate), &tumble) {
         progress(Progress::Stage(Stage::Calibrate, "calibrating the hand tumble (paper eq. 1)"));
         let t = Instant::now();
@@ -234,7 +233,7 @@ pub fn run_chain(
     } else if let Some(c) = given_cal {
         stages.push(reused(Stage::Calibrate, "given".into(), out));
         cal = Some((c, "given".into()));
-    } else if let Some(p) = earlier(dir.join("calibration.json"), false) {
+    } else if let Some(p) = earlier(dir.join("calibration.json")) {
         let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
         stages.push(reused(Stage::Calibrate, p.display().to_string(), out));
         cal = Some((c, p.display().to_string()));
@@ -271,7 +270,7 @@ pub fn run_chain(
     } else if let Some(n) = given_noise {
         stages.push(reused(Stage::Allan, "given".into(), out));
         noise = Some(n);
-    } else if let Some(p) = earlier(dir.join("imu.yaml"), false) {
+    } else if let Some(p) = earlier(dir.join("imu.yaml")) {
         noise = Some(ImuNoise::read(&p).map_err(|e| e.to_string())?);
         stages.push(reused(Stage::Allan, p.display().to_string(), out));
     } else {
@@ -313,8 +312,8 @@ pub fn run_chain(
         }
         (want, rec, c) => {
             // An earlier audit is stale when the calibration it audited is no longer the one in use.
-            let stale = calibrated_now || cal.as_ref().is_some_and(|(_, from)| from == "given");
-            match earlier(dir.join("calibration.json"), stale) {
+            let stale = calibration.is_some() || cal.as_ref().is_some_and(|(_, from)| from == "given");
+            match earlier(dir.join("calibration.json")).filter(|_| !stale) {
                 Some(p) => {
                     let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
                     stages.push(reused(Stage::Audit, p.display().to_string(), out));
@@ -339,16 +338,10 @@ pub fn run_chain(
         (true, Some(source)) => {
             let input = source(final_cal.as_ref().map(|(c, _)| c)).map_err(|e| format!("vio: {e}"))?;
             let mut vopts = opts.vio.clone();
-            let noise_from = match (noise, input.noise) {
-                (Some(n), _) => {
-                    n.apply(&mut vopts.imu);
-                    "the Allan stage"
-                }
-                (None, Some(n)) => {
-                    n.apply(&mut vopts.imu);
-                    "the dataset's sensor.yaml"
-                }
-                (None, None) => "the built-in defaults",
+            let noise_from = match input.apply_noise(noise, &mut vopts.imu) {
+                NoiseSource::Given => "the Allan stage",
+                NoiseSource::Input => "the dataset's sensor.yaml",
+                NoiseSource::Default => "the built-in defaults",
             };
             let cal_from = final_cal.as_ref().map_or("none (samples used as read)".to_string(), |(_, f)| f.clone());
             let line = format!("fusing IMU and camera ({} frames); calibration: {cal_from}", input.frames.len());

@@ -13,6 +13,7 @@ use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
 use std::path::Path;
 use tumble_factors::camera::{CameraModel, Distortion};
+use tumble_factors::imu_preint::PreintegrationParams;
 use tumble_solvers::sophus_lie::Isometry3F64;
 
 /// Calibrated IMU samples in the body (IMU) frame.
@@ -33,6 +34,17 @@ pub struct Frame {
     pub t: f64,
     /// Observed features.
     pub features: Vec<(u64, [f64; 2])>,
+}
+
+/// Where a run's IMU noise came from ([`VioInput::apply_noise`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoiseSource {
+    /// Given by the caller.
+    Given,
+    /// The input's own figures ([`VioInput::noise`]).
+    Input,
+    /// Neither: the preintegration defaults (EuRoC's ADIS16448).
+    Default,
 }
 
 /// Everything the estimator needs for one run.
@@ -58,6 +70,23 @@ pub struct VioInput {
 }
 
 impl VioInput {
+    /// Set the IMU noise of a run: `given` (e.g. `tumble allan`'s `imu.yaml`)
+    /// when there, else the input's own figures, else `p`'s defaults are kept.
+    /// Returns which it was.
+    pub fn apply_noise(&self, given: Option<ImuNoise>, p: &mut PreintegrationParams) -> NoiseSource {
+        match (given, self.noise) {
+            (Some(n), _) => {
+                n.apply(p);
+                NoiseSource::Given
+            }
+            (None, Some(n)) => {
+                n.apply(p);
+                NoiseSource::Input
+            }
+            (None, None) => NoiseSource::Default,
+        }
+    }
+
     /// Check what a run needs: samples, frames in order, finite numbers.
     pub fn check(&self) -> Result<(), String> {
         let name = &self.name;

@@ -37,7 +37,7 @@ pub mod output;
 
 pub use crate::io::ImuNoise;
 pub use estimator::{run, Estimator, FrameEstimate, VioResult};
-pub use input::{read_eqvio, Frame, ImuData, VioInput};
+pub use input::{read_eqvio, Frame, ImuData, NoiseSource, VioInput};
 pub use output::{bias_track, summarize, trajectory, write_outputs, Summary};
 
 use tumble_factors::imu_preint::{PreintegrationParams, Scheme};
