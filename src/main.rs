@@ -411,6 +411,11 @@ enum Command {
         /// Seed of the simulated camera's landmarks and noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Also record the run for the rerun viewer into this .rrd file: images with
+        /// features, poses, window, landmarks, ground truth, biases (cargo feature
+        /// `rerun`; view with `pip install rerun-sdk==0.36.3 && rerun FILE.rrd`).
+        #[arg(long, value_name = "FILE.rrd")]
+        rerun: Option<PathBuf>,
         /// The visual frontend, used when cam0 has images but no tracks.csv.
         #[command(flatten)]
         frontend: FrontendArgs,
@@ -498,6 +503,11 @@ enum Command {
         /// vio stage without camera data: a simulated camera flies the ground truth.
         #[arg(long)]
         simulate_camera: bool,
+        /// Also record the vio stage for the rerun viewer into this .rrd file: images with
+        /// features, poses, window, landmarks, ground truth, biases (cargo feature
+        /// `rerun`; view with `pip install rerun-sdk==0.36.3 && rerun FILE.rrd`).
+        #[arg(long, value_name = "FILE.rrd")]
+        rerun: Option<PathBuf>,
         /// How to read text recordings (both --tumble and --static).
         #[command(flatten)]
         read: RecordingArgs,
@@ -793,9 +803,13 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             bias_after,
             simulate_camera,
             seed,
+            rerun,
             frontend,
         } => {
             use tumble::vio::{ImuNoise, VioOptions};
+            if let Some(r) = &rerun {
+                tumble::vio::rerun_available(r)?;
+            }
             let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
             let mut opts = VioOptions { window, pixel_sigma, gravity, noise_from_static, ..VioOptions::default() };
             if midpoint {
@@ -818,14 +832,15 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 "vio [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})",
             );
             let mut tick = |done: usize, _: usize| bar.set_position(done as u64);
-            let result = tumble::vio::run(&vin, &opts, Some(&mut tick))?;
+            let (result, recorded) = tumble::vio::run_recorded(&vin, &opts, Some(&mut tick), rerun.as_deref())?;
             bar.finish_and_clear();
             let summary = tumble::vio::summarize(&vin, &opts, &result, bias_after);
             for w in &summary.warnings {
                 eprintln!("warning: {w}");
             }
             println!("{}", summary.table());
-            let files = tumble::vio::write_outputs(&out, &vin, &result, &summary)?;
+            let mut files = tumble::vio::write_outputs(&out, &vin, &result, &summary)?;
+            files.extend(recorded);
             println!("wrote {}", paths(&files));
         }
         Command::Eval { estimate, groundtruth, align, biases, rpe_distances, bias_after, max_gap, out } => {
@@ -884,6 +899,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             groundtruth,
             simulate_camera,
             read,
+            rerun,
             frontend,
         } => {
             use tumble::pipeline::{run_chain, ChainInputs, ChainOptions, Progress, Stage};
@@ -898,7 +914,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if !(init_static.is_finite() && init_static > 0.0) {
                 return Err(format!("--init-static must be positive, got {init_static}").into());
             }
-            let mut opts = ChainOptions { skip, ..Default::default() };
+            let mut opts = ChainOptions { skip, rerun, ..Default::default() };
             opts.calib.init_static_s = init_static;
             opts.allan.progress = std::io::IsTerminal::is_terminal(&std::io::stderr());
             if tumble_rec.is_some() && !opts.skip.contains(&Stage::Calibrate) {

@@ -104,6 +104,9 @@ pub struct ChainOptions {
     pub vio: VioOptions,
     /// VIO bias errors are averaged from this many seconds after initialization.
     pub bias_after_s: f64,
+    /// Record the VIO stage into this rerun file (cargo feature `rerun`; an
+    /// error before any stage runs without it).
+    pub rerun: Option<PathBuf>,
 }
 
 impl Default for ChainOptions {
@@ -115,6 +118,7 @@ impl Default for ChainOptions {
             audit: AuditOptions::default(),
             vio: VioOptions::default(),
             bias_after_s: 10.0,
+            rerun: None,
         }
     }
 }
@@ -203,6 +207,9 @@ pub fn run_chain(
     out: &Path,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<ChainReport, String> {
+    if let Some(r) = &opts.rerun {
+        crate::vio::rerun_available(r)?;
+    }
     std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
     let wanted = |s: Stage| !opts.skip.contains(&s);
     let mut stages = Vec::new();
@@ -348,9 +355,13 @@ pub fn run_chain(
             progress(Progress::Stage(Stage::Vio, &line));
             let t = Instant::now();
             let mut tick = |done: usize, total: usize| progress(Progress::Frames(done, total));
-            let result = crate::vio::run(&input, &vopts, Some(&mut tick)).map_err(|e| format!("vio: {e}"))?;
+            let (result, recorded) = crate::vio::run_recorded(&input, &vopts, Some(&mut tick), opts.rerun.as_deref())
+                .map_err(|e| format!("vio: {e}"))?;
             let summary = summarize(&input, &vopts, &result, opts.bias_after_s);
             let files = write_outputs(&dir, &input, &result, &summary).map_err(|e| format!("vio: {e}"))?;
+            let recorded = recorded.map_or(String::new(), |p| {
+                format!("\n\nRecorded for the rerun viewer: `{}` (`rerun {}`).", p.display(), p.display())
+            });
             let secs = t.elapsed().as_secs_f64();
             warnings.extend(summary.warnings.iter().map(|w| format!("vio: {w}")));
             let mut headline = format!(
@@ -364,7 +375,7 @@ pub fn run_chain(
                 let _ = write!(headline, ", ATE {ate:.3} m");
             }
             let md = format!(
-                "Input `{}`; calibration: {cal_from}; noise from {noise_from}.\n\n{}{}",
+                "Input `{}`; calibration: {cal_from}; noise from {noise_from}.\n\n{}{}{recorded}",
                 input.name,
                 code(&summary.table()),
                 figures(out, &files)

@@ -155,5 +155,15 @@ fn run_command_refuses_bad_arguments() {
     assert!(e.contains("/nonexistent/tumble.csv"), "{e}");
     let e = run(&["--out", o, "--vio", "x", "--noise", "/nonexistent/imu.yaml"]);
     assert!(e.contains("/nonexistent/imu.yaml"), "{e}");
+    if !cfg!(feature = "rerun") {
+        // Refused before any stage runs, with the way to get it.
+        let e = run(&["--out", o, "--vio", "x", "--rerun", "r.rrd"]);
+        assert!(e.contains("--features rerun") && e.contains("r.rrd"), "{e}");
+        let vio = Command::new(env!("CARGO_BIN_EXE_tumble"))
+            .args(["vio", "x", "--out", o, "--rerun", "r.rrd"])
+            .output()
+            .unwrap();
+        assert!(String::from_utf8_lossy(&vio.stderr).contains("--features rerun"));
+    }
     std::fs::remove_dir_all(&out).ok();
 }

@@ -145,7 +145,7 @@ fn quantization_saturation_and_temperature() {
 
 #[test]
 fn walk_round_trips_through_the_readers_and_returns_to_start() {
-    let c = SimConfig { duration_s: Some(30.0), ..SimConfig::default() };
+    let c = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
     let dir = out_dir("walk");
     let s = simulate_and_write(Scenario::Walk, &c, 4, &dir).unwrap();
     let d = read_asl(&dir, &ImuTextFormat::default()).unwrap();
@@ -250,4 +250,18 @@ fn sample_time_jitter_moves_samples_by_the_set_amount() {
     }
     let sigma = (num / den).sqrt();
     assert!((sigma / 1e-3 - 1.0).abs() < 0.1, "jitter {sigma}");
+}
+
+#[test]
+fn loops_too_short_for_plausible_dynamics_are_refused() {
+    // The walk and flight are time-scaled: a 20 s walk would shake at ~25 g.
+    for (scenario, seconds) in [(Scenario::Walk, 20.0), (Scenario::Flight, 15.0)] {
+        let c = SimConfig { duration_s: Some(seconds), ..SimConfig::default() };
+        let e = simulate(scenario, &c, 1).err().unwrap();
+        assert!(e.contains("at least") && e.contains(" g)"), "{e}");
+    }
+    for (scenario, seconds) in [(Scenario::Walk, 40.0), (Scenario::Flight, 25.0)] {
+        let c = SimConfig { duration_s: Some(seconds), ..SimConfig::default() };
+        assert!(simulate(scenario, &c, 1).is_ok(), "{scenario:?} {seconds} s");
+    }
 }

@@ -82,7 +82,7 @@ fn frames_without_features_warn_and_recover() {
 
 #[test]
 fn imu_gaps_warn_and_recover() {
-    let (mut input, opts) = walk(30.0, 6);
+    let (mut input, opts) = walk(40.0, 6);
     let keep: Vec<usize> =
         (0..input.imu.t.len()).filter(|&i| !(input.imu.t[i] > 12.0 && input.imu.t[i] < 12.2)).collect();
     input.imu.t = keep.iter().map(|&i| input.imu.t[i]).collect();
@@ -95,7 +95,7 @@ fn imu_gaps_warn_and_recover() {
 
 #[test]
 fn pure_rotation_triangulates_nothing_and_stays_finite() {
-    let (mut input, opts) = walk(20.0, 7);
+    let (mut input, opts) = walk(40.0, 7);
     // Every feature keeps its pixel: no parallax at all (a camera that only rotates
     // about its centre sees the same — no depth can be triangulated).
     let first = input.frames[0].features.clone();
@@ -109,7 +109,7 @@ fn pure_rotation_triangulates_nothing_and_stays_finite() {
 
 #[test]
 fn a_start_in_motion_is_refused_with_advice() {
-    let (mut input, opts) = walk(20.0, 8);
+    let (mut input, opts) = walk(40.0, 8);
     // Drop the first 5 s: the recording starts while moving.
     let k = input.imu.t.partition_point(|&t| t < 5.0);
     input.imu.t.drain(..k);

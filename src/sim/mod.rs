@@ -36,9 +36,11 @@ pub enum Scenario {
     Tumble,
     /// A long static log for Allan variance (default 2 h).
     Static,
-    /// The paper's 6-minute hand-held loop in a 1 m cube, with a camera.
+    /// The paper's 6-minute hand-held loop in a 1 m cube, with a camera
+    /// (time-scaled to the duration; at least ~35 s, see [`MAX_LOOP_ACCELERATION`]).
     Walk,
-    /// An EuRoC-like flight in a room (default 120 s), with a camera.
+    /// An EuRoC-like flight in a room (default 120 s), with a camera
+    /// (time-scaled like the walk; at least ~20 s).
     Flight,
 }
 
@@ -198,6 +200,30 @@ pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Sim
     simulate_with(scenario, config, seed, &mut |_, _| {})
 }
 
+/// Largest acceleration a walk or flight may reach \[m/s²\] (4 g): the loops
+/// are time-scaled to their duration, so a short one shakes harder, and beyond
+/// this it is no longer a hand-held or flying motion.
+pub const MAX_LOOP_ACCELERATION: f64 = 4.0 * crate::io::STANDARD_GRAVITY;
+
+/// Refuse a loop whose duration compresses it into implausible dynamics.
+fn check_dynamics(scenario: Scenario, motion: &dyn Motion) -> Result<(), String> {
+    let d = motion.duration();
+    let peak = (0..=(d * 50.0) as usize).map(|k| motion.at(k as f64 / 50.0).acceleration.norm()).fold(0.0, f64::max);
+    if peak <= MAX_LOOP_ACCELERATION {
+        return Ok(());
+    }
+    // Accelerations scale with the inverse square of the moving time (duration − 10 s).
+    let shortest = (d - 10.0) * (peak / MAX_LOOP_ACCELERATION).sqrt() + 10.0;
+    Err(format!(
+        "a {d:.0} s {} time-compresses its loop to accelerations of {peak:.0} m/s² ({:.1} g), \
+         beyond the {:.0} g of a real one: give a duration of at least {:.0} s",
+        if scenario == Scenario::Walk { "walk" } else { "flight" },
+        peak / crate::io::STANDARD_GRAVITY,
+        MAX_LOOP_ACCELERATION / crate::io::STANDARD_GRAVITY,
+        shortest.ceil()
+    ))
+}
+
 /// [`simulate`], handing each finished chunk of IMU samples to `on_chunk`.
 pub fn simulate_with(
     scenario: Scenario,
@@ -229,6 +255,9 @@ pub fn simulate_with(
             (Box::new(m), Vector3::new(0.0, 0.0, 1.5), Vec::new())
         }
     };
+    if matches!(scenario, Scenario::Walk | Scenario::Flight) {
+        check_dynamics(scenario, motion.as_ref())?;
+    }
     let bias_every = ((config.imu.rate_hz / groundtruth_rate(scenario, config)).round() as usize).max(1);
     let imu = imu::simulate_imu_streaming(motion.as_ref(), &config.imu, config.gravity, seed, bias_every, on_chunk);
     let camera = config.camera_enabled.unwrap_or(matches!(scenario, Scenario::Walk | Scenario::Flight));

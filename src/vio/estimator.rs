@@ -115,6 +115,29 @@ fn vec3(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
 
+/// A track's landmark in the world frame \[m\]: its anchor observation's ray
+/// at the estimated inverse depth, seen from the anchor state's camera.
+fn landmark_world(values: &Values, body_from_camera: &Isometry3F64, tr: &Track) -> Option<Vector3<f64>> {
+    let (lid, anchor) = tr.landmark?;
+    let a = tr.obs.iter().find(|o| o.sid == anchor)?;
+    let (ra, pa) = parts(values.get::<Isometry3F64>(X(anchor)).ok()?);
+    let rho = values.get::<Vector1<f64>>(L(lid)).ok()?[0];
+    let (r_bc, t_bc) = parts(body_from_camera);
+    let pw = ra * (r_bc * (Vector3::new(a.xy[0], a.xy[1], 1.0) / rho) + t_bc) + pa;
+    pw.iter().all(|x| x.is_finite()).then_some(pw)
+}
+
+/// A window state as [`Estimator::window`] reports it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowState {
+    /// State time \[s\] (input time axis).
+    pub t: f64,
+    /// Body position in the world frame \[m\].
+    pub position: [f64; 3],
+    /// Rotation world←body `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+}
+
 impl<'a> Estimator<'a> {
     /// An estimator over `input` (frames are given to [`Estimator::process`] by index).
     pub fn new(input: &'a VioInput, opts: &VioOptions) -> Self {
@@ -139,6 +162,30 @@ impl<'a> Estimator<'a> {
             init_time: None,
             no_feature_since: None,
         }
+    }
+
+    /// The states in the window now (keyframes, and the newest frame while it
+    /// is being decided), oldest first.
+    pub fn window(&self) -> Vec<WindowState> {
+        self.states
+            .iter()
+            .filter_map(|s| {
+                let x = self.values.get::<Isometry3F64>(X(s.sid)).ok()?;
+                let (r, p) = parts(x);
+                let q = UnitQuaternion::from_matrix(&r);
+                Some(WindowState { t: s.t, position: vec3(&p), rotation: [q.w, q.i, q.j, q.k] })
+            })
+            .collect()
+    }
+
+    /// The landmarks in the window now, by track id, in the world frame \[m\].
+    pub fn landmarks(&self) -> Vec<(u64, [f64; 3])> {
+        self.tracks
+            .iter()
+            .filter_map(|(id, tr)| {
+                landmark_world(&self.values, &self.input.body_from_camera, tr).map(|p| (*id, vec3(&p)))
+            })
+            .collect()
     }
 
     fn warn(&mut self, msg: String) {
@@ -649,16 +696,10 @@ impl<'a> Estimator<'a> {
             let Some(&xy) = obs.get(id) else { continue };
             let tr = self.tracks.entry(*id).or_default();
             // A landmark the predicted pose would see behind the camera: skip the observation.
-            if let Some((lid, anchor)) = tr.landmark {
-                let (Some(a), Ok(x), Ok(rho)) = (
-                    tr.obs.iter().find(|o| o.sid == anchor),
-                    self.values.get::<Isometry3F64>(X(anchor)),
-                    self.values.get::<Vector1<f64>>(L(lid)),
-                ) else {
+            if tr.landmark.is_some() {
+                let Some(pw) = landmark_world(&self.values, &self.input.body_from_camera, tr) else {
                     continue;
                 };
-                let (ra, pa) = parts(x);
-                let pw = ra * (r_bc * (Vector3::new(a.xy[0], a.xy[1], 1.0) / rho[0]) + t_bc) + pa;
                 if (r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc)).z < 0.05 {
                     continue;
                 }
@@ -707,7 +748,19 @@ impl<'a> Estimator<'a> {
 pub fn run(
     input: &VioInput,
     opts: &VioOptions,
+    progress: Option<&mut dyn FnMut(usize, usize)>,
+) -> Result<VioResult, String> {
+    run_observed(input, opts, progress, &mut |_, _, _| {})
+}
+
+/// As [`run`], calling `observe(estimator, frame index, estimate)` after each
+/// frame that produced an estimate — e.g. to record the window and its
+/// landmarks for a viewer ([`Estimator::window`], [`Estimator::landmarks`]).
+pub fn run_observed(
+    input: &VioInput,
+    opts: &VioOptions,
     mut progress: Option<&mut dyn FnMut(usize, usize)>,
+    observe: &mut dyn FnMut(&Estimator, usize, &FrameEstimate),
 ) -> Result<VioResult, String> {
     input.check()?;
     let t0 = Instant::now();
@@ -715,6 +768,7 @@ pub fn run(
     let mut out = VioResult::default();
     for i in 0..input.frames.len() {
         if let Some(e) = est.process(i) {
+            observe(&est, i, &e);
             out.estimates.push(e);
         }
         if let Some(p) = progress.as_mut() {

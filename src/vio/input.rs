@@ -67,6 +67,9 @@ pub struct VioInput {
     /// IMU noise figures the input itself gives (ASL `imu0/sensor.yaml`, the
     /// simulator's model), if any.
     pub noise: Option<ImuNoise>,
+    /// The camera's image files by time \[ns\] (absolute, like `t0_ns`) when
+    /// the input came from an image folder; for viewers, not the estimator.
+    pub images: Vec<(i64, std::path::PathBuf)>,
 }
 
 impl VioInput {
@@ -186,6 +189,7 @@ impl VioInput {
             body_from_camera,
             groundtruth: Some(gt),
             noise: Some(ImuNoise::from_model(m)),
+            images: Vec::new(),
         })
     }
 
@@ -241,6 +245,7 @@ impl VioInput {
             body_from_camera,
             groundtruth: ds.groundtruth,
             noise,
+            images: Vec::new(),
         })
     }
 
@@ -287,6 +292,7 @@ impl VioInput {
         let body_from_camera = pose(t_ic.rotation.to_rotation_matrix().matrix(), &t_ic.translation.vector);
         let imu = imu_data(&ds.imu, calibration);
         let noise = sensor_noise(&ds);
+        let images = cam.frames.clone();
         Ok(VioInput {
             name: ds.root.display().to_string(),
             t0_ns: t0,
@@ -296,6 +302,7 @@ impl VioInput {
             body_from_camera,
             groundtruth: ds.groundtruth,
             noise,
+            images,
         })
     }
 }
@@ -419,5 +426,6 @@ pub fn read_eqvio(path: &Path, groundtruth: Option<&Path>) -> Result<VioInput, I
         body_from_camera: pose(q.to_rotation_matrix().matrix(), &t_ci),
         groundtruth,
         noise: None,
+        images: Vec::new(),
     })
 }

@@ -21,9 +21,10 @@
 //! use tumble::sim::{simulate, Scenario, SimConfig};
 //! use tumble::vio::{run, VioInput, VioOptions};
 //! let mut cfg = SimConfig::default();
-//! cfg.duration_s = Some(12.0);
+//! cfg.duration_s = Some(40.0);
 //! let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
-//! let input = VioInput::from_simulation(&sim).unwrap();
+//! let mut input = VioInput::from_simulation(&sim).unwrap();
+//! input.frames.retain(|f| f.t < 8.0); // the first 8 s, to keep the example short
 //! let out = run(&input, &VioOptions::default(), None).unwrap();
 //! let last = out.estimates.last().unwrap();
 //! assert!(last.position.iter().all(|x| x.is_finite()));
@@ -34,9 +35,11 @@ pub mod frontend;
 pub mod geometry;
 pub mod input;
 pub mod output;
+#[cfg(feature = "rerun")]
+pub mod record;
 
 pub use crate::io::ImuNoise;
-pub use estimator::{run, Estimator, FrameEstimate, VioResult};
+pub use estimator::{run, run_observed, Estimator, FrameEstimate, VioResult, WindowState};
 pub use input::{read_eqvio, Frame, ImuData, NoiseSource, VioInput};
 pub use output::{bias_track, summarize, trajectory, write_outputs, Summary};
 
@@ -148,4 +151,54 @@ impl VioOptions {
         ImuNoise::from_model(&cfg.imu).apply(&mut o.imu);
         o
     }
+}
+
+/// [`run`], also recording the run into the rerun file `rerun` when given
+/// (see `record`; needs the cargo feature `rerun`, an error without it).
+/// Returns the result (with the recording's warnings, e.g. an unreadable
+/// image) and the file written.
+pub fn run_recorded(
+    input: &VioInput,
+    opts: &VioOptions,
+    progress: Option<&mut dyn FnMut(usize, usize)>,
+    rerun: Option<&std::path::Path>,
+) -> Result<(VioResult, Option<std::path::PathBuf>), String> {
+    let Some(path) = rerun else {
+        return run(input, opts, progress).map(|r| (r, None));
+    };
+    #[cfg(feature = "rerun")]
+    {
+        let mut rec = record::Recorder::create(path, input)?.with_images(input.images.iter().cloned());
+        let mut result = run_observed(input, opts, progress, &mut |est, i, e| rec.frame(est, i, e))?;
+        let (written, warnings) = rec.finish()?;
+        result.warnings.extend(warnings);
+        Ok((result, Some(written)))
+    }
+    #[cfg(not(feature = "rerun"))]
+    {
+        let _ = progress;
+        Err(rerun_missing(path))
+    }
+}
+
+/// Ok when this build can write the rerun file `path` (cargo feature
+/// `rerun`); otherwise the error saying how to get it — for callers that
+/// check before long work.
+pub fn rerun_available(path: &std::path::Path) -> Result<(), String> {
+    #[cfg(feature = "rerun")]
+    {
+        let _ = path;
+        Ok(())
+    }
+    #[cfg(not(feature = "rerun"))]
+    Err(rerun_missing(path))
+}
+
+#[cfg(not(feature = "rerun"))]
+fn rerun_missing(path: &std::path::Path) -> String {
+    format!(
+        "{}: this tumble was built without rerun support; rebuild with `--features rerun` \
+         (e.g. `cargo run --release --features rerun -- vio … --rerun FILE.rrd`)",
+        path.display()
+    )
 }
