@@ -92,6 +92,10 @@ struct FrontendArgs {
     /// Equalize images (CLAHE) before tracking: for dark or low-contrast sequences (costs track accuracy).
     #[arg(long)]
     equalize: bool,
+    /// Also match cam0's features into cam1 (same time; epipolar check with both
+    /// sensor.yaml extrinsics) and write tracks_cam1.csv with the same track ids.
+    #[arg(long)]
+    stereo: bool,
 }
 
 impl FrontendArgs {
@@ -102,6 +106,7 @@ impl FrontendArgs {
             fb_threshold: self.fb_threshold,
             ransac_threshold: self.ransac_threshold,
             equalize: self.equalize,
+            stereo: self.stereo,
             ..Default::default()
         }
     }
@@ -124,6 +129,9 @@ fn run_frontend(
         eprintln!("warning: {w}");
     }
     println!("frontend: {}", stats.line());
+    if let Some(s) = &stats.stereo {
+        println!("frontend: {}", s.line());
+    }
     println!("wrote {}", paths(&files));
     Ok(obs)
 }

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use tumble::factors::camera::{CameraModel, Distortion};
 use tumble::io::asl::read_asl;
 use tumble::vio::frontend::{
-    moving_window, read_gray, track_asl, track_camera, FrontendOptions, FrontendStats, KltTracker,
+    moving_window, read_gray, track_asl, track_asl_stereo, track_camera, FrontendOptions, FrontendStats, KltTracker,
 };
 
 mod common;
@@ -108,4 +108,35 @@ fn bad_images_are_refused_with_the_file_named() {
     // An empty image handed to the tracker.
     let mut t = KltTracker::new(cam, FrontendOptions::default());
     assert!(t.track(&opencv::core::Mat::default()).is_err());
+}
+
+/// Stereo matching on the 95 real V1_01 pairs: every match must satisfy the
+/// calibrated epipolar geometry to well under a pixel and sit at a room-scale
+/// depth (the MAV stands ~2 m from the mats). Measured: 20.8 % of cam0's
+/// features matched, median epipolar distance 0.12 px, median depth 2.17 m;
+/// most features lie on low-texture cloth where KLT between the two
+/// viewpoints converges elsewhere and the forward–backward check drops it.
+/// Floors: ≥ 15 % matched, ≥ 75 % of KLT's survivors pass the epipolar and
+/// depth checks, median epipolar distance ≤ 0.3 px, median depth 1–4 m.
+#[test]
+fn euroc_micro_stereo_matches_obey_the_epipolar_geometry() {
+    let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
+    let ds = read_asl(&micro, &Default::default()).unwrap();
+    let (o0, o1, s) = track_asl_stereo(&ds, &FrontendOptions::default(), &mut |_, _| {}).unwrap();
+    let st = s.stereo.as_ref().unwrap();
+    println!("V1_01 micro: {}", st.line());
+    assert_eq!(st.pairs, 95);
+    assert!(st.match_ratio() >= 0.15, "{}", st.line());
+    assert!(st.epipolar_ratio() >= 0.75, "{}", st.line());
+    assert!(st.median_epipolar_px() <= 0.3, "{}", st.line());
+    assert!((1.0..=4.0).contains(&st.median_depth_m()), "{}", st.line());
+    // Every cam1 observation belongs to a cam0 track seen at the same time.
+    let seen: std::collections::HashSet<(i64, u64)> = o0.iter().map(|o| (o.0, o.1)).collect();
+    assert!(o1.iter().all(|o| seen.contains(&(o.0, o.1))));
+    assert_eq!(o1.len(), st.matched());
+    // A folder with one camera cannot do stereo.
+    let mut mono = ds.clone();
+    mono.cameras.truncate(1);
+    let e = track_asl_stereo(&mono, &FrontendOptions::default(), &mut |_, _| {}).unwrap_err();
+    assert!(e.contains("cam0 and cam1"), "{e}");
 }

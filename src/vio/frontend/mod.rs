@@ -13,7 +13,7 @@
 #[cfg(feature = "opencv")]
 mod klt;
 #[cfg(feature = "opencv")]
-pub use klt::{draw_tracks, moving_window, read_gray, track_camera, KltTracker};
+pub use klt::{draw_tracks, match_stereo, moving_window, read_gray, track_camera, track_stereo, KltTracker};
 
 use crate::error::InputError;
 #[cfg(doc)]
@@ -47,6 +47,9 @@ pub struct FrontendOptions {
     /// the scene moves, so tracks drift more (on a known motion, 95th percentile
     /// 0.80 px instead of 0.26 px after up to 40 frames; `tests/frontend.rs`). Off by default.
     pub equalize: bool,
+    /// Also match each cam0 frame's features into cam1's image of the same
+    /// time ([`track_asl_stereo`]); `track_asl_into` then writes `tracks_cam1.csv`.
+    pub stereo: bool,
 }
 
 impl Default for FrontendOptions {
@@ -60,6 +63,7 @@ impl Default for FrontendOptions {
             fb_threshold: 0.5,
             ransac_threshold: 1.0,
             equalize: false,
+            stereo: false,
         }
     }
 }
@@ -83,6 +87,66 @@ pub struct FrontendStats {
     pub ms_per_frame: f64,
     /// What the reader should know (skipped images, …).
     pub warnings: Vec<String>,
+    /// Stereo matching into the second camera, when asked for.
+    pub stereo: Option<StereoStats>,
+}
+
+/// What stereo matching (cam0 features into cam1's image of the same time) did.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct StereoStats {
+    /// Stereo pairs matched.
+    pub pairs: usize,
+    /// cam0 features offered for matching.
+    pub offered: usize,
+    /// Of those, kept by KLT and its forward–backward check.
+    pub klt_kept: usize,
+    /// Epipolar distance of each final match \[px of cam1\].
+    #[serde(skip)]
+    pub epipolar_px: Vec<f64>,
+    /// Depth of each final match in cam0 \[m\].
+    #[serde(skip)]
+    pub depths_m: Vec<f64>,
+}
+
+impl StereoStats {
+    /// Final matches (KLT, forward–backward, epipolar and depth checks passed).
+    pub fn matched(&self) -> usize {
+        self.depths_m.len()
+    }
+    /// Fraction of the offered features matched.
+    pub fn match_ratio(&self) -> f64 {
+        self.matched() as f64 / self.offered.max(1) as f64
+    }
+    /// Of the KLT matches, the fraction the epipolar and depth checks kept.
+    pub fn epipolar_ratio(&self) -> f64 {
+        self.matched() as f64 / self.klt_kept.max(1) as f64
+    }
+    /// Median of `v` (NaN when empty).
+    fn median(v: &[f64]) -> f64 {
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        s.get(s.len() / 2).copied().unwrap_or(f64::NAN)
+    }
+    /// Median epipolar distance of the matches \[px\].
+    pub fn median_epipolar_px(&self) -> f64 {
+        Self::median(&self.epipolar_px)
+    }
+    /// Median depth of the matches \[m\].
+    pub fn median_depth_m(&self) -> f64 {
+        Self::median(&self.depths_m)
+    }
+    /// One line for the terminal.
+    pub fn line(&self) -> String {
+        format!(
+            "stereo: {} pairs, {:.1} % of cam0 features matched in cam1 (epipolar check kept {:.1} % of KLT's), \
+             median epipolar distance {:.2} px, median depth {:.2} m",
+            self.pairs,
+            100.0 * self.match_ratio(),
+            100.0 * self.epipolar_ratio(),
+            self.median_epipolar_px(),
+            self.median_depth_m()
+        )
+    }
 }
 
 impl FrontendStats {
@@ -161,6 +225,61 @@ pub fn track_asl(
     }
 }
 
+/// Track cam0 of an ASL folder and match every frame's features into cam1's
+/// image of the same time (the extrinsics of both `sensor.yaml`s give the
+/// epipolar geometry). Returns the cam0 observations, the cam1 observations
+/// (same track ids; for stereo initialization) and the statistics with
+/// [`FrontendStats::stereo`] set.
+pub fn track_asl_stereo(
+    ds: &crate::io::asl::AslDataset,
+    opts: &FrontendOptions,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(Vec<Observation>, Vec<Observation>, FrontendStats), String> {
+    let [c0, c1] = [0, 1].map(|k| ds.cameras.get(k));
+    let (Some(c0), Some(c1)) = (c0, c1) else {
+        return Err(format!("{}: stereo matching needs cam0 and cam1", ds.root.display()));
+    };
+    let yaml = |c: &crate::io::asl::Camera| ds.root.join(&c.name).join("sensor.yaml");
+    let model =
+        |c: &crate::io::asl::Camera| c.model.ok_or_else(|| format!("{}: camera intrinsics missing", yaml(c).display()));
+    let pose = |c: &crate::io::asl::Camera| {
+        c.t_bs.ok_or_else(|| format!("{}: T_BS missing: stereo needs both cameras' extrinsics", yaml(c).display()))
+    };
+    let (m0, m1) = (model(c0)?, model(c1)?);
+    let right_from_left = pose(c1)?.inverse() * pose(c0)?;
+    if right_from_left.translation.vector.norm() < 1e-3 {
+        return Err(format!(
+            "{}: cam0 and cam1 are less than 1 mm apart (T_BS): no stereo baseline",
+            ds.root.display()
+        ));
+    }
+    let right: std::collections::HashMap<i64, &std::path::PathBuf> =
+        c1.frames.iter().filter(|f| f.1.is_file()).map(|(t, p)| (*t, p)).collect();
+    let frames: Vec<_> = c0
+        .frames
+        .iter()
+        .filter(|f| f.1.is_file())
+        .map(|(t, p)| (*t, p.clone(), right.get(t).map(|p| (*p).clone())))
+        .collect();
+    if frames.is_empty() {
+        return Err(format!("{}: no cam0 images", ds.root.join(&c0.name).display()));
+    }
+    let unpaired = frames.iter().filter(|f| f.2.is_none()).count();
+    #[cfg(feature = "opencv")]
+    {
+        let (o0, o1, mut stats) = track_stereo(&frames, [m0, m1], &right_from_left, opts, progress)?;
+        if unpaired > 0 {
+            stats.warnings.push(format!("{unpaired} cam0 frames have no cam1 image at the same time: not matched"));
+        }
+        Ok((o0, o1, stats))
+    }
+    #[cfg(not(feature = "opencv"))]
+    {
+        let _ = (m0, m1, opts, progress, unpaired);
+        Err(format!("{}: {NEEDS_OPENCV}", ds.root.display()))
+    }
+}
+
 /// [`track_asl`], then write into `dir`: `tracks.csv`, `frontend.json` (the
 /// statistics and options) and `tracks.png` (the middle frame with its tracks).
 /// Returns the observations, the statistics and the files written.
@@ -171,16 +290,39 @@ pub fn track_asl_into(
     dir: &Path,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<Observation>, FrontendStats, Vec<std::path::PathBuf>), String> {
-    let (obs, stats) = track_asl(ds, camera, opts, progress)?;
+    let (obs, right, stats) = match opts.stereo {
+        true if camera == 0 => {
+            let (o0, o1, s) = track_asl_stereo(ds, opts, progress)?;
+            (o0, Some(o1), s)
+        }
+        true => return Err(format!("{}: stereo matching starts from cam0", ds.root.display())),
+        false => {
+            let (o, s) = track_asl(ds, camera, opts, progress)?;
+            (o, None, s)
+        }
+    };
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let tracks = dir.join("tracks.csv");
     write_tracks(&tracks, &obs).map_err(|e| e.to_string())?;
+    let mut files = vec![tracks];
+    if let Some(o1) = &right {
+        let p = dir.join("tracks_cam1.csv");
+        write_tracks(&p, o1).map_err(|e| e.to_string())?;
+        files.push(p);
+    }
+    let stereo = stats.stereo.as_ref().map(|s| {
+        serde_json::json!({
+            "match_ratio": s.match_ratio(),
+            "epipolar_ratio": s.epipolar_ratio(),
+            "median_epipolar_px": s.median_epipolar_px(),
+            "median_depth_m": s.median_depth_m(),
+        })
+    });
     let json = dir.join("frontend.json");
-    let text = serde_json::to_string_pretty(&serde_json::json!({ "stats": stats, "options": opts }))
+    let text = serde_json::to_string_pretty(&serde_json::json!({ "stats": stats, "stereo": stereo, "options": opts }))
         .map_err(|e| e.to_string())?;
     std::fs::write(&json, text).map_err(|e| format!("{}: {e}", json.display()))?;
-    #[allow(unused_mut)]
-    let mut files = vec![tracks, json];
+    files.push(json);
     #[cfg(feature = "opencv")]
     {
         // The middle tracked frame (observations are in time order).
