@@ -112,11 +112,11 @@ fn bad_images_are_refused_with_the_file_named() {
 
 /// Stereo matching on the 95 real V1_01 pairs: every match must satisfy the
 /// calibrated epipolar geometry to well under a pixel and sit at a room-scale
-/// depth (the MAV stands ~2 m from the mats). Measured: 20.8 % of cam0's
-/// features matched, median epipolar distance 0.12 px, median depth 2.17 m;
+/// depth (the MAV stands ~2 m from the mats). Measured: 31.7 % of cam0's
+/// features matched, median epipolar distance 0.15 px, median depth 2.13 m;
 /// most features lie on low-texture cloth where KLT between the two
 /// viewpoints converges elsewhere and the forward–backward check drops it.
-/// Floors: ≥ 15 % matched, ≥ 75 % of KLT's survivors pass the epipolar and
+/// Floors: ≥ 25 % matched, ≥ 75 % of KLT's survivors pass the epipolar and
 /// depth checks, median epipolar distance ≤ 0.3 px, median depth 1–4 m.
 #[test]
 fn euroc_micro_stereo_matches_obey_the_epipolar_geometry() {
@@ -126,7 +126,7 @@ fn euroc_micro_stereo_matches_obey_the_epipolar_geometry() {
     let st = s.stereo.as_ref().unwrap();
     println!("V1_01 micro: {}", st.line());
     assert_eq!(st.pairs, 95);
-    assert!(st.match_ratio() >= 0.15, "{}", st.line());
+    assert!(st.match_ratio() >= 0.25, "{}", st.line());
     assert!(st.epipolar_ratio() >= 0.75, "{}", st.line());
     assert!(st.median_epipolar_px() <= 0.3, "{}", st.line());
     assert!((1.0..=4.0).contains(&st.median_depth_m()), "{}", st.line());
