@@ -447,7 +447,7 @@ const STEREO_LEVELS: i32 = 1;
 
 /// Match features of a left image into the right image of a stereo pair:
 /// KLT started where the feature would be at a prior depth (`prior` by track
-/// id, else a few typical depths, [`STEREO_DEPTHS_M`]), the forward–backward
+/// id, else 2, 1, 4 and 0.6 m in turn), the forward–backward
 /// check, then the epipolar constraint of the known extrinsics
 /// (`right_from_left`, the left camera's pose in the right camera's frame) on
 /// undistorted points, and a positive, finite depth. Returns `(track id,
