@@ -502,17 +502,20 @@ impl Structure {
     }
 
     /// Dense symmetric copy of triangular CSC values `h`.
-    fn dense_matrix(&self, h: &[f64]) -> DMatrix<f64> {
-        let mut m = DMatrix::zeros(self.n, self.n);
+    /// faer's dense Cholesky of the reduced system (lower triangle filled):
+    /// blocked and vectorized, several times faster than nalgebra's on the
+    /// 100–200 unknowns of a VIO window.
+    fn dense_llt(&self, h: &[f64]) -> Option<faer::linalg::solvers::Llt<f64>> {
+        let mut m = faer::Mat::<f64>::zeros(self.n, self.n);
         for c in 0..self.n {
             for (&r, &v) in
                 self.row_idx[self.col_ptr[c]..self.col_ptr[c + 1]].iter().zip(&h[self.col_ptr[c]..self.col_ptr[c + 1]])
             {
-                m[(r, c)] = v;
-                m[(c, r)] = v;
+                let (i, j) = if r >= c { (r, c) } else { (c, r) };
+                m[(i, j)] = v;
             }
         }
-        m
+        m.llt(faer::Side::Lower).ok()
     }
 
     /// Diagonal of H over kept unknowns followed by eliminated ones.
@@ -538,12 +541,15 @@ impl Structure {
         let mut solve_s = 0.0;
         if self.n == 0 {
         } else if self.dense {
-            let ch = nalgebra::Cholesky::new(self.dense_matrix(&h))
-                .ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
+            use faer::linalg::solvers::Solve;
+            let ch = self.dense_llt(&h).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
             fact_s = t_fact.elapsed().as_secs_f64();
             let t_solve = std::time::Instant::now();
-            let sol = ch.solve(&DVector::from_vec(x));
-            x = sol.as_slice().to_vec();
+            let mut rhs = faer::Mat::<f64>::from_fn(self.n, 1, |i, _| x[i]);
+            ch.solve_in_place(rhs.as_mut());
+            for (i, xi) in x.iter_mut().enumerate() {
+                *xi = rhs[(i, 0)];
+            }
             solve_s = t_solve.elapsed().as_secs_f64();
         } else {
             if self.factor.is_none() {
@@ -603,9 +609,13 @@ impl Structure {
                     a[(k, k)] += d[off + k];
                 }
             }
-            let inv = nalgebra::Cholesky::new(a)
-                .ok_or_else(|| SolveError::Singular(format!("eliminated block {e} is not positive definite")))?
-                .inverse();
+            let singular = || SolveError::Singular(format!("eliminated block {e} is not positive definite"));
+            let inv = match a.nrows() {
+                // Inverse depths: a scalar, no factorization needed.
+                1 if a[(0, 0)] > 0.0 && a[(0, 0)].is_finite() => DMatrix::from_element(1, 1, 1.0 / a[(0, 0)]),
+                1 => return Err(singular()),
+                _ => nalgebra::Cholesky::new(a).ok_or_else(singular)?.inverse(),
+            };
             let w: Vec<DMatrix<f64>> = hcl.iter().map(|m| m * &inv).collect();
             for &(sa, sb, pair) in &self.elim_pairs[e] {
                 self.sub_w_ht(h, pair, &w[sa], &hcl[sb]);
@@ -662,12 +672,17 @@ impl Structure {
         self.reduce(sys, None, &mut h)?;
         let mut out = DMatrix::zeros(self.n, cols.len());
         if self.dense || self.n == 0 {
-            let ch = nalgebra::Cholesky::new(self.dense_matrix(&h))
-                .ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
-            for (j, &c) in cols.iter().enumerate() {
-                let mut e = DVector::zeros(self.n);
-                e[c] = 1.0;
-                out.set_column(j, &ch.solve(&e));
+            use faer::linalg::solvers::Solve;
+            if self.n == 0 {
+                return Ok(out);
+            }
+            let ch = self.dense_llt(&h).ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
+            let mut rhs = faer::Mat::<f64>::from_fn(self.n, cols.len(), |i, j| if i == cols[j] { 1.0 } else { 0.0 });
+            ch.solve_in_place(rhs.as_mut());
+            for j in 0..cols.len() {
+                for i in 0..self.n {
+                    out[(i, j)] = rhs[(i, j)];
+                }
             }
             return Ok(out);
         }
