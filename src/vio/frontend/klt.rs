@@ -129,40 +129,10 @@ impl KltTracker {
     fn klt(&mut self, prev: &Vector<Mat>, img: &Vector<Mat>, size: Size) -> Result<Vec<bool>, String> {
         let o = &self.opts;
         let win = Size::new(o.window, o.window);
-        let crit = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 30, 0.01).map_err(cv)?;
         let prev_pts: Vector<Point2f> = self.pts.iter().copied().collect();
-        let (mut next, mut status, mut err) = (Vector::<Point2f>::new(), Vector::<u8>::new(), Vector::<f32>::new());
-        video::calc_optical_flow_pyr_lk(
-            prev,
-            img,
-            &prev_pts,
-            &mut next,
-            &mut status,
-            &mut err,
-            win,
-            o.pyramid_levels,
-            crit,
-            0,
-            1e-4,
-        )
-        .map_err(cv)?;
-        // Backward from where the features went, starting at their old places.
-        let mut back = prev_pts.clone();
-        let mut status_b = Vector::<u8>::new();
-        video::calc_optical_flow_pyr_lk(
-            img,
-            prev,
-            &next,
-            &mut back,
-            &mut status_b,
-            &mut err,
-            win,
-            1,
-            crit,
-            video::OPTFLOW_USE_INITIAL_FLOW,
-            1e-4,
-        )
-        .map_err(cv)?;
+        let mut next = Vector::<Point2f>::new();
+        let (status, back, status_b) =
+            klt_both_ways(prev, img, &prev_pts, &mut next, win, [o.pyramid_levels, 1], false)?;
         let (w, h) = (size.width as f32, size.height as f32);
         let mut keep = vec![false; self.pts.len()];
         for (i, k) in keep.iter_mut().enumerate() {
@@ -437,6 +407,46 @@ pub fn moving_window(
     Ok((imgs, rel))
 }
 
+/// Forward status, backward positions, backward status of [`klt_both_ways`].
+type BothWays = (Vector<u8>, Vector<Point2f>, Vector<u8>);
+
+/// Pyramidal KLT from `a` to `b` (images or their pyramids) into `next`
+/// (which holds the starts when `initial`), then back from where the features
+/// went, starting at their old places; `levels` for each direction. Returns
+/// the forward status, the backward positions and the backward status.
+fn klt_both_ways(
+    a: &impl core::ToInputArray,
+    b: &impl core::ToInputArray,
+    pts: &Vector<Point2f>,
+    next: &mut Vector<Point2f>,
+    win: Size,
+    levels: [i32; 2],
+    initial: bool,
+) -> Result<BothWays, String> {
+    let crit = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 30, 0.01).map_err(cv)?;
+    let (mut status, mut err) = (Vector::<u8>::new(), Vector::<f32>::new());
+    let flags = if initial { video::OPTFLOW_USE_INITIAL_FLOW } else { 0 };
+    video::calc_optical_flow_pyr_lk(a, b, pts, next, &mut status, &mut err, win, levels[0], crit, flags, 1e-4)
+        .map_err(cv)?;
+    let mut back = pts.clone();
+    let mut status_b = Vector::<u8>::new();
+    video::calc_optical_flow_pyr_lk(
+        b,
+        a,
+        &*next,
+        &mut back,
+        &mut status_b,
+        &mut err,
+        win,
+        levels[1],
+        crit,
+        video::OPTFLOW_USE_INITIAL_FLOW,
+        1e-4,
+    )
+    .map_err(cv)?;
+    Ok((status, back, status_b))
+}
+
 /// Where KLT starts a stereo match: the feature's left ray at these depths
 /// \[m\] (its own earlier depth first when known), tried in turn for the
 /// features still unmatched. One pyramid level above the image: with a start
@@ -471,7 +481,6 @@ pub fn match_stereo(
     let r = right_from_left.rotation.to_rotation_matrix().into_inner();
     let t = right_from_left.translation.vector;
     let win = Size::new(opts.window, opts.window);
-    let crit = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 30, 0.01).map_err(cv)?;
     let (w, h) = (right.cols() as f32, right.rows() as f32);
     // The right pixel of left feature `uv` at `depth`.
     let at_depth = |uv: &[f64; 2], depth: f64| -> Option<Point2f> {
@@ -502,38 +511,8 @@ pub fn match_stereo(
         if idx.is_empty() {
             continue;
         }
-        let (mut status, mut err) = (Vector::<u8>::new(), Vector::<f32>::new());
-        let flags = video::OPTFLOW_USE_INITIAL_FLOW;
-        video::calc_optical_flow_pyr_lk(
-            left,
-            right,
-            &pts,
-            &mut next,
-            &mut status,
-            &mut err,
-            win,
-            STEREO_LEVELS,
-            crit,
-            flags,
-            1e-4,
-        )
-        .map_err(cv)?;
-        let mut back = pts.clone();
-        let mut status_b = Vector::<u8>::new();
-        video::calc_optical_flow_pyr_lk(
-            right,
-            left,
-            &next,
-            &mut back,
-            &mut status_b,
-            &mut err,
-            win,
-            STEREO_LEVELS,
-            crit,
-            flags,
-            1e-4,
-        )
-        .map_err(cv)?;
+        let levels = [STEREO_LEVELS, STEREO_LEVELS];
+        let (status, back, status_b) = klt_both_ways(left, right, &pts, &mut next, win, levels, true)?;
         for (k, &i) in idx.iter().enumerate() {
             let uv0 = features[i].1;
             let (p, b) = (next.get(k).map_err(cv)?, back.get(k).map_err(cv)?);
