@@ -281,6 +281,22 @@ pub fn read_gray(path: &Path) -> Result<Mat, String> {
     Ok(img)
 }
 
+/// [`read_gray`], refusing an image whose size is not `resolution` `[w, h]` (from sensor.yaml) when given.
+fn read_sized(path: &Path, resolution: Option<[u32; 2]>) -> Result<Mat, String> {
+    let img = read_gray(path)?;
+    if let Some([w, h]) = resolution {
+        if img.cols() as u32 != w || img.rows() as u32 != h {
+            return Err(format!(
+                "{}: image is {}×{}, sensor.yaml says {w}×{h}",
+                path.display(),
+                img.cols(),
+                img.rows()
+            ));
+        }
+    }
+    Ok(img)
+}
+
 /// Track a camera's frames `(t[ns], image path)` in order; `progress(done, total)`
 /// is called after each frame. Images must all have `resolution` `[w, h]` when given.
 pub fn track_camera(
@@ -293,17 +309,7 @@ pub fn track_camera(
     let mut tracker = KltTracker::new(camera, opts.clone());
     let mut obs = Vec::new();
     for (k, (t, path)) in frames.iter().enumerate() {
-        let img = read_gray(path)?;
-        if let Some([w, h]) = resolution {
-            if img.cols() as u32 != w || img.rows() as u32 != h {
-                return Err(format!(
-                    "{}: image is {}×{}, sensor.yaml says {w}×{h}",
-                    path.display(),
-                    img.cols(),
-                    img.rows()
-                ));
-            }
-        }
+        let img = read_sized(path, resolution)?;
         let f = tracker.track(&img).map_err(|e| format!("{}: {e}", path.display()))?;
         obs.extend(f.into_iter().map(|(id, uv)| (*t, id, uv)));
         progress(k + 1, frames.len());
@@ -552,12 +558,14 @@ pub fn match_stereo(
 }
 
 /// Track cam0's frames and match each into cam1's image of the same time
-/// (`frames`: `(t[ns], left image, right image if any)`). Returns the cam0
+/// (`frames`: `(t[ns], left image, right image if any)`; images must have the
+/// `resolutions` of their sensor.yaml when given). Returns the cam0
 /// observations, the cam1 observations (same track ids), and the statistics.
 #[allow(clippy::type_complexity)]
 pub fn track_stereo(
     frames: &[(i64, std::path::PathBuf, Option<std::path::PathBuf>)],
     cams: [CameraModel; 2],
+    resolutions: [Option<[u32; 2]>; 2],
     right_from_left: &nalgebra::Isometry3<f64>,
     opts: &FrontendOptions,
     progress: &mut dyn FnMut(usize, usize),
@@ -567,10 +575,10 @@ pub fn track_stereo(
     let mut depths = std::collections::HashMap::new();
     let (mut obs0, mut obs1) = (Vec::new(), Vec::new());
     for (k, (t, left, right)) in frames.iter().enumerate() {
-        let img = read_gray(left)?;
+        let img = read_sized(left, resolutions[0])?;
         let f = tracker.track(&img).map_err(|e| format!("{}: {e}", left.display()))?;
         if let Some(right) = right {
-            let rimg = read_gray(right)?;
+            let rimg = read_sized(right, resolutions[1])?;
             let m = match_stereo(&img, &rimg, &f, [&cams[0], &cams[1]], right_from_left, &depths, opts, &mut stereo)
                 .map_err(|e| format!("{}: {e}", right.display()))?;
             depths = m.iter().map(|(id, _, d)| (*id, *d)).collect();

@@ -267,7 +267,8 @@ pub fn track_asl_stereo(
     let unpaired = frames.iter().filter(|f| f.2.is_none()).count();
     #[cfg(feature = "opencv")]
     {
-        let (o0, o1, mut stats) = track_stereo(&frames, [m0, m1], &right_from_left, opts, progress)?;
+        let (o0, o1, mut stats) =
+            track_stereo(&frames, [m0, m1], [c0.resolution, c1.resolution], &right_from_left, opts, progress)?;
         if unpaired > 0 {
             stats.warnings.push(format!("{unpaired} cam0 frames have no cam1 image at the same time: not matched"));
         }
