@@ -164,7 +164,8 @@ fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
-fn iso(p: [f64; 3], q: [f64; 4]) -> Isometry3<f64> {
+/// Pose from a position and a rotation `[w, x, y, z]`.
+pub(crate) fn iso(p: [f64; 3], q: [f64; 4]) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), quat(q))
 }
 
@@ -189,7 +190,7 @@ fn bracket(t: &[i64], t_ns: i64, max_gap_ns: f64) -> Option<(usize, f64)> {
 }
 
 /// Ground-truth pose at `t_ns` (None outside its span or in a gap).
-fn pose_at(gt: &Trajectory, t_ns: i64, max_gap_ns: f64) -> Option<Isometry3<f64>> {
+pub(crate) fn pose_at(gt: &Trajectory, t_ns: i64, max_gap_ns: f64) -> Option<Isometry3<f64>> {
     let (k, w) = bracket(&gt.t_ns, t_ns, max_gap_ns)?;
     if w == 0.0 {
         return Some(iso(gt.p[k], gt.q[k]));
@@ -197,6 +198,15 @@ fn pose_at(gt: &Trajectory, t_ns: i64, max_gap_ns: f64) -> Option<Isometry3<f64>
     let q = quat(gt.q[k]).slerp(&quat(gt.q[k + 1]), w);
     let p = lerp3(gt.p[k], gt.p[k + 1], w);
     Some(Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), q))
+}
+
+/// Ground-truth biases `(gyro, accel)` at `t_ns`, interpolated (None without
+/// bias columns, outside the span or in a gap).
+pub(crate) fn biases_at(gt: &Trajectory, t_ns: i64, max_gap_ns: f64) -> Option<([f64; 3], [f64; 3])> {
+    let (bg, ba) = gt.bias_gyro.as_ref().zip(gt.bias_accel.as_ref())?;
+    let (k, w) = bracket(&gt.t_ns, t_ns, max_gap_ns)?;
+    let k1 = (k + 1).min(gt.len() - 1);
+    Some((lerp3(bg[k], bg[k1], w), lerp3(ba[k], ba[k1], w)))
 }
 
 fn stats(v: &[f64]) -> (f64, f64, f64, f64) {
@@ -283,11 +293,7 @@ fn compare_biases(
     let (mut sg, mut sa, mut n) = ([0.0; 3], [0.0; 3], 0usize);
     for i in 0..biases.t_ns.len() {
         let t = (biases.t_ns[i] - t0_ns) as f64 * 1e-9;
-        let at = truth.and_then(|(bg, ba)| {
-            let (k, w) = bracket(&gt.t_ns, biases.t_ns[i], max_gap_ns)?;
-            let k1 = (k + 1).min(gt.len() - 1);
-            Some((lerp3(bg[k], bg[k1], w), lerp3(ba[k], ba[k1], w)))
-        });
+        let at = biases_at(gt, biases.t_ns[i], max_gap_ns);
         if let (Some((bg, ba)), true) = (at, t >= opts.bias_after_s) {
             for a in 0..3 {
                 sg[a] += (biases.gyro[i][a] - bg[a]).powi(2);

@@ -33,13 +33,17 @@
 //! ```
 
 use super::{Estimator, FrameEstimate, VioInput};
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use crate::eval::{biases_at, iso, pose_at};
+use nalgebra::{Point3, UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// Longest run of positions in one `world/trajectory` line strip (older
 /// positions are thinned so the file grows linearly with the run).
 const TRAJECTORY_POINTS: usize = 1000;
+
+/// Longest ground-truth gap interpolated across \[ns\] (as `tumble eval`'s default).
+const MAX_TRUTH_GAP_NS: f64 = 0.1e9;
 
 /// Writes a VIO run into an `.rrd` file, frame by frame.
 pub struct Recorder<'a> {
@@ -60,11 +64,6 @@ pub struct Recorder<'a> {
 
 fn f32x3(p: &[f64; 3]) -> [f32; 3] {
     [p[0] as f32, p[1] as f32, p[2] as f32]
-}
-
-fn iso(p: &[f64; 3], q: &[f64; 4]) -> Isometry3<f64> {
-    let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
-    Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), q)
 }
 
 fn transform(p: &[f64; 3], q: &[f64; 4]) -> rerun::Transform3D {
@@ -152,8 +151,7 @@ impl<'a> Recorder<'a> {
     ) -> Result<(), rerun::RecordingStreamError> {
         let rec = &self.rec;
         rec.log("world/body", &transform(&e.position, &e.rotation))?;
-        let t_ns = self.input.t0_ns + (frame.t * 1e9).round() as i64;
-        if let Some(file) = self.images.get(&t_ns) {
+        if let Some(file) = self.images.get(&self.t_ns(frame.t)) {
             match rerun::EncodedImage::from_file(file) {
                 Ok(img) => rec.log("world/body/camera/image", &img)?,
                 Err(err) => self.warnings.push(format!(
@@ -193,31 +191,21 @@ impl<'a> Recorder<'a> {
         rec.log("status/solve_ms", &rerun::Scalars::single(e.solve_s * 1e3))
     }
 
-    /// Index of the ground-truth sample nearest to input time `t` \[s\].
-    fn nearest_truth(&self, t: f64) -> Option<usize> {
-        let gt = self.input.groundtruth.as_ref()?;
-        let t_ns = self.input.t0_ns + (t * 1e9).round() as i64;
-        let i = gt.t_ns.partition_point(|&x| x < t_ns);
-        let best = [i.checked_sub(1), (i < gt.len()).then_some(i)]
-            .into_iter()
-            .flatten()
-            .min_by_key(|&j| (gt.t_ns[j] - t_ns).abs())?;
-        ((gt.t_ns[best] - t_ns).abs() < 20_000_000).then_some(best)
+    /// Absolute time \[ns\] of input time `t` \[s\].
+    fn t_ns(&self, t: f64) -> i64 {
+        self.input.t0_ns + (t * 1e9).round() as i64
     }
 
     fn truth_biases(&self, t: f64) -> Option<([f64; 3], [f64; 3])> {
-        let gt = self.input.groundtruth.as_ref()?;
-        let i = self.nearest_truth(t)?;
-        Some((gt.bias_accel.as_ref()?[i], gt.bias_gyro.as_ref()?[i]))
+        biases_at(self.input.groundtruth.as_ref()?, self.t_ns(t), MAX_TRUTH_GAP_NS)
     }
 
     /// The ground truth as a static line strip, moved so that its pose at the
     /// first estimate coincides with that estimate.
     fn log_groundtruth(&self, first: &FrameEstimate) -> Result<(), rerun::RecordingStreamError> {
-        let (Some(gt), Some(i)) = (self.input.groundtruth.as_ref(), self.nearest_truth(first.t)) else {
-            return Ok(());
-        };
-        let align = iso(&first.position, &first.rotation) * iso(&gt.p[i], &gt.q[i]).inverse();
+        let Some(gt) = self.input.groundtruth.as_ref() else { return Ok(()) };
+        let Some(truth) = pose_at(gt, self.t_ns(first.t), MAX_TRUTH_GAP_NS) else { return Ok(()) };
+        let align = iso(first.position, first.rotation) * truth.inverse();
         let step = gt.len().div_ceil(20 * TRAJECTORY_POINTS).max(1);
         let strip: Vec<[f32; 3]> =
             gt.p.iter()
