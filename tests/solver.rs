@@ -377,6 +377,25 @@ fn schur_complement_matches_full_solve() {
         }
     }
     assert!(tumble_solvers::covariances_eliminating(&g, &a, &[L(0)], &['l']).is_err());
+    // The optimizer's own covariances (from its last linearization, at its
+    // solution) equal a separate recovery at that solution, dense and sparse.
+    let mut v2 = v.clone();
+    v2.set_constant(C(1), true);
+    for linear_solver in [LinearSolver::SparseCholesky, LinearSolver::DenseCholesky] {
+        let opt = Optimizer::new(LmOptions { eliminate: vec!['l'], linear_solver, ..lm() });
+        let (sol, _, cov) = opt.optimize_with_covariances(&g, &v2, &keys).unwrap();
+        let (cov, separate) = (cov.unwrap(), tumble_solvers::covariances(&g, &sol, &keys).unwrap());
+        for x in keys {
+            for y in keys {
+                let (f, r) = (separate.block(x, y).unwrap(), cov.block(x, y).unwrap());
+                assert_relative_eq!(f, r, epsilon = 1e-12 * f.amax().max(1.0), max_relative = 1e-7);
+            }
+        }
+        // An eliminated key has no kept covariance: an error, the solution stays.
+        let (sol2, _, bad) = opt.optimize_with_covariances(&g, &v2, &[L(0)]).unwrap();
+        assert!(bad.is_err());
+        assert_eq!(sol2.get::<SVector<f64, 9>>(C(2)).unwrap(), sol.get::<SVector<f64, 9>>(C(2)).unwrap());
+    }
 }
 
 /// Results are bit-identical whatever the number of threads.
@@ -396,6 +415,25 @@ fn parallel_linearization_is_deterministic() {
             b.get::<Isometry3F64>(X(i)).unwrap().params_dyn()
         );
     }
+}
+
+/// A factor with no residual rows (a marginalization prior of rank 0) adds nothing.
+#[test]
+fn empty_factor_is_harmless() {
+    let mut g = Graph::new();
+    g.add(PriorFactor::new(X(0), Vector1::new(2.0)), NoiseModel::Unit);
+    g.add(
+        LinearFactor::new(vec![X(0), X(1)], vec![DMatrix::zeros(0, 1), DMatrix::zeros(0, 1)], DVector::zeros(0)),
+        NoiseModel::Unit,
+    );
+    g.add(PriorFactor::new(X(1), Vector1::new(-1.0)), NoiseModel::Unit);
+    let mut v = Values::new();
+    v.insert(X(0), Vector1::new(0.0));
+    v.insert(X(1), Vector1::new(0.0));
+    let (sol, _, cov) = Optimizer::new(lm()).optimize_with_covariances(&g, &v, &[X(0), X(1)]).unwrap();
+    assert_relative_eq!(sol.get::<Vector1<f64>>(X(0)).unwrap()[0], 2.0, epsilon = 1e-9);
+    assert_relative_eq!(sol.get::<Vector1<f64>>(X(1)).unwrap()[0], -1.0, epsilon = 1e-9);
+    assert_relative_eq!(cov.unwrap().block(X(0), X(1)).unwrap()[(0, 0)], 0.0, epsilon = 1e-12);
 }
 
 #[test]

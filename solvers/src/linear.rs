@@ -16,7 +16,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, Par, Side};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 use std::collections::{BTreeSet, HashMap};
 
 /// Role of a variable in the linear system.
@@ -63,18 +63,8 @@ struct ElimPlan {
     pos: usize,
     /// Eliminated block index.
     block: usize,
-    /// For each kept position of the factor: (position, slot among the block's kept neighbours).
+    /// For each kept position of the factor: (position, offset of its H_cl block in [`System::hcl`]).
     slots: Vec<(usize, usize)>,
-}
-
-/// Normal-equation blocks of one eliminated variable l.
-pub(crate) struct ElimBlock {
-    /// H_ll.
-    pub hll: DMatrix<f64>,
-    /// g_l.
-    pub gl: DVector<f64>,
-    /// H_cl (d_cam × d_l) per neighbouring kept block, in slot order.
-    pub hcl: Vec<DMatrix<f64>>,
 }
 
 /// Sparsity structure: the upper triangle of the reduced system, in CSC,
@@ -97,6 +87,11 @@ pub(crate) struct Structure {
     elim_cams: Vec<Vec<usize>>,
     /// Per eliminated block: (slot a, slot b, pair) with blk(a) ≥ blk(b).
     elim_pairs: Vec<Vec<(usize, usize, usize)>>,
+    /// Offset of each eliminated block's H_ll (d × d) in [`System::hll`]; one past the end last.
+    hll_offsets: Vec<usize>,
+    /// Offset of each eliminated block's first H_cl in [`System::hcl`]; its
+    /// slots follow in `elim_cams` order, each `kept_dim × d` column-major.
+    hcl_offsets: Vec<usize>,
     dense: bool,
     /// Original kept-block index → position in the fill-reducing order.
     rank: Vec<usize>,
@@ -223,13 +218,24 @@ fn block_amd(nk: usize, factor_roles: &[Vec<Role>]) -> Vec<usize> {
 }
 
 /// Numeric content of the normal equations `H δ = −g` at one linearization.
+///
+/// The eliminated blocks live in flat buffers (no allocation per landmark and
+/// iteration): block `e` of dimension `d` has H_ll at `hll[hll_offsets[e]..]`
+/// (d × d, column-major), g_l at `gl[elim_offsets[e] − n..]` and, per
+/// neighbouring kept block in slot order, H_cl (d_cam × d, column-major) from
+/// `hcl[hcl_offsets[e]..]`.
+#[derive(Default)]
 pub(crate) struct System {
     /// Upper-triangular CSC values of H over kept blocks.
     pub h: Vec<f64>,
     /// Gradient over kept blocks.
     pub g: Vec<f64>,
-    /// Per eliminated block.
-    pub elim: Vec<ElimBlock>,
+    /// H_ll of every eliminated block.
+    pub hll: Vec<f64>,
+    /// g_l of every eliminated block (the gradient's eliminated part).
+    pub gl: Vec<f64>,
+    /// H_cl of every eliminated block's kept neighbours.
+    pub hcl: Vec<f64>,
 }
 
 impl Structure {
@@ -241,7 +247,14 @@ impl Structure {
         solver: LinearSolver,
     ) -> Result<Self, SolveError> {
         let nk = kept_dims.len();
-        let rank = block_amd(nk, factor_roles);
+        let n: usize = kept_dims.iter().sum();
+        let dense = match solver {
+            LinearSolver::DenseCholesky => true,
+            LinearSolver::SparseCholesky => false,
+            LinearSolver::Auto => n <= DENSE_THRESHOLD,
+        };
+        // A dense factorization does not care about the order.
+        let rank = if dense { (0..nk).collect() } else { block_amd(nk, factor_roles) };
         let mut dims_new = vec![0; nk];
         for (b, &d) in kept_dims.iter().enumerate() {
             dims_new[rank[b]] = d;
@@ -260,29 +273,28 @@ impl Structure {
         }
         kept_offsets.push(n);
 
-        // Block pattern (upper triangle): col block → set of row blocks ≤ col.
-        let mut cols: Vec<BTreeSet<usize>> = (0..nk).map(|b| BTreeSet::from([b])).collect();
+        // Block pattern (upper triangle): col block → sorted row blocks ≤ col.
+        let mut cols: Vec<Vec<usize>> = (0..nk).map(|b| vec![b]).collect();
         let mut elim_cams: Vec<Vec<usize>> = vec![Vec::new(); elim_dims.len()];
         for (fi, roles) in factor_roles.iter().enumerate() {
-            let kept: Vec<usize> =
-                roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }).collect();
-            for &a in &kept {
-                for &b in &kept {
+            let kept = roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None });
+            for a in kept.clone() {
+                for b in kept.clone() {
                     if a > b {
-                        cols[a].insert(b);
+                        cols[a].push(b);
                     }
                 }
             }
-            let elims: Vec<usize> =
-                roles.iter().filter_map(|r| if let Role::Elim(e) = r { Some(*e) } else { None }).collect();
-            if elims.len() > 1 {
+            let mut elims = roles.iter().filter_map(|r| if let Role::Elim(e) = r { Some(*e) } else { None });
+            let first = elims.next();
+            if first.is_some() && elims.next().is_some() {
                 return Err(SolveError::Config(format!(
                     "factor {fi} connects {} eliminated (landmark) variables; Schur elimination needs at most one per factor",
-                    elims.len()
+                    roles.iter().filter(|r| matches!(r, Role::Elim(_))).count()
                 )));
             }
-            if let Some(&e) = elims.first() {
-                for &a in &kept {
+            if let Some(e) = first {
+                for a in kept {
                     if !elim_cams[e].contains(&a) {
                         elim_cams[e].push(a);
                     }
@@ -293,32 +305,44 @@ impl Structure {
             for &a in cams {
                 for &b in cams {
                     if a > b {
-                        cols[a].insert(b);
+                        cols[a].push(b);
                     }
                 }
             }
         }
+        for c in &mut cols {
+            c.sort_unstable();
+            c.dedup();
+        }
+        // Pair (j, i), i ≤ j, has id `first_pair[j] + position of i in cols[j]`.
+        let mut first_pair = Vec::with_capacity(nk + 1);
+        let mut np = 0;
+        for c in &cols {
+            first_pair.push(np);
+            np += c.len();
+        }
+        let pair_id = |j: usize, i: usize| -> usize {
+            first_pair[j] + cols[j].binary_search(&i).expect("pair in the block pattern")
+        };
 
         // Scalar CSC pattern and per-pair bases.
         let mut col_ptr = Vec::with_capacity(n + 1);
         let mut row_idx = Vec::new();
-        let mut pair_id: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut pairs = Vec::new();
+        let mut pairs = Vec::with_capacity(np);
         let mut bases = Vec::new();
         let mut diag_positions = vec![0; n];
         // Pair (big, small) lives in the columns of `big`; `bases[b0 + r]` is the
         // position of row `offset(small)` in column `offset(big) + r`.
         for (j, rows) in cols.iter().enumerate() {
+            let first_base = bases.len();
             for &i in rows {
-                pair_id.insert((j, i), pairs.len());
                 pairs.push((j, i, bases.len()));
                 bases.extend(std::iter::repeat_n(0, kept_dims[j]));
             }
             for c in 0..kept_dims[j] {
                 col_ptr.push(row_idx.len());
-                for &i in rows {
-                    let base_slot = pairs[pair_id[&(j, i)]].2 + c;
-                    bases[base_slot] = row_idx.len();
+                for (slot, &i) in rows.iter().enumerate() {
+                    bases[first_base + slot * kept_dims[j] + c] = row_idx.len();
                     if i == j {
                         diag_positions[kept_offsets[j] + c] = row_idx.len() + c;
                         row_idx.extend(kept_offsets[j]..=kept_offsets[j] + c);
@@ -329,6 +353,18 @@ impl Structure {
             }
         }
         col_ptr.push(row_idx.len());
+
+        let mut hll_offsets = Vec::with_capacity(elim_dims.len() + 1);
+        let mut hcl_offsets = Vec::with_capacity(elim_dims.len() + 1);
+        let (mut ho, mut co) = (0, 0);
+        for (cams, &d) in elim_cams.iter().zip(&elim_dims) {
+            hll_offsets.push(ho);
+            hcl_offsets.push(co);
+            ho += d * d;
+            co += cams.iter().map(|&c| kept_dims[c] * d).sum::<usize>();
+        }
+        hll_offsets.push(ho);
+        hcl_offsets.push(co);
 
         let mut plans = Vec::with_capacity(factor_roles.len());
         for roles in factor_roles {
@@ -341,16 +377,21 @@ impl Structure {
             for &(p, bp) in &plan.kept {
                 for &(q, bq) in &plan.kept {
                     if bp >= bq {
-                        plan.pairs.push((p, q, pair_id[&(bp, bq)]));
+                        plan.pairs.push((p, q, pair_id(bp, bq)));
                     }
                 }
             }
             for (p, r) in roles.iter().enumerate() {
                 if let Role::Elim(e) = r {
+                    let d = elim_dims[*e];
                     let slots = plan
                         .kept
                         .iter()
-                        .map(|&(q, bq)| (q, elim_cams[*e].iter().position(|&c| c == bq).unwrap_or(0)))
+                        .map(|&(q, bq)| {
+                            let cams = &elim_cams[*e];
+                            let slot = cams.iter().position(|&c| c == bq).unwrap_or(0);
+                            (q, hcl_offsets[*e] + cams[..slot].iter().map(|&c| kept_dims[c] * d).sum::<usize>())
+                        })
                         .collect();
                     plan.elim = Some(ElimPlan { pos: p, block: *e, slots });
                 }
@@ -364,18 +405,13 @@ impl Structure {
                 for (sa, &a) in cams.iter().enumerate() {
                     for (sb, &b) in cams.iter().enumerate() {
                         if a >= b {
-                            v.push((sa, sb, pair_id[&(a, b)]));
+                            v.push((sa, sb, pair_id(a, b)));
                         }
                     }
                 }
                 v
             })
             .collect();
-        let dense = match solver {
-            LinearSolver::DenseCholesky => true,
-            LinearSolver::SparseCholesky => false,
-            LinearSolver::Auto => n <= DENSE_THRESHOLD,
-        };
         let elim_offsets = elim_dims
             .iter()
             .scan(n, |o, d| {
@@ -398,6 +434,8 @@ impl Structure {
             plans,
             elim_cams,
             elim_pairs,
+            hll_offsets,
+            hcl_offsets,
             dense,
             rank,
             factor: None,
@@ -421,17 +459,29 @@ impl Structure {
     }
 
     /// `H_(big, small) −= W_big H_smallᵀ` (Schur update), without a temporary.
+    /// `w_big` is `d_big × dl`, `h_small` is `d_small × dl`, both column-major.
     #[inline]
-    fn sub_w_ht(&self, h: &mut [f64], pair: usize, w_big: &DMatrix<f64>, h_small: &DMatrix<f64>) {
+    fn sub_w_ht(&self, h: &mut [f64], pair: usize, w_big: &[f64], h_small: &[f64], dl: usize) {
         let (i, j, b0) = self.pairs[pair];
-        let dl = w_big.ncols();
-        for r in 0..w_big.nrows() {
+        let (rows, cols) = (w_big.len() / dl, h_small.len() / dl);
+        if dl == 1 {
+            // Inverse depths: an outer product.
+            for (r, &w) in w_big.iter().enumerate() {
+                let base = self.bases[b0 + r];
+                let cmax = if i == j { r + 1 } else { cols };
+                for (hv, &s) in h[base..base + cmax].iter_mut().zip(h_small) {
+                    *hv -= w * s;
+                }
+            }
+            return;
+        }
+        for r in 0..rows {
             let base = self.bases[b0 + r];
-            let cmax = if i == j { r + 1 } else { h_small.nrows() };
+            let cmax = if i == j { r + 1 } else { cols };
             for c in 0..cmax {
                 let mut s = 0.0;
                 for k in 0..dl {
-                    s += w_big[(r, k)] * h_small[(c, k)];
+                    s += w_big[r + k * rows] * h_small[c + k * cols];
                 }
                 h[base + c] -= s;
             }
@@ -442,18 +492,20 @@ impl Structure {
     #[inline]
     fn add_jtj(&self, h: &mut [f64], pair: usize, j_big: &DMatrix<f64>, j_small: &DMatrix<f64>) {
         let (i, j, b0) = self.pairs[pair];
-        for (r, cr) in j_big.column_iter().enumerate() {
+        let m = j_big.nrows();
+        let (big, small) = (j_big.as_slice(), j_small.as_slice());
+        for (r, cr) in big.chunks_exact(m).enumerate() {
             let base = self.bases[b0 + r];
             let cmax = if i == j { r + 1 } else { j_small.ncols() };
-            for c in 0..cmax {
-                h[base + c] += cr.dot(&j_small.column(c));
+            for (c, cs) in small.chunks_exact(m).take(cmax).enumerate() {
+                h[base + c] += dot(cr, cs);
             }
         }
     }
 
     /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
     pub fn assemble(&self, lins: &[WhitenedLinearization]) -> System {
-        let mut sys = System { h: Vec::new(), g: Vec::new(), elim: Vec::new() };
+        let mut sys = System::default();
         self.assemble_into(lins, &mut sys);
         sys
     }
@@ -461,47 +513,55 @@ impl Structure {
     /// As [`Structure::assemble`], reusing the buffers of `sys` (large `h`
     /// buffers are otherwise returned to the OS and page-faulted back every iteration).
     pub fn assemble_into(&self, lins: &[WhitenedLinearization], sys: &mut System) {
-        let mut h = std::mem::take(&mut sys.h);
-        h.clear();
-        h.resize(self.nnz(), 0.0);
-        let mut g = std::mem::take(&mut sys.g);
-        g.clear();
-        g.resize(self.n, 0.0);
-        let mut elim: Vec<ElimBlock> = self
-            .elim_dims
-            .iter()
-            .zip(&self.elim_cams)
-            .map(|(&d, cams)| ElimBlock {
-                hll: DMatrix::zeros(d, d),
-                gl: DVector::zeros(d),
-                hcl: cams.iter().map(|&c| DMatrix::zeros(self.kept_dims[c], d)).collect(),
-            })
-            .collect();
+        fn zeroed(v: &mut Vec<f64>, n: usize) {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+        zeroed(&mut sys.h, self.nnz());
+        zeroed(&mut sys.g, self.n);
+        zeroed(&mut sys.hll, *self.hll_offsets.last().unwrap_or(&0));
+        zeroed(&mut sys.gl, self.elim_dims.iter().sum());
+        zeroed(&mut sys.hcl, *self.hcl_offsets.last().unwrap_or(&0));
+        let System { h, g, hll, gl, hcl } = sys;
         for (plan, wl) in self.plans.iter().zip(lins) {
-            let (r, js) = (&wl.lin.residual, &wl.lin.jacobians);
+            let (r, js) = (wl.lin.residual.as_slice(), &wl.lin.jacobians);
+            let m = r.len();
+            if m == 0 {
+                // E.g. a marginalization prior of rank 0: nothing to add.
+                continue;
+            }
             for &(p, b) in &plan.kept {
                 let o = self.kept_offsets[b];
-                for (k, col) in js[p].column_iter().enumerate() {
-                    g[o + k] += col.dot(r);
+                for (k, col) in js[p].as_slice().chunks_exact(m).enumerate() {
+                    g[o + k] += dot(col, r);
                 }
             }
             for &(p, q, pair) in &plan.pairs {
-                self.add_jtj(&mut h, pair, &js[p], &js[q]);
+                self.add_jtj(h, pair, &js[p], &js[q]);
             }
             if let Some(ep) = &plan.elim {
-                let b = &mut elim[ep.block];
-                let jl = &js[ep.pos];
-                b.hll.gemm_tr(1.0, jl, jl, 1.0);
-                b.gl.gemv_tr(1.0, jl, r, 1.0);
-                for &(q, s) in &ep.slots {
-                    b.hcl[s].gemm_tr(1.0, &js[q], jl, 1.0);
+                let jl = js[ep.pos].as_slice();
+                let d = self.elim_dims[ep.block];
+                let (ho, go) = (self.hll_offsets[ep.block], self.elim_offsets[ep.block] - self.n);
+                for (a, ca) in jl.chunks_exact(m).enumerate() {
+                    gl[go + a] += dot(ca, r);
+                    for (b, cb) in jl.chunks_exact(m).enumerate() {
+                        hll[ho + a + b * d] += dot(ca, cb);
+                    }
+                }
+                for &(q, off) in &ep.slots {
+                    let jq = &js[q];
+                    let dc = jq.ncols();
+                    for (b, cb) in jl.chunks_exact(m).enumerate() {
+                        for (a, ca) in jq.as_slice().chunks_exact(m).enumerate() {
+                            hcl[off + a + b * dc] += dot(ca, cb);
+                        }
+                    }
                 }
             }
         }
-        *sys = System { h, g, elim };
     }
 
-    /// Dense symmetric copy of triangular CSC values `h`.
     /// faer's dense Cholesky of the reduced system (lower triangle filled):
     /// blocked and vectorized, several times faster than nalgebra's on the
     /// 100–200 unknowns of a VIO window.
@@ -521,10 +581,21 @@ impl Structure {
     /// Diagonal of H over kept unknowns followed by eliminated ones.
     pub fn diagonal(&self, sys: &System) -> Vec<f64> {
         let mut d: Vec<f64> = self.diag_positions.iter().map(|&p| sys.h[p]).collect();
-        for b in &sys.elim {
-            d.extend(b.hll.diagonal().iter());
+        for (e, &de) in self.elim_dims.iter().enumerate() {
+            let o = self.hll_offsets[e];
+            d.extend((0..de).map(|k| sys.hll[o + k * (de + 1)]));
         }
         d
+    }
+
+    /// Slot ranges of eliminated block `e`'s H_cl blocks: (kept block, offset, length).
+    fn elim_slots(&self, e: usize) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+        let d = self.elim_dims[e];
+        self.elim_cams[e].iter().scan(self.hcl_offsets[e], move |o, &c| {
+            let here = *o;
+            *o += self.kept_dims[c] * d;
+            Some((c, here, self.kept_dims[c] * d))
+        })
     }
 
     /// Solve `(H + diag(damping)) δ = −g`; δ over kept unknowns then eliminated ones.
@@ -566,15 +637,22 @@ impl Structure {
         }
         // Back-substitution for eliminated blocks: δ_l = −H_ll⁻¹ (g_l + Σ H_lc δ_c).
         let t_back = std::time::Instant::now();
-        for (e, ElimBlock { gl, hcl, .. }) in sys.elim.iter().enumerate() {
-            let mut rhs = gl.clone();
-            for (s, &c) in self.elim_cams[e].iter().enumerate() {
+        let mut rhs = Vec::new();
+        for (e, &d) in self.elim_dims.iter().enumerate() {
+            let go = self.elim_offsets[e] - self.n;
+            rhs.clear();
+            rhs.extend_from_slice(&sys.gl[go..go + d]);
+            for (c, off, len) in self.elim_slots(e) {
                 let o = self.kept_offsets[c];
-                let dc = DVector::from_column_slice(&x[o..o + self.kept_dims[c]]);
-                rhs += hcl[s].tr_mul(&dc);
+                let dc = self.kept_dims[c];
+                for (b, col) in sys.hcl[off..off + len].chunks_exact(dc).enumerate() {
+                    rhs[b] += dot(col, &x[o..o + dc]);
+                }
             }
-            let dl = -(&elim_inv[e] * rhs);
-            x.extend(dl.iter());
+            let inv = &elim_inv[self.hll_offsets[e]..self.hll_offsets[e + 1]];
+            for a in 0..d {
+                x.push(-(0..d).map(|b| inv[a + b * d] * rhs[b]).sum::<f64>());
+            }
         }
         if x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::Singular("non-finite step".into()));
@@ -585,13 +663,14 @@ impl Structure {
 
     /// The reduced system: `h` ← upper triangle of `H + diag(damping)` over the
     /// kept unknowns minus the Schur complement of the eliminated blocks; returns
-    /// the reduced gradient and each eliminated block's (damped) inverse.
+    /// the reduced gradient and the eliminated blocks' (damped) inverses, laid
+    /// out as [`System::hll`].
     fn reduce(
         &self,
         sys: &System,
         damping: Option<&[f64]>,
         h: &mut Vec<f64>,
-    ) -> Result<(Vec<f64>, Vec<DMatrix<f64>>), SolveError> {
+    ) -> Result<(Vec<f64>, Vec<f64>), SolveError> {
         h.clear();
         h.extend_from_slice(&sys.h);
         let mut g = sys.g.clone();
@@ -600,34 +679,56 @@ impl Structure {
                 h[p] += d[k];
             }
         }
-        let mut elim_inv = Vec::with_capacity(sys.elim.len());
-        for (e, ElimBlock { hll, gl, hcl }) in sys.elim.iter().enumerate() {
-            let off = self.elim_offsets[e];
-            let mut a = hll.clone();
-            if let Some(d) = damping {
-                for k in 0..a.nrows() {
-                    a[(k, k)] += d[off + k];
+        let mut elim_inv = vec![0.0; sys.hll.len()];
+        let (mut w, mut w_offsets, mut slots) = (Vec::new(), Vec::new(), Vec::new());
+        for (e, &d) in self.elim_dims.iter().enumerate() {
+            let (off, ho) = (self.elim_offsets[e], self.hll_offsets[e]);
+            let inv = &mut elim_inv[ho..ho + d * d];
+            inv.copy_from_slice(&sys.hll[ho..ho + d * d]);
+            if let Some(dmp) = damping {
+                for k in 0..d {
+                    inv[k * (d + 1)] += dmp[off + k];
                 }
             }
             let singular = || SolveError::Singular(format!("eliminated block {e} is not positive definite"));
-            let inv = match a.nrows() {
+            if d == 1 {
                 // Inverse depths: a scalar, no factorization needed.
-                1 if a[(0, 0)] > 0.0 && a[(0, 0)].is_finite() => DMatrix::from_element(1, 1, 1.0 / a[(0, 0)]),
-                1 => return Err(singular()),
-                _ => nalgebra::Cholesky::new(a).ok_or_else(singular)?.inverse(),
-            };
-            let w: Vec<DMatrix<f64>> = hcl.iter().map(|m| m * &inv).collect();
-            for &(sa, sb, pair) in &self.elim_pairs[e] {
-                self.sub_w_ht(h, pair, &w[sa], &hcl[sb]);
+                if !(inv[0] > 0.0 && inv[0].is_finite()) {
+                    return Err(singular());
+                }
+                inv[0] = 1.0 / inv[0];
+            } else {
+                let a = DMatrix::from_column_slice(d, d, inv);
+                let ai = nalgebra::Cholesky::new(a).ok_or_else(singular)?.inverse();
+                inv.copy_from_slice(ai.as_slice());
             }
-            for (s, &c) in self.elim_cams[e].iter().enumerate() {
-                let v = &w[s] * gl;
-                let o = self.kept_offsets[c];
-                for (k, x) in v.iter().enumerate() {
-                    g[o + k] -= x;
+            // W_s = H_cl,s H_ll⁻¹ per slot.
+            w.clear();
+            w_offsets.clear();
+            slots.clear();
+            for (_, o, len) in self.elim_slots(e) {
+                let hc = &sys.hcl[o..o + len];
+                let dc = len / d;
+                slots.push(o..o + len);
+                w_offsets.push(w.len());
+                for b in 0..d {
+                    for a in 0..dc {
+                        w.push((0..d).map(|k| hc[a + k * dc] * inv[k + b * d]).sum::<f64>());
+                    }
                 }
             }
-            elim_inv.push(inv);
+            w_offsets.push(w.len());
+            for &(sa, sb, pair) in &self.elim_pairs[e] {
+                self.sub_w_ht(h, pair, &w[w_offsets[sa]..w_offsets[sa + 1]], &sys.hcl[slots[sb].clone()], d);
+            }
+            let gl = &sys.gl[off - self.n..off - self.n + d];
+            for (s, &c) in self.elim_cams[e].iter().enumerate() {
+                let ws = &w[w_offsets[s]..w_offsets[s + 1]];
+                let (o, dc) = (self.kept_offsets[c], self.kept_dims[c]);
+                for (k, gk) in g[o..o + dc].iter_mut().enumerate() {
+                    *gk -= (0..d).map(|b| ws[k + b * dc] * gl[b]).sum::<f64>();
+                }
+            }
         }
         Ok((g, elim_inv))
     }
@@ -644,22 +745,21 @@ impl Structure {
                 }
             }
         }
-        for (e, ElimBlock { hll, hcl, .. }) in sys.elim.iter().enumerate() {
-            let (off, d) = (self.elim_offsets[e], hll.nrows());
-            let xl = DVector::from_column_slice(&x[off..off + d]);
-            let mut yl = hll * &xl;
-            for (s, &c) in self.elim_cams[e].iter().enumerate() {
-                let o = self.kept_offsets[c];
-                let dc = self.kept_dims[c];
-                let xc = DVector::from_column_slice(&x[o..o + dc]);
-                yl += hcl[s].tr_mul(&xc);
-                let yc = &hcl[s] * &xl;
-                for k in 0..dc {
-                    y[o + k] += yc[k];
-                }
+        for (e, &d) in self.elim_dims.iter().enumerate() {
+            let (off, ho) = (self.elim_offsets[e], self.hll_offsets[e]);
+            let hll = &sys.hll[ho..ho + d * d];
+            for a in 0..d {
+                y[off + a] += (0..d).map(|b| hll[a + b * d] * x[off + b]).sum::<f64>();
             }
-            for k in 0..d {
-                y[off + k] += yl[k];
+            for (c, o, len) in self.elim_slots(e) {
+                let (oc, dc) = (self.kept_offsets[c], self.kept_dims[c]);
+                for (b, col) in sys.hcl[o..o + len].chunks_exact(dc).enumerate() {
+                    // y_l += H_clᵀ x_c, y_c += H_cl x_l.
+                    y[off + b] += dot(col, &x[oc..oc + dc]);
+                    for (k, &v) in col.iter().enumerate() {
+                        y[oc + k] += v * x[off + b];
+                    }
+                }
             }
         }
         y
@@ -698,4 +798,10 @@ impl Structure {
         }
         Ok(out)
     }
+}
+
+/// Dot product of two equally long slices.
+#[inline]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
 }

@@ -4,7 +4,7 @@ use crate::error::{FactorError, SolveError};
 use crate::factor::{Factor, Linearization, Vars};
 use crate::graph::{FactorEntry, Graph};
 use crate::key::Key;
-use crate::linear::LinearSolver;
+use crate::linear::{LinearSolver, Structure, System};
 use crate::optimizer::{linearize_all, Layout};
 use crate::values::Values;
 use crate::variable::DynVariable;
@@ -224,6 +224,19 @@ pub fn covariances_eliminating(
     let mut structure = layout.structure(&vars, LinearSolver::Auto)?;
     let (lins, _) = linearize_all(graph.entries(), &layout, &vars)?;
     let sys = structure.assemble(&lins);
+    covariances_of_system(&layout, &mut structure, &sys, keys)
+}
+
+/// Covariance blocks of `keys` from an assembled system (`sys` from
+/// `structure.assemble` at the solution): shared by [`covariances_eliminating`]
+/// and [`crate::Optimizer::optimize_with_covariances`], which reuses its last
+/// linearization instead of a second one.
+pub(crate) fn covariances_of_system(
+    layout: &Layout,
+    structure: &mut Structure,
+    sys: &System,
+    keys: &[Key],
+) -> Result<Covariances, SolveError> {
     let mut cols = Vec::new();
     let mut offsets = vec![0];
     for k in keys {
@@ -240,7 +253,7 @@ pub fn covariances_eliminating(
         cols.extend(o..o + structure.kept_dim(b));
         offsets.push(cols.len());
     }
-    let full = structure.inverse_columns(&sys, &cols)?;
+    let full = structure.inverse_columns(sys, &cols)?;
     let mut joint = DMatrix::zeros(cols.len(), cols.len());
     for (i, &r) in cols.iter().enumerate() {
         for j in 0..cols.len() {

@@ -6,6 +6,7 @@ use crate::factor::Vars;
 use crate::graph::{FactorEntry, Graph, WhitenedLinearization};
 use crate::key::Key;
 use crate::linear::{LinearSolver, Role, Structure, System};
+use crate::marginal::{covariances_of_system, Covariances};
 use crate::values::Values;
 use crate::variable::DynVariable;
 use rayon::prelude::*;
@@ -175,6 +176,9 @@ impl fmt::Display for Summary {
     }
 }
 
+/// Covariances requested from [`Optimizer::optimize_with_covariances`], or why they failed.
+type CovarianceResult = Result<Covariances, SolveError>;
+
 /// Variables and factors laid out for the linear algebra.
 pub(crate) struct Layout {
     /// All variables referenced by factors, ascending.
@@ -320,6 +324,45 @@ impl Optimizer {
     /// Minimize the graph's cost starting from `initial`; returns the solution
     /// (all of `initial`'s values, the free ones updated) and a [`Summary`].
     pub fn optimize(&self, graph: &Graph, initial: &Values) -> Result<(Values, Summary), SolveError> {
+        self.optimize_impl(graph, initial, None).map(|(v, s, _)| (v, s))
+    }
+
+    /// As [`Optimizer::optimize`], and the marginal covariance blocks of `keys`
+    /// at the solution — the same blocks as [`crate::covariances_eliminating`]
+    /// with [`LmOptions::eliminate`], from the optimizer's own last
+    /// linearization (taken at the solution) instead of a second one. The
+    /// covariances' own error (e.g. a key held constant or eliminated, or a
+    /// singular information matrix) does not discard the solution.
+    ///
+    /// ```
+    /// use tumble_solvers::{Graph, Values, NoiseModel, Optimizer, LmOptions, X};
+    /// use tumble_solvers::testing::LinearFactor;
+    /// use nalgebra::{DMatrix, DVector, Vector1};
+    /// let mut g = Graph::new();
+    /// let i = DMatrix::identity(1, 1);
+    /// g.add(LinearFactor::new(vec![X(0)], vec![i.clone()], DVector::from_element(1, -1.0)), NoiseModel::isotropic(1, 0.5).unwrap());
+    /// let mut v = Values::new();
+    /// v.insert(X(0), Vector1::new(0.0));
+    /// let (sol, _, cov) = Optimizer::new(LmOptions::default()).optimize_with_covariances(&g, &v, &[X(0)]).unwrap();
+    /// assert!((sol.get::<Vector1<f64>>(X(0)).unwrap()[0] - 1.0).abs() < 1e-9);
+    /// assert!((cov.unwrap().get(X(0)).unwrap()[(0, 0)] - 0.25).abs() < 1e-12);
+    /// ```
+    pub fn optimize_with_covariances(
+        &self,
+        graph: &Graph,
+        initial: &Values,
+        keys: &[Key],
+    ) -> Result<(Values, Summary, CovarianceResult), SolveError> {
+        self.optimize_impl(graph, initial, Some(keys))
+            .map(|(v, s, c)| (v, s, c.unwrap_or_else(|| Err(SolveError::Config("no covariance requested".into())))))
+    }
+
+    fn optimize_impl(
+        &self,
+        graph: &Graph,
+        initial: &Values,
+        covariance_keys: Option<&[Key]>,
+    ) -> Result<(Values, Summary, Option<CovarianceResult>), SolveError> {
         let o = &self.options;
         let t0 = Instant::now();
         let layout = Layout::new(graph, initial, &o.eliminate)?;
@@ -355,7 +398,7 @@ impl Optimizer {
         let mut lambda = o.initial_lambda;
         let mut nu = 2.0;
         let gn = o.method == Method::GaussNewton;
-        let mut sys = System { h: Vec::new(), g: Vec::new(), elim: Vec::new() };
+        let mut sys = System::default();
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
 
         'outer: while summary.termination != Termination::NothingToOptimize {
@@ -366,8 +409,7 @@ impl Optimizer {
             let t = Instant::now();
             structure.assemble_into(&lins, &mut sys);
             summary.time_build += t.elapsed().as_secs_f64();
-            let g_all: Vec<f64> =
-                sys.g.iter().copied().chain(sys.elim.iter().flat_map(|e| e.gl.iter().copied())).collect();
+            let g_all: Vec<f64> = sys.g.iter().copied().chain(sys.gl.iter().copied()).collect();
             let gmax = g_all.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             if gmax <= o.gradient_tolerance {
                 summary.termination = Termination::GradientTolerance;
@@ -479,6 +521,12 @@ impl Optimizer {
             }
         }
         summary.final_cost = cost;
+        // `lins` is the linearization at the final values (trial points are
+        // linearized when tried), so the covariance needs no second pass.
+        let covariances = covariance_keys.map(|keys| {
+            structure.assemble_into(&lins, &mut sys);
+            covariances_of_system(&layout, &mut structure, &sys, keys)
+        });
         let mut out = initial.clone();
         for (i, k) in layout.keys.iter().enumerate() {
             if layout.roles[i] != Role::Const {
@@ -486,6 +534,6 @@ impl Optimizer {
             }
         }
         summary.time_total = t0.elapsed().as_secs_f64();
-        Ok((out, summary))
+        Ok((out, summary, covariances))
     }
 }

@@ -11,8 +11,7 @@ use tumble_factors::imu_preint::Preintegrated;
 use tumble_factors::{bias_random_walk, ImuFactor, InverseDepthReprojection, PriorFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{
-    covariances_eliminating, marginalize, Graph, Huber, LmOptions, MarginalPrior, NoiseModel, Optimizer, Values, B, L,
-    V, X,
+    marginalize, Covariances, Graph, Huber, LmOptions, MarginalPrior, NoiseModel, Optimizer, Values, B, L, V, X,
 };
 
 /// The estimate at one camera frame.
@@ -637,7 +636,17 @@ impl<'a> Estimator<'a> {
             log_iterations: false,
             ..LmOptions::default()
         };
-        let solved = Optimizer::new(lm).optimize(&graph, &self.values);
+        let optimizer = Optimizer::new(lm);
+        let mut covariances = None;
+        let solved = if self.opts.covariances {
+            // The σ of the new state, from the solve's own last linearization.
+            optimizer.optimize_with_covariances(&graph, &self.values, &[X(sid), V(sid), B(sid)]).map(|(v, s, c)| {
+                covariances = c.ok();
+                (v, s)
+            })
+        } else {
+            optimizer.optimize(&graph, &self.values)
+        };
         let failure = match solved {
             Ok((v, _)) => {
                 self.values = v;
@@ -655,7 +664,7 @@ impl<'a> Estimator<'a> {
         }
         self.reintegrate_if_needed();
         self.reject_outliers();
-        let est = self.estimate(sid, keyframe, t_start, Some(&graph));
+        let est = self.estimate(sid, keyframe, t_start, covariances.as_ref());
         self.last_good = Some(self.state_values(sid));
         if keyframe {
             self.last_keyframe_obs = obs;
@@ -711,19 +720,19 @@ impl<'a> Estimator<'a> {
         self.tracks.retain(|id, t| seen.contains(id) || t.landmark.is_some());
     }
 
-    fn estimate(&self, sid: u64, keyframe: bool, t0: Instant, graph: Option<&Graph>) -> FrameEstimate {
+    /// The estimate of state `sid`; its σ from `covariances` (of the frame's
+    /// solve, at the solution) when given, else NaN.
+    fn estimate(&self, sid: u64, keyframe: bool, t0: Instant, covariances: Option<&Covariances>) -> FrameEstimate {
         let (x, v, b) = self.state_values(sid);
         let (r, p) = parts(&x);
         let q = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r));
         let mut std = [[f64::NAN; 3]; 5];
-        if let (true, Some(g)) = (self.opts.covariances, graph) {
-            if let Ok(c) = covariances_eliminating(g, &self.values, &[X(sid), V(sid), B(sid)], &['l']) {
-                let d = |k, i: usize| c.get(k).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt());
-                let blocks = [(X(sid), 0), (X(sid), 3), (V(sid), 0), (B(sid), 0), (B(sid), 3)];
-                for (row, (key, off)) in std.iter_mut().zip(blocks) {
-                    for (i, s) in row.iter_mut().enumerate() {
-                        *s = d(key, i + off);
-                    }
+        if let Some(c) = covariances {
+            let d = |k, i: usize| c.get(k).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt());
+            let blocks = [(X(sid), 0), (X(sid), 3), (V(sid), 0), (B(sid), 0), (B(sid), 3)];
+            for (row, (key, off)) in std.iter_mut().zip(blocks) {
+                for (i, s) in row.iter_mut().enumerate() {
+                    *s = d(key, i + off);
                 }
             }
         }
