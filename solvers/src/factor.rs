@@ -68,6 +68,13 @@ pub trait Factor: Send + Sync {
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
         numeric_linearize(self, vars)
     }
+    /// Whether the Jacobians [`Factor::linearize`] returns never change (a
+    /// linear factor, or a prior whose Jacobians are held at its linearization
+    /// point). The optimizer then forms this factor's JᵀJ once per solve
+    /// instead of every iteration (unless a robust loss reweights it).
+    fn constant_jacobians(&self) -> bool {
+        false
+    }
 }
 
 /// Step of the central differences used by [`numeric_linearize`].

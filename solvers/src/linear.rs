@@ -54,6 +54,8 @@ struct FactorPlan {
     kept: Vec<(usize, usize)>,
     /// The factor's eliminated variable, if any.
     elim: Option<ElimPlan>,
+    /// Its JᵀJ never changes: formed once into [`Structure::hessian_cache`].
+    constant: bool,
 }
 
 /// Where a factor's eliminated variable goes.
@@ -98,6 +100,9 @@ pub(crate) struct Structure {
     factor: Option<SparseFactor>,
     /// Reused copy of H for damping and the Schur complement.
     scratch: Vec<f64>,
+    /// Per factor with constant JᵀJ: its kept-pair entries, in the order
+    /// [`Structure::assemble_into`] adds them (empty until first formed).
+    hessian_cache: Vec<Vec<f64>>,
 }
 
 /// faer's sparse Cholesky on our pattern, whose blocks are already in a
@@ -440,6 +445,7 @@ impl Structure {
             rank,
             factor: None,
             scratch: Vec::new(),
+            hessian_cache: Vec::new(),
         })
     }
 
@@ -503,8 +509,48 @@ impl Structure {
         }
     }
 
+    /// Mark the factors whose JᵀJ never changes (see [`crate::Factor::constant_jacobians`]).
+    pub fn set_constant_hessians(&mut self, constant: &[bool]) {
+        for (plan, &c) in self.plans.iter_mut().zip(constant) {
+            plan.constant = c;
+        }
+        self.hessian_cache = vec![Vec::new(); self.plans.len()];
+    }
+
+    /// The kept-pair entries of a factor's JᵀJ in the order `add_jtj` visits them.
+    fn jtj_entries(&self, plan: &FactorPlan, js: &[DMatrix<f64>]) -> Vec<f64> {
+        let mut out = Vec::new();
+        for &(p, q, pair) in &plan.pairs {
+            let (i, j, _) = self.pairs[pair];
+            let m = js[p].nrows();
+            let small = js[q].as_slice();
+            for (r, cr) in js[p].as_slice().chunks_exact(m).enumerate() {
+                let cmax = if i == j { r + 1 } else { js[q].ncols() };
+                out.extend(small.chunks_exact(m).take(cmax).map(|cs| dot(cr, cs)));
+            }
+        }
+        out
+    }
+
+    /// Add entries from [`Structure::jtj_entries`] of a factor into `h`.
+    fn add_entries(&self, h: &mut [f64], plan: &FactorPlan, entries: &[f64]) {
+        let mut k = 0;
+        for &(_, _, pair) in &plan.pairs {
+            let (i, j, b0) = self.pairs[pair];
+            let (rows, cols) = (self.kept_dims[i], self.kept_dims[j]);
+            for r in 0..rows {
+                let base = self.bases[b0 + r];
+                let cmax = if i == j { r + 1 } else { cols };
+                for (hv, e) in h[base..base + cmax].iter_mut().zip(&entries[k..k + cmax]) {
+                    *hv += e;
+                }
+                k += cmax;
+            }
+        }
+    }
+
     /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
-    pub fn assemble(&self, lins: &[WhitenedLinearization]) -> System {
+    pub fn assemble(&mut self, lins: &[WhitenedLinearization]) -> System {
         let mut sys = System::default();
         self.assemble_into(lins, &mut sys);
         sys
@@ -512,7 +558,7 @@ impl Structure {
 
     /// As [`Structure::assemble`], reusing the buffers of `sys` (large `h`
     /// buffers are otherwise returned to the OS and page-faulted back every iteration).
-    pub fn assemble_into(&self, lins: &[WhitenedLinearization], sys: &mut System) {
+    pub fn assemble_into(&mut self, lins: &[WhitenedLinearization], sys: &mut System) {
         fn zeroed(v: &mut Vec<f64>, n: usize) {
             v.clear();
             v.resize(n, 0.0);
@@ -523,7 +569,8 @@ impl Structure {
         zeroed(&mut sys.gl, self.elim_dims.iter().sum());
         zeroed(&mut sys.hcl, *self.hcl_offsets.last().unwrap_or(&0));
         let System { h, g, hll, gl, hcl } = sys;
-        for (plan, wl) in self.plans.iter().zip(lins) {
+        let mut cache = std::mem::take(&mut self.hessian_cache);
+        for (fi, (plan, wl)) in self.plans.iter().zip(lins).enumerate() {
             let (r, js) = (wl.lin.residual.as_slice(), &wl.lin.jacobians);
             let m = r.len();
             if m == 0 {
@@ -536,8 +583,15 @@ impl Structure {
                     g[o + k] += dot(col, r);
                 }
             }
-            for &(p, q, pair) in &plan.pairs {
-                self.add_jtj(h, pair, &js[p], &js[q]);
+            if plan.constant && fi < cache.len() {
+                if cache[fi].is_empty() {
+                    cache[fi] = self.jtj_entries(plan, js);
+                }
+                self.add_entries(h, plan, &cache[fi]);
+            } else {
+                for &(p, q, pair) in &plan.pairs {
+                    self.add_jtj(h, pair, &js[p], &js[q]);
+                }
             }
             if let Some(ep) = &plan.elim {
                 let jl = js[ep.pos].as_slice();
@@ -560,6 +614,7 @@ impl Structure {
                 }
             }
         }
+        self.hessian_cache = cache;
     }
 
     /// faer's dense Cholesky of the reduced system (lower triangle filled):

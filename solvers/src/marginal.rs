@@ -66,6 +66,9 @@ impl Factor for MarginalPrior {
         }
         Ok(Linearization { residual, jacobians })
     }
+    fn constant_jacobians(&self) -> bool {
+        true
+    }
 }
 
 /// Result of [`marginalize`].

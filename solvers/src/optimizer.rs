@@ -188,6 +188,8 @@ pub(crate) struct Layout {
     pub factor_vars: Vec<Vec<usize>>,
     pub kept_vars: Vec<usize>,
     pub elim_vars: Vec<usize>,
+    /// Per factor: its JᵀJ never changes (constant Jacobians, no robust loss).
+    pub constant_hessian: Vec<bool>,
 }
 
 impl Layout {
@@ -238,7 +240,9 @@ impl Layout {
             }
         }
         let factor_vars = graph.entries().iter().map(|e| e.factor.keys().iter().map(|k| index[k]).collect()).collect();
-        Ok(Layout { keys, roles, factor_vars, kept_vars, elim_vars })
+        let constant_hessian =
+            graph.entries().iter().map(|e| e.loss.is_none() && e.factor.constant_jacobians()).collect();
+        Ok(Layout { keys, roles, factor_vars, kept_vars, elim_vars, constant_hessian })
     }
 
     pub fn structure(&self, vars: &[Box<dyn DynVariable>], solver: LinearSolver) -> Result<Structure, SolveError> {
@@ -246,7 +250,9 @@ impl Layout {
         let elim_dims = self.elim_vars.iter().map(|&v| vars[v].dim()).collect();
         let factor_roles: Vec<Vec<Role>> =
             self.factor_vars.iter().map(|fv| fv.iter().map(|&v| self.roles[v]).collect()).collect();
-        Structure::new(kept_dims, elim_dims, &factor_roles, solver)
+        let mut s = Structure::new(kept_dims, elim_dims, &factor_roles, solver)?;
+        s.set_constant_hessians(&self.constant_hessian);
+        Ok(s)
     }
 }
 

@@ -46,4 +46,7 @@ impl Factor for LinearFactor {
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
         Ok(Linearization { residual: self.residual(vars)?, jacobians: self.a.clone() })
     }
+    fn constant_jacobians(&self) -> bool {
+        true
+    }
 }
