@@ -217,44 +217,81 @@ fn robust_losses_resist_gross_outliers() {
 /// full problem, in solution and in information of the kept variables.
 #[test]
 fn marginalization_is_equivalent_to_full_problem() {
-    let build = || {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(9);
-        let mut rand_mat = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random::<f64>() - 0.5);
-        let b = |v: f64| DVector::from_element(2, v);
-        let i2 = DMatrix::identity(2, 2);
-        let mut g = Graph::new();
-        g.add(LinearFactor::new(vec![X(0)], vec![i2.clone()], b(0.3)), NoiseModel::isotropic(2, 0.5).unwrap());
-        g.add(LinearFactor::new(vec![X(0), X(1)], vec![rand_mat(2, 2), i2.clone()], b(-0.2)), NoiseModel::Unit);
-        g.add(
-            LinearFactor::new(vec![X(0), X(2)], vec![rand_mat(2, 2), rand_mat(2, 2) + &i2], b(0.7)),
-            NoiseModel::Unit,
-        );
-        g.add(LinearFactor::new(vec![X(1), X(2)], vec![rand_mat(2, 2), i2.clone()], b(0.1)), NoiseModel::Unit);
-        g.add(LinearFactor::new(vec![X(2)], vec![i2], b(-1.0)), NoiseModel::Unit);
-        g
-    };
-    let g = build();
-    let mut v = Values::new();
-    for i in 0..3 {
-        v.insert(X(i), Vector2::new(0.5 * i as f64, -0.25));
-    }
-    let (full, _) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
-    let full_cov = covariances(&g, &full, &[X(1), X(2)]).unwrap();
+    // A linear chain and, in the second graph, three scalar "landmarks" that
+    // only the marginalized variable and one kept variable see, marginalized
+    // with it (as the VIO does with the oldest keyframe's landmarks).
+    for landmarks in [false, true] {
+        let build = || {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+            let mut rand_mat = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random::<f64>() - 0.5);
+            let b = |v: f64| DVector::from_element(2, v);
+            let i2 = DMatrix::identity(2, 2);
+            let mut g = Graph::new();
+            g.add(LinearFactor::new(vec![X(0)], vec![i2.clone()], b(0.3)), NoiseModel::isotropic(2, 0.5).unwrap());
+            g.add(LinearFactor::new(vec![X(0), X(1)], vec![rand_mat(2, 2), i2.clone()], b(-0.2)), NoiseModel::Unit);
+            g.add(
+                LinearFactor::new(vec![X(0), X(2)], vec![rand_mat(2, 2), rand_mat(2, 2) + &i2], b(0.7)),
+                NoiseModel::Unit,
+            );
+            if landmarks {
+                for l in 0..3 {
+                    let kept = X(1 + l % 2);
+                    g.add(
+                        LinearFactor::new(
+                            vec![X(0), L(l), kept],
+                            vec![rand_mat(2, 2), rand_mat(2, 1), rand_mat(2, 2)],
+                            b(0.1),
+                        ),
+                        NoiseModel::Unit,
+                    );
+                    g.add(
+                        LinearFactor::new(vec![L(l), kept], vec![rand_mat(2, 1), rand_mat(2, 2)], b(-0.3)),
+                        NoiseModel::Unit,
+                    );
+                }
+            }
+            g.add(LinearFactor::new(vec![X(1), X(2)], vec![rand_mat(2, 2), i2.clone()], b(0.1)), NoiseModel::Unit);
+            g.add(LinearFactor::new(vec![X(2)], vec![i2], b(-1.0)), NoiseModel::Unit);
+            g
+        };
+        let g = build();
+        let mut v = Values::new();
+        for i in 0..3 {
+            v.insert(X(i), Vector2::new(0.5 * i as f64, -0.25));
+        }
+        let mut gone = vec![X(0)];
+        if landmarks {
+            for l in 0..3 {
+                v.insert(L(l), Vector1::new(0.1 * l as f64));
+                gone.push(L(l));
+            }
+        }
+        let (full, _) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+        let full_cov = covariances(&g, &full, &[X(1), X(2)]).unwrap();
 
-    let m = marginalize(&g, &v, &[X(0)]).unwrap();
-    assert_eq!(m.removed_factors, vec![0, 1, 2]);
-    let mut g2 = build();
-    g2.remove(&m.removed_factors);
-    g2.add(m.prior, NoiseModel::Unit);
-    let mut v2 = v.clone();
-    v2.remove(X(0));
-    let (marg, _) = Optimizer::new(lm()).optimize(&g2, &v2).unwrap();
-    for k in [X(1), X(2)] {
-        assert_relative_eq!(marg.get::<Vector2<f64>>(k).unwrap(), full.get::<Vector2<f64>>(k).unwrap(), epsilon = 1e-9);
-    }
-    let marg_cov = covariances(&g2, &marg, &[X(1), X(2)]).unwrap();
-    for (a, b) in [(X(1), X(1)), (X(1), X(2)), (X(2), X(2))] {
-        assert_relative_eq!(marg_cov.block(a, b).unwrap(), full_cov.block(a, b).unwrap(), epsilon = 1e-9);
+        let m = marginalize(&g, &v, &gone).unwrap();
+        if !landmarks {
+            assert_eq!(m.removed_factors, vec![0, 1, 2]);
+        }
+        let mut g2 = build();
+        g2.remove(&m.removed_factors);
+        g2.add(m.prior, NoiseModel::Unit);
+        let mut v2 = v.clone();
+        for k in &gone {
+            v2.remove(*k);
+        }
+        let (marg, _) = Optimizer::new(lm()).optimize(&g2, &v2).unwrap();
+        for k in [X(1), X(2)] {
+            assert_relative_eq!(
+                marg.get::<Vector2<f64>>(k).unwrap(),
+                full.get::<Vector2<f64>>(k).unwrap(),
+                epsilon = 1e-9
+            );
+        }
+        let marg_cov = covariances(&g2, &marg, &[X(1), X(2)]).unwrap();
+        for (a, b) in [(X(1), X(1)), (X(1), X(2)), (X(2), X(2))] {
+            assert_relative_eq!(marg_cov.block(a, b).unwrap(), full_cov.block(a, b).unwrap(), epsilon = 1e-9);
+        }
     }
 }
 
