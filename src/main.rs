@@ -261,6 +261,9 @@ enum Command {
         recording: PathBuf,
         #[command(flatten)]
         read: RecordingArgs,
+        /// Also write a PNG of the accelerometer and gyro (and temperature) against time.
+        #[arg(long, value_name = "FILE.png")]
+        plot: Option<PathBuf>,
     },
     /// Identify IMU noise from a static recording by Allan variance: writes
     /// allan.json, Kalibr's imu.yaml and allan_gyro.png / allan_accel.png.
@@ -557,6 +560,9 @@ enum Command {
         /// Print the per-iteration log.
         #[arg(long)]
         verbose: bool,
+        /// g2o only: write a PNG of the initial guess and the solution seen from above.
+        #[arg(long, value_name = "FILE.png")]
+        plot: Option<PathBuf>,
     },
 }
 
@@ -609,7 +615,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 start.elapsed().as_secs_f64()
             );
         }
-        Command::Inspect { recording, read } => {
+        Command::Inspect { recording, read, plot } => {
             let start = std::time::Instant::now();
             let r = tumble::io::open_recording(&recording, &read.options())?;
             println!("{}: {} samples in {:.2} s", r.source_name(), r.len(), start.elapsed().as_secs_f64());
@@ -642,6 +648,10 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             }
             for w in &r.warnings {
                 println!("warning: {w}");
+            }
+            if let Some(png) = plot {
+                r.write_overview_png(&png)?;
+                println!("wrote {}", png.display());
             }
         }
         Command::Allan { recording, read, out, kind, taus, max_tau_fraction, confidence, axis_stat, span } => {
@@ -995,6 +1005,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             function_tolerance,
             repair_information,
             verbose,
+            plot,
         } => {
             let defaults = LmOptions::default();
             let options = LmOptions {
@@ -1009,6 +1020,9 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 ..LmOptions::default()
             };
             let is_g2o = file.extension().is_some_and(|e| e.eq_ignore_ascii_case("g2o"));
+            if plot.is_some() && !is_g2o {
+                return Err(format!("--plot draws pose graphs (.g2o); {} is a BAL problem", file.display()).into());
+            }
             let (graph, values, options) = if is_g2o {
                 let opts = g2o::G2oOptions {
                     bad_information: if repair_information {
@@ -1034,12 +1048,18 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 );
                 (p.graph, p.values, LmOptions { eliminate: vec!['l'], ..options })
             };
-            let (_, summary) = Optimizer::new(options).optimize(&graph, &values)?;
+            let (solved, summary) = Optimizer::new(options).optimize(&graph, &values)?;
             if verbose {
                 print_log(&summary);
             }
             println!("{summary}");
             println!("final chi2 {:.6}", 2.0 * summary.final_cost);
+            if let Some(png) = plot {
+                let name = file.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+                let title = format!("{name}: χ² {:.1} → {:.1}", 2.0 * summary.initial_cost, 2.0 * summary.final_cost);
+                tumble::posegraph::plot_top_view(&values, &solved, &title, &png)?;
+                println!("wrote {}", png.display());
+            }
         }
     }
     Ok(())

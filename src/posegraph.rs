@@ -78,3 +78,55 @@ pub fn simulate_helix(
     }
     SimulatedPoseGraph { graph, initial, truth, poses: n }
 }
+
+/// Positions seen from above, `(x, y)` \[m\], of every SE(2) or SE(3) pose in
+/// `values`, in key order (other variable types are skipped).
+pub fn top_view(values: &Values) -> Vec<(f64, f64)> {
+    use tumble_solvers::sophus_lie::prelude::*;
+    use tumble_solvers::sophus_lie::Isometry2F64;
+    values
+        .keys()
+        .filter_map(|k| {
+            if let Ok(p) = values.get::<Isometry3F64>(k) {
+                let t = p.translation();
+                Some((t[0], t[1]))
+            } else {
+                values.get::<Isometry2F64>(k).ok().map(|p| {
+                    let t = p.translation();
+                    (t[0], t[1])
+                })
+            }
+        })
+        .collect()
+}
+
+/// Write a PNG (1000×800) of a pose graph seen from above: the initial guess
+/// and the solution, each as the path through the poses in key order.
+///
+/// ```no_run
+/// use tumble::io::g2o::{read_g2o, G2oOptions};
+/// use tumble::solvers::{LmOptions, Optimizer};
+/// let pg = read_g2o("M3500.g2o".as_ref(), &G2oOptions::default()).unwrap();
+/// let (solved, _) = Optimizer::new(LmOptions::default()).optimize(&pg.graph, &pg.values).unwrap();
+/// tumble::posegraph::plot_top_view(&pg.values, &solved, "M3500", "m3500.png".as_ref()).unwrap();
+/// ```
+pub fn plot_top_view(initial: &Values, solved: &Values, title: &str, path: &std::path::Path) -> Result<(), String> {
+    use crate::plot::{ScatterChart, Series};
+    use plotters::style::RGBColor;
+    let (a, b) = (top_view(initial), top_view(solved));
+    if b.is_empty() {
+        return Err(format!("{}: no SE(2) or SE(3) poses to draw", path.display()));
+    }
+    let chart = ScatterChart {
+        title: title.to_string(),
+        x_label: "x [m]".into(),
+        y_label: "y [m]".into(),
+        series: vec![
+            Series { label: "initial guess".into(), color: RGBColor(200, 200, 200), points: a, line: true },
+            Series { label: "solution".into(), color: RGBColor(31, 119, 180), points: b, line: true },
+        ],
+        equal_aspect: true,
+        ..Default::default()
+    };
+    chart.write_png(path, 1000, 800)
+}

@@ -131,6 +131,21 @@ fn plain_csv_with_units_and_temperature() {
     assert_eq!(r.temperature.as_ref().unwrap()[3], 25.5);
     assert!((r.t[1] - 0.005).abs() < 1e-12);
     assert!(r.warnings.is_empty(), "{:?}", r.warnings);
+    // The overview PNG: three panels with the temperature, taller than two.
+    let png = p.with_extension("png");
+    r.write_overview_png(&png).unwrap();
+    let size = |p: &Path| {
+        let b = std::fs::read(p).unwrap();
+        assert_eq!(&b[1..4], b"PNG");
+        u32::from_be_bytes([b[20], b[21], b[22], b[23]])
+    };
+    assert_eq!(size(&png), 1150);
+    let mut no_temp = r.clone();
+    no_temp.temperature = None;
+    no_temp.write_overview_png(&png).unwrap();
+    assert_eq!(size(&png), 900);
+    let empty = tumble::io::ImuRecording::default();
+    assert!(empty.write_overview_png(&png).unwrap_err().contains("no samples"));
 }
 
 fn err_of(text: &str, fmt: &ImuTextFormat) -> String {

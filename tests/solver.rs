@@ -435,6 +435,21 @@ fn schur_complement_matches_full_solve() {
     }
 }
 
+/// The pose-graph picture: initial guess and solution seen from above.
+#[test]
+fn pose_graph_top_view_png() {
+    let sim = tumble::posegraph::simulate_helix(20, 2, 3.0, 0.01, 0.05, 2);
+    let (solved, _) = Optimizer::new(lm()).optimize(&sim.graph, &sim.initial).unwrap();
+    let top = tumble::posegraph::top_view(&solved);
+    assert_eq!(top.len(), 40);
+    let truth = tumble::posegraph::top_view(&sim.truth);
+    assert!(top.iter().zip(&truth).all(|(a, b)| (a.0 - b.0).hypot(a.1 - b.1) < 0.5));
+    let png = std::env::temp_dir().join("tumble_test_top_view.png");
+    tumble::posegraph::plot_top_view(&sim.initial, &solved, "helix", &png).unwrap();
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+    assert!(tumble::posegraph::plot_top_view(&Values::new(), &Values::new(), "none", &png).is_err());
+}
+
 /// Results are bit-identical whatever the number of threads.
 #[test]
 fn parallel_linearization_is_deterministic() {

@@ -68,6 +68,79 @@ impl ImuRecording {
     pub fn source_name(&self) -> String {
         self.sources.first().map(|p| p.display().to_string()).unwrap_or_else(|| "<memory>".into())
     }
+    /// Write a PNG overview (1200 × 900, or × 1150 with a temperature column):
+    /// the accelerometer and the gyro, per axis, against time \[s\] (and the
+    /// temperature). Long recordings keep each axis' envelope: every pixel
+    /// column holds the minimum and maximum of its samples, so spikes and
+    /// saturation stay visible.
+    ///
+    /// ```no_run
+    /// use tumble::io::{open_recording, RecordingOptions};
+    /// let rec = open_recording("mav0/".as_ref(), &RecordingOptions::default()).unwrap();
+    /// rec.write_overview_png("imu.png".as_ref()).unwrap();
+    /// ```
+    pub fn write_overview_png(&self, path: &std::path::Path) -> Result<(), String> {
+        use crate::plot::{write_panels, ScatterChart, Series};
+        use plotters::style::RGBColor;
+        const COLUMNS: usize = 1000;
+        const COLORS: [RGBColor; 3] = [RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(31, 119, 180)];
+        if self.is_empty() {
+            return Err(format!("{}: no samples to plot", path.display()));
+        }
+        let per = self.len().div_ceil(COLUMNS);
+        let envelope = |value: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
+            let mut pts = Vec::with_capacity(2 * COLUMNS);
+            for start in (0..self.len()).step_by(per) {
+                let end = (start + per).min(self.len());
+                let (lo, hi) =
+                    (start..end).map(value).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
+                let t = self.t[start];
+                pts.push((t, lo));
+                if hi > lo {
+                    pts.push((t, hi));
+                }
+            }
+            pts
+        };
+        // imu_tk layouts hold the gyro in a second file.
+        let gyro_source = self.sources.last().map_or_else(|| self.source_name(), |p| p.display().to_string());
+        let axes = |data: &[[f64; 3]], what: &str, unit: &str, source: &str| ScatterChart {
+            title: format!("{what} — {source}"),
+            x_label: "time [s]".into(),
+            y_label: unit.into(),
+            series: (0..3)
+                .map(|k| Series {
+                    label: ["x", "y", "z"][k].into(),
+                    color: COLORS[k],
+                    points: envelope(&|i| data[i][k]),
+                    line: true,
+                })
+                .collect(),
+            ..Default::default()
+        };
+        let unit = |u: Stored, si: &str| if u == Stored::Si { si.to_string() } else { "raw counts".into() };
+        let mut charts = vec![
+            axes(&self.accel, "accelerometer", &unit(self.accel_units, "m/s²"), &self.source_name()),
+            axes(&self.gyro, "gyroscope", &unit(self.gyro_units, "rad/s"), &gyro_source),
+        ];
+        if let Some(temp) = &self.temperature {
+            charts.push(ScatterChart {
+                title: "temperature".into(),
+                x_label: "time [s]".into(),
+                y_label: "°C".into(),
+                series: vec![Series {
+                    color: RGBColor(120, 120, 120),
+                    points: envelope(&|i| temp[i]),
+                    line: true,
+                    ..Default::default()
+                }],
+                ..Default::default()
+            });
+        }
+        let height = if charts.len() == 3 { 1150 } else { 900 };
+        write_panels(path, &charts, 1200, height)
+    }
+
     /// Samples with `t` in `[t_start, t_end)` \[s\] as a new recording (warnings dropped).
     pub fn slice_time(&self, t_start: f64, t_end: f64) -> ImuRecording {
         let a = self.t.partition_point(|&x| x < t_start);
