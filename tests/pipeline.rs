@@ -169,5 +169,18 @@ fn run_command_refuses_bad_arguments() {
             .unwrap();
         assert!(String::from_utf8_lossy(&vio.stderr).contains("--features rerun"));
     }
+    // A motion the simulator refuses is reported as the simulation's, not the folder's, fault.
+    let sim = Command::new(env!("CARGO_BIN_EXE_tumble"))
+        .args(["sim", "walk", "--duration", "20", "--out", o])
+        .output()
+        .unwrap();
+    let e = String::from_utf8_lossy(&sim.stderr).to_string();
+    assert!(!sim.status.success() && e.contains("simulation: a 20 s walk") && !e.contains(o), "{e}");
+    // Plot options refuse what they cannot draw.
+    let bal = Command::new(env!("CARGO_BIN_EXE_tumble"))
+        .args(["solve", "no_such_problem.txt", "--plot", "x.png"])
+        .output()
+        .unwrap();
+    assert!(String::from_utf8_lossy(&bal.stderr).contains("--plot draws pose graphs"));
     std::fs::remove_dir_all(&out).ok();
 }
