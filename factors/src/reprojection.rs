@@ -26,7 +26,7 @@
 //! ```
 
 use crate::camera::CameraModel;
-use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Vector1, Vector3};
+use nalgebra::{DVector, Matrix2x3, Matrix3, Vector1, Vector3};
 use tumble_solvers::lie::hat;
 use tumble_solvers::sophus_lie::prelude::*;
 use tumble_solvers::sophus_lie::Isometry3F64;
@@ -63,7 +63,10 @@ impl InverseDepthReprojection {
         }
     }
 
-    fn evaluate(&self, vars: Vars<'_>, jac: bool) -> Result<Linearization, FactorError> {
+    /// Residual \[px\] into `out.residual` and, when `out` is given Jacobian
+    /// room (`jac`), the three Jacobian blocks (anchor pose, observing pose,
+    /// inverse depth).
+    fn evaluate(&self, vars: Vars<'_>, jac: bool, out: &mut Linearization) -> Result<(), FactorError> {
         let xa: &Isometry3F64 = vars.get(0)?;
         let xj: &Isometry3F64 = vars.get(1)?;
         let rho: &Vector1<f64> = vars.get(2)?;
@@ -78,24 +81,28 @@ impl InverseDepthReprojection {
         let Some((uv, jp)) = self.camera.project_with_jacobian(&[p_cj.x, p_cj.y, p_cj.z]) else {
             return Err(FactorError::Other(format!("landmark behind camera (depth {:.3} m)", p_cj.z)));
         };
-        let residual = DVector::from_vec(vec![uv[0] - self.measured[0], uv[1] - self.measured[1]]);
+        let residual = [uv[0] - self.measured[0], uv[1] - self.measured[1]];
         if !residual.iter().all(|x| x.is_finite()) {
             return Err(FactorError::NonFinite);
         }
         if !jac {
-            return Ok(Linearization { residual, jacobians: Vec::new() });
+            out.reshape(2, &[]);
+            out.residual.copy_from_slice(&residual);
+            return Ok(());
         }
+        out.reshape(2, &[6, 6, 1]);
+        out.residual.copy_from_slice(&residual);
         let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
         let rcb_rjt = self.r_bc.transpose() * rj.transpose();
-        let mut jxa = DMatrix::zeros(2, 6);
-        jxa.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * rcb_rjt * ra * (-hat(&p_ba))));
-        jxa.fixed_view_mut::<2, 3>(0, 3).copy_from(&(jpi * rcb_rjt * ra));
-        let mut jxj = DMatrix::zeros(2, 6);
+        let j_pw = jpi * rcb_rjt * ra;
+        let [jxa, jxj, jl] = &mut out.jacobians[..] else { unreachable!("reshaped to three blocks") };
+        jxa.fixed_view_mut::<2, 3>(0, 0).copy_from(&(j_pw * (-hat(&p_ba))));
+        jxa.fixed_view_mut::<2, 3>(0, 3).copy_from(&j_pw);
         jxj.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * self.r_bc.transpose() * hat(&p_bj)));
         jxj.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jpi * self.r_bc.transpose()));
-        let d_rho = jpi * rcb_rjt * ra * self.r_bc * (-self.bearing * (inv * inv));
-        let jl = DMatrix::from_column_slice(2, 1, d_rho.as_slice());
-        Ok(Linearization { residual, jacobians: vec![jxa, jxj, jl] })
+        let d_rho = j_pw * self.r_bc * (-self.bearing * (inv * inv));
+        jl.copy_from_slice(d_rho.as_slice());
+        Ok(())
     }
 }
 
@@ -107,9 +114,16 @@ impl Factor for InverseDepthReprojection {
         2
     }
     fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
-        Ok(self.evaluate(vars, false)?.residual)
+        let mut out = Linearization::default();
+        self.evaluate(vars, false, &mut out)?;
+        Ok(out.residual)
     }
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-        self.evaluate(vars, true)
+        let mut out = Linearization::default();
+        self.evaluate(vars, true, &mut out)?;
+        Ok(out)
+    }
+    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+        self.evaluate(vars, true, out)
     }
 }

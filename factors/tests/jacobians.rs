@@ -3,7 +3,7 @@
 use nalgebra::{Vector3, Vector6};
 use tumble_factors::{BetweenFactor, PriorFactor, SnavelyReprojection};
 use tumble_solvers::sophus_lie::{Isometry3F64, Rotation3F64};
-use tumble_solvers::{check_jacobians, se2, AutoDiff, DynVariable, Factor, C, L, X};
+use tumble_solvers::{check_jacobians, se2, AutoDiff, DynVariable, Factor, Linearization, Vars, C, L, X};
 
 fn assert_ok<F: Factor>(f: &F, vars: &[&dyn DynVariable]) {
     let r = check_jacobians(f, vars).unwrap();
@@ -131,7 +131,22 @@ fn inverse_depth_reprojection_for_every_camera_model() {
     ] {
         let cam = CameraModel { fx: 458.0, fy: 457.0, cx: 367.0, cy: 248.0, distortion };
         let f = InverseDepthReprojection::new([X(0), X(1), L(3)], [0.1, -0.08], [400.0, 200.0], cam, &t_bc);
-        assert_ok(&f, &[&xa, &xj, &Vector1::new(0.35)]);
+        let rho = Vector1::new(0.35);
+        assert_ok(&f, &[&xa, &xj, &rho]);
+        // linearize_into overwrites whatever buffers it is given: fresh ones,
+        // the right shapes full of other numbers, or the wrong shapes.
+        let vars: [&dyn DynVariable; 3] = [&xa, &xj, &rho];
+        let want = f.linearize(Vars::new(&vars)).unwrap();
+        let mut garbage = want.clone();
+        garbage.residual.fill(7.0);
+        garbage.jacobians.iter_mut().for_each(|j| j.fill(-3.0));
+        let wrong =
+            Linearization { residual: nalgebra::DVector::zeros(5), jacobians: vec![nalgebra::DMatrix::zeros(1, 1); 4] };
+        for mut out in [Linearization::default(), garbage, wrong] {
+            f.linearize_into(Vars::new(&vars), &mut out).unwrap();
+            assert_eq!(out.residual, want.residual);
+            assert_eq!(out.jacobians, want.jacobians);
+        }
     }
 }
 

@@ -56,6 +56,29 @@ pub struct Linearization {
     pub jacobians: Vec<DMatrix<f64>>,
 }
 
+impl Default for Linearization {
+    fn default() -> Self {
+        Linearization { residual: DVector::zeros(0), jacobians: Vec::new() }
+    }
+}
+
+impl Linearization {
+    /// Give the residual `rows` entries and the Jacobians `rows × cols[k]`
+    /// shapes, reusing the buffers when they already have them (contents are
+    /// then left as they were: the caller overwrites them).
+    pub fn reshape(&mut self, rows: usize, cols: &[usize]) {
+        if self.residual.len() != rows {
+            self.residual = DVector::zeros(rows);
+        }
+        self.jacobians.resize_with(cols.len(), || DMatrix::zeros(0, 0));
+        for (j, &c) in self.jacobians.iter_mut().zip(cols) {
+            if j.shape() != (rows, c) {
+                *j = DMatrix::zeros(rows, c);
+            }
+        }
+    }
+}
+
 /// One term of a nonlinear least-squares cost.
 pub trait Factor: Send + Sync {
     /// Keys of the variables this factor depends on (no duplicates).
@@ -67,6 +90,14 @@ pub trait Factor: Send + Sync {
     /// Residual and Jacobians. The default uses central differences on the manifold.
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
         numeric_linearize(self, vars)
+    }
+    /// As [`Factor::linearize`], into `out`, whose buffers hold an earlier
+    /// linearization of this factor: a factor evaluated many times per solve
+    /// can overwrite them ([`Linearization::reshape`]) instead of allocating.
+    /// The default calls [`Factor::linearize`].
+    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+        *out = self.linearize(vars)?;
+        Ok(())
     }
     /// Whether the Jacobians [`Factor::linearize`] returns never change (a
     /// linear factor, or a prior whose Jacobians are held at its linearization

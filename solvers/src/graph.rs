@@ -20,7 +20,7 @@ pub struct FactorEntry {
 }
 
 /// A whitened, robust-corrected linearization of one factor.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub(crate) struct WhitenedLinearization {
     pub lin: Linearization,
     /// ρ(s) (or s without a loss): twice this factor's cost.
@@ -41,7 +41,19 @@ impl FactorEntry {
     }
 
     pub(crate) fn linearize_whitened(&self, vars: Vars<'_>) -> Result<WhitenedLinearization, FactorError> {
-        let mut lin = self.factor.linearize(vars)?;
+        let mut out = WhitenedLinearization::default();
+        self.linearize_whitened_into(vars, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`FactorEntry::linearize_whitened`] into `out`, reusing its buffers.
+    pub(crate) fn linearize_whitened_into(
+        &self,
+        vars: Vars<'_>,
+        out: &mut WhitenedLinearization,
+    ) -> Result<(), FactorError> {
+        let lin = &mut out.lin;
+        self.factor.linearize_into(vars, lin)?;
         self.noise.whiten(&mut lin.residual);
         for j in lin.jacobians.iter_mut() {
             self.noise.whiten_jacobian(j);
@@ -50,11 +62,11 @@ impl FactorEntry {
         {
             return Err(FactorError::NonFinite);
         }
-        let rho = match &self.loss {
+        out.rho = match &self.loss {
             None => lin.residual.norm_squared(),
             Some(l) => apply_robust(l.as_ref(), &mut lin.residual, &mut lin.jacobians),
         };
-        Ok(WhitenedLinearization { lin, rho })
+        Ok(())
     }
 }
 

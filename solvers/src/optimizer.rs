@@ -266,13 +266,24 @@ pub(crate) fn linearize_all(
     layout: &Layout,
     vars: &[Box<dyn DynVariable>],
 ) -> Result<(Vec<WhitenedLinearization>, f64), SolveError> {
-    let lins: Vec<WhitenedLinearization> = entries
-        .par_iter()
-        .zip(layout.factor_vars.par_iter())
-        .enumerate()
-        .map(|(fi, (e, fv))| {
+    let mut lins = Vec::new();
+    let cost = linearize_all_into(entries, layout, vars, &mut lins)?;
+    Ok((lins, cost))
+}
+
+/// [`linearize_all`] into `lins`, reusing the buffers of an earlier
+/// linearization of the same graph; returns the cost.
+pub(crate) fn linearize_all_into(
+    entries: &[FactorEntry],
+    layout: &Layout,
+    vars: &[Box<dyn DynVariable>],
+    lins: &mut Vec<WhitenedLinearization>,
+) -> Result<f64, SolveError> {
+    lins.resize_with(entries.len(), Default::default);
+    lins.par_iter_mut().zip(entries.par_iter()).zip(layout.factor_vars.par_iter()).enumerate().try_for_each(
+        |(fi, ((wl, e), fv))| {
             let v = gather(vars, fv);
-            let wl = e.linearize_whitened(Vars::new(&v)).map_err(|source| SolveError::Factor { factor: fi, source })?;
+            e.linearize_whitened_into(Vars::new(&v), wl).map_err(|source| SolveError::Factor { factor: fi, source })?;
             if wl.lin.jacobians.len() != fv.len()
                 || wl.lin.residual.len() != e.factor.residual_dim()
                 || wl
@@ -287,11 +298,10 @@ pub(crate) fn linearize_all(
                     what: "Jacobian or residual has the wrong shape".into(),
                 });
             }
-            Ok(wl)
-        })
-        .collect::<Result<_, _>>()?;
-    let cost = 0.5 * lins.iter().map(|l| l.rho).sum::<f64>();
-    Ok((lins, cost))
+            Ok(())
+        },
+    )?;
+    Ok(0.5 * lins.iter().map(|l| l.rho).sum::<f64>())
 }
 
 /// Nonlinear least-squares optimizer over a [`Graph`].
@@ -396,6 +406,8 @@ impl Optimizer {
         };
         let t = Instant::now();
         let (mut lins, mut cost) = linearize_all(entries, &layout, &vars)?;
+        // The trial point's linearization, in buffers reused from step to step.
+        let mut trial_lins = Vec::new();
         summary.time_linearize += t.elapsed().as_secs_f64();
         summary.initial_cost = cost;
         if summary.variables == 0 {
@@ -470,8 +482,8 @@ impl Optimizer {
                 // Linearize at the trial point right away: with small damping
                 // nearly every step is accepted, and then this is the next
                 // iteration's linearization (no second pass over the residuals).
-                let trial_lin = linearize_all(entries, &layout, &trial);
-                let new_cost = trial_lin.as_ref().map(|(_, c)| *c);
+                let new_cost = linearize_all_into(entries, &layout, &trial, &mut trial_lins);
+                let linearized = new_cost.is_ok();
                 summary.time_linearize += t.elapsed().as_secs_f64();
                 // Predicted decrease: −gᵀδ − ½ δᵀHδ.
                 let hd = structure.h_times(&sys, &delta);
@@ -494,11 +506,11 @@ impl Optimizer {
                         accepted,
                     });
                 }
-                if let (true, Ok((l, c))) = (accepted, trial_lin) {
+                if accepted && linearized {
                     let decrease = cost - new_cost;
                     vars = trial;
-                    lins = l;
-                    cost = c;
+                    std::mem::swap(&mut lins, &mut trial_lins);
+                    cost = new_cost;
                     if !gn {
                         lambda *= o.min_lambda_decrease.max(1.0 - (2.0 * rho - 1.0).powi(3));
                         lambda = lambda.max(1e-16);
