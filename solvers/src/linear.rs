@@ -464,27 +464,31 @@ impl Structure {
         self.row_idx.len()
     }
 
+    /// The rows of pair `pair`'s block in `h`: `(r, position of the row's
+    /// first entry, entries stored)` for each row `r` of the bigger block —
+    /// all the smaller block's columns, or `r + 1` on a diagonal block (upper triangle).
+    #[inline]
+    fn pair_rows(&self, pair: usize) -> impl Iterator<Item = (usize, usize, usize)> + '_ {
+        let (i, j, b0) = self.pairs[pair];
+        let cols = self.kept_dims[j];
+        (0..self.kept_dims[i]).map(move |r| (r, self.bases[b0 + r], if i == j { r + 1 } else { cols }))
+    }
+
     /// `H_(big, small) −= W_big H_smallᵀ` (Schur update), without a temporary.
     /// `w_big` is `d_big × dl`, `h_small` is `d_small × dl`, both column-major.
     #[inline]
     fn sub_w_ht(&self, h: &mut [f64], pair: usize, w_big: &[f64], h_small: &[f64], dl: usize) {
-        let (i, j, b0) = self.pairs[pair];
         let (rows, cols) = (w_big.len() / dl, h_small.len() / dl);
-        if dl == 1 {
-            // Inverse depths: an outer product.
-            for (r, &w) in w_big.iter().enumerate() {
-                let base = self.bases[b0 + r];
-                let cmax = if i == j { r + 1 } else { cols };
-                for (hv, &s) in h[base..base + cmax].iter_mut().zip(h_small) {
+        for (r, base, n) in self.pair_rows(pair) {
+            if dl == 1 {
+                // Inverse depths: an outer product.
+                let w = w_big[r];
+                for (hv, &s) in h[base..base + n].iter_mut().zip(h_small) {
                     *hv -= w * s;
                 }
+                continue;
             }
-            return;
-        }
-        for r in 0..rows {
-            let base = self.bases[b0 + r];
-            let cmax = if i == j { r + 1 } else { cols };
-            for c in 0..cmax {
+            for c in 0..n {
                 let mut s = 0.0;
                 for k in 0..dl {
                     s += w_big[r + k * rows] * h_small[c + k * cols];
@@ -497,14 +501,12 @@ impl Structure {
     /// `H_(big, small) += J_bigᵀ J_small`, without a temporary.
     #[inline]
     fn add_jtj(&self, h: &mut [f64], pair: usize, j_big: &DMatrix<f64>, j_small: &DMatrix<f64>) {
-        let (i, j, b0) = self.pairs[pair];
         let m = j_big.nrows();
         let (big, small) = (j_big.as_slice(), j_small.as_slice());
-        for (r, cr) in big.chunks_exact(m).enumerate() {
-            let base = self.bases[b0 + r];
-            let cmax = if i == j { r + 1 } else { j_small.ncols() };
-            for (c, cs) in small.chunks_exact(m).take(cmax).enumerate() {
-                h[base + c] += dot(cr, cs);
+        for (r, base, n) in self.pair_rows(pair) {
+            let cr = &big[r * m..(r + 1) * m];
+            for (hv, cs) in h[base..base + n].iter_mut().zip(small.chunks_exact(m)) {
+                *hv += dot(cr, cs);
             }
         }
     }
@@ -521,12 +523,11 @@ impl Structure {
     fn jtj_entries(&self, plan: &FactorPlan, js: &[DMatrix<f64>]) -> Vec<f64> {
         let mut out = Vec::new();
         for &(p, q, pair) in &plan.pairs {
-            let (i, j, _) = self.pairs[pair];
             let m = js[p].nrows();
-            let small = js[q].as_slice();
-            for (r, cr) in js[p].as_slice().chunks_exact(m).enumerate() {
-                let cmax = if i == j { r + 1 } else { js[q].ncols() };
-                out.extend(small.chunks_exact(m).take(cmax).map(|cs| dot(cr, cs)));
+            let (big, small) = (js[p].as_slice(), js[q].as_slice());
+            for (r, _, n) in self.pair_rows(pair) {
+                let cr = &big[r * m..(r + 1) * m];
+                out.extend(small.chunks_exact(m).take(n).map(|cs| dot(cr, cs)));
             }
         }
         out
@@ -536,15 +537,11 @@ impl Structure {
     fn add_entries(&self, h: &mut [f64], plan: &FactorPlan, entries: &[f64]) {
         let mut k = 0;
         for &(_, _, pair) in &plan.pairs {
-            let (i, j, b0) = self.pairs[pair];
-            let (rows, cols) = (self.kept_dims[i], self.kept_dims[j]);
-            for r in 0..rows {
-                let base = self.bases[b0 + r];
-                let cmax = if i == j { r + 1 } else { cols };
-                for (hv, e) in h[base..base + cmax].iter_mut().zip(&entries[k..k + cmax]) {
+            for (_, base, n) in self.pair_rows(pair) {
+                for (hv, e) in h[base..base + n].iter_mut().zip(&entries[k..k + n]) {
                     *hv += e;
                 }
-                k += cmax;
+                k += n;
             }
         }
     }
