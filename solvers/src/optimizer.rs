@@ -10,7 +10,6 @@ use crate::marginal::{covariances_of_system, Covariances};
 use crate::values::Values;
 use crate::variable::DynVariable;
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::fmt;
 use std::time::Instant;
 
@@ -194,7 +193,6 @@ pub(crate) struct Layout {
 
 impl Layout {
     pub fn new(graph: &Graph, values: &Values, eliminate: &[char]) -> Result<Self, SolveError> {
-        let mut index: HashMap<Key, usize> = HashMap::new();
         let mut keys: Vec<Key> = Vec::new();
         for (fi, e) in graph.entries().iter().enumerate() {
             let ks = e.factor.keys();
@@ -205,11 +203,8 @@ impl Layout {
                 if !values.contains(*k) {
                     return Err(SolveError::MissingVariable { factor: fi, key: *k });
                 }
-                if !index.contains_key(k) {
-                    index.insert(*k, 0);
-                    keys.push(*k);
-                }
             }
+            keys.extend_from_slice(ks);
             if let Some(d) = e.noise.dim() {
                 if d != e.factor.residual_dim() {
                     return Err(SolveError::BadFactor {
@@ -222,10 +217,9 @@ impl Layout {
                 }
             }
         }
-        keys.sort();
-        for (i, k) in keys.iter().enumerate() {
-            index.insert(*k, i);
-        }
+        keys.sort_unstable();
+        keys.dedup();
+        let index = |k: &Key| keys.binary_search(k).expect("every factor key is in `keys`");
         let mut roles = Vec::with_capacity(keys.len());
         let (mut kept_vars, mut elim_vars) = (Vec::new(), Vec::new());
         for (i, k) in keys.iter().enumerate() {
@@ -239,7 +233,7 @@ impl Layout {
                 kept_vars.push(i);
             }
         }
-        let factor_vars = graph.entries().iter().map(|e| e.factor.keys().iter().map(|k| index[k]).collect()).collect();
+        let factor_vars = graph.entries().iter().map(|e| e.factor.keys().iter().map(index).collect()).collect();
         let constant_hessian =
             graph.entries().iter().map(|e| e.loss.is_none() && e.factor.constant_jacobians()).collect();
         Ok(Layout { keys, roles, factor_vars, kept_vars, elim_vars, constant_hessian })
