@@ -601,15 +601,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 cfg.duration_s = duration;
             }
             let start = std::time::Instant::now();
-            // Errors of the configuration or the motion come back on the output
-            // folder itself; they are not about that path, so say "simulation".
-            let sim = tumble::sim::simulate_and_write(scenario, &cfg, seed, &out).map_err(|e| {
-                if e.file == out && e.line.is_none() {
-                    format!("simulation: {}", e.message)
-                } else {
-                    e.to_string()
-                }
-            })?;
+            let sim = tumble::sim::simulate_and_write(scenario, &cfg, seed, &out)?;
             println!(
                 "simulated {:?}: {} IMU samples over {:.1} s{}, written to {} in {:.2} s",
                 scenario,

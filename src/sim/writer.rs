@@ -65,17 +65,21 @@ fn format_imu_rows(imu: &SimulatedImu, t0_ns: i64, rate_hz: f64, range: std::ops
 /// Simulate and write at once: each chunk of IMU samples is formatted as soon
 /// as it is final and written by a second thread while the next chunk is
 /// simulated. Then the rest of the folder as [`write_asl`] does.
+///
+/// Errors: a configuration or motion the simulator refuses reads
+/// `simulation: …`; a file that cannot be written is named with its path.
 pub fn simulate_and_write(
     scenario: super::Scenario,
     config: &super::SimConfig,
     seed: u64,
     out: &Path,
-) -> Result<Simulation, InputError> {
-    config.check().map_err(|m| InputError::file(out, m))?;
+) -> Result<Simulation, String> {
+    let refused = |m: String| format!("simulation: {m}");
+    config.check().map_err(refused)?;
     let csv = out.join("mav0").join("imu0").join("data.csv");
-    let mut w = create(&csv)?;
+    let mut w = create(&csv).map_err(|e| e.to_string())?;
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<Vec<u8>>>(2);
-    let sim = std::thread::scope(|scope| -> Result<Simulation, InputError> {
+    let sim = std::thread::scope(|scope| -> Result<Simulation, String> {
         let writer = scope.spawn(move || -> std::io::Result<()> {
             for pieces in rx {
                 for p in pieces {
@@ -98,11 +102,11 @@ pub fn simulate_and_write(
         };
         let sim = super::simulate_with(scenario, config, seed, &mut send);
         drop(tx);
-        let written = writer.join().map_err(|_| InputError::file(&csv, "writer thread panicked"))?;
-        written.map_err(|e| werr(&csv, e))?;
-        sim.map_err(|m| InputError::file(out, m))
+        let written = writer.join().map_err(|_| InputError::file(&csv, "writer thread panicked").to_string())?;
+        written.map_err(|e| werr(&csv, e).to_string())?;
+        sim.map_err(refused)
     })?;
-    write_rest(&sim, out)?;
+    write_rest(&sim, out).map_err(|e| e.to_string())?;
     Ok(sim)
 }
 
