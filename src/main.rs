@@ -348,13 +348,30 @@ enum Command {
     },
     /// Model-discrepancy audit of a calibration recording: find the effect the
     /// calibration lacks, add it, show the gap shrink. Writes audit.json,
-    /// audit.md, calibration.json (with the effects) and figures.
+    /// audit.md, calibration.json (with the effects) and figures. With --vio,
+    /// the audit of a VIO run instead: camera–IMU and accelerometer–gyro time offsets.
     Audit {
         #[command(flatten)]
         input: CalibInput,
-        /// calibration.json or .yaml from `tumble calibrate` (or imu_tk's, converted by it).
+        /// calibration.json or .yaml from `tumble calibrate` (or imu_tk's, converted by it);
+        /// optional with --vio (then calibration.json with the offsets is written only when given).
         #[arg(long)]
-        calibration: PathBuf,
+        calibration: Option<PathBuf>,
+        /// Audit a VIO run on this input instead (as `tumble vio` takes it: ASL folder with
+        /// tracks or images, or an EqVIO .csv): fits the time offsets by re-running the estimator.
+        #[arg(long, conflicts_with_all = ["recording", "accel", "gyro"])]
+        vio: Option<PathBuf>,
+        /// With --vio: feature observation noise [px].
+        #[arg(long, default_value_t = 1.0)]
+        pixel_sigma: f64,
+        /// With --vio: gravity magnitude [m/s²].
+        #[arg(long, default_value_t = 9.81)]
+        gravity: f64,
+        /// With --vio: spacing of the offsets tried [ms].
+        #[arg(long, default_value_t = 4.0)]
+        offset_step_ms: f64,
+        #[command(flatten)]
+        frontend: FrontendArgs,
         /// Kalibr imu.yaml with the noise (from `tumble allan`): its bias random walks set how
         /// far biases may wander (default: generous consumer-MEMS values).
         #[arg(long)]
@@ -736,15 +753,45 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             let files = result.write_all(&rec, &opts, &out)?;
             println!("calibrated in {elapsed:.3} s; wrote {}", paths(&files));
         }
-        Command::Audit { input, calibration, noise, out, alpha, max_effects, candidates, init_static } => {
+        Command::Audit {
+            input,
+            calibration,
+            vio,
+            pixel_sigma,
+            gravity,
+            offset_step_ms,
+            frontend,
+            noise,
+            out,
+            alpha,
+            max_effects,
+            candidates,
+            init_static,
+        } => {
             use tumble::audit::{audit, AuditOptions, Effect};
+            let candidates = candidates
+                .iter()
+                .map(|c| {
+                    Effect::from_id(c.trim()).ok_or_else(|| {
+                        let ids: Vec<&str> = Effect::ALL.iter().map(|e| e.id()).collect();
+                        format!("--candidates: unknown effect `{c}` (known: {})", ids.join(", "))
+                    })
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            if !(alpha > 0.0 && alpha < 1.0) {
+                return Err(format!("--alpha must be in (0, 1), got {alpha}").into());
+            }
+            if let Some(path) = vio {
+                let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
+                let noise = noise.as_deref().map(tumble::vio::ImuNoise::read).transpose()?;
+                let args = VioAuditArgs { pixel_sigma, gravity, offset_step_ms, alpha, candidates, noise };
+                return audit_vio_command(&path, cal.as_ref(), &args, &frontend, &out);
+            }
+            let calibration = calibration.ok_or("--calibration is required to audit a calibration recording")?;
             let cal = tumble::calib::ImuCalibration::read(&calibration)?;
             let (rec, _, _) = input.open()?;
             for w in &rec.warnings {
                 eprintln!("warning: {w}");
-            }
-            if !(alpha > 0.0 && alpha < 1.0) {
-                return Err(format!("--alpha must be in (0, 1), got {alpha}").into());
             }
             if !(init_static.is_finite() && init_static > 0.0) {
                 return Err(format!("--init-static must be positive, got {init_static}").into());
@@ -752,15 +799,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             let mut opts = AuditOptions { alpha, max_effects, ..AuditOptions::default() };
             opts.detection.init_static_s = init_static;
             if !candidates.is_empty() {
-                opts.candidates = candidates
-                    .iter()
-                    .map(|c| {
-                        Effect::from_id(c.trim()).ok_or_else(|| {
-                            let ids: Vec<&str> = Effect::ALL.iter().map(|e| e.id()).collect();
-                            format!("--candidates: unknown effect `{c}` (known: {})", ids.join(", "))
-                        })
-                    })
-                    .collect::<Result<_, _>>()?;
+                opts.candidates = candidates;
             }
             if let Some(p) = &noise {
                 opts.noise = Some(tumble::vio::ImuNoise::read(p)?);
@@ -1068,6 +1107,62 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
 /// The VIO's input from the command line: an EqVIO .csv, or an ASL folder with
 /// tracks, with images (run through the frontend into `out`), or with only a
 /// ground truth (`simulate_camera`).
+/// Options of `tumble audit --vio`.
+struct VioAuditArgs {
+    pixel_sigma: f64,
+    gravity: f64,
+    offset_step_ms: f64,
+    alpha: f64,
+    candidates: Vec<tumble::audit::Effect>,
+    noise: Option<tumble::vio::ImuNoise>,
+}
+
+/// `tumble audit --vio`: fit the time offsets of a VIO input and write the audit.
+fn audit_vio_command(
+    path: &std::path::Path,
+    cal: Option<&tumble::calib::ImuCalibration>,
+    args: &VioAuditArgs,
+    frontend: &FrontendArgs,
+    out: &std::path::Path,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use tumble::audit::vio::{audit_vio, VioAuditOptions};
+    if !(args.pixel_sigma.is_finite() && args.pixel_sigma > 0.0) {
+        return Err(format!("--pixel-sigma must be positive, got {}", args.pixel_sigma).into());
+    }
+    if !(args.offset_step_ms.is_finite() && args.offset_step_ms > 0.0 && args.offset_step_ms <= 20.0) {
+        return Err(format!("--offset-step-ms must be in (0, 20], got {}", args.offset_step_ms).into());
+    }
+    let vin = vio_input(path, cal, None, false, 0, frontend, out)?;
+    let mut vopts =
+        tumble::vio::VioOptions { pixel_sigma: args.pixel_sigma, gravity: args.gravity, ..Default::default() };
+    vin.apply_noise(args.noise, &mut vopts.imu);
+    let mut opts = VioAuditOptions::new(vopts);
+    opts.alpha = args.alpha;
+    opts.step_s = 1e-3 * args.offset_step_ms;
+    if !args.candidates.is_empty() {
+        opts.candidates = args.candidates.clone();
+    }
+    if let Some(o) = cal.and_then(|c| c.time_offsets) {
+        println!(
+            "the calibration's time offsets are applied: camera–IMU {:+.3} ms, accel–gyro {:+.3} ms",
+            1e3 * o.camera_imu_s,
+            1e3 * o.accel_gyro_s
+        );
+    }
+    let bar = progress_bar(0, "audit [{elapsed_precise}] {pos} VIO runs {msg}");
+    let mut tick = |done: usize| bar.set_position(done as u64);
+    let t = std::time::Instant::now();
+    let result = audit_vio(&vin, &opts, Some(&mut tick))?;
+    bar.finish_and_clear();
+    for n in &result.notes {
+        eprintln!("note: {n}");
+    }
+    let files = tumble::audit::vio::write(&result, cal, out)?;
+    println!("{}", result.verdict());
+    println!("audited in {:.1} s; wrote {} in {}", t.elapsed().as_secs_f64(), files.join(", "), out.display());
+    Ok(())
+}
+
 fn vio_input(
     input: &std::path::Path,
     cal: Option<&tumble::calib::ImuCalibration>,

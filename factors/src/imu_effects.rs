@@ -39,9 +39,10 @@ pub enum Effect {
     GyroScaleNonlinearity,
     /// Quadratic accelerometer scale error `n_a ⊙ a²` \[1/(m/s²)\].
     AccelScaleNonlinearity,
-    /// Time offset between accelerometer and gyro samples \[s\] (not fitted by the calibration audit).
+    /// Time offset between accelerometer and gyro samples \[s\] (invisible to the
+    /// calibration audit; fitted by the VIO audit, `tumble audit --vio`).
     AccelGyroTimeOffset,
-    /// Time offset between camera and IMU \[s\] (needs a camera; not fitted by the calibration audit).
+    /// Time offset between camera and IMU \[s\] (needs a camera: fitted by the VIO audit, `tumble audit --vio`).
     CameraImuTimeOffset,
     /// Linear bias drift within the recording: accel `d_a` \[m/s³\], gyro `d_g` \[rad/s²\].
     BiasDrift,

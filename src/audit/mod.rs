@@ -17,6 +17,9 @@
 //! `alpha / candidates` (Bonferroni) and its ΔBIC is positive; then the search
 //! repeats until nothing passes.
 //!
+//! The two time offsets of the vocabulary do not show in a calibration
+//! recording; [`vio`] audits a VIO run for them.
+//!
 //! ```no_run
 //! use tumble::audit::{audit, AuditOptions};
 //! use tumble::calib::ImuCalibration;
@@ -30,6 +33,7 @@
 pub mod data;
 pub mod fit;
 pub mod report;
+pub mod vio;
 
 pub use data::AuditData;
 pub use tumble_factors::imu_effects::Effect;
@@ -219,7 +223,7 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
     }
     for e in &opts.candidates {
         if !e.in_sensor_model() {
-            notes.push(format!("{e} needs a camera/VIO run or sample timing; not tested on a calibration recording"));
+            notes.push(format!("{e} needs a VIO run (`tumble audit --vio`); not tested on a calibration recording"));
         }
     }
     let start = fit::start_values(&data, accel, gyro, gyro_bias);
@@ -334,25 +338,49 @@ fn still_intervals(
 }
 
 fn score(effect: Effect, current: &Fit, with: &Fit, threshold: f64) -> CandidateScore {
-    let p = effect.dim();
-    let delta = (current.chi2() - with.chi2()).max(0.0);
-    let dof = with.dof().max(1) as f64;
-    let f = (delta / p as f64) / (with.chi2() / dof).max(1e-300);
-    let p_value = FisherSnedecor::new(p as f64, dof).map(|d| d.sf(f)).unwrap_or(1.0);
-    let delta_bic = delta - p as f64 * (with.residuals() as f64).ln();
     let j = with.layout.effects.len() - 1;
-    CandidateScore {
-        effect: effect.id().to_string(),
-        dof_added: p,
-        params: with.effect(j),
-        params_std: with.effect_std.get(j).cloned().unwrap_or_default(),
-        chi2: with.chi2(),
-        delta_chi2: delta,
-        f,
-        p_value,
-        delta_bic,
-        gap: with.gap(),
-        significant: p_value < threshold && delta_bic > 0.0,
+    CandidateScore::from_chi2(
+        effect,
+        (current.chi2(), with.chi2(), with.dof(), with.residuals()),
+        with.effect(j),
+        with.effect_std.get(j).cloned().unwrap_or_default(),
+        with.gap(),
+        threshold,
+    )
+}
+
+impl CandidateScore {
+    /// Score an effect from `(χ² without it, χ² with it, dof with it, residual
+    /// count)`: F-test of the χ² drop per added parameter against the
+    /// remaining χ²/dof, ΔBIC = Δχ² − p ln(residuals); significant when the
+    /// p-value is below `threshold` and ΔBIC > 0.
+    pub fn from_chi2(
+        effect: Effect,
+        (chi2_before, chi2, dof, residuals): (f64, f64, usize, usize),
+        params: Vec<f64>,
+        params_std: Vec<f64>,
+        gap: f64,
+        threshold: f64,
+    ) -> CandidateScore {
+        let p = effect.dim();
+        let delta = (chi2_before - chi2).max(0.0);
+        let dof = dof.max(1) as f64;
+        let f = (delta / p as f64) / (chi2 / dof).max(1e-300);
+        let p_value = FisherSnedecor::new(p as f64, dof).map(|d| d.sf(f)).unwrap_or(1.0);
+        let delta_bic = delta - p as f64 * (residuals.max(1) as f64).ln();
+        CandidateScore {
+            effect: effect.id().to_string(),
+            dof_added: p,
+            params,
+            params_std,
+            chi2,
+            delta_chi2: delta,
+            f,
+            p_value,
+            delta_bic,
+            gap,
+            significant: p_value < threshold && delta_bic > 0.0,
+        }
     }
 }
 
@@ -385,5 +413,6 @@ fn calibrated(given: &ImuCalibration, data: &AuditData, noise: &Noise, fit: &Fit
         gravity: given.gravity,
         units: given.units.clone(),
         effects: (!effects.effects.is_empty()).then_some(effects),
+        time_offsets: given.time_offsets,
     })
 }

@@ -33,5 +33,5 @@ pub mod solve;
 
 pub use apply::write_like_input;
 pub use gravity::normal_gravity;
-pub use model::{read_imu_tk_calib, Corrector, EffectTerm, ImuCalibration, ModelEffects, Triad, Units};
+pub use model::{read_imu_tk_calib, Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
 pub use solve::{calibrate, CalibError, CalibOptions, CalibrationResult, RECORDING_ADVICE};

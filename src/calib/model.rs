@@ -116,6 +116,40 @@ pub struct ImuCalibration {
     pub units: Units,
     /// Effects beyond eq. (1) found by `tumble audit` (`None`: the plain model).
     pub effects: Option<ModelEffects>,
+    /// Time offsets found by `tumble audit --vio` (`None`: none known).
+    pub time_offsets: Option<TimeOffsets>,
+}
+
+/// Sensor time offsets \[s\], the audit's `camera_imu_time_offset` and
+/// `accel_gyro_time_offset`. The VIO applies them when it builds its input
+/// with the calibration ([`crate::vio::VioInput::with_time_offsets`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeOffsets {
+    /// A camera frame stamped `t` was taken at IMU time `t + camera_imu_s`.
+    #[serde(default)]
+    pub camera_imu_s: f64,
+    /// Its standard deviation (0: not estimated).
+    #[serde(default)]
+    pub camera_imu_s_std: f64,
+    /// An accelerometer sample stamped `t` measured the motion at `t + accel_gyro_s`.
+    #[serde(default)]
+    pub accel_gyro_s: f64,
+    /// Its standard deviation (0: not estimated).
+    #[serde(default)]
+    pub accel_gyro_s_std: f64,
+}
+
+impl TimeOffsets {
+    /// Check that both offsets are finite and within ±1 s.
+    pub fn check(&self) -> Result<(), String> {
+        for (name, v) in [("camera_imu_s", self.camera_imu_s), ("accel_gyro_s", self.accel_gyro_s)] {
+            if !(v.is_finite() && v.abs() <= 1.0) {
+                return Err(format!("time_offsets: {name} = {v} is not a time offset within ±1 s"));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Effects beyond the paper's model, with the references they are measured from
@@ -220,6 +254,9 @@ pub struct CalibrationFile {
     /// Effects found by `tumble audit`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub effects: Option<ModelEffects>,
+    /// Time offsets found by `tumble audit --vio`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub time_offsets: Option<TimeOffsets>,
 }
 
 fn default_gravity() -> f64 {
@@ -254,6 +291,7 @@ impl From<&ImuCalibration> for CalibrationFile {
             gravity: c.gravity,
             units: c.units.clone(),
             effects: c.effects.clone(),
+            time_offsets: c.time_offsets,
         }
     }
 }
@@ -297,6 +335,13 @@ impl CalibrationFile {
                 }
                 None => None,
             },
+            time_offsets: match self.time_offsets {
+                Some(o) => {
+                    o.check()?;
+                    Some(o)
+                }
+                None => None,
+            },
         };
         if cal.effects.as_ref().is_some_and(|e| !e.effects.is_empty()) {
             cal.inverse_params().map_err(|m| format!("effects: {m}"))?;
@@ -306,6 +351,19 @@ impl CalibrationFile {
 }
 
 impl ImuCalibration {
+    /// The identity calibration (SI input, no error, standard gravity): samples
+    /// pass unchanged; a start for offsets or effects known from elsewhere.
+    pub fn identity() -> ImuCalibration {
+        ImuCalibration {
+            accel: Triad::identity(),
+            gyro: Triad::identity(),
+            gravity: crate::io::STANDARD_GRAVITY,
+            units: Units::default(),
+            effects: None,
+            time_offsets: None,
+        }
+    }
+
     /// Read a `calibration.json` (or `.yaml`) written by `tumble calibrate`
     /// (diagnostic keys are ignored; the `*_std` keys are optional).
     pub fn read(path: &Path) -> Result<ImuCalibration, InputError> {

@@ -343,6 +343,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
             gravity: opts.gravity,
             units,
             effects: None,
+            time_offsets: None,
         },
         multiplier,
         threshold: multiplier * base,

@@ -202,7 +202,11 @@ pub fn simulate_imu_streaming(
                 let i = c0 + j;
                 let ti = (i as f64 * dt + if jitter_on { jitter[j] } else { 0.0 }).clamp(0.0, motion.duration());
                 let k = motion.at(ti);
-                let f = k.specific_force(g);
+                let f = if model.accel_time_offset_s == 0.0 {
+                    k.specific_force(g)
+                } else {
+                    motion.at((ti + model.accel_time_offset_s).clamp(0.0, motion.duration())).specific_force(g)
+                };
                 let (w, f) = ([k.omega.x, k.omega.y, k.omega.z], [f.x, f.y, f.z]);
                 let dtemp = temperature.map(|v| v[i] - tref).unwrap_or(0.0);
                 let yg = deterministic(&model.gyro, model, w, dtemp);

@@ -111,11 +111,20 @@ impl SimConfig {
     }
 }
 
+/// Camera–IMU time offset `hide_effect` sets at strength 1 \[s\] (a frame stamped
+/// `t` shows the motion at `t + offset`).
+pub const CAMERA_IMU_TIME_OFFSET_S: f64 = 0.01;
+
+/// Accelerometer–gyro time offset `hide_effect` sets at strength 1 \[s\].
+pub const ACCEL_GYRO_TIME_OFFSET_S: f64 = 0.005;
+
 /// Switch on one effect the calibration model lacks, as the audit's tests and
 /// `tumble demo` hide it: `g_sensitivity`, `temperature_bias`,
 /// `temperature_scale`, `gyro_nonlinearity`, `accel_nonlinearity`,
-/// `bias_drift`, or `none`, with the model's coefficients of that effect
-/// multiplied by `strength`. Temperature effects also get a warm-up from 10 °C
+/// `bias_drift`, `camera_imu_time_offset`, `accel_gyro_time_offset`, or
+/// `none`, with the model's coefficients of that effect multiplied by
+/// `strength` (the time offsets: [`CAMERA_IMU_TIME_OFFSET_S`] and
+/// [`ACCEL_GYRO_TIME_OFFSET_S`] times `strength`). Temperature effects also get a warm-up from 10 °C
 /// to 50 °C (time constant 150 s) so the temperature changes during a tumble
 /// recording; the nonlinearity of the other triad stays zero.
 pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Result<(), String> {
@@ -148,6 +157,8 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
             config.imu.gyro.nonlinearity = [0.0; 3];
         }
         "bias_drift" => e.bias_drift = true,
+        "camera_imu_time_offset" => config.camera.time_offset_s = CAMERA_IMU_TIME_OFFSET_S * strength,
+        "accel_gyro_time_offset" => config.imu.accel_time_offset_s = ACCEL_GYRO_TIME_OFFSET_S * strength,
         "temperature_bias" => {
             e.temperature = true;
             config.imu.accel.temperature_scale = [0.0; 3];
@@ -163,7 +174,7 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
         other => {
             return Err(format!(
                 "unknown effect `{other}`: use g_sensitivity, temperature_bias, temperature_scale, gyro_nonlinearity, \
-                 accel_nonlinearity, bias_drift or none"
+                 accel_nonlinearity, bias_drift, camera_imu_time_offset, accel_gyro_time_offset or none"
             ))
         }
     }

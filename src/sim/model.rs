@@ -188,6 +188,10 @@ pub struct ImuModel {
     pub g_sensitivity: [[f64; 3]; 3],
     /// Standard deviation of the sample instants about their stamps \[s\].
     pub jitter_s: f64,
+    /// Time offset of the accelerometer against the gyro \[s\]: an accelerometer
+    /// sample stamped `t` measures the motion at `t + accel_time_offset_s`
+    /// (0: both triads sampled together; the audit's `accel_gyro_time_offset`).
+    pub accel_time_offset_s: f64,
     /// Temperature trace.
     pub temperature: TemperatureTrace,
     /// Which effects are applied.
@@ -275,6 +279,7 @@ impl ImuModel {
             accel,
             g_sensitivity: [[2e-4, 5e-5, -3e-5], [-4e-5, 1.5e-4, 6e-5], [3e-5, -5e-5, 1e-4]],
             jitter_s: 2e-5,
+            accel_time_offset_s: 0.0,
             temperature: TemperatureTrace::default(),
             effects: Effects::default(),
         }
@@ -311,6 +316,9 @@ impl ImuModel {
         }
         if !(self.jitter_s.is_finite() && self.jitter_s >= 0.0) {
             return Err("jitter_s must be ≥ 0".into());
+        }
+        if !(self.accel_time_offset_s.is_finite() && self.accel_time_offset_s.abs() <= 1.0) {
+            return Err(format!("accel_time_offset_s must be within ±1 s, found {}", self.accel_time_offset_s));
         }
         Ok(())
     }

@@ -53,6 +53,55 @@ pub struct VioResult {
     pub init_time: Option<f64>,
     /// Wall time of the whole run \[s\].
     pub wall_s: f64,
+    /// The measurement residuals at their final estimates, for the audit.
+    pub residuals: ResidualTally,
+}
+
+/// Whitened measurement residuals of a run, each factor counted once: at the
+/// estimate it had when its oldest state was marginalized (reprojections of
+/// the landmarks anchored in that state, the IMU and bias random-walk factors
+/// to the next state). Priors are not measurements and are left out. The
+/// model-discrepancy audit of a VIO run compares them with what the noise explains.
+///
+/// A reprojection residual is whitened by `σ_px √2`: the landmark's ray is
+/// fixed by its anchor observation, whose pixel noise therefore enters every
+/// other residual of the landmark about as much as the observation's own (the
+/// solver's factor weighs by `σ_px` alone, as VINS-Mono's does).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct ResidualTally {
+    /// Σ ‖r/(σ_px √2)‖² of the reprojections (no robust loss).
+    pub reprojection_chi2: f64,
+    /// Number of reprojection residual rows (2 per observation).
+    pub reprojection_rows: usize,
+    /// Landmarks whose observations were counted (one inverse depth each).
+    pub landmarks: usize,
+    /// Σ of squared whitened IMU-factor and bias random-walk residuals.
+    pub imu_chi2: f64,
+    /// Their rows (15 per link: 9 IMU, 6 bias random walk).
+    pub imu_rows: usize,
+    /// Marginalized states (15 parameters each: pose, velocity, biases).
+    pub states: usize,
+}
+
+impl ResidualTally {
+    /// χ² of every counted residual.
+    pub fn chi2(&self) -> f64 {
+        self.reprojection_chi2 + self.imu_chi2
+    }
+
+    /// Degrees of freedom: residual rows minus the parameters estimated from them.
+    pub fn dof(&self) -> usize {
+        (self.reprojection_rows + self.imu_rows).saturating_sub(self.landmarks + 15 * self.states)
+    }
+
+    /// The gap χ²/dof − 1, floored at 0 (0 when the noise explains the residuals;
+    /// NaN without degrees of freedom).
+    pub fn gap(&self) -> f64 {
+        match self.dof() {
+            0 => f64::NAN,
+            d => (self.chi2() / d as f64 - 1.0).max(0.0),
+        }
+    }
 }
 
 struct State {
@@ -108,6 +157,7 @@ pub struct Estimator<'a> {
     pub init_time: Option<f64>,
     gravity: Vector3<f64>,
     no_feature_since: Option<f64>,
+    residuals: ResidualTally,
 }
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
@@ -160,6 +210,7 @@ impl<'a> Estimator<'a> {
             resets: 0,
             init_time: None,
             no_feature_since: None,
+            residuals: ResidualTally::default(),
         }
     }
 
@@ -473,6 +524,7 @@ impl<'a> Estimator<'a> {
         for id in &anchored {
             keys.push(L(self.tracks[id].landmark.expect("anchored").0));
         }
+        self.tally_oldest(old);
         let graph = self.build_graph();
         match marginalize(&graph, &self.values, &keys) {
             Ok(m) => self.marginal = Some(m.prior),
@@ -500,6 +552,60 @@ impl<'a> Estimator<'a> {
         }
         self.states.remove(0);
         self.links.remove(0);
+    }
+
+    /// Add the residuals of the factors leaving with state `old` (the oldest) to the tally.
+    fn tally_oldest(&mut self, old: u64) {
+        let mut t = self.residuals;
+        for tr in self.tracks.values() {
+            let Some((lid, anchor)) = tr.landmark else { continue };
+            if anchor != old {
+                continue;
+            }
+            let (Some(a), Ok(xa), Ok(rho)) = (
+                tr.obs.iter().find(|o| o.sid == anchor),
+                self.values.get::<Isometry3F64>(X(anchor)),
+                self.values.get::<Vector1<f64>>(L(lid)),
+            ) else {
+                continue;
+            };
+            let mut counted = false;
+            for o in tr.obs.iter().filter(|o| o.sid != anchor) {
+                let Ok(xj) = self.values.get::<Isometry3F64>(X(o.sid)) else { continue };
+                let f = self.reprojection(anchor, o.sid, lid, a.xy, o.uv);
+                let vars: [&dyn tumble_solvers::DynVariable; 3] = [xa, xj, rho];
+                if let Ok(r) = tumble_solvers::Factor::residual(&f, tumble_solvers::Vars::new(&vars)) {
+                    // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
+                    t.reprojection_chi2 += r.norm_squared() / (2.0 * self.opts.pixel_sigma.powi(2));
+                    t.reprojection_rows += 2;
+                    counted = true;
+                }
+            }
+            t.landmarks += usize::from(counted);
+        }
+        if let (Some(next), Some((pim, scale))) = (self.states.get(1), self.links.first()) {
+            let (a, b) = (old, next.sid);
+            let mut g = Graph::new();
+            let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
+            if let Ok(n) = f.noise_model_scaled(*scale) {
+                g.add(f, n);
+            }
+            if let Ok((rw, n)) = bias_random_walk(
+                B(a),
+                B(b),
+                self.opts.imu.accel_random_walk,
+                self.opts.imu.gyro_random_walk,
+                pim.delta_t().max(1e-3),
+            ) {
+                g.add(rw, n);
+            }
+            if let Ok(c) = g.chi2(&self.values) {
+                t.imu_chi2 += c;
+                t.imu_rows += g.entries().iter().map(|e| e.factor.residual_dim()).sum::<usize>();
+                t.states += 1;
+            }
+        }
+        self.residuals = t;
     }
 
     fn reset_to_newest(&mut self) {
@@ -797,6 +903,7 @@ pub fn run_observed(
     out.warnings = est.warnings;
     out.resets = est.resets;
     out.init_time = est.init_time;
+    out.residuals = est.residuals;
     out.wall_s = t0.elapsed().as_secs_f64();
     Ok(out)
 }

@@ -90,6 +90,39 @@ impl VioInput {
         }
     }
 
+    /// The input with its time offsets corrected: camera frames moved onto the
+    /// IMU's time axis by `camera_imu_s` (a frame stamped `t` was taken at IMU
+    /// time `t + camera_imu_s`), and the accelerometer resampled at the gyro's
+    /// stamps by `accel_gyro_s` (an accelerometer sample stamped `t` measured
+    /// the motion at `t + accel_gyro_s`; linear interpolation, held at the ends).
+    /// The audit's `camera_imu_time_offset` and `accel_gyro_time_offset` \[s\].
+    pub fn with_time_offsets(&self, camera_imu_s: f64, accel_gyro_s: f64) -> VioInput {
+        let mut out = self.clone();
+        for f in &mut out.frames {
+            f.t += camera_imu_s;
+        }
+        if accel_gyro_s != 0.0 {
+            let (t, acc) = (&self.imu.t, &self.imu.acc);
+            let mut j = 0;
+            for (i, a) in out.imu.acc.iter_mut().enumerate() {
+                // The accelerometer's stamp that measured gyro time t[i].
+                let s = t[i] - accel_gyro_s;
+                while j + 1 < t.len() && t[j + 1] <= s {
+                    j += 1;
+                }
+                *a = if s <= t[0] {
+                    acc[0]
+                } else if j + 1 >= t.len() {
+                    acc[t.len() - 1]
+                } else {
+                    let w = (s - t[j]) / (t[j + 1] - t[j]);
+                    acc[j] * (1.0 - w) + acc[j + 1] * w
+                };
+            }
+        }
+        out
+    }
+
     /// Check what a run needs: samples, frames in order, finite numbers.
     pub fn check(&self) -> Result<(), String> {
         let name = &self.name;
@@ -180,17 +213,20 @@ impl VioInput {
         }
         gt.bias_gyro = Some(bga);
         gt.bias_accel = Some(baa);
-        Ok(VioInput {
-            name: format!("simulated {:?} (seed {})", sim.scenario, sim.seed).to_lowercase(),
-            t0_ns: sim.config.t0_ns,
-            imu,
-            frames,
-            camera: cs.model(),
-            body_from_camera,
-            groundtruth: Some(gt),
-            noise: Some(ImuNoise::from_model(m)),
-            images: Vec::new(),
-        })
+        Ok(with_calibrated_offsets(
+            VioInput {
+                name: format!("simulated {:?} (seed {})", sim.scenario, sim.seed).to_lowercase(),
+                t0_ns: sim.config.t0_ns,
+                imu,
+                frames,
+                camera: cs.model(),
+                body_from_camera,
+                groundtruth: Some(gt),
+                noise: Some(ImuNoise::from_model(m)),
+                images: Vec::new(),
+            },
+            calibration,
+        ))
     }
 
     /// An ASL folder with `imu0/`, `cam0/sensor.yaml` and `cam0/tracks.csv`
@@ -236,17 +272,20 @@ impl VioInput {
         let body_from_camera = pose(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
         let imu = imu_data(&ds.imu, calibration);
         let noise = sensor_noise(&ds);
-        Ok(VioInput {
-            name: format!("{} (simulated camera)", ds.root.display()),
-            t0_ns: t0,
-            imu,
-            frames,
-            camera: cam.model(),
-            body_from_camera,
-            groundtruth: ds.groundtruth,
-            noise,
-            images: Vec::new(),
-        })
+        Ok(with_calibrated_offsets(
+            VioInput {
+                name: format!("{} (simulated camera)", ds.root.display()),
+                t0_ns: t0,
+                imu,
+                frames,
+                camera: cam.model(),
+                body_from_camera,
+                groundtruth: ds.groundtruth,
+                noise,
+                images: Vec::new(),
+            },
+            calibration,
+        ))
     }
 
     /// As [`VioInput::from_asl`] on a loaded dataset, with the cam0
@@ -293,17 +332,30 @@ impl VioInput {
         let imu = imu_data(&ds.imu, calibration);
         let noise = sensor_noise(&ds);
         let images = cam.frames.clone();
-        Ok(VioInput {
-            name: ds.root.display().to_string(),
-            t0_ns: t0,
-            imu,
-            frames,
-            camera,
-            body_from_camera,
-            groundtruth: ds.groundtruth,
-            noise,
-            images,
-        })
+        Ok(with_calibrated_offsets(
+            VioInput {
+                name: ds.root.display().to_string(),
+                t0_ns: t0,
+                imu,
+                frames,
+                camera,
+                body_from_camera,
+                groundtruth: ds.groundtruth,
+                noise,
+                images,
+            },
+            calibration,
+        ))
+    }
+}
+
+/// `input` with the calibration's time offsets applied, when it has any.
+fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuCalibration>) -> VioInput {
+    match calibration.and_then(|c| c.time_offsets) {
+        Some(o) if o.camera_imu_s != 0.0 || o.accel_gyro_s != 0.0 => {
+            input.with_time_offsets(o.camera_imu_s, o.accel_gyro_s)
+        }
+        _ => input,
     }
 }
 

@@ -39,7 +39,7 @@ pub mod output;
 pub mod record;
 
 pub use crate::io::ImuNoise;
-pub use estimator::{run, run_observed, Estimator, FrameEstimate, VioResult, WindowState};
+pub use estimator::{run, run_observed, Estimator, FrameEstimate, ResidualTally, VioResult, WindowState};
 pub use input::{read_eqvio, Frame, ImuData, NoiseSource, VioInput};
 pub use output::{bias_track, summarize, trajectory, write_outputs, Summary};
 

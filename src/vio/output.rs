@@ -43,6 +43,11 @@ pub struct Summary {
     pub bias_rmse_accel: Option<f64>,
     /// Start of the bias RMSE window \[s\] (convergence time skipped).
     pub bias_rmse_from_s: f64,
+    /// Measurement residuals at their final estimates and their gap
+    /// χ²/dof − 1 (the model-discrepancy audit's figure for a VIO run).
+    pub residuals: super::ResidualTally,
+    /// `residuals.gap()`.
+    pub residual_gap: f64,
     /// Warnings of the run.
     pub warnings: Vec<String>,
     /// The evaluation against the ground truth (written to `eval/`), when known.
@@ -112,6 +117,8 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         frames: e.len(),
         keyframes: e.iter().filter(|x| x.keyframe).count(),
         resets: result.resets,
+        residuals: result.residuals,
+        residual_gap: result.residuals.gap(),
         solve_ms_median: percentile(&mut solve, 0.5),
         solve_ms_p95: percentile(&mut solve, 0.95),
         ate_rmse_m: m.map(|m| m.ate_rmse_m),
