@@ -122,7 +122,9 @@ pub struct ImuCalibration {
 
 /// Sensor time offsets \[s\], the audit's `camera_imu_time_offset` and
 /// `accel_gyro_time_offset`. The VIO applies them when it builds its input
-/// with the calibration ([`crate::vio::VioInput::with_time_offsets`]).
+/// with the calibration ([`crate::vio::VioInput::with_time_offsets`]);
+/// `tumble apply` resamples the accelerometer by `accel_gyro_s`
+/// ([`crate::io::imu::resample_delayed`]).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TimeOffsets {

@@ -160,3 +160,31 @@ impl ImuRecording {
         }
     }
 }
+
+/// The series `x` sampled at stamps `t` \[s\], read at `t[i] − delay` for every
+/// `i` (linear interpolation, held at the ends): corrects a sensor whose
+/// sample stamped `t` measured time `t + delay` (e.g. an accelerometer
+/// `accel_gyro_s` behind the gyro). `t` must be increasing.
+pub fn resample_delayed(t: &[f64], x: &[[f64; 3]], delay: f64) -> Vec<[f64; 3]> {
+    let n = t.len().min(x.len());
+    if n == 0 || delay == 0.0 {
+        return x.to_vec();
+    }
+    let mut j = 0;
+    (0..n)
+        .map(|i| {
+            let s = t[i] - delay;
+            while j + 1 < n && t[j + 1] <= s {
+                j += 1;
+            }
+            if s <= t[0] {
+                x[0]
+            } else if j + 1 >= n {
+                x[n - 1]
+            } else {
+                let w = (s - t[j]) / (t[j + 1] - t[j]);
+                [0, 1, 2].map(|k| x[j][k] * (1.0 - w) + x[j + 1][k] * w)
+            }
+        })
+        .collect()
+}

@@ -102,23 +102,9 @@ impl VioInput {
             f.t += camera_imu_s;
         }
         if accel_gyro_s != 0.0 {
-            let (t, acc) = (&self.imu.t, &self.imu.acc);
-            let mut j = 0;
-            for (i, a) in out.imu.acc.iter_mut().enumerate() {
-                // The accelerometer's stamp that measured gyro time t[i].
-                let s = t[i] - accel_gyro_s;
-                while j + 1 < t.len() && t[j + 1] <= s {
-                    j += 1;
-                }
-                *a = if s <= t[0] {
-                    acc[0]
-                } else if j + 1 >= t.len() {
-                    acc[t.len() - 1]
-                } else {
-                    let w = (s - t[j]) / (t[j + 1] - t[j]);
-                    acc[j] * (1.0 - w) + acc[j + 1] * w
-                };
-            }
+            let acc: Vec<[f64; 3]> = self.imu.acc.iter().map(|a| [a.x, a.y, a.z]).collect();
+            let shifted = crate::io::imu::resample_delayed(&self.imu.t, &acc, accel_gyro_s);
+            out.imu.acc = shifted.into_iter().map(Vector3::from).collect();
         }
         out
     }
