@@ -784,7 +784,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if let Some(path) = vio {
                 let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
                 let noise = noise.as_deref().map(tumble::vio::ImuNoise::read).transpose()?;
-                let args = VioAuditArgs { pixel_sigma, gravity, offset_step_ms, alpha, candidates, noise };
+                let args = VioAuditArgs { pixel_sigma, gravity, offset_step_ms, alpha, max_effects, candidates, noise };
                 return audit_vio_command(&path, cal.as_ref(), &args, &frontend, &out);
             }
             let calibration = calibration.ok_or("--calibration is required to audit a calibration recording")?;
@@ -1117,6 +1117,7 @@ struct VioAuditArgs {
     gravity: f64,
     offset_step_ms: f64,
     alpha: f64,
+    max_effects: usize,
     candidates: Vec<tumble::audit::Effect>,
     noise: Option<tumble::vio::ImuNoise>,
 }
@@ -1142,6 +1143,7 @@ fn audit_vio_command(
     vin.apply_noise(args.noise, &mut vopts.imu);
     let mut opts = VioAuditOptions::new(vopts);
     opts.alpha = args.alpha;
+    opts.max_effects = args.max_effects;
     opts.step_s = 1e-3 * args.offset_step_ms;
     if !args.candidates.is_empty() {
         opts.candidates = args.candidates.clone();

@@ -3,34 +3,45 @@
 //! effect added: residuals before and after against the effect's regressor).
 
 use super::fit::{self, Fit};
-use super::{Audit, Effect};
+use super::{Audit, CandidateScore, Effect};
 use crate::plot::{ScatterChart, Series, AXIS_COLORS};
 use plotters::style::RGBColor;
 use std::fmt::Write as _;
 use std::path::Path;
 
+/// One entry of `audit.json`'s `iterations`: the effect, its parameters by
+/// name with their σ, its score (ΔBIC), p-value, F, the gaps and every candidate's score.
+pub fn iteration_json(
+    effect: Effect,
+    score: &CandidateScore,
+    gap_before: f64,
+    gap_after: f64,
+    candidates: &[CandidateScore],
+) -> serde_json::Value {
+    use serde_json::json;
+    let named = |v: &[f64]| -> serde_json::Map<String, serde_json::Value> {
+        effect.param_names().iter().zip(v).map(|(n, x)| (n.to_string(), json!(x))).collect()
+    };
+    json!({
+        "effect": effect.id(),
+        "params": named(&score.params),
+        "params_std": named(&score.params_std),
+        "score": score.delta_bic,
+        "p_value": score.p_value,
+        "f": score.f,
+        "gap_before": gap_before,
+        "gap_after": gap_after,
+        "candidates": candidates,
+    })
+}
+
 /// `audit.json` in the layout (plus details).
 pub fn json(a: &Audit) -> serde_json::Value {
     use serde_json::json;
-    let named = |e: Effect, v: &[f64]| -> serde_json::Map<String, serde_json::Value> {
-        e.param_names().iter().zip(v).map(|(n, x)| (n.to_string(), json!(x))).collect()
-    };
     let iterations: Vec<serde_json::Value> = a
         .iterations
         .iter()
-        .map(|it| {
-            json!({
-                "effect": it.effect.id(),
-                "params": named(it.effect, &it.score.params),
-                "params_std": named(it.effect, &it.score.params_std),
-                "score": it.score.delta_bic,
-                "p_value": it.score.p_value,
-                "f": it.score.f,
-                "gap_before": it.gap_before,
-                "gap_after": it.gap_after,
-                "candidates": it.candidates,
-            })
-        })
+        .map(|it| iteration_json(it.effect, &it.score, it.gap_before, it.gap_after, &it.candidates))
         .collect();
     let fit = a.final_fit();
     let groups: serde_json::Map<String, serde_json::Value> = fit::GROUPS

@@ -52,8 +52,8 @@ pub struct VioAuditOptions {
     pub step_s: f64,
     /// Largest offset searched \[s\].
     pub max_offset_s: f64,
-    /// Offsets already known (camera–IMU, accelerometer–gyro) \[s\]: the audit starts from them.
-    pub start: [f64; 2],
+    /// Most offsets to add.
+    pub max_effects: usize,
 }
 
 impl Default for VioAuditOptions {
@@ -76,7 +76,7 @@ impl VioAuditOptions {
             candidates: vec![Effect::CameraImuTimeOffset, Effect::AccelGyroTimeOffset],
             step_s: 0.004,
             max_offset_s: 0.06,
-            start: [0.0; 2],
+            max_effects: 2,
         }
     }
 }
@@ -110,7 +110,7 @@ pub struct VioAuditIteration {
 /// Result of [`audit_vio`].
 #[derive(Clone, Debug)]
 pub struct VioAudit {
-    /// The run with the starting offsets.
+    /// The run on the input as given.
     pub base: ResidualTally,
     /// Effects added, in order.
     pub iterations: Vec<VioAuditIteration>,
@@ -118,7 +118,8 @@ pub struct VioAudit {
     pub last_round: Vec<CandidateScore>,
     /// The run with the offsets found.
     pub final_tally: ResidualTally,
-    /// Offsets found: camera–IMU, accelerometer–gyro \[s\].
+    /// Offsets found, relative to the input as given: camera–IMU,
+    /// accelerometer–gyro \[s\] (0 for one not added).
     pub offsets: [f64; 2],
     /// Their standard deviations \[s\] (NaN when not fitted).
     pub offsets_std: [f64; 2],
@@ -360,13 +361,13 @@ pub fn audit_vio(
             p(done);
         }
     };
-    let mut offsets = opts.start;
+    let mut offsets = [0.0; 2];
     let mut offsets_std = [f64::NAN; 2];
     let base = tally(input, &opts.vio, offsets).map_err(|e| format!("{}: the VIO run failed: {e}", input.name))?;
     runs(1);
     let mut current = base;
     let (mut iterations, mut last_round, mut profiles) = (Vec::new(), Vec::new(), Vec::new());
-    loop {
+    while iterations.len() < opts.max_effects {
         let remaining: Vec<Effect> = candidates
             .iter()
             .copied()
@@ -421,19 +422,7 @@ pub fn json(a: &VioAudit) -> serde_json::Value {
     let iterations: Vec<serde_json::Value> = a
         .iterations
         .iter()
-        .map(|it| {
-            json!({
-                "effect": it.effect.id(),
-                "params": {"offset_s": it.score.params[0]},
-                "params_std": {"offset_s": it.score.params_std[0]},
-                "score": it.score.delta_bic,
-                "p_value": it.score.p_value,
-                "f": it.score.f,
-                "gap_before": it.gap_before,
-                "gap_after": it.gap_after,
-                "candidates": it.candidates,
-            })
-        })
+        .map(|it| super::report::iteration_json(it.effect, &it.score, it.gap_before, it.gap_after, &it.candidates))
         .collect();
     json!({
         "kind": "vio",
@@ -455,14 +444,16 @@ pub fn json(a: &VioAudit) -> serde_json::Value {
     })
 }
 
-/// The calibration with the offsets found (the others as given).
+/// The calibration with the offsets found added to its own (a VIO input built
+/// with a calibration is already corrected by the calibration's offsets, so
+/// what the audit finds is the remainder).
 pub fn with_offsets(cal: &ImuCalibration, a: &VioAudit) -> ImuCalibration {
     let mut o = cal.time_offsets.unwrap_or_default();
     for it in &a.iterations {
         let (v, s) = (it.score.params[0], it.score.params_std[0]);
         match it.effect {
-            Effect::CameraImuTimeOffset => (o.camera_imu_s, o.camera_imu_s_std) = (v, s),
-            Effect::AccelGyroTimeOffset => (o.accel_gyro_s, o.accel_gyro_s_std) = (v, s),
+            Effect::CameraImuTimeOffset => (o.camera_imu_s, o.camera_imu_s_std) = (o.camera_imu_s + v, s),
+            Effect::AccelGyroTimeOffset => (o.accel_gyro_s, o.accel_gyro_s_std) = (o.accel_gyro_s + v, s),
             _ => {}
         }
     }
@@ -492,31 +483,16 @@ pub fn write(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> 
     let _ = writeln!(md, "{}\n", a.verdict());
     md.push_str("| step | effect | offset [ms] | σ [ms] | p-value | ΔBIC | gap |\n|---|---|---|---|---|---|---|\n");
     let _ = writeln!(md, "| 0 | as given | | | | | {:.4} |", a.base.gap());
+    let mut row = |step: &str, name: &str, s: &CandidateScore, gap: f64| {
+        let (x, sd) = (1e3 * s.params[0], 1e3 * s.params_std[0]);
+        let (p, bic) = (s.p_value, s.delta_bic);
+        let _ = writeln!(md, "| {step} | {name} | {x:+.3} | {sd:.3} | {p:.1e} | {bic:.1} | {gap:.4} |");
+    };
     for (i, it) in a.iterations.iter().enumerate() {
-        let s = &it.score;
-        let _ = writeln!(
-            md,
-            "| {} | {} | {:+.3} | {:.3} | {:.1e} | {:.1} | {:.4} |",
-            i + 1,
-            it.effect,
-            1e3 * s.params[0],
-            1e3 * s.params_std[0],
-            s.p_value,
-            s.delta_bic,
-            it.gap_after
-        );
+        row(&(i + 1).to_string(), it.effect.id(), &it.score, it.gap_after);
     }
     for s in &a.last_round {
-        let _ = writeln!(
-            md,
-            "| – | {} (not significant) | {:+.3} | {:.3} | {:.1e} | {:.1} | {:.4} |",
-            s.effect,
-            1e3 * s.params[0],
-            1e3 * s.params_std[0],
-            s.p_value,
-            s.delta_bic,
-            s.gap
-        );
+        row("–", &format!("{} (not significant)", s.effect), s, s.gap);
     }
     if !a.profiles.is_empty() {
         let _ = writeln!(md, "\n![χ²/dof against the offset]({figure})");

@@ -355,18 +355,8 @@ impl<'a> Estimator<'a> {
         if let Some(m) = &self.marginal {
             g.add(m.clone(), NoiseModel::Unit);
         }
-        for (i, (pim, scale)) in self.links.iter().enumerate() {
-            let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
-            let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
-            if let Ok(n) = f.noise_model_scaled(*scale) {
-                g.add(f, n);
-            }
-            let dt = pim.delta_t().max(1e-3);
-            if let Ok((rw, n)) =
-                bias_random_walk(B(a), B(b), self.opts.imu.accel_random_walk, self.opts.imu.gyro_random_walk, dt)
-            {
-                g.add(rw, n);
-            }
+        for i in 0..self.links.len() {
+            self.add_link(&mut g, i);
         }
         for s in &self.states {
             if s.zero_velocity {
@@ -388,6 +378,22 @@ impl<'a> Estimator<'a> {
             }
         }
         g
+    }
+
+    /// Add link `i`'s IMU factor and bias random walk (state `i` to `i + 1`) to `g`.
+    fn add_link(&self, g: &mut Graph, i: usize) {
+        let (pim, scale) = &self.links[i];
+        let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
+        let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
+        if let Ok(n) = f.noise_model_scaled(*scale) {
+            g.add(f, n);
+        }
+        let dt = pim.delta_t().max(1e-3);
+        if let Ok((rw, n)) =
+            bias_random_walk(B(a), B(b), self.opts.imu.accel_random_walk, self.opts.imu.gyro_random_walk, dt)
+        {
+            g.add(rw, n);
+        }
     }
 
     /// The reprojection factor of observation `uv` in state `sid` of landmark `lid`
@@ -583,22 +589,9 @@ impl<'a> Estimator<'a> {
             }
             t.landmarks += usize::from(counted);
         }
-        if let (Some(next), Some((pim, scale))) = (self.states.get(1), self.links.first()) {
-            let (a, b) = (old, next.sid);
+        if !self.links.is_empty() {
             let mut g = Graph::new();
-            let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
-            if let Ok(n) = f.noise_model_scaled(*scale) {
-                g.add(f, n);
-            }
-            if let Ok((rw, n)) = bias_random_walk(
-                B(a),
-                B(b),
-                self.opts.imu.accel_random_walk,
-                self.opts.imu.gyro_random_walk,
-                pim.delta_t().max(1e-3),
-            ) {
-                g.add(rw, n);
-            }
+            self.add_link(&mut g, 0);
             if let Ok(c) = g.chi2(&self.values) {
                 t.imu_chi2 += c;
                 t.imu_rows += g.entries().iter().map(|e| e.factor.residual_dim()).sum::<usize>();
