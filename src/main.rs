@@ -837,7 +837,10 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             (rec.accel, rec.gyro) = corr.correct_recording(&rec);
             if let Some(o) = cal.time_offsets.filter(|o| o.accel_gyro_s != 0.0) {
                 rec.accel = tumble::io::imu::resample_delayed(&rec.t, &rec.accel, o.accel_gyro_s);
-                println!("accelerometer resampled onto the gyro's stamps ({:+.3} ms behind)", 1e3 * o.accel_gyro_s);
+                println!(
+                    "accelerometer resampled onto the gyro's stamps (accel–gyro offset {:+.3} ms)",
+                    1e3 * o.accel_gyro_s
+                );
             }
             rec.accel_units = tumble::io::Stored::Si;
             rec.gyro_units = tumble::io::Stored::Si;
