@@ -104,14 +104,17 @@ pub fn summary_table(a: &Audit) -> String {
     s
 }
 
+/// Write `text` to `dir/name` (creating `dir`); the name back, or an error naming the file.
+pub(super) fn put_file(dir: &Path, name: &str, text: String) -> Result<String, String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    let p = dir.join(name);
+    std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
+    Ok(name.to_string())
+}
+
 /// Write `audit.json`, `calibration.json` (with the effects), `audit.md` and the figures into `dir`.
 pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let put = |name: &str, text: String| -> Result<String, String> {
-        let p = dir.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
-        Ok(name.to_string())
-    };
+    let put = |name: &str, text: String| put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     let file = crate::calib::model::CalibrationFile::from(&a.calibration);
     written.push(put("calibration.json", serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?)?);

@@ -464,12 +464,7 @@ pub fn with_offsets(cal: &ImuCalibration, a: &VioAudit) -> ImuCalibration {
 /// run against the offset tried) and, when a calibration was given,
 /// `calibration.json` with the offsets, into `dir`.
 pub fn write(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> Result<Vec<String>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let put = |name: &str, text: String| -> Result<String, String> {
-        let p = dir.join(name);
-        std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
-        Ok(name.to_string())
-    };
+    let put = |name: &str, text: String| super::report::put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     if let Some(c) = calibration {
         let file = crate::calib::model::CalibrationFile::from(&with_offsets(c, a));
