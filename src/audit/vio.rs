@@ -378,7 +378,7 @@ pub fn audit_vio(
         }
         let threshold = opts.alpha / remaining.len() as f64;
         let mut scores = Vec::new();
-        let mut best: Option<(CandidateScore, Minimum, usize)> = None;
+        let mut best: Option<(Effect, CandidateScore, Minimum)> = None;
         for e in remaining {
             let k = slot(e).expect("time-offset candidates only");
             let (m, curve) = match profile(input, opts, offsets, k, &mut runs) {
@@ -390,20 +390,21 @@ pub fn audit_vio(
             };
             profiles.push(OffsetProfile { effect: e.id().into(), round: iterations.len(), points: curve });
             let s = offset_score(e, &m, threshold);
-            if s.significant && best.as_ref().is_none_or(|b| s.delta_bic > b.0.delta_bic) {
-                best = Some((s.clone(), m, k));
+            if s.significant && best.as_ref().is_none_or(|b| s.delta_bic > b.1.delta_bic) {
+                best = Some((e, s.clone(), m));
             }
             scores.push(s);
         }
         scores.sort_by(|a, b| b.delta_bic.total_cmp(&a.delta_bic));
-        let Some((s, m, k)) = best else {
+        let Some((effect, s, m)) = best else {
             last_round = scores;
             break;
         };
+        let k = slot(effect).expect("time-offset candidates only");
         offsets[k] = m.offset;
         offsets_std[k] = m.std;
         iterations.push(VioAuditIteration {
-            effect: Effect::from_id(&s.effect).expect("vocabulary"),
+            effect,
             gap_before: current.gap(),
             gap_after: m.tally.gap(),
             score: s,
