@@ -614,10 +614,13 @@ impl Structure {
         self.hessian_cache = cache;
     }
 
-    /// faer's dense Cholesky of the reduced system (lower triangle filled):
+    /// faer's dense Cholesky of the reduced system: the lower factor L (H = L Lᵀ),
     /// blocked and vectorized, several times faster than nalgebra's on the
-    /// 100–200 unknowns of a VIO window.
-    fn dense_llt(&self, h: &[f64]) -> Option<faer::linalg::solvers::Llt<f64>> {
+    /// 100–200 unknowns of a VIO window. Always sequential (`Par::Seq`): with
+    /// faer's `rayon` feature on (a dependent crate may turn it on) faer's
+    /// default would spread a 150×150 factorization over every thread.
+    fn dense_cholesky(&self, h: &[f64]) -> Option<faer::Mat<f64>> {
+        use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
         let mut m = faer::Mat::<f64>::zeros(self.n, self.n);
         for c in 0..self.n {
             for (&r, &v) in
@@ -627,7 +630,23 @@ impl Structure {
                 m[(i, j)] = v;
             }
         }
-        m.llt(faer::Side::Lower).ok()
+        let mut mem =
+            MemBuffer::try_new(cholesky_in_place_scratch::<f64>(self.n, Par::Seq, Default::default())).ok()?;
+        let reg = LltRegularization::default();
+        cholesky_in_place(m.as_mut(), reg, Par::Seq, MemStack::new(&mut mem), Default::default()).ok()?;
+        Some(m)
+    }
+
+    /// Solve L Lᵀ X = B in place (B's columns), L from [`Self::dense_cholesky`].
+    fn dense_solve(l: &faer::Mat<f64>, rhs: faer::MatMut<'_, f64>) {
+        // The triangular solves need no scratch memory (their scratch request is empty).
+        faer::linalg::cholesky::llt::solve::solve_in_place_with_conj(
+            l.as_ref(),
+            Conj::No,
+            rhs,
+            Par::Seq,
+            MemStack::new(&mut []),
+        );
     }
 
     /// Diagonal of H over kept unknowns followed by eliminated ones.
@@ -664,15 +683,10 @@ impl Structure {
         let mut solve_s = 0.0;
         if self.n == 0 {
         } else if self.dense {
-            use faer::linalg::solvers::Solve;
-            let ch = self.dense_llt(&h).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
+            let l = self.dense_cholesky(&h).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
             fact_s = t_fact.elapsed().as_secs_f64();
             let t_solve = std::time::Instant::now();
-            let mut rhs = faer::Mat::<f64>::from_fn(self.n, 1, |i, _| x[i]);
-            ch.solve_in_place(rhs.as_mut());
-            for (i, xi) in x.iter_mut().enumerate() {
-                *xi = rhs[(i, 0)];
-            }
+            Self::dense_solve(&l, faer::MatMut::from_column_major_slice_mut(&mut x, self.n, 1));
             solve_s = t_solve.elapsed().as_secs_f64();
         } else {
             if self.factor.is_none() {
@@ -824,13 +838,13 @@ impl Structure {
         self.reduce(sys, None, &mut h)?;
         let mut out = DMatrix::zeros(self.n, cols.len());
         if self.dense || self.n == 0 {
-            use faer::linalg::solvers::Solve;
             if self.n == 0 {
                 return Ok(out);
             }
-            let ch = self.dense_llt(&h).ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
+            let l =
+                self.dense_cholesky(&h).ok_or_else(|| SolveError::Singular("information matrix is singular".into()))?;
             let mut rhs = faer::Mat::<f64>::from_fn(self.n, cols.len(), |i, j| if i == cols[j] { 1.0 } else { 0.0 });
-            ch.solve_in_place(rhs.as_mut());
+            Self::dense_solve(&l, rhs.as_mut());
             for j in 0..cols.len() {
                 for i in 0..self.n {
                     out[(i, j)] = rhs[(i, j)];
