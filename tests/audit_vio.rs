@@ -1,8 +1,9 @@
 //! The audit of a VIO run (`tumble audit --vio`): simulated walks with a hidden
-//! camera–IMU or accelerometer–gyro time offset must have it named first, fitted
-//! and the gap shrunk by ≥ 80 %; a clean walk must get nothing. One seed each
-//! here (every audit is ~25 VIO runs); `cargo run --release --example
-//! audit_vio_sim` runs the 10- and 20-seed sweeps the README reports.
+//! accelerometer–gyro time offset must have it named first, fitted and the gap
+//! shrunk by ≥ 80 %; with both offsets hidden both must be found; a clean walk
+//! must get nothing. One seed each here (every audit is ~25 VIO runs); `cargo
+//! run --release --example audit_vio_sim` runs the 10- and 20-seed sweeps the
+//! README reports (the camera–IMU offset alone among them).
 
 use std::process::Command;
 use tumble::audit::vio::{audit_vio, with_offsets, VioAudit, VioAuditOptions};
@@ -11,54 +12,67 @@ use tumble::calib::{ImuCalibration, TimeOffsets};
 use tumble::sim::{hide_effect, simulate, Scenario, SimConfig};
 use tumble::vio::{VioInput, VioOptions};
 
-/// A 40 s walk with 30 features per frame (fast enough for a test), `effect` hidden.
-fn walk(effect: &str, strength: f64, seed: u64) -> (VioInput, VioAuditOptions) {
+/// A 40 s walk with 30 features per frame (fast enough for a test), the
+/// effects hidden at their strengths.
+fn walk(hidden: &[(&str, f64)], seed: u64) -> (VioInput, VioAuditOptions) {
     let mut cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
     cfg.camera.max_features = 30;
-    hide_effect(&mut cfg, effect, strength).unwrap();
+    for &(effect, strength) in hidden {
+        hide_effect(&mut cfg, effect, strength).unwrap();
+    }
     let sim = simulate(Scenario::Walk, &cfg, seed).unwrap();
     (VioInput::from_simulation(&sim).unwrap(), VioAuditOptions::new(VioOptions::for_simulation(&cfg)))
 }
 
-fn finds(effect: &str, strength: f64, expected: Effect, truth_s: f64, tolerance_s: f64, seed: u64) -> VioAudit {
-    let (input, mut opts) = walk(effect, strength, seed);
-    // The first effect is what is tested (the second round costs another profile).
-    opts.max_effects = 1;
-    let a = audit_vio(&input, &opts, None).unwrap();
-    println!("{}", a.verdict());
-    assert_eq!(a.effects_added().first(), Some(&expected), "{}", a.verdict());
-    let offset = a.iterations[0].score.params[0];
-    assert!((offset - truth_s).abs() < tolerance_s, "{offset} vs {truth_s}");
+/// The gap of the run with the offsets found is at most a fifth of the input's.
+fn assert_gap_shrunk(a: &VioAudit) {
     let (g0, g1) = (a.base.gap(), a.final_tally.gap());
     assert!(g0 > 0.0 && g1 <= 0.2 * g0, "gap {g0} → {g1}");
-    a
 }
 
 #[test]
-fn finds_a_hidden_camera_imu_time_offset() {
-    let a = finds("camera_imu_time_offset", 1.0, Effect::CameraImuTimeOffset, 0.010, 0.001, 700);
-    // The offset goes into the calibration, and a VIO input built with it is shifted.
+fn finds_both_hidden_time_offsets() {
+    // Camera–IMU 10 ms and accelerometer–gyro 10 ms, hidden together.
+    let hidden = [("camera_imu_time_offset", 1.0), ("accel_gyro_time_offset", 2.0)];
+    let (input, opts) = walk(&hidden, 700);
+    let a = audit_vio(&input, &opts, None).unwrap();
+    println!("{}", a.verdict());
+    let added = a.effects_added();
+    assert_eq!(added.len(), 2, "{}", a.verdict());
+    assert!(added.contains(&Effect::CameraImuTimeOffset) && added.contains(&Effect::AccelGyroTimeOffset));
+    assert!((a.offsets[0] - 0.010).abs() < 0.001, "camera–IMU {}", a.offsets[0]);
+    assert!((a.offsets[1] - 0.010).abs() < 0.002, "accelerometer–gyro {}", a.offsets[1]);
+    assert_gap_shrunk(&a);
+    // The offsets go into the calibration.
     let cal = with_offsets(&ImuCalibration::identity(), &a);
     let o = cal.time_offsets.unwrap();
-    assert_eq!(o.camera_imu_s, a.offsets[0]);
+    assert_eq!((o.camera_imu_s, o.accel_gyro_s), (a.offsets[0], a.offsets[1]));
     assert!(o.camera_imu_s_std > 0.0 && o.camera_imu_s_std < 0.001);
     // A calibration's own offsets were applied to the input already: the audit's adds to them.
     let known = TimeOffsets { camera_imu_s: 0.002, accel_gyro_s: -0.001, ..TimeOffsets::default() };
     let pre = ImuCalibration { time_offsets: Some(known), ..ImuCalibration::identity() };
     let o = with_offsets(&pre, &a).time_offsets.unwrap();
-    assert_eq!((o.camera_imu_s, o.accel_gyro_s), (0.002 + a.offsets[0], -0.001));
+    assert_eq!((o.camera_imu_s, o.accel_gyro_s), (0.002 + a.offsets[0], -0.001 + a.offsets[1]));
 }
 
 #[test]
 fn finds_a_hidden_accel_gyro_time_offset() {
     // 10 ms: at 5 ms the offset is at the edge of what this walk shows (found on
     // one of two seeds), and its χ² stays below the gap's floor (χ²/dof < 1).
-    finds("accel_gyro_time_offset", 2.0, Effect::AccelGyroTimeOffset, 0.010, 0.002, 701);
+    let (input, mut opts) = walk(&[("accel_gyro_time_offset", 2.0)], 701);
+    // The first effect is what is tested (the second round costs another profile).
+    opts.max_effects = 1;
+    let a = audit_vio(&input, &opts, None).unwrap();
+    println!("{}", a.verdict());
+    assert_eq!(a.effects_added().first(), Some(&Effect::AccelGyroTimeOffset), "{}", a.verdict());
+    let offset = a.iterations[0].score.params[0];
+    assert!((offset - 0.010).abs() < 0.002, "{offset}");
+    assert_gap_shrunk(&a);
 }
 
 #[test]
 fn adds_nothing_to_a_clean_walk() {
-    let (input, opts) = walk("none", 1.0, 702);
+    let (input, opts) = walk(&[], 702);
     let a = audit_vio(&input, &opts, None).unwrap();
     println!("{}", a.verdict());
     assert!(a.effects_added().is_empty(), "{}", a.verdict());
@@ -67,7 +81,7 @@ fn adds_nothing_to_a_clean_walk() {
 
 #[test]
 fn time_offsets_shift_frames_and_resample_the_accelerometer() {
-    let (mut input, _) = walk("none", 1.0, 703);
+    let (mut input, _) = walk(&[], 703);
     // A ramp: the accelerometer reads its stamp.
     for (a, t) in input.imu.acc.iter_mut().zip(&input.imu.t) {
         *a = nalgebra::Vector3::repeat(*t);
