@@ -1,9 +1,11 @@
 //! The VIO audit on a simulated walk with a hidden time offset, over seeds:
-//! `cargo run --release --example audit_vio_sim -- camera_imu_time_offset 1 3 20`
+//! `cargo run --example audit_vio_sim -- camera_imu_time_offset 1 3 20`
 //! (effect from `tumble sim --hide`'s names or `none`, strength, seeds, walk
 //! seconds, features per frame). Several effects hide together when joined by
 //! `+` (`camera_imu_time_offset+accel_gyro_time_offset`): a seed counts when
-//! the audit adds every one of them and nothing else.
+//! the audit adds every one of them and nothing else. `NAME:S` gives one effect
+//! its own strength (`camera_imu_time_offset:1+accel_gyro_time_offset:2`, as
+//! `tumble sim --hide` takes it).
 
 use tumble::audit::vio::{audit_vio, VioAuditOptions};
 use tumble::sim::{hide_effect, simulate, Scenario, SimConfig};
@@ -16,12 +18,18 @@ fn main() -> Result<(), String> {
     let seeds: u64 = args.get(2).map_or(Ok(3), |s| s.parse()).map_err(|e| format!("seeds: {e}"))?;
     let duration: f64 = args.get(3).map_or(Ok(40.0), |s| s.parse()).map_err(|e| format!("duration: {e}"))?;
     let features: usize = args.get(4).map_or(Ok(150), |s| s.parse()).map_err(|e| format!("features: {e}"))?;
+    let mut hidden: Vec<&str> = effect.split('+').map(|e| e.split(':').next().unwrap_or(e)).collect();
+    hidden.sort_unstable();
     let (mut first, mut shrunk, mut added_any) = (0, 0, 0);
     for seed in 0..seeds {
         let mut cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
         cfg.camera.max_features = features;
         for e in effect.split('+') {
-            hide_effect(&mut cfg, e, strength)?;
+            let (name, s) = match e.split_once(':') {
+                Some((n, s)) => (n, s.parse().map_err(|err| format!("strength of {n}: {err}"))?),
+                None => (e, strength),
+            };
+            hide_effect(&mut cfg, name, s)?;
         }
         let sim = simulate(Scenario::Walk, &cfg, 500 + seed)?;
         let input = VioInput::from_simulation(&sim)?;
@@ -32,13 +40,11 @@ fn main() -> Result<(), String> {
         let added = a.effects_added();
         added_any += usize::from(!added.is_empty());
         let mut ids: Vec<&str> = added.iter().map(|e| e.id()).collect();
-        let named = if effect.contains('+') {
-            let mut hidden: Vec<&str> = effect.split('+').collect();
-            hidden.sort_unstable();
+        let named = if hidden.len() > 1 {
             ids.sort_unstable();
             ids == hidden
         } else {
-            ids.first() == Some(&effect)
+            ids.first() == hidden.first()
         };
         first += usize::from(named);
         let (g0, g1) = (a.base.gap(), a.final_tally.gap());
@@ -67,7 +73,7 @@ fn main() -> Result<(), String> {
     } else {
         println!(
             "{effect} (strength {strength}): {} on {first} of {seeds} seeds, gap ≥ 80 % smaller on {shrunk}",
-            if effect.contains('+') { "all found (and nothing else)" } else { "named first" }
+            if hidden.len() > 1 { "all found (and nothing else)" } else { "named first" }
         );
     }
     Ok(())
