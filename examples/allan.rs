@@ -2,7 +2,7 @@
 //! overlapping Allan deviation, the IEEE read-offs and the weighted fit.
 //!
 //! ```sh
-//! cargo run --release --example allan
+//! cargo run --example allan
 //! ```
 
 use tumble::allan::{allan_deviation, identify, AllanOptions, Coefficient};

@@ -1,5 +1,5 @@
 //! Hide an effect in a simulated tumble recording, calibrate without it, and
-//! let the audit find it: `cargo run --release --example audit_sim -- [effect] [seed] [strength]`
+//! let the audit find it: `cargo run --example audit_sim -- [effect] [seed] [strength]`
 //! (effect: g_sensitivity, temperature_bias, temperature_scale, gyro_nonlinearity,
 //! accel_nonlinearity, bias_drift or none).
 

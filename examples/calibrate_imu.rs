@@ -4,7 +4,7 @@
 //! to calibrate yours instead.
 //!
 //! ```sh
-//! cargo run --release --example calibrate_imu [-- RECORDING]
+//! cargo run --example calibrate_imu [-- RECORDING]
 //! ```
 
 use tumble::calib::{calibrate, CalibOptions};

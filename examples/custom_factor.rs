@@ -5,7 +5,7 @@
 //! once, generically over the scalar; `AutoDiff` gives exact Jacobians.
 //!
 //! ```sh
-//! cargo run --release --example custom_factor
+//! cargo run --example custom_factor
 //! ```
 
 use nalgebra::Vector3;

@@ -1,8 +1,8 @@
 //! Solve a g2o pose graph (SE(2) or SE(3)) and print the solver summary.
 //!
 //! ```sh
-//! cargo run --release --example pose_graph_g2o -- ../shared/data/pose_graphs/sphere2500.g2o
-//! cargo run --release --example pose_graph_g2o            # a simulated helix when no file is given
+//! cargo run --example pose_graph_g2o -- ../shared/data/pose_graphs/sphere2500.g2o
+//! cargo run --example pose_graph_g2o            # a simulated helix when no file is given
 //! ```
 
 use tumble::io::g2o::{read_g2o, G2oOptions};

@@ -1,7 +1,7 @@
 //! Run the estimator on real EuRoC V1_01 data: EqVIO's processed file (real IMU
 //! and real feature tracks, first 30 s) against the EuRoC ground truth.
 //!
-//! `cargo run --release --example vio_euroc -- [eqvio.csv] [groundtruth.csv]`
+//! `cargo run --example vio_euroc -- [eqvio.csv] [groundtruth.csv]`
 
 use std::path::PathBuf;
 use tumble::vio::{read_eqvio, run, summarize, VioOptions};

@@ -1,7 +1,7 @@
 //! Simulate the paper's hand-held walk (BMI055-like IMU + camera), run the
 //! sliding-window estimator on it and print drift, ATE and bias errors.
 //!
-//! `cargo run --release --example vio_sim -- [duration_s] [seed]`
+//! `cargo run --example vio_sim -- [duration_s] [seed]`
 
 use tumble::sim::{simulate, Scenario, SimConfig};
 use tumble::vio::{run, summarize, VioInput, VioOptions};

@@ -2,7 +2,7 @@
 //! accelerometer–gyro time offset must have it named first, fitted and the gap
 //! shrunk by ≥ 80 %; with both offsets hidden both must be found; a clean walk
 //! must get nothing. One seed each here (every audit is ~25 VIO runs); `cargo
-//! run --release --example audit_vio_sim` runs the 10- and 20-seed sweeps the
+//! run --example audit_vio_sim` runs the 10- and 20-seed sweeps the
 //! README reports (the camera–IMU offset alone among them).
 
 use std::process::Command;

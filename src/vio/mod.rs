@@ -198,7 +198,7 @@ pub fn rerun_available(path: &std::path::Path) -> Result<(), String> {
 fn rerun_missing(path: &std::path::Path) -> String {
     format!(
         "{}: this tumble was built without rerun support; rebuild with `--features rerun` \
-         (e.g. `cargo run --release --features rerun -- vio … --rerun FILE.rrd`)",
+         (e.g. `cargo run --features rerun -- vio … --rerun FILE.rrd`)",
         path.display()
     )
 }

@@ -7,7 +7,7 @@
 //! check, RANSAC on the fundamental matrix of undistorted points) uses OpenCV
 //! and is built with the cargo feature `opencv`
 //! (`apt-get install libopencv-dev clang libclang-dev`, then
-//! `cargo build --release --features opencv`). Options, statistics and the
+//! `cargo build --features opencv`). Options, statistics and the
 //! tracks file are here without it.
 
 #[cfg(feature = "opencv")]
@@ -180,7 +180,7 @@ pub fn write_tracks(path: &Path, obs: &[Observation]) -> Result<(), InputError> 
 
 /// What to tell a user whose build lacks the frontend.
 pub const NEEDS_OPENCV: &str = "the visual frontend needs the cargo feature `opencv`: \
-    `sudo apt-get install -y libopencv-dev clang libclang-dev`, then `cargo run --release --features opencv -- …`";
+    `sudo apt-get install -y libopencv-dev clang libclang-dev`, then `cargo run --features opencv -- …`";
 
 /// Track the images of camera `camera` (index into [`AslDataset::cameras`])
 /// of an ASL folder; `progress(done, total)` after each frame. Errors name the
