@@ -417,6 +417,14 @@ enum Command {
         /// Keyframes in the window.
         #[arg(long, default_value_t = 10)]
         window: usize,
+        /// Mean feature parallax to the last keyframe (rotation taken out) that
+        /// makes a frame a keyframe [px]; larger values stretch the window over
+        /// more time.
+        #[arg(long, default_value_t = 10.0)]
+        keyframe_parallax: f64,
+        /// Longest time between keyframes [s].
+        #[arg(long, default_value_t = 0.5)]
+        keyframe_interval: f64,
         /// Feature observation noise [px].
         #[arg(long, default_value_t = 1.0)]
         pixel_sigma: f64,
@@ -860,6 +868,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             out,
             init_from_groundtruth,
             window,
+            keyframe_parallax,
+            keyframe_interval,
             pixel_sigma,
             midpoint,
             gravity,
@@ -874,8 +884,24 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if let Some(r) = &rerun {
                 tumble::vio::rerun_available(r)?;
             }
+            for (v, name, unit) in [
+                (keyframe_parallax, "--keyframe-parallax", "pixels"),
+                (keyframe_interval, "--keyframe-interval", "seconds"),
+            ] {
+                if !(v.is_finite() && v > 0.0) {
+                    return Err(format!("{name} must be a positive number of {unit}, got {v}").into());
+                }
+            }
             let cal = calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
-            let mut opts = VioOptions { window, pixel_sigma, gravity, noise_from_static, ..VioOptions::default() };
+            let mut opts = VioOptions {
+                window,
+                keyframe_parallax_px: keyframe_parallax,
+                keyframe_max_interval_s: keyframe_interval,
+                pixel_sigma,
+                gravity,
+                noise_from_static,
+                ..VioOptions::default()
+            };
             if midpoint {
                 opts.imu.scheme = tumble::factors::imu_preint::Scheme::Midpoint;
             }

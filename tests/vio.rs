@@ -181,3 +181,23 @@ fn real_v1_02_imu_with_a_simulated_camera() {
     let err = VioInput::from_dataset_with_simulated_camera(bare, None, &cam, 1).unwrap_err().to_string();
     assert!(err.contains("no ground truth"), "{err}");
 }
+
+/// `tumble vio` refuses keyframe settings that cannot work, naming the option,
+/// before it reads any input.
+#[test]
+fn vio_command_refuses_bad_keyframe_settings() {
+    let out = std::env::temp_dir().join(format!("tumble_vio_keyframes_{}", std::process::id()));
+    for (opt, arg) in [
+        ("--keyframe-parallax", "--keyframe-parallax=0"),
+        ("--keyframe-interval", "--keyframe-interval=-1"),
+        ("--keyframe-parallax", "--keyframe-parallax=nan"),
+    ] {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_tumble"))
+            .args(["vio", "/nonexistent/walk", "--out", out.to_str().unwrap(), arg])
+            .output()
+            .unwrap();
+        let e = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success() && e.contains(&format!("{opt} must be a positive")), "{arg}: {e}");
+    }
+    assert!(!out.exists(), "nothing is written for a refused run");
+}
