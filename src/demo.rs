@@ -63,7 +63,7 @@ pub struct DemoReport {
     pub found: Vec<String>,
     /// Audit gap before and after.
     pub gap: (f64, f64),
-    /// Walk: distance \[m\], fused and IMU-only closed-loop error \[m\].
+    /// Walk: distance walked (the ground truth's) \[m\], fused and IMU-only closed-loop error \[m\].
     pub walk: (f64, f64, f64),
     /// Walk: ATE \[m\], gyro and accel bias RMSE.
     pub walk_errors: (Option<f64>, Option<f64>, Option<f64>),
@@ -163,7 +163,7 @@ pub fn run(opts: &DemoOptions, out: &Path, stage: &mut dyn FnMut(&str)) -> Resul
         hidden: opts.hidden.0.clone(),
         found: audited.effects_added().iter().map(|e| e.id().to_string()).collect(),
         gap: (audited.base.gap(), audited.final_fit().gap()),
-        walk: (s.distance_m, s.closed_loop_error_m, s.imu_only_closed_loop_error_m),
+        walk: (s.walked_m(), s.closed_loop_error_m, s.imu_only_closed_loop_error_m),
         walk_errors: (s.ate_rmse_m, s.bias_rmse_gyro, s.bias_rmse_accel),
         stage_s,
         report: chain.report_path.clone(),

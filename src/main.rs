@@ -24,6 +24,17 @@ enum MethodArg {
     Gn,
 }
 
+/// `tumble vio --init`: how the first state is found.
+#[derive(Clone, Copy, ValueEnum)]
+enum InitArg {
+    /// At rest when the recording starts at rest, else from the motion.
+    Auto,
+    /// The recording must start at rest.
+    Static,
+    /// Closed-form visual–inertial solution over a moving start.
+    Motion,
+}
+
 /// How to read an IMU recording given on the command line.
 #[derive(Args, Clone)]
 struct RecordingArgs {
@@ -414,16 +425,22 @@ enum Command {
         /// Start from the ground-truth state at the first frame (evaluation aid only).
         #[arg(long)]
         init_from_groundtruth: bool,
+        /// How the first state is found without ground truth: `static` needs the
+        /// recording to start at rest; `motion` solves velocity, roll, pitch and
+        /// scale in closed form from the IMU and the tracks of a moving start;
+        /// `auto` uses the first when the start is at rest, else the second.
+        #[arg(long, value_enum, default_value_t = InitArg::Auto)]
+        init: InitArg,
         /// Keyframes in the window.
         #[arg(long, default_value_t = 10)]
         window: usize,
         /// Mean feature parallax to the last keyframe (rotation taken out) that
         /// makes a frame a keyframe [px]; larger values stretch the window over
         /// more time.
-        #[arg(long, default_value_t = 10.0)]
+        #[arg(long, default_value_t = 20.0)]
         keyframe_parallax: f64,
         /// Longest time between keyframes [s].
-        #[arg(long, default_value_t = 0.5)]
+        #[arg(long, default_value_t = 1.0)]
         keyframe_interval: f64,
         /// Feature observation noise [px].
         #[arg(long, default_value_t = 1.0)]
@@ -867,6 +884,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             groundtruth,
             out,
             init_from_groundtruth,
+            init,
             window,
             keyframe_parallax,
             keyframe_interval,
@@ -900,6 +918,11 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 pixel_sigma,
                 gravity,
                 noise_from_static,
+                init: match init {
+                    InitArg::Auto => tumble::vio::Init::Auto,
+                    InitArg::Static => tumble::vio::Init::Static,
+                    InitArg::Motion => tumble::vio::Init::Motion,
+                },
                 ..VioOptions::default()
             };
             if midpoint {

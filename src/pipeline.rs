@@ -366,7 +366,7 @@ pub fn run_chain(
             warnings.extend(summary.warnings.iter().map(|w| format!("vio: {w}")));
             let mut headline = format!(
                 "{:.1} m in {:.0} s, closed loop {:.3} m (IMU only {:.1} m)",
-                summary.distance_m,
+                summary.walked_m(),
                 summary.duration_s,
                 summary.closed_loop_error_m,
                 summary.imu_only_closed_loop_error_m

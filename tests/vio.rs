@@ -4,7 +4,7 @@
 mod common;
 
 use tumble::sim::{simulate, Scenario, SimConfig};
-use tumble::vio::{read_eqvio, run, summarize, VioInput, VioOptions};
+use tumble::vio::{read_eqvio, run, summarize, Init, VioInput, VioOptions};
 
 fn walk(duration: f64, seed: u64) -> (VioInput, VioOptions) {
     let cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
@@ -20,10 +20,10 @@ fn simulated_walk_closes_the_loop_far_better_than_the_imu_alone() {
     println!("{}", s.table());
     assert_eq!(s.returns_to_start, Some(true));
     assert_eq!(out.resets, 0, "{:?}", out.warnings);
-    // Fused drift: about a percent of the path; IMU-only: orders of magnitude more.
-    // (Rounding alone moves it: 0.89 % with nalgebra's dense Cholesky, 1.12 %
-    // with faer's — the same equations solved in another order.)
-    assert!(s.closed_loop_error_m < 0.015 * s.distance_m, "{}", s.closed_loop_error_m);
+    // Fused drift: under a percent of the distance walked (0.73 % here; 1.2 %
+    // with keyframes every 10 px / 0.5 s); IMU-only: orders of magnitude more.
+    assert!(s.groundtruth_distance_m.is_some());
+    assert!(s.closed_loop_percent() < 1.0, "{} %", s.closed_loop_percent());
     assert!(s.imu_only_closed_loop_error_m > 20.0 * s.closed_loop_error_m);
     assert!(s.ate_rmse_m.unwrap() < 0.15);
     // Normalized gyro-bias errors against the reported σ after convergence.
@@ -109,17 +109,78 @@ fn pure_rotation_triangulates_nothing_and_stays_finite() {
     assert!(out.estimates.iter().all(|e| e.landmarks == 0 || e.t > 0.0));
 }
 
-#[test]
-fn a_start_in_motion_is_refused_with_advice() {
-    let (mut input, opts) = walk(40.0, 8);
-    // Drop the first 5 s: the recording starts while moving.
-    let k = input.imu.t.partition_point(|&t| t < 5.0);
+/// A walk whose recording starts `skip` seconds in, while moving (the
+/// simulated walk rests 3 s, then ramps up over 2 s).
+fn walk_started_in_motion(duration: f64, seed: u64, skip: f64) -> (VioInput, VioOptions) {
+    let (mut input, opts) = walk(duration, seed);
+    let k = input.imu.t.partition_point(|&t| t < skip);
     input.imu.t.drain(..k);
     input.imu.gyro.drain(..k);
     input.imu.acc.drain(..k);
-    input.frames.retain(|f| f.t > 5.0 && f.t < 8.0);
+    input.frames.retain(|f| f.t > skip);
+    (input, opts)
+}
+
+#[test]
+fn a_static_start_refuses_a_moving_recording_with_advice() {
+    let (mut input, opts) = walk_started_in_motion(40.0, 8, 5.0);
+    input.frames.retain(|f| f.t < 8.0);
+    let opts = VioOptions { init: Init::Static, ..opts };
     let err = run(&input, &opts, None).unwrap_err();
-    assert!(err.contains("at rest") && err.contains("--init-from-groundtruth"), "{err}");
+    assert!(err.contains("at rest") && err.contains("--init auto") && err.contains("--init-from-groundtruth"), "{err}");
+    // In motion but without features there is nothing to observe scale with.
+    for f in &mut input.frames {
+        f.features.clear();
+    }
+    let err = run(&input, &VioOptions { init: Init::Motion, ..opts }, None).unwrap_err();
+    assert!(err.contains("observes scale") && err.contains("landmarks"), "{err}");
+}
+
+#[test]
+fn a_start_in_motion_is_initialized_by_the_closed_form() {
+    let (input, opts) = walk_started_in_motion(60.0, 8, 6.0);
+    assert_eq!(opts.init, Init::Auto);
+    let out = run(&input, &opts, None).unwrap();
+    let s = summarize(&input, &opts, &out, 20.0);
+    println!("{}", s.table());
+    assert!(out.warnings.iter().any(|w| w.contains("initialized in motion")), "{:?}", out.warnings);
+    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    // The first state against the truth: speed and tilt (yaw is the gauge).
+    let gt = input.groundtruth.as_ref().unwrap();
+    let first = &out.estimates[0];
+    let k = gt.t_ns.partition_point(|&t| t < input.t0_ns + (first.t * 1e9).round() as i64);
+    // True velocity by central difference of the ground-truth positions.
+    let p = |i: usize| nalgebra::Vector3::from(gt.p[i]);
+    let v_true = (p(k + 1) - p(k - 1)) / ((gt.t_ns[k + 1] - gt.t_ns[k - 1]) as f64 * 1e-9);
+    let up = |q: [f64; 4]| {
+        q_body_up(&nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])))
+    };
+    let tilt_deg = up(first.rotation).angle(&up(gt.q[k])).to_degrees();
+    let dv = (nalgebra::Vector3::from(first.velocity).norm() - v_true.norm()).abs();
+    println!("initial speed error {dv:.3} m/s of {:.3} m/s, tilt error {tilt_deg:.2}°", v_true.norm());
+    assert!(v_true.norm() > 0.05, "the start must be in motion: {v_true}");
+    // Within the start's priors (0.1 m/s, 2° per axis; the closed form takes the
+    // biases as zero, and this IMU's accelerometer bias alone tilts by 0.7°).
+    assert!(dv < 0.1 && tilt_deg < 4.0, "speed error {dv}, tilt error {tilt_deg}°");
+    // The window then keeps the tilt as well as after a start at rest.
+    let half = &out.estimates[out.estimates.len() / 2..];
+    let tilt2: f64 = half
+        .iter()
+        .map(|e| {
+            let k = gt.t_ns.partition_point(|&t| t < input.t0_ns + (e.t * 1e9).round() as i64).min(gt.len() - 1);
+            up(e.rotation).angle(&up(gt.q[k])).to_degrees().powi(2)
+        })
+        .sum();
+    let tilt_rms = (tilt2 / half.len() as f64).sqrt();
+    println!("tilt error over the second half: {tilt_rms:.2}° RMS");
+    // (1.6° here; the same walk started at rest has a rotation RMSE of 2.0°.)
+    assert!(tilt_rms < 2.5, "{tilt_rms}°");
+    assert!(s.ate_rmse_m.unwrap() < 0.15, "ATE {:?}", s.ate_rmse_m);
+}
+
+/// The world's up direction seen in the body frame.
+fn q_body_up(q: &nalgebra::UnitQuaternion<f64>) -> nalgebra::Vector3<f64> {
+    q.inverse() * nalgebra::Vector3::z()
 }
 
 #[test]

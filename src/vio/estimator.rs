@@ -133,6 +133,38 @@ struct InitPrior {
     b_sigma: [f64; 6],
 }
 
+/// Velocity prior σ of a start at rest or from a given state \[m/s\].
+const STATIC_V_SIGMA: f64 = 0.01;
+/// Velocity prior σ of a start in motion (the closed form's accuracy) \[m/s\].
+const MOTION_V_SIGMA: f64 = 0.1;
+/// Roll/pitch prior σ of a start in motion \[rad\] (2°).
+const MOTION_TILT_SIGMA: f64 = 0.035;
+
+/// Why a static start did not work (yet).
+enum AtRest {
+    /// Not enough IMU data before the frame.
+    TooEarly,
+    /// The IMU moved in the window.
+    Moving,
+}
+
+/// The first state of a window and how sure it is.
+struct InitState {
+    x: Isometry3F64,
+    v: Vector3<f64>,
+    b: Vector6<f64>,
+    /// Velocity prior σ \[m/s\].
+    v_sigma: f64,
+    /// Roll/pitch prior σ \[rad\]; default: what the accelerometer-bias prior allows.
+    tilt_sigma: Option<f64>,
+}
+
+impl InitState {
+    fn at_rest(x: Isometry3F64, v: Vector3<f64>, b: Vector6<f64>) -> Self {
+        InitState { x, v, b, v_sigma: STATIC_V_SIGMA, tilt_sigma: None }
+    }
+}
+
 /// The sliding-window estimator; feed it frames in time order with [`Estimator::process`].
 pub struct Estimator<'a> {
     opts: VioOptions,
@@ -155,6 +187,8 @@ pub struct Estimator<'a> {
     pub resets: usize,
     /// Time of initialization.
     pub init_time: Option<f64>,
+    /// Why the last initialization in motion failed (for the error when none worked).
+    init_failure: Option<String>,
     gravity: Vector3<f64>,
     no_feature_since: Option<f64>,
     residuals: ResidualTally,
@@ -209,6 +243,7 @@ impl<'a> Estimator<'a> {
             warnings: Vec::new(),
             resets: 0,
             init_time: None,
+            init_failure: None,
             no_feature_since: None,
             residuals: ResidualTally::default(),
         }
@@ -242,9 +277,9 @@ impl<'a> Estimator<'a> {
         self.warnings.push(msg);
     }
 
-    /// Try to initialize at time `t`; returns the initial state when it worked.
-    fn initialize(&mut self, t: f64) -> Option<(Isometry3F64, Vector3<f64>, Vector6<f64>)> {
-        let imu = &self.input.imu;
+    /// Try to initialize at frame `index` (time `t`); returns the initial
+    /// state and the velocity's prior σ \[m/s\] when it worked.
+    fn initialize(&mut self, index: usize, t: f64) -> Option<InitState> {
         match &self.opts.init {
             Init::Given { q, p, v, bias_accel, bias_gyro, t: t0 } => {
                 if t < *t0 {
@@ -253,64 +288,113 @@ impl<'a> Estimator<'a> {
                 let uq = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
                 let b =
                     Vector6::new(bias_accel[0], bias_accel[1], bias_accel[2], bias_gyro[0], bias_gyro[1], bias_gyro[2]);
-                Some((pose(uq.to_rotation_matrix().matrix(), &Vector3::from(*p)), Vector3::from(*v), b))
+                Some(InitState::at_rest(
+                    pose(uq.to_rotation_matrix().matrix(), &Vector3::from(*p)),
+                    Vector3::from(*v),
+                    b,
+                ))
             }
-            Init::Static => {
-                let w = self.opts.init_window_s;
-                let (i0, i1) = (imu.t.partition_point(|&s| s < t - w), imu.t.partition_point(|&s| s <= t));
-                if t - w < imu.t.first().copied().unwrap_or(f64::INFINITY) - 1e-9 || i1 < i0 + 10 {
-                    return None;
-                }
-                // At rest, means over quarters of the window agree (vibration averages out).
-                let quarter = (i1 - i0) / 4;
-                let mean = |a: usize, b: usize, g: bool| -> Vector3<f64> {
-                    let s: Vector3<f64> = (a..b).map(|k| if g { imu.gyro[k] } else { imu.acc[k] }).sum();
-                    s / (b - a) as f64
-                };
-                let (mut dg, mut da) = (0.0f64, 0.0f64);
-                let (gm, am) = (mean(i0, i1, true), mean(i0, i1, false));
-                for q in 0..4 {
-                    let (a, b) = (i0 + q * quarter, i0 + (q + 1) * quarter);
-                    dg = dg.max((mean(a, b, true) - gm).amax());
-                    da = da.max((mean(a, b, false) - am).amax());
-                }
-                if dg > 0.02 || da > 0.3 {
-                    return None;
-                }
-                {
-                    let rate = (i1 - i0) as f64 / w;
-                    let std = |g: bool, m: &Vector3<f64>| -> f64 {
-                        let s: f64 =
-                            (i0..i1).map(|k| (if g { imu.gyro[k] } else { imu.acc[k] } - m).norm_squared() / 3.0).sum();
-                        (s / (i1 - i0) as f64).sqrt()
-                    };
-                    let (sa, sg) = (std(false, &am) / rate.sqrt(), std(true, &gm) / rate.sqrt());
-                    let apply = self.opts.noise_from_static;
-                    let action = if apply { "using the measured value" } else { "kept (--noise-from-static uses it)" };
-                    let params = &mut self.opts.imu;
-                    for (what, unit, measured, density) in [
-                        ("accelerometer", "m/s²/√Hz, vibration?", sa, &mut params.accel_noise_density),
-                        ("gyroscope", "rad/s/√Hz", sg, &mut params.gyro_noise_density),
-                    ] {
-                        if measured > 1.5 * *density {
-                            self.warnings.push(format!(
+            Init::Static => self.initialize_static(t).ok(),
+            Init::Motion => self.initialize_moving(index, t),
+            Init::Auto => match self.initialize_static(t) {
+                Ok(state) => Some(state),
+                Err(AtRest::Moving) => self.initialize_moving(index, t),
+                Err(AtRest::TooEarly) => None,
+            },
+        }
+    }
+
+    /// [`Init::Static`] at time `t`.
+    fn initialize_static(&mut self, t: f64) -> Result<InitState, AtRest> {
+        let imu = &self.input.imu;
+        let w = self.opts.init_window_s;
+        let (i0, i1) = (imu.t.partition_point(|&s| s < t - w), imu.t.partition_point(|&s| s <= t));
+        if t - w < imu.t.first().copied().unwrap_or(f64::INFINITY) - 1e-9 || i1 < i0 + 10 {
+            return Err(AtRest::TooEarly);
+        }
+        // At rest, means over quarters of the window agree (vibration averages out).
+        let quarter = (i1 - i0) / 4;
+        let mean = |a: usize, b: usize, g: bool| -> Vector3<f64> {
+            let s: Vector3<f64> = (a..b).map(|k| if g { imu.gyro[k] } else { imu.acc[k] }).sum();
+            s / (b - a) as f64
+        };
+        let (mut dg, mut da) = (0.0f64, 0.0f64);
+        let (gm, am) = (mean(i0, i1, true), mean(i0, i1, false));
+        for q in 0..4 {
+            let (a, b) = (i0 + q * quarter, i0 + (q + 1) * quarter);
+            dg = dg.max((mean(a, b, true) - gm).amax());
+            da = da.max((mean(a, b, false) - am).amax());
+        }
+        if dg > 0.02 || da > 0.3 {
+            return Err(AtRest::Moving);
+        }
+        {
+            let rate = (i1 - i0) as f64 / w;
+            let std = |g: bool, m: &Vector3<f64>| -> f64 {
+                let s: f64 =
+                    (i0..i1).map(|k| (if g { imu.gyro[k] } else { imu.acc[k] } - m).norm_squared() / 3.0).sum();
+                (s / (i1 - i0) as f64).sqrt()
+            };
+            let (sa, sg) = (std(false, &am) / rate.sqrt(), std(true, &gm) / rate.sqrt());
+            let apply = self.opts.noise_from_static;
+            let action = if apply { "using the measured value" } else { "kept (--noise-from-static uses it)" };
+            let params = &mut self.opts.imu;
+            for (what, unit, measured, density) in [
+                ("accelerometer", "m/s²/√Hz, vibration?", sa, &mut params.accel_noise_density),
+                ("gyroscope", "rad/s/√Hz", sg, &mut params.gyro_noise_density),
+            ] {
+                if measured > 1.5 * *density {
+                    self.warnings.push(format!(
                                 "the {what} at rest is noisier than the noise model says ({measured:.2e} vs {:.2e} {unit}): {action}",
                                 *density
                             ));
-                            if apply {
-                                *density = measured;
-                            }
-                        }
+                    if apply {
+                        *density = measured;
                     }
                 }
-                let r = gravity_aligned(&am);
-                let b = Vector6::new(0.0, 0.0, 0.0, gm.x, gm.y, gm.z);
-                Some((pose(&r, &Vector3::zeros()), Vector3::zeros(), b))
+            }
+        }
+        let r = gravity_aligned(&am);
+        let b = Vector6::new(0.0, 0.0, 0.0, gm.x, gm.y, gm.z);
+        Ok(InitState::at_rest(pose(&r, &Vector3::zeros()), Vector3::zeros(), b))
+    }
+
+    /// [`Init::Motion`] at frame `index`: the closed form over the frames of
+    /// the last `init_motion_window_s`; `None` (tried again at the next
+    /// frame) while the window is too short or does not observe scale.
+    fn initialize_moving(&mut self, index: usize, t: f64) -> Option<InitState> {
+        let frames = &self.input.frames;
+        let first = frames.partition_point(|f| f.t < t - self.opts.init_motion_window_s);
+        if frames.first().is_none_or(|f| t - f.t < self.opts.init_motion_window_s - 1e-9) || index < first + 3 {
+            return None;
+        }
+        let window: Vec<usize> = (first..=index).collect();
+        match super::init::closed_form(self.input, &window, &self.opts) {
+            Ok(m) => {
+                self.warn(format!(
+                    "initialized in motion at {t:.3} s from {} frames and {} landmarks (speed {:.2} m/s, free gravity {:.2} m/s²)",
+                    window.len(),
+                    m.landmarks,
+                    m.velocity.norm(),
+                    m.free_gravity
+                ));
+                Some(InitState {
+                    x: pose(&m.rotation, &Vector3::zeros()),
+                    v: m.velocity,
+                    b: Vector6::zeros(),
+                    v_sigma: MOTION_V_SIGMA,
+                    tilt_sigma: Some(MOTION_TILT_SIGMA),
+                })
+            }
+            Err(why) => {
+                self.init_failure = Some(format!("at {t:.3} s: {why}"));
+                None
             }
         }
     }
 
-    fn start(&mut self, t: f64, x: Isometry3F64, v: Vector3<f64>, b: Vector6<f64>, v_sigma: f64) {
+    fn start(&mut self, t: f64, init: InitState) {
+        let InitState { x, v, b, v_sigma, tilt_sigma } = init;
         let sid = self.next_sid;
         self.next_sid += 1;
         self.values = Values::new();
@@ -324,7 +408,7 @@ impl<'a> Estimator<'a> {
         // Roll and pitch as uncertain as an accelerometer bias makes them; yaw and
         // position fixed (the gauge of VIO).
         let (r, _) = parts(&x);
-        let tilt = (self.opts.init_bias_accel_sigma / self.opts.gravity).max(1e-3);
+        let tilt = tilt_sigma.unwrap_or((self.opts.init_bias_accel_sigma / self.opts.gravity).max(1e-3));
         let u = r.transpose() * Vector3::z();
         let rot_cov = Matrix3::identity() * tilt * tilt + u * u.transpose() * (1e-6 - tilt * tilt);
         let mut pose_cov = DMatrix::identity(6, 6) * 1e-6;
@@ -605,7 +689,7 @@ impl<'a> Estimator<'a> {
         let (x, v, b) = self.last_good.expect("initialized");
         let t = self.states.last().map_or(0.0, |s| s.t);
         self.resets += 1;
-        self.start(t, x, v, b, 0.5);
+        self.start(t, InitState { x, v, b, v_sigma: 0.5, tilt_sigma: None });
         if let Some(p) = self.init_prior.as_mut() {
             // Position and yaw stay the gauge; roll, pitch and biases loosen.
             p.b_sigma = [0.2, 0.2, 0.2, 0.02, 0.02, 0.02];
@@ -642,9 +726,10 @@ impl<'a> Estimator<'a> {
         let t = frame.t;
         let t_start = Instant::now();
         if self.states.is_empty() {
-            let (x, v, b) = self.initialize(t)?;
+            let init = self.initialize(index, t)?;
+            let x = init.x;
             self.init_time = Some(t);
-            self.start(t, x, v, b, 0.01);
+            self.start(t, init);
             let obs = self.frame_obs(index);
             self.add_observations(index, &obs);
             self.last_keyframe_obs = obs.clone();
@@ -887,8 +972,15 @@ pub fn run_observed(
         return Err(match opts.init {
             Init::Static => format!(
                 "could not initialize: no {:.1} s window at rest before any frame (the static initialization needs the recording to start at rest; \
-                 give --init-from-groundtruth to evaluate from a known state)",
+                 use --init auto or motion for a moving start, or --init-from-groundtruth to evaluate from a known state)",
                 opts.init_window_s
+            ),
+            Init::Motion | Init::Auto => format!(
+                "could not initialize: {}no {:.1} s window of motion that observes scale \
+                 (last attempt {}; give --init-from-groundtruth to evaluate from a known state)",
+                if opts.init == Init::Auto { format!("no {:.1} s window at rest and ", opts.init_window_s) } else { String::new() },
+                opts.init_motion_window_s,
+                est.init_failure.as_deref().unwrap_or("none: too few frames")
             ),
             Init::Given { t, .. } => format!("could not initialize: no frame after the given initial state at {t:.3} s"),
         });

@@ -33,6 +33,7 @@
 pub mod estimator;
 pub mod frontend;
 pub mod geometry;
+pub mod init;
 pub mod input;
 pub mod output;
 #[cfg(feature = "rerun")]
@@ -48,10 +49,17 @@ use tumble_factors::imu_preint::{PreintegrationParams, Scheme};
 /// How the first state is found.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub enum Init {
+    /// [`Init::Static`] when the recording starts at rest, else [`Init::Motion`].
+    #[default]
+    Auto,
     /// From the first `init_window_s` of data, which must be at rest: gyro
     /// bias = mean rate, roll and pitch from the mean specific force, v = 0.
-    #[default]
     Static,
+    /// From a moving start: the closed-form visual–inertial solution over the
+    /// frames of the last `init_motion_window_s` (velocity, roll, pitch and
+    /// metric scale from the IMU and the feature tracks; see [`init`]). The
+    /// gyro bias starts at zero (the calibration removed it).
+    Motion,
     /// From a given state (evaluation aid, e.g. ground truth): time \[s\],
     /// rotation world←body `[w, x, y, z]`, position \[m\], velocity \[m/s\],
     /// accelerometer and gyro biases.
@@ -99,6 +107,8 @@ pub struct VioOptions {
     pub init: Init,
     /// Length of the static window used by [`Init::Static`] \[s\].
     pub init_window_s: f64,
+    /// Length of the frame window used by [`Init::Motion`] \[s\].
+    pub init_motion_window_s: f64,
     /// Prior standard deviation of the accelerometer bias at the start \[m/s²\].
     pub init_bias_accel_sigma: f64,
     /// Raise the white-noise densities to what the static start measured when
@@ -121,8 +131,8 @@ impl Default for VioOptions {
     fn default() -> Self {
         VioOptions {
             window: 10,
-            keyframe_parallax_px: 10.0,
-            keyframe_max_interval_s: 0.5,
+            keyframe_parallax_px: 20.0,
+            keyframe_max_interval_s: 1.0,
             pixel_sigma: 1.0,
             huber: 5.99f64.sqrt(),
             outlier_sigmas: 8.0,
@@ -130,8 +140,9 @@ impl Default for VioOptions {
             imu: PreintegrationParams { scheme: Scheme::ZeroOrderHold, ..PreintegrationParams::default() },
             gravity: 9.81,
             max_iterations: 8,
-            init: Init::Static,
+            init: Init::Auto,
             init_window_s: 1.0,
+            init_motion_window_s: 1.5,
             init_bias_accel_sigma: 0.1,
             noise_from_static: false,
             function_tolerance: 1e-3,

@@ -17,6 +17,9 @@ pub struct Summary {
     pub duration_s: f64,
     /// Length of the estimated path \[m\].
     pub distance_m: f64,
+    /// Length of the ground-truth path over the matched frames \[m\], when
+    /// known (frame-to-frame jitter makes the estimated path longer).
+    pub groundtruth_distance_m: Option<f64>,
     /// Distance between the last and the first estimated position \[m\].
     pub closed_loop_error_m: f64,
     /// The same for IMU-only dead reckoning from the initial state \[m\].
@@ -110,6 +113,7 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
     Summary {
         duration_s,
         distance_m,
+        groundtruth_distance_m: m.map(|m| m.distance_m),
         closed_loop_error_m,
         imu_only_closed_loop_error_m,
         returns_to_start: returns,
@@ -131,22 +135,35 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
 }
 
 impl Summary {
+    /// The distance walked \[m\]: the ground truth's when known, else the
+    /// estimated path's.
+    pub fn walked_m(&self) -> f64 {
+        self.groundtruth_distance_m.unwrap_or(self.distance_m)
+    }
+
+    /// Closed-loop error as a percentage of [`Summary::walked_m`].
+    pub fn closed_loop_percent(&self) -> f64 {
+        100.0 * self.closed_loop_error_m / self.walked_m().max(1e-9)
+    }
+
     /// A few lines for the terminal.
     pub fn table(&self) -> String {
         let opt = |v: Option<f64>, unit: &str| v.map_or("—".to_string(), |x| format!("{x:.4} {unit}"));
         format!(
-            "duration {:.1} s, path {:.2} m, {} frames ({} keyframes), {} resets\n\
-             closed-loop error: fused {:.3} m ({:.3} % of the path) vs IMU only {:.3} m\n\
+            "duration {:.1} s, path {:.2} m{}, {} frames ({} keyframes), {} resets\n\
+             closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
              bias RMSE after {:.1} s: gyro {}, accel {}\n\
              speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
             self.duration_s,
             self.distance_m,
+            self.groundtruth_distance_m.map_or(String::new(), |d| format!(" (ground truth {d:.2} m)")),
             self.frames,
             self.keyframes,
             self.resets,
             self.closed_loop_error_m,
-            100.0 * self.closed_loop_error_m / self.distance_m.max(1e-9),
+            self.closed_loop_percent(),
+            if self.groundtruth_distance_m.is_some() { "ground-truth" } else { "estimated" },
             self.imu_only_closed_loop_error_m,
             opt(self.ate_rmse_m, "m"),
             self.bias_rmse_from_s,
