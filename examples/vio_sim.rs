@@ -1,25 +1,40 @@
 //! Simulate the paper's hand-held walk (BMI055-like IMU + camera), run the
 //! sliding-window estimator on it and print drift, ATE and bias errors.
 //!
-//! `cargo run --example vio_sim -- [duration_s] [seed] [keyframe_parallax_px keyframe_interval_s]`
+//! `cargo run --example vio_sim -- [--duration S] [--seed N]
+//! [--keyframe-parallax PX] [--keyframe-interval S] [--out DIR]`
 //!
 //! The IMU is corrected with the simulation's true calibration (what a
 //! perfect `tumble calibrate` would give); the pixel noise is the simulator's.
+//! With `--out` the run's files and figures are written as `tumble vio` does.
 
 use tumble::sim::{simulate, Scenario, SimConfig};
-use tumble::vio::{run, summarize, VioInput, VioOptions};
+use tumble::vio::{run, summarize, write_outputs, VioInput, VioOptions};
+
+/// The value after `--name`, parsed; the default when absent.
+fn flag<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
+    match args.iter().position(|a| a == name) {
+        Some(i) => match args.get(i + 1).map(|v| v.parse()) {
+            Some(Ok(v)) => v,
+            _ => {
+                eprintln!("{name} needs a value");
+                std::process::exit(2);
+            }
+        },
+        None => default,
+    }
+}
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let duration: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(60.0);
-    let seed: u64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(1);
+    let duration: f64 = flag(&args, "--duration", 60.0);
+    let seed: u64 = flag(&args, "--seed", 1);
     let cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
     let sim = simulate(Scenario::Walk, &cfg, seed).expect("simulation");
     let input = VioInput::from_simulation(&sim).expect("input");
     let mut opts = VioOptions::for_simulation(&cfg);
-    if let (Some(p), Some(i)) = (args.get(3).and_then(|s| s.parse().ok()), args.get(4).and_then(|s| s.parse().ok())) {
-        (opts.keyframe_parallax_px, opts.keyframe_max_interval_s) = (p, i);
-    }
+    opts.keyframe_parallax_px = flag(&args, "--keyframe-parallax", opts.keyframe_parallax_px);
+    opts.keyframe_max_interval_s = flag(&args, "--keyframe-interval", opts.keyframe_max_interval_s);
     let out = run(&input, &opts, None).expect("vio");
     let s = summarize(&input, &opts, &out, 20.0);
     println!("{}", s.table());
@@ -28,5 +43,10 @@ fn main() {
     }
     for w in out.warnings.iter().take(10) {
         println!("warning: {w}");
+    }
+    let dir: String = flag(&args, "--out", String::new());
+    if !dir.is_empty() {
+        let files = write_outputs(std::path::Path::new(&dir), &input, &out, &s).expect("writing the outputs");
+        println!("wrote {}", files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
     }
 }
