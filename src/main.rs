@@ -445,6 +445,11 @@ enum Command {
         /// Feature observation noise [px].
         #[arg(long, default_value_t = 1.0)]
         pixel_sigma: f64,
+        /// Solve the whole window at every frame (VINS-Mono's way; several
+        /// times slower) instead of at keyframes only, with the frames in
+        /// between tracked against the fixed window.
+        #[arg(long)]
+        solve_every_frame: bool,
         /// Integrate with VINS-Mono's midpoint rule instead of GTSAM's zero-order hold.
         #[arg(long)]
         midpoint: bool,
@@ -889,6 +894,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             keyframe_parallax,
             keyframe_interval,
             pixel_sigma,
+            solve_every_frame,
             midpoint,
             gravity,
             noise_from_static,
@@ -918,6 +924,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 pixel_sigma,
                 gravity,
                 noise_from_static,
+                solve_window_every_frame: solve_every_frame,
                 init: match init {
                     InitArg::Auto => tumble::vio::Init::Auto,
                     InitArg::Static => tumble::vio::Init::Static,

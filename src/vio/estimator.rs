@@ -189,6 +189,11 @@ pub struct Estimator<'a> {
     pub init_time: Option<f64>,
     /// Why the last initialization in motion failed (for the error when none worked).
     init_failure: Option<String>,
+    /// Marginal σ of the last keyframe (added to the conditional σ of the
+    /// frames tracked against it).
+    keyframe_std: [[f64; 3]; 5],
+    /// The last frame tracked against the window: time \[s\] and state.
+    last_tracked: Option<(f64, Isometry3F64, Vector3<f64>, Vector6<f64>)>,
     gravity: Vector3<f64>,
     no_feature_since: Option<f64>,
     residuals: ResidualTally,
@@ -244,6 +249,8 @@ impl<'a> Estimator<'a> {
             resets: 0,
             init_time: None,
             init_failure: None,
+            keyframe_std: [[f64::NAN; 3]; 5],
+            last_tracked: None,
             no_feature_since: None,
             residuals: ResidualTally::default(),
         }
@@ -758,12 +765,22 @@ impl<'a> Estimator<'a> {
             self.warn(format!("no IMU samples before the frame at {t:.3} s: frame skipped"));
             return None;
         }
-        // Predict the new state.
-        let (ri, pi) = parts(&xl);
-        let dt = pim.delta_t();
-        let rj = ri * pim.delta_rotation();
-        let vj = vl + self.gravity * dt + ri * pim.delta_velocity();
-        let pj = pi + vl * dt + self.gravity * (0.5 * dt * dt) + ri * pim.delta_position();
+        // Predict the new state: from the last frame tracked since the newest
+        // window state when there is one (a shorter IMU span), else from that state.
+        let (ri, _) = parts(&xl);
+        let tracked = self.last_tracked.filter(|(tt, ..)| *tt > ta && *tt < t).map(|(tt, xt, vt, bt)| {
+            let bias = (bt.fixed_rows::<3>(0).into_owned(), bt.fixed_rows::<3>(3).into_owned());
+            (xt, vt, preintegrate(&self.input.imu, tt, t, bias, self.opts.imu).0)
+        });
+        let (x0, v0, p0) = match &tracked {
+            Some((xt, vt, pt)) => (*xt, *vt, pt),
+            None => (xl, vl, &pim),
+        };
+        let (r0, q0) = parts(&x0);
+        let dt = p0.delta_t();
+        let rj = r0 * p0.delta_rotation();
+        let vj = v0 + self.gravity * dt + r0 * p0.delta_velocity();
+        let pj = q0 + v0 * dt + self.gravity * (0.5 * dt * dt) + r0 * p0.delta_position();
         let predicted = pose(&rj, &pj);
         let sid = self.next_sid;
         self.next_sid += 1;
@@ -810,6 +827,14 @@ impl<'a> Estimator<'a> {
         self.add_observations(index, &obs);
         self.prev_frame_obs = obs.clone();
         self.prev_frame_rotation = rj;
+        // A frame at rest or a window with few landmarks still gets the full
+        // solve: its zero-velocity prior or its IMU link is what holds the
+        // window's velocities and biases then.
+        if !keyframe && !zero_velocity && !self.opts.solve_window_every_frame && self.landmark_count() >= 30 {
+            // Not triangulated from here: this frame's pose is only the IMU's
+            // prediction now, and the landmark's depth would stay fixed.
+            return self.track_frame(index, sid, &predicted, vj, bl, obs, t_start);
+        }
         self.triangulate_new();
         // Solve.
         let graph = self.build_graph();
@@ -851,6 +876,7 @@ impl<'a> Estimator<'a> {
         let est = self.estimate(sid, keyframe, t_start, covariances.as_ref());
         self.last_good = Some(self.state_values(sid));
         if keyframe {
+            self.keyframe_std = est.std;
             self.last_keyframe_obs = obs;
             if self.states.len() > self.opts.window {
                 self.marginalize_oldest();
@@ -858,6 +884,116 @@ impl<'a> Estimator<'a> {
         } else {
             self.drop_newest();
         }
+        Some(est)
+    }
+
+    /// A frame that will not become a keyframe, with the window held fixed:
+    /// only its own pose, velocity and bias are solved, from the IMU factor to
+    /// the last keyframe and its observations of the window's landmarks
+    /// (motion-only, as a keyframe-based tracker does). Its σ adds the last
+    /// keyframe's marginal variances to the conditional ones of this solve.
+    #[allow(clippy::too_many_arguments)]
+    fn track_frame(
+        &mut self,
+        index: usize,
+        sid: u64,
+        predicted: &Isometry3F64,
+        vj: Vector3<f64>,
+        bl: Vector6<f64>,
+        obs: HashMap<u64, [f64; 2]>,
+        t_start: Instant,
+    ) -> Option<FrameEstimate> {
+        let t = self.input.frames[index].t;
+        let n = self.states.len();
+        let prev = self.states[n - 2].sid;
+        let mut g = Graph::new();
+        self.add_link(&mut g, n - 2);
+        if self.states[n - 1].zero_velocity {
+            g.add(PriorFactor::new(V(sid), Vector3::zeros()), NoiseModel::isotropic(3, 0.01).expect("positive"));
+        }
+        let mut values = Values::new();
+        let copy = |values: &mut Values, key, constant: bool| {
+            if !values.contains(key) {
+                if let Ok(v) = self.values.get_dyn(key) {
+                    values.insert_dyn(key, v.clone_box());
+                    values.set_constant(key, constant);
+                }
+            }
+        };
+        for key in [X(prev), V(prev), B(prev)] {
+            copy(&mut values, key, true);
+        }
+        for key in [X(sid), V(sid), B(sid)] {
+            copy(&mut values, key, false);
+        }
+        let noise = NoiseModel::isotropic(2, self.opts.pixel_sigma).expect("positive pixel sigma");
+        let huber = Arc::new(Huber(self.opts.huber));
+        for tr in self.tracks.values() {
+            let Some((lid, anchor)) = tr.landmark else { continue };
+            if anchor == sid || tr.obs.len() < 4 {
+                continue;
+            }
+            let (Some(a), Some(o)) = (tr.obs.iter().find(|o| o.sid == anchor), tr.obs.iter().find(|o| o.sid == sid))
+            else {
+                continue;
+            };
+            copy(&mut values, X(anchor), true);
+            copy(&mut values, L(lid), true);
+            g.add_entry(tumble_solvers::FactorEntry {
+                factor: Box::new(self.reprojection(anchor, sid, lid, a.xy, o.uv)),
+                noise: noise.clone(),
+                loss: Some(huber.clone()),
+            });
+        }
+        let lm = LmOptions {
+            max_iterations: self.opts.max_iterations,
+            function_tolerance: self.opts.function_tolerance,
+            log_iterations: false,
+            ..LmOptions::default()
+        };
+        let optimizer = Optimizer::new(lm);
+        let keys = [X(sid), V(sid), B(sid)];
+        let mut covariances = None;
+        let solved = if self.opts.covariances {
+            optimizer.optimize_with_covariances(&g, &values, &keys).map(|(v, s, c)| {
+                covariances = c.ok();
+                (v, s)
+            })
+        } else {
+            optimizer.optimize(&g, &values)
+        };
+        let failure = match solved {
+            Ok((v, _)) => {
+                for key in keys {
+                    if let Ok(x) = v.get_dyn(key) {
+                        self.values.insert_dyn(key, x.clone_box());
+                    }
+                }
+                self.failed(sid, predicted)
+            }
+            Err(e) => Some(format!("the solver failed: {e}")),
+        };
+        if let Some(why) = failure {
+            self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
+            self.last_good = Some((*predicted, vj, bl));
+            self.reset_to_newest();
+            self.add_observations(index, &obs);
+            self.last_keyframe_obs = obs;
+            return Some(self.estimate(self.states[0].sid, true, t_start, None));
+        }
+        let mut est = self.estimate(sid, false, t_start, covariances.as_ref());
+        for (row, kf) in est.std.iter_mut().zip(&self.keyframe_std) {
+            for (s, k) in row.iter_mut().zip(kf) {
+                if k.is_finite() {
+                    *s = s.hypot(*k);
+                }
+            }
+        }
+        self.last_good = Some(self.state_values(sid));
+        let (x, v, b) = self.state_values(sid);
+        self.last_tracked = Some((t, x, v, b));
+        self.drop_newest();
+        est.solve_s = t_start.elapsed().as_secs_f64();
         Some(est)
     }
 

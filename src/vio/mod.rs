@@ -125,6 +125,10 @@ pub struct VioOptions {
     pub max_imu_gap_s: f64,
     /// Recover marginal standard deviations of every frame's state.
     pub covariances: bool,
+    /// Solve the whole window at every frame (VINS-Mono's way) instead of
+    /// only at keyframes, with the frames in between tracked against the
+    /// fixed window (motion-only: their own pose, velocity and bias).
+    pub solve_window_every_frame: bool,
 }
 
 impl Default for VioOptions {
@@ -149,6 +153,7 @@ impl Default for VioOptions {
             zero_velocity_px: 0.3,
             max_imu_gap_s: 0.05,
             covariances: true,
+            solve_window_every_frame: false,
         }
     }
 }
