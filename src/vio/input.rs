@@ -151,9 +151,15 @@ impl VioInput {
     ) -> Result<VioInput, String> {
         let tracks = sim.tracks.as_ref().ok_or("the simulation has no camera")?;
         let m = &sim.config.imu;
+        // The simulator applies T and K only when their effects are on.
         let inv = |t: &crate::sim::TriadModel| -> Result<Matrix3<f64>, String> {
-            let tm = Matrix3::from_fn(|r, c| t.misalignment[r][c]);
-            (tm * Matrix3::from_diagonal(&Vector3::from(t.scale))).try_inverse().ok_or("singular T K".to_string())
+            let tm = if m.effects.misalignment {
+                Matrix3::from_fn(|r, c| t.misalignment[r][c])
+            } else {
+                Matrix3::identity()
+            };
+            let k = if m.effects.scale { Vector3::from(t.scale) } else { Vector3::repeat(1.0) };
+            (tm * Matrix3::from_diagonal(&k)).try_inverse().ok_or("singular T K".to_string())
         };
         // Raw-bias-to-body maps and the bias the correction already removes.
         let (ma, mg, ba0, bg0, imu) = match calibration {
