@@ -174,7 +174,7 @@ fn a_start_in_motion_is_initialized_by_the_closed_form() {
         .sum();
     let tilt_rms = (tilt2 / half.len() as f64).sqrt();
     println!("tilt error over the second half: {tilt_rms:.2}° RMS");
-    // (0.9° here.)
+    // (0.8° here.)
     assert!(tilt_rms < 2.5, "{tilt_rms}°");
     assert!(s.ate_rmse_m.unwrap() < 0.15, "ATE {:?}", s.ate_rmse_m);
 }

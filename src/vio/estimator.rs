@@ -367,37 +367,42 @@ impl<'a> Estimator<'a> {
     }
 
     /// [`Init::Motion`] at frame `index`: the closed form over the frames of
-    /// the last `init_motion_window_s`; `None` (tried again at the next
-    /// frame) while the window is too short or does not observe scale.
+    /// the last `init_motion_window_s`, or of twice that when the shorter
+    /// window saw too little parallax; `None` (tried again at the next frame)
+    /// while the window is too short or does not observe scale.
     fn initialize_moving(&mut self, index: usize, t: f64) -> Option<InitState> {
         let frames = &self.input.frames;
-        let first = frames.partition_point(|f| f.t < t - self.opts.init_motion_window_s);
-        if frames.first().is_none_or(|f| t - f.t < self.opts.init_motion_window_s - 1e-9) || index < first + 3 {
-            return None;
-        }
-        let window: Vec<usize> = (first..=index).collect();
-        match super::init::closed_form(self.input, &window, &self.opts) {
-            Ok(m) => {
-                self.warn(format!(
-                    "initialized in motion at {t:.3} s from {} frames and {} landmarks (speed {:.2} m/s, free gravity {:.2} m/s²)",
-                    window.len(),
-                    m.landmarks,
-                    m.velocity.norm(),
-                    m.free_gravity
-                ));
-                Some(InitState {
-                    x: pose(&m.rotation, &Vector3::zeros()),
-                    v: m.velocity,
-                    b: Vector6::zeros(),
-                    v_sigma: MOTION_V_SIGMA,
-                    tilt_sigma: Some(MOTION_TILT_SIGMA),
-                })
+        let mut failure = None;
+        for span in [self.opts.init_motion_window_s, 2.0 * self.opts.init_motion_window_s] {
+            let first = frames.partition_point(|f| f.t < t - span);
+            if frames.first().is_none_or(|f| t - f.t < span - 1e-9) || index < first + 3 {
+                break;
             }
-            Err(why) => {
-                self.init_failure = Some(format!("at {t:.3} s: {why}"));
-                None
+            let window: Vec<usize> = (first..=index).collect();
+            match super::init::closed_form(self.input, &window, &self.opts) {
+                Ok(m) => {
+                    self.warn(format!(
+                        "initialized in motion at {t:.3} s from {} frames and {} landmarks (speed {:.2} m/s, free gravity {:.2} m/s²)",
+                        window.len(),
+                        m.landmarks,
+                        m.velocity.norm(),
+                        m.free_gravity
+                    ));
+                    return Some(InitState {
+                        x: pose(&m.rotation, &Vector3::zeros()),
+                        v: m.velocity,
+                        b: Vector6::zeros(),
+                        v_sigma: MOTION_V_SIGMA,
+                        tilt_sigma: Some(MOTION_TILT_SIGMA),
+                    });
+                }
+                Err(why) => failure = Some(format!("at {t:.3} s over {span:.1} s: {why}")),
             }
         }
+        if failure.is_some() {
+            self.init_failure = failure;
+        }
+        None
     }
 
     fn start(&mut self, t: f64, init: InitState) {

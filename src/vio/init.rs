@@ -8,14 +8,27 @@
 //! `g` (both in the first body frame) unknown, the body position is linear in
 //! them, `p_k = v₀ t_k + ½ g t_k² + Δp_k`, and so is every observation of a
 //! landmark at depth `λ` along its first ray `u_a`:
-//! `[u_k]× R_ckᵀ (p_ca + λ R_ca u_a − p_ck) = 0`. One linear least-squares
+//! `[û_k]× R_ckᵀ (p_ca + λ R_ca u_a − p_ck) = 0`. One linear least-squares
 //! problem in `(v₀, g, λ…)` gives velocity, gravity direction — roll and pitch —
 //! and metric scale at once, without visual SfM. The gyro bias is taken as
 //! zero (the calibration removed it); the window refines it afterwards.
+//!
+//! Two things spoil it and are guarded against. A mismatched observation
+//! enters every row of its track; mismatches are removed first, free of the
+//! unknown scale, by the coplanarity of each frame pair's parallax with the
+//!X
+//! also vanish for the trivial solution — nothing moves, every landmark at
+//! the camera — which noise favours when the window's parallax is small (a
+//! walk at 0.1 m/s over 1.5 s): a solution whose median depth comes out
+//! under 0.3 m is refused, and the estimator tries a window twice as long.
+//!
+//! Noise-free, the solution is exact (the unit tests: tilt 1e-4°, velocity
+//! 1e-4 m/s); with the default simulated noise, over 1.5 s of a one-minute
+//! walk, tilt within 1.5° and velocity within 0.12 m/s.
 
 use super::geometry::{gravity_aligned, parts, preintegrate};
 use super::{VioInput, VioOptions};
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use std::collections::BTreeMap;
 
 /// What the closed-form initialization found, at the window's last frame.
@@ -38,6 +51,19 @@ pub struct MotionInit {
 const MIN_LANDMARKS: usize = 15;
 /// Most landmarks used (the longest tracks).
 const MAX_LANDMARKS: usize = 120;
+/// Rows missing by less than this are never dropped as mismatches \[m\]
+/// (half a pixel at 2 m for a focal length of 500 px).
+const ROW_MISS_FLOOR_M: f64 = 2e-3;
+/// Median landmark depth below which the solution is taken for the trivial
+/// one \[m\].
+const MIN_DEPTH_M: f64 = 0.3;
+/// Parallax-plane misses below this angle are never taken for mismatches
+/// \[rad\].
+const PAIR_ANGLE_FLOOR_RAD: f64 = 2e-3;
+/// Fewest features a frame pair needs for its mismatches to be looked for.
+const MIN_PAIR_FEATURES: usize = 8;
+/// Most rounds of dropping mismatched observations.
+const MISMATCH_ROUNDS: usize = 4;
 /// Relative error of the free gravity magnitude accepted.
 const MAX_GRAVITY_ERROR: f64 = 0.1;
 
@@ -79,35 +105,107 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             }
         }
     }
-    let mut used: Vec<Vec<(usize, Vector3<f64>)>> = tracks.into_values().filter(|o| o.len() >= 3).collect();
+    let (r_bc, t_bc) = parts(&input.body_from_camera);
+    let mut tracks: Vec<Vec<(usize, Vector3<f64>)>> = tracks.into_values().collect();
+    drop_mismatches(&mut tracks, &rot, &r_bc);
+    let mut used: Vec<Vec<(usize, Vector3<f64>)>> = tracks.into_iter().filter(|o| o.len() >= 3).collect();
     used.sort_by_key(|o| std::cmp::Reverse(o.len()));
     used.truncate(MAX_LANDMARKS);
     if used.len() < MIN_LANDMARKS {
         return Err(format!("{} landmarks seen in 3 or more frames, {MIN_LANDMARKS} needed", used.len()));
     }
-    let (r_bc, t_bc) = parts(&input.body_from_camera);
-    let n = 6 + used.len();
-    // Normal equations of the rows [u_k]× R_ckᵀ (…) = 0 in (v₀, g, λ…).
-    let mut h = DMatrix::<f64>::zeros(n, n);
-    let mut b = DVector::<f64>::zeros(n);
+    // The rows [û_k]× R_ckᵀ (…) = 0, linear in (v₀, g, λ_j): per observation
+    // the 3×6 block of (v₀, g), the column of λ_j and the constant.
+    let mut rows: Vec<Row> = Vec::new();
     for (j, obs) in used.iter().enumerate() {
         let (a, ua) = obs[0];
         let ray = rot[a] * r_bc * ua;
         for &(k, uk) in &obs[1..] {
-            let m = cross(&uk) * (rot[k] * r_bc).transpose();
-            let mut row = DMatrix::<f64>::zeros(3, n);
-            row.view_mut((0, 0), (3, 3)).copy_from(&(m * (time[a] - time[k])));
-            row.view_mut((0, 3), (3, 3)).copy_from(&(m * (0.5 * (time[a] * time[a] - time[k] * time[k]))));
-            row.view_mut((0, 6 + j), (3, 1)).copy_from(&(m * ray));
-            let c = m * ((dp[a] - dp[k]) + (rot[a] - rot[k]) * t_bc);
-            h += row.transpose() * &row;
-            b -= row.transpose() * c;
+            let m = cross(&uk.normalize()) * (rot[k] * r_bc).transpose();
+            let mut jvg = Matrix3x6::zeros();
+            jvg.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * (time[a] - time[k])));
+            jvg.fixed_view_mut::<3, 3>(0, 3).copy_from(&(m * (0.5 * (time[a] * time[a] - time[k] * time[k]))));
+            rows.push((j, jvg, m * ray, m * ((dp[a] - dp[k]) + (rot[a] - rot[k]) * t_bc)));
         }
     }
-    let solve = |h: &DMatrix<f64>, b: &DVector<f64>| -> Result<DVector<f64>, String> {
-        h.clone().cholesky().map(|c| c.solve(b)).ok_or_else(|| "the window's equations are singular".to_string())
+    // Weighted least squares over the observations still trusted (weight 0:
+    // dropped; a landmark left without any has its depth pinned to 0 by a
+    // unit diagonal). `fixed_g` moves a known gravity to the constants and
+    // solves for its tangent-plane correction instead (5 columns, not 6).
+    let solve = |weights: &[f64], fixed_g: Option<&Vector3<f64>>| -> Result<DVector<f64>, String> {
+        let cols = if fixed_g.is_some() { 5 } else { 6 };
+        let m = cols + used.len();
+        let mut h = DMatrix::<f64>::zeros(m, m);
+        let mut b = DVector::<f64>::zeros(m);
+        let mut seen = vec![false; used.len()];
+        for ((j, jvg, jl, c), &w) in rows.iter().zip(weights).filter(|(_, &w)| w > 0.0) {
+            seen[*j] = true;
+            let (jr, cr) = match fixed_g {
+                None => (DMatrix::from_column_slice(3, 6, jvg.as_slice()), *c),
+                Some(g) => {
+                    let mut jr = DMatrix::<f64>::zeros(3, 5);
+                    jr.view_mut((0, 0), (3, 3)).copy_from(&jvg.fixed_view::<3, 3>(0, 0));
+                    jr.view_mut((0, 3), (3, 2)).copy_from(&(jvg.fixed_view::<3, 3>(0, 3) * tangent_basis(g)));
+                    (jr, c + jvg.fixed_view::<3, 3>(0, 3) * g)
+                }
+            };
+            let l = cols + j;
+            let mut hvg = h.view_mut((0, 0), (cols, cols));
+            hvg += w * jr.transpose() * &jr;
+            let cross_term = w * jr.transpose() * jl;
+            for i in 0..cols {
+                h[(i, l)] += cross_term[i];
+                h[(l, i)] += cross_term[i];
+            }
+            h[(l, l)] += w * jl.norm_squared();
+            let mut bvg = b.rows_mut(0, cols);
+            bvg -= w * jr.transpose() * cr;
+            b[l] -= w * jl.dot(&cr);
+        }
+        for (j, _) in seen.iter().enumerate().filter(|(_, &s)| !s) {
+            h[(cols + j, cols + j)] = 1.0;
+        }
+        h.cholesky().map(|ch| ch.solve(&b)).ok_or_else(|| "the window's equations are singular".to_string())
     };
-    let x = solve(&h, &b)?;
+    // Rows are the ray's miss at the landmark in metres. Rows missing by more
+    // than 3× the median are dropped (what `drop_mismatches` could not see)
+    // and the solution repeated, a few rounds, until the set kept no longer
+    // changes.
+    let mut weights = vec![1.0; rows.len()];
+    let mut x = solve(&weights, None)?;
+    for _ in 0..MISMATCH_ROUNDS {
+        let xvg = x.fixed_rows::<6>(0).into_owned();
+        let miss: Vec<f64> = rows.iter().map(|(j, jvg, jl, c)| (jvg * xvg + jl * x[6 + j] + c).norm()).collect();
+        let mut sorted: Vec<f64> = miss.iter().zip(&weights).filter(|(_, &w)| w > 0.0).map(|(e, _)| *e).collect();
+        sorted.sort_by(f64::total_cmp);
+        let limit = (3.0 * sorted[sorted.len() / 2]).max(ROW_MISS_FLOOR_M);
+        let next: Vec<f64> = miss.iter().map(|&e| if e <= limit { 1.0 } else { 0.0 }).collect();
+        if next == weights {
+            break;
+        }
+        weights = next;
+        x = solve(&weights, None)?;
+    }
+    let mut active = vec![false; used.len()];
+    for ((j, ..), _) in rows.iter().zip(&weights).filter(|(_, &w)| w > 0.0) {
+        active[*j] = true;
+    }
+    let kept = active.iter().filter(|&&a| a).count();
+    if kept < MIN_LANDMARKS {
+        return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed"));
+    }
+    let mut depths: Vec<f64> = (0..used.len()).filter(|&j| active[j]).map(|j| x[6 + j]).collect();
+    depths.sort_by(f64::total_cmp);
+    let median_depth = depths[depths.len() / 2];
+    let positive = depths.iter().filter(|&&d| d > 0.0).count();
+    if median_depth < MIN_DEPTH_M || positive * 5 < kept * 4 {
+        // Near the trivial solution — nothing moves, every landmark at the
+        // camera — which noise favours when the parallax is small.
+        return Err(format!(
+            "the landmarks came out {median_depth:.2} m from the camera ({positive} of {kept} in front): \
+             too little parallax to observe scale"
+        ));
+    }
     let free_g = Vector3::new(x[3], x[4], x[5]);
     let free_gravity = free_g.norm();
     if !free_gravity.is_finite() || (free_gravity / opts.gravity - 1.0).abs() > MAX_GRAVITY_ERROR {
@@ -116,30 +214,15 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             opts.gravity
         ));
     }
-    // Gravity on its sphere: g = |g| ĝ + B w, w in the tangent plane, re-solved a few times.
+    // Gravity on its sphere: g = |g| ĝ + B w, w in the tangent plane, solved
+    // again a few times.
     let mut g = free_g * (opts.gravity / free_gravity);
-    let mut x = x;
+    let mut v0 = Vector3::new(x[0], x[1], x[2]);
     for _ in 0..4 {
-        let basis = tangent_basis(&g);
-        // Substitute g: columns 3..6 of H become H₃ B (2 columns), the constant moves to b.
-        let mut p = DMatrix::<f64>::zeros(n, n - 1);
-        p.view_mut((0, 0), (3, 3)).fill_with_identity();
-        p.view_mut((3, 3), (3, 2)).copy_from(&basis);
-        p.view_mut((6, 5), (n - 6, n - 6)).fill_with_identity();
-        let mut g_full = DVector::<f64>::zeros(n);
-        g_full.rows_mut(3, 3).copy_from(&g);
-        let hr = p.transpose() * &h * &p;
-        let br = p.transpose() * (&b - &h * g_full);
-        let y = solve(&hr, &br)?;
-        g = (g + basis * Vector3::new(y[3], y[4], 0.0).xy()).normalize() * opts.gravity;
-        x = &p * &y;
-        x.rows_mut(3, 3).copy_from(&g);
+        let y = solve(&weights, Some(&g))?;
+        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.gravity;
+        v0 = Vector3::new(y[0], y[1], y[2]);
     }
-    let positive = (0..used.len()).filter(|&j| x[6 + j] > 0.0).count();
-    if positive * 5 < used.len() * 4 {
-        return Err(format!("only {positive} of {} landmarks came out in front of the camera", used.len()));
-    }
-    let v0 = Vector3::new(x[0], x[1], x[2]);
     let last = frames.len() - 1;
     // World ← first body: gravity down, yaw 0.
     let r_w0 = gravity_aligned(&(-g));
@@ -147,8 +230,75 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         rotation: r_w0 * rot[last],
         velocity: r_w0 * (v0 + g * time[last] + dv[last]),
         free_gravity,
-        landmarks: used.len(),
+        landmarks: kept,
     })
+}
+
+/// One observation's row: landmark index, the 3×6 block of `(v₀, g)`, the
+/// depth's column and the constant.
+type Row = (usize, Matrix3x6<f64>, Vector3<f64>, Vector3<f64>);
+
+/// A frame pair's parallax vector: track, index of its later observation, vector.
+type Parallax = (usize, usize, Vector3<f64>);
+
+/// Remove the observations that do not fit the motion between two frames.
+///
+/// A track's rows all refer to its first observation, so a single mismatched
+/// pixel can bend the whole linear solution — even towards the trivial one
+/// in which nothing moves and every landmark sits at the camera. Mismatches
+/// are found before, free of the unknown scale: between two frames `a`, `b`
+/// whose rotation the gyro gives, every landmark's two bearings and the
+/// camera's translation `t` are coplanar, `(u_a × R_ab u_b) · t = 0`. Per
+/// frame pair, `t` is the direction most orthogonal to all those parallax
+/// vectors (smallest eigenvector, twice with the worst fits left out); an
+/// observation pair missing it by more than 3× the median (or
+/// `PAIR_ANGLE_FLOOR_RAD`) is a mismatch and both its observations are
+/// dropped. Frame pairs with fewer than `MIN_PAIR_FEATURES` are left as
+/// they are.
+fn drop_mismatches(tracks: &mut [Vec<(usize, Vector3<f64>)>], rot: &[Matrix3<f64>], r_bc: &Matrix3<f64>) {
+    // Parallax vectors by frame pair: (track, index of the later observation, vector).
+    let mut pairs: BTreeMap<(usize, usize), Vec<Parallax>> = BTreeMap::new();
+    for (i, obs) in tracks.iter().enumerate() {
+        for (n, w) in obs.windows(2).enumerate() {
+            let ((a, ua), (b, ub)) = (w[0], w[1]);
+            let r_ab = r_bc.transpose() * rot[a].transpose() * rot[b] * r_bc;
+            let parallax = ua.normalize().cross(&(r_ab * ub.normalize()));
+            pairs.entry((a, b)).or_default().push((i, n + 1, parallax));
+        }
+    }
+    let mut bad: Vec<Vec<bool>> = tracks.iter().map(|o| vec![false; o.len()]).collect();
+    for list in pairs.values().filter(|l| l.len() >= MIN_PAIR_FEATURES) {
+        let mut on = vec![true; list.len()];
+        let mut miss = vec![0.0; list.len()];
+        let mut limit = f64::INFINITY;
+        for _ in 0..3 {
+            let scatter = list.iter().zip(&on).filter(|(_, &o)| o).fold(Matrix3::zeros(), |m, ((_, _, p), _)| {
+                // Directions only: a mismatch's long parallax vector
+                // would otherwise outweigh dozens of right ones.
+                let d = p / p.norm().max(PAIR_ANGLE_FLOOR_RAD);
+                m + d * d.transpose()
+            });
+            let eig = scatter.symmetric_eigen();
+            let t = eig.eigenvectors.column(eig.eigenvalues.imin()).into_owned();
+            for (m, (_, _, p)) in miss.iter_mut().zip(list) {
+                *m = p.dot(&t).abs();
+            }
+            let mut sorted: Vec<f64> = miss.iter().zip(&on).filter(|(_, &o)| o).map(|(m, _)| *m).collect();
+            sorted.sort_by(f64::total_cmp);
+            limit = (3.0 * sorted[sorted.len() / 2]).max(PAIR_ANGLE_FLOOR_RAD);
+            on = miss.iter().map(|m| *m <= limit).collect();
+        }
+        for ((i, n, _), m) in list.iter().zip(&miss) {
+            if *m > limit {
+                bad[*i][*n - 1] = true;
+                bad[*i][*n] = true;
+            }
+        }
+    }
+    for (obs, bad) in tracks.iter_mut().zip(bad) {
+        let mut flags = bad.into_iter();
+        obs.retain(|_| !flags.next().unwrap_or(false));
+    }
 }
 
 /// The skew-symmetric matrix of `v` (`[v]× w = v × w`).
@@ -163,4 +313,109 @@ fn tangent_basis(g: &Vector3<f64>) -> nalgebra::Matrix3x2<f64> {
     let b1 = (helper - a * a.dot(&helper)).normalize();
     let b2 = a.cross(&b1);
     nalgebra::Matrix3x2::from_columns(&[b1, b2])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sim::{simulate, Effects, Scenario, SimConfig};
+
+    /// On an ideal IMU and noise-free tracks (1 % of the observations
+    /// mismatched, the simulator's default) the closed form recovers the
+    /// velocity and the gravity direction of a moving window exactly.
+    #[test]
+    fn recovers_velocity_and_tilt_without_noise() {
+        // The paper's 6-minute walk: shorter ones are the same loop time-scaled,
+        // fast enough for 200 Hz integration to err by a degree.
+        let mut cfg = SimConfig { duration_s: Some(360.0), ..SimConfig::default() };
+        cfg.imu.effects = Effects::none();
+        cfg.camera.pixel_noise_px = 0.0;
+        let sim = simulate(Scenario::Walk, &cfg, 2).unwrap();
+        let input = VioInput::from_simulation(&sim).unwrap();
+        // Midpoint integration: the simulator samples the true rates, which
+        // zero-order hold integrates with 1e-3 rad over this window.
+        let mut opts = VioOptions::for_simulation(&cfg);
+        opts.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
+        let frames: Vec<usize> =
+            (0..input.frames.len()).filter(|&k| (20.0..21.5).contains(&input.frames[k].t)).collect();
+        let m = closed_form(&input, &frames, &opts).unwrap();
+        let gt = input.groundtruth.as_ref().unwrap();
+        let t_last = input.t0_ns + (input.frames[*frames.last().unwrap()].t * 1e9).round() as i64;
+        let k = gt.t_ns.partition_point(|&t| t < t_last);
+        assert_eq!(gt.t_ns[k], t_last, "ground truth at the frame time");
+        let q = gt.q[k];
+        let r_true = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+        let up_true = r_true.inverse() * Vector3::z();
+        let up = m.rotation.transpose() * Vector3::z();
+        let tilt_deg = up.angle(&up_true).to_degrees();
+        let p = |i: usize| Vector3::from(gt.p[i]);
+        let v_true = (p(k + 1) - p(k - 1)) / ((gt.t_ns[k + 1] - gt.t_ns[k - 1]) as f64 * 1e-9);
+        // Velocities compare in the world frame up to yaw: speed and vertical part.
+        let dv = ((m.velocity.norm() - v_true.norm()).abs()).max((m.velocity.z - v_true.z).abs());
+        println!("free gravity {:.4} m/s², tilt error {tilt_deg:.4}°, velocity error {dv:.4} m/s", m.free_gravity);
+        assert!((m.free_gravity - cfg.gravity).abs() < 0.05, "free gravity {}", m.free_gravity);
+        assert!(tilt_deg < 0.1, "tilt error {tilt_deg}°");
+        assert!(dv < 0.01, "velocity error {dv} m/s (true {v_true}, estimated {})", m.velocity);
+    }
+
+    /// With the default pixel noise, 1 % mismatches and a noisy, biased IMU,
+    /// 1.5 s windows of three one-minute walks (0.6–0.9 m/s) give the tilt
+    /// within 2° and the velocity within 0.15 m/s — a start the sliding
+    /// window refines. (Measured: at most 1.5° and 0.12 m/s.)
+    #[test]
+    fn is_close_enough_on_noisy_windows() {
+        let cfg = SimConfig { duration_s: Some(60.0), ..SimConfig::default() };
+        let opts = VioOptions::for_simulation(&cfg);
+        for seed in [1, 2, 3] {
+            let sim = simulate(Scenario::Walk, &cfg, seed).unwrap();
+            let input = VioInput::from_simulation(&sim).unwrap();
+            for end in [8.0, 12.0, 31.5] {
+                let frames = window(&input, end - 1.5, end);
+                let m = closed_form(&input, &frames, &opts).unwrap();
+                let truth = sim.motion.at(input.frames[*frames.last().unwrap()].t);
+                let up_true = truth.rotation.transpose() * Vector3::z();
+                let tilt_deg = (m.rotation.transpose() * Vector3::z()).angle(&up_true).to_degrees();
+                let dv = (m.velocity.norm() - truth.velocity.norm()).abs().max((m.velocity.z - truth.velocity.z).abs());
+                println!(
+                    "seed {seed}, {end} s: free gravity {:.3}, tilt {tilt_deg:.2}°, velocity {dv:.3} m/s",
+                    m.free_gravity
+                );
+                assert!((m.free_gravity - cfg.gravity).abs() < 0.3, "free gravity {}", m.free_gravity);
+                assert!(tilt_deg < 2.0, "tilt error {tilt_deg}°");
+                assert!(dv < 0.15, "velocity error {dv} m/s of {}", truth.velocity.norm());
+            }
+        }
+    }
+
+    /// The six-minute walk moves at 0.1 m/s: over 1.5 s its parallax drowns
+    /// in the noise and the least-squares solution slides to the trivial
+    /// one. That is refused, not returned.
+    #[test]
+    fn refuses_the_trivial_solution_of_a_slow_window() {
+        let cfg = SimConfig { duration_s: Some(360.0), ..SimConfig::default() };
+        let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
+        let input = VioInput::from_simulation(&sim).unwrap();
+        let opts = VioOptions::for_simulation(&cfg);
+        let err = closed_form(&input, &window(&input, 30.0, 31.5), &opts).unwrap_err();
+        assert!(err.contains("too little parallax"), "{err}");
+    }
+
+    /// Indices of the frames in `[from, to)` seconds.
+    fn window(input: &VioInput, from: f64, to: f64) -> Vec<usize> {
+        (0..input.frames.len()).filter(|&k| (from..to).contains(&input.frames[k].t)).collect()
+    }
+
+    #[test]
+    fn refuses_too_few_frames_and_landmarks() {
+        let cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
+        let sim = simulate(Scenario::Walk, &cfg, 2).unwrap();
+        let mut input = VioInput::from_simulation(&sim).unwrap();
+        let opts = VioOptions::for_simulation(&cfg);
+        assert!(closed_form(&input, &[10, 11, 12], &opts).unwrap_err().contains("4 needed"));
+        for f in &mut input.frames {
+            f.features.truncate(5);
+        }
+        let frames: Vec<usize> = (160..190).collect();
+        assert!(closed_form(&input, &frames, &opts).unwrap_err().contains("landmarks"));
+    }
 }

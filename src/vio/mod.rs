@@ -9,11 +9,15 @@
 //!   calibrated samples (eq. 16–19) + bias random walks + reprojection factors
 //!   under a Huber loss, solved by Levenberg–Marquardt with the landmarks
 //!   eliminated by the Schur complement.
-//! - Every frame is solved; a frame that is not a keyframe (parallax, time)
-//!   is dropped afterwards and its IMU merged into the next interval; when the
-//!   window holds more than N keyframes the oldest is marginalized.
+//! - The window is solved when a frame becomes a keyframe (parallax, time);
+//!   a frame in between is tracked against the fixed window (its own pose,
+//!   velocity and bias only) and dropped, its IMU measured again from the last
+//!   keyframe by the next frame ([`VioOptions::solve_window_every_frame`]
+//!   solves the whole window at every frame instead); when the window holds
+//!   more than N keyframes the oldest is marginalized.
 //! - Initialization without ground truth from a static start (gyro bias,
-//!   gravity direction, zero velocity); see [`Init`].
+//!   gravity direction, zero velocity) or from a moving start (closed form,
+//!   see [`init`]); see [`Init`].
 //!
 //! World frame: z up, gravity `[0, 0, −g]`, origin and yaw at the first state.
 //!
@@ -56,7 +60,8 @@ pub enum Init {
     /// bias = mean rate, roll and pitch from the mean specific force, v = 0.
     Static,
     /// From a moving start: the closed-form visual–inertial solution over the
-    /// frames of the last `init_motion_window_s` (velocity, roll, pitch and
+    /// frames of the last `init_motion_window_s`, or of twice that when the
+    /// shorter window saw too little parallax (velocity, roll, pitch and
     /// metric scale from the IMU and the feature tracks; see [`init`]). The
     /// gyro bias starts at zero (the calibration removed it).
     Motion,
@@ -107,7 +112,8 @@ pub struct VioOptions {
     pub init: Init,
     /// Length of the static window used by [`Init::Static`] \[s\].
     pub init_window_s: f64,
-    /// Length of the frame window used by [`Init::Motion`] \[s\].
+    /// Length of the frame window used by [`Init::Motion`] \[s\] (twice
+    /// this is tried when it sees too little parallax).
     pub init_motion_window_s: f64,
     /// Prior standard deviation of the accelerometer bias at the start \[m/s²\].
     pub init_bias_accel_sigma: f64,
