@@ -843,24 +843,8 @@ impl<'a> Estimator<'a> {
         self.triangulate_new();
         // Solve.
         let graph = self.build_graph();
-        let lm = LmOptions {
-            max_iterations: self.opts.max_iterations,
-            function_tolerance: self.opts.function_tolerance,
-            eliminate: vec!['l'],
-            log_iterations: false,
-            ..LmOptions::default()
-        };
-        let optimizer = Optimizer::new(lm);
-        let mut covariances = None;
-        let solved = if self.opts.covariances {
-            // The σ of the new state, from the solve's own last linearization.
-            optimizer.optimize_with_covariances(&graph, &self.values, &[X(sid), V(sid), B(sid)]).map(|(v, s, c)| {
-                covariances = c.ok();
-                (v, s)
-            })
-        } else {
-            optimizer.optimize(&graph, &self.values)
-        };
+        // The σ of the new state, from the solve's own last linearization.
+        let (solved, covariances) = self.solve(&graph, &self.values, &[X(sid), V(sid), B(sid)], vec!['l']);
         let failure = match solved {
             Ok((v, _)) => {
                 self.values = v;
@@ -869,12 +853,7 @@ impl<'a> Estimator<'a> {
             Err(e) => Some(format!("the solver failed: {e}")),
         };
         if let Some(why) = failure {
-            self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
-            self.last_good = Some((predicted, vj, bl));
-            self.reset_to_newest();
-            self.add_observations(index, &obs);
-            self.last_keyframe_obs = obs;
-            return Some(self.estimate(self.states[0].sid, true, t_start, None));
+            return self.recover(index, &why, (predicted, vj, bl), obs, t_start);
         }
         self.reintegrate_if_needed();
         self.reject_outliers();
@@ -950,23 +929,8 @@ impl<'a> Estimator<'a> {
                 loss: Some(huber.clone()),
             });
         }
-        let lm = LmOptions {
-            max_iterations: self.opts.max_iterations,
-            function_tolerance: self.opts.function_tolerance,
-            log_iterations: false,
-            ..LmOptions::default()
-        };
-        let optimizer = Optimizer::new(lm);
         let keys = [X(sid), V(sid), B(sid)];
-        let mut covariances = None;
-        let solved = if self.opts.covariances {
-            optimizer.optimize_with_covariances(&g, &values, &keys).map(|(v, s, c)| {
-                covariances = c.ok();
-                (v, s)
-            })
-        } else {
-            optimizer.optimize(&g, &values)
-        };
+        let (solved, covariances) = self.solve(&g, &values, &keys, Vec::new());
         let failure = match solved {
             Ok((v, _)) => {
                 for key in keys {
@@ -979,12 +943,7 @@ impl<'a> Estimator<'a> {
             Err(e) => Some(format!("the solver failed: {e}")),
         };
         if let Some(why) = failure {
-            self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
-            self.last_good = Some((*predicted, vj, bl));
-            self.reset_to_newest();
-            self.add_observations(index, &obs);
-            self.last_keyframe_obs = obs;
-            return Some(self.estimate(self.states[0].sid, true, t_start, None));
+            return self.recover(index, &why, (*predicted, vj, bl), obs, t_start);
         }
         let mut est = self.estimate(sid, false, t_start, covariances.as_ref());
         for (row, kf) in est.std.iter_mut().zip(&self.keyframe_std) {
@@ -1000,6 +959,55 @@ impl<'a> Estimator<'a> {
         self.drop_newest();
         est.solve_s = t_start.elapsed().as_secs_f64();
         Some(est)
+    }
+
+    /// One Levenberg–Marquardt solve of `graph` from `values` with the
+    /// estimator's options, eliminating the key families `eliminate`; with
+    /// `opts.covariances`, the marginal covariances of `keys` from the
+    /// solve's own last linearization too.
+    #[allow(clippy::type_complexity)]
+    fn solve(
+        &self,
+        graph: &Graph,
+        values: &Values,
+        keys: &[tumble_solvers::Key],
+        eliminate: Vec<char>,
+    ) -> (Result<(Values, tumble_solvers::Summary), tumble_solvers::SolveError>, Option<Covariances>) {
+        let optimizer = Optimizer::new(LmOptions {
+            max_iterations: self.opts.max_iterations,
+            function_tolerance: self.opts.function_tolerance,
+            eliminate,
+            log_iterations: false,
+            ..LmOptions::default()
+        });
+        if !self.opts.covariances {
+            return (optimizer.optimize(graph, values), None);
+        }
+        let mut covariances = None;
+        let solved = optimizer.optimize_with_covariances(graph, values, keys).map(|(v, s, c)| {
+            covariances = c.ok();
+            (v, s)
+        });
+        (solved, covariances)
+    }
+
+    /// After a failed solve at frame `index`: warn, restart the window from
+    /// `last_good` (the frame's predicted state), and report that start.
+    fn recover(
+        &mut self,
+        index: usize,
+        why: &str,
+        last_good: (Isometry3F64, Vector3<f64>, Vector6<f64>),
+        obs: HashMap<u64, [f64; 2]>,
+        t_start: Instant,
+    ) -> Option<FrameEstimate> {
+        let t = self.input.frames[index].t;
+        self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
+        self.last_good = Some(last_good);
+        self.reset_to_newest();
+        self.add_observations(index, &obs);
+        self.last_keyframe_obs = obs;
+        Some(self.estimate(self.states[0].sid, true, t_start, None))
     }
 
     fn reintegrate_if_needed(&mut self) {
