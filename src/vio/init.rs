@@ -128,39 +128,40 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             rows.push((j, jvg, m * ray, m * ((dp[a] - dp[k]) + (rot[a] - rot[k]) * t_bc)));
         }
     }
-    // Weighted least squares over the observations still trusted (weight 0:
-    // dropped; a landmark left without any has its depth pinned to 0 by a
-    // unit diagonal). `fixed_g` moves a known gravity to the constants and
-    // solves for its tangent-plane correction instead (5 columns, not 6).
-    let solve = |weights: &[f64], fixed_g: Option<&Vector3<f64>>| -> Result<DVector<f64>, String> {
+    // Least squares over the observations still kept (a landmark left
+    // without any has its depth pinned to 0 by a unit diagonal). `fixed_g`
+    // moves a known gravity to the constants and solves for its
+    // tangent-plane correction instead (5 columns, not 6).
+    let solve = |kept: &[bool], fixed_g: Option<&Vector3<f64>>| -> Result<DVector<f64>, String> {
         let cols = if fixed_g.is_some() { 5 } else { 6 };
         let m = cols + used.len();
         let mut h = DMatrix::<f64>::zeros(m, m);
         let mut b = DVector::<f64>::zeros(m);
         let mut seen = vec![false; used.len()];
-        for ((j, jvg, jl, c), &w) in rows.iter().zip(weights).filter(|(_, &w)| w > 0.0) {
+        let basis = fixed_g.map(tangent_basis);
+        for ((j, jvg, jl, c), _) in rows.iter().zip(kept).filter(|(_, &k)| k) {
             seen[*j] = true;
-            let (jr, cr) = match fixed_g {
-                None => (DMatrix::from_column_slice(3, 6, jvg.as_slice()), *c),
-                Some(g) => {
+            let (jr, cr) = match (fixed_g, &basis) {
+                (Some(g), Some(basis)) => {
                     let mut jr = DMatrix::<f64>::zeros(3, 5);
                     jr.view_mut((0, 0), (3, 3)).copy_from(&jvg.fixed_view::<3, 3>(0, 0));
-                    jr.view_mut((0, 3), (3, 2)).copy_from(&(jvg.fixed_view::<3, 3>(0, 3) * tangent_basis(g)));
+                    jr.view_mut((0, 3), (3, 2)).copy_from(&(jvg.fixed_view::<3, 3>(0, 3) * basis));
                     (jr, c + jvg.fixed_view::<3, 3>(0, 3) * g)
                 }
+                _ => (DMatrix::from_column_slice(3, 6, jvg.as_slice()), *c),
             };
             let l = cols + j;
             let mut hvg = h.view_mut((0, 0), (cols, cols));
-            hvg += w * jr.transpose() * &jr;
-            let cross_term = w * jr.transpose() * jl;
+            hvg += jr.transpose() * &jr;
+            let cross_term = jr.transpose() * jl;
             for i in 0..cols {
                 h[(i, l)] += cross_term[i];
                 h[(l, i)] += cross_term[i];
             }
-            h[(l, l)] += w * jl.norm_squared();
+            h[(l, l)] += jl.norm_squared();
             let mut bvg = b.rows_mut(0, cols);
-            bvg -= w * jr.transpose() * cr;
-            b[l] -= w * jl.dot(&cr);
+            bvg -= jr.transpose() * cr;
+            b[l] -= jl.dot(&cr);
         }
         for (j, _) in seen.iter().enumerate().filter(|(_, &s)| !s) {
             h[(cols + j, cols + j)] = 1.0;
@@ -171,23 +172,23 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     // than 3× the median are dropped (what `drop_mismatches` could not see)
     // and the solution repeated, a few rounds, until the set kept no longer
     // changes.
-    let mut weights = vec![1.0; rows.len()];
-    let mut x = solve(&weights, None)?;
+    let mut kept_rows = vec![true; rows.len()];
+    let mut x = solve(&kept_rows, None)?;
     for _ in 0..MISMATCH_ROUNDS {
         let xvg = x.fixed_rows::<6>(0).into_owned();
         let miss: Vec<f64> = rows.iter().map(|(j, jvg, jl, c)| (jvg * xvg + jl * x[6 + j] + c).norm()).collect();
-        let mut sorted: Vec<f64> = miss.iter().zip(&weights).filter(|(_, &w)| w > 0.0).map(|(e, _)| *e).collect();
+        let mut sorted: Vec<f64> = miss.iter().zip(&kept_rows).filter(|(_, &k)| k).map(|(e, _)| *e).collect();
         sorted.sort_by(f64::total_cmp);
         let limit = (3.0 * sorted[sorted.len() / 2]).max(ROW_MISS_FLOOR_M);
-        let next: Vec<f64> = miss.iter().map(|&e| if e <= limit { 1.0 } else { 0.0 }).collect();
-        if next == weights {
+        let next: Vec<bool> = miss.iter().map(|&e| e <= limit).collect();
+        if next == kept_rows {
             break;
         }
-        weights = next;
-        x = solve(&weights, None)?;
+        kept_rows = next;
+        x = solve(&kept_rows, None)?;
     }
     let mut active = vec![false; used.len()];
-    for ((j, ..), _) in rows.iter().zip(&weights).filter(|(_, &w)| w > 0.0) {
+    for ((j, ..), _) in rows.iter().zip(&kept_rows).filter(|(_, &k)| k) {
         active[*j] = true;
     }
     let kept = active.iter().filter(|&&a| a).count();
@@ -219,7 +220,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     let mut g = free_g * (opts.gravity / free_gravity);
     let mut v0 = Vector3::new(x[0], x[1], x[2]);
     for _ in 0..4 {
-        let y = solve(&weights, Some(&g))?;
+        let y = solve(&kept_rows, Some(&g))?;
         g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.gravity;
         v0 = Vector3::new(y[0], y[1], y[2]);
     }
