@@ -343,12 +343,12 @@ fn covariance_equals_dense_inverse() {
     }
 }
 
-/// Small bundle adjustment: Schur elimination of the points gives the same
-/// solution as the full sparse and dense solves.
-#[test]
-fn schur_complement_matches_full_solve() {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-    let cams: Vec<SVector<f64, 9>> = (0..4)
+/// A small bundle-adjustment problem: `n_cams` Snavely cameras looking at
+/// `n_points` points, every point seen by every camera, the cameras' x moved
+/// by 1 cm and the points by (1, −1, 2) cm; camera 0 held constant.
+fn bundle_adjustment(n_cams: usize, n_points: usize, seed: u64) -> (Graph, Values, Vec<SVector<f64, 9>>) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let cams: Vec<SVector<f64, 9>> = (0..n_cams)
         .map(|i| {
             SVector::<f64, 9>::from_column_slice(&[
                 0.01 * i as f64,
@@ -363,7 +363,7 @@ fn schur_complement_matches_full_solve() {
             ])
         })
         .collect();
-    let pts: Vec<Vector3<f64>> = (0..30)
+    let pts: Vec<Vector3<f64>> = (0..n_points)
         .map(|_| Vector3::new(rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5, rng.random::<f64>() - 0.5))
         .collect();
     let mut g = Graph::new();
@@ -384,6 +384,14 @@ fn schur_complement_matches_full_solve() {
         v.insert(L(pi as u64), p + Vector3::new(0.01, -0.01, 0.02));
     }
     v.set_constant(C(0), true);
+    (g, v, cams)
+}
+
+/// Small bundle adjustment: Schur elimination of the points gives the same
+/// solution as the full sparse and dense solves.
+#[test]
+fn schur_complement_matches_full_solve() {
+    let (g, v, cams) = bundle_adjustment(4, 30, 11);
     let run = |eliminate: Vec<char>, linear_solver| {
         Optimizer::new(LmOptions { eliminate, linear_solver, ..lm() }).optimize(&g, &v).unwrap()
     };
@@ -450,22 +458,40 @@ fn pose_graph_top_view_png() {
     assert!(tumble::posegraph::plot_top_view(&Values::new(), &Values::new(), "none", &png).is_err());
 }
 
-/// Results are bit-identical whatever the number of threads.
+/// Results are bit-identical whatever the number of threads: small graphs,
+/// and graphs big enough (over 4096 factors) for the linearization and the
+/// assembly of the normal equations — kept and Schur-eliminated parts — to be
+/// spread over the threads.
 #[test]
-fn parallel_linearization_is_deterministic() {
-    let sim = tumble::posegraph::simulate_helix(50, 2, 5.0, 0.02, 0.1, 3);
-    let solve = |threads| {
+fn parallel_solves_are_deterministic() {
+    fn solve_with(threads: usize, g: &Graph, v: &Values, eliminate: &[char]) -> (Values, tumble_solvers::Summary) {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| Optimizer::new(LmOptions::default()).optimize(&sim.graph, &sim.initial).unwrap())
-    };
-    let (a, sa) = solve(1);
-    let (b, sb) = solve(3);
+        let opt = Optimizer::new(LmOptions { eliminate: eliminate.to_vec(), ..LmOptions::default() });
+        pool.install(|| opt.optimize(g, v).unwrap())
+    }
+    for (per_lap, laps) in [(50, 2), (400, 8)] {
+        let sim = tumble::posegraph::simulate_helix(per_lap, laps, 5.0, 0.02, 0.1, 3);
+        assert!(laps == 2 || sim.graph.len() > 4096, "{} factors", sim.graph.len());
+        let (a, sa) = solve_with(1, &sim.graph, &sim.initial, &[]);
+        let (b, sb) = solve_with(3, &sim.graph, &sim.initial, &[]);
+        assert_eq!(sa.final_cost.to_bits(), sb.final_cost.to_bits());
+        for i in 0..sim.poses as u64 {
+            assert_eq!(
+                a.get::<Isometry3F64>(X(i)).unwrap().params_dyn(),
+                b.get::<Isometry3F64>(X(i)).unwrap().params_dyn()
+            );
+        }
+    }
+    let (g, v, _) = bundle_adjustment(8, 600, 5);
+    let (a, sa) = solve_with(1, &g, &v, &['l']);
+    let (b, sb) = solve_with(3, &g, &v, &['l']);
+    assert!(sa.iterations > 1);
     assert_eq!(sa.final_cost.to_bits(), sb.final_cost.to_bits());
-    for i in 0..sim.poses as u64 {
-        assert_eq!(
-            a.get::<Isometry3F64>(X(i)).unwrap().params_dyn(),
-            b.get::<Isometry3F64>(X(i)).unwrap().params_dyn()
-        );
+    for k in 0..8 {
+        assert_eq!(a.get::<SVector<f64, 9>>(C(k)).unwrap(), b.get::<SVector<f64, 9>>(C(k)).unwrap());
+    }
+    for k in 0..600 {
+        assert_eq!(a.get::<Vector3<f64>>(L(k)).unwrap(), b.get::<Vector3<f64>>(L(k)).unwrap());
     }
 }
 

@@ -143,6 +143,9 @@ pub fn run_tumble(path: &Path, repeat: usize) -> Record {
         }
     }
     let s = last.expect("at least one run");
+    if std::env::var_os("TUMBLE_BENCH_SUMMARY").is_some() {
+        eprintln!("{name}: {s}");
+    }
     Record {
         problem: name,
         solver: "tumble".into(),

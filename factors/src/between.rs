@@ -58,4 +58,30 @@ impl<G: LieGroup> Factor for BetweenFactor<G> {
         j1.neg_mut();
         Ok(Linearization { residual: r, jacobians: vec![j1, jinv] })
     }
+    /// As [`Factor::linearize`], into reused buffers and without allocating:
+    /// `J₂ = Jr⁻¹(r)`, `J₁ = −Jr⁻¹(r) Ad(X₁₂⁻¹)`.
+    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+        const MAX: usize = 6;
+        let x1: &G = vars.get(0)?;
+        let x2: &G = vars.get(1)?;
+        let d = G::DIM;
+        if d > MAX {
+            *out = self.linearize(vars)?;
+            return Ok(());
+        }
+        out.reshape(d, &[d, d]);
+        let x12 = x1.inverse_elem().compose(x2);
+        self.measured_inv.compose(&x12).log_into(out.residual.as_mut_slice());
+        let [j1, j2] = &mut out.jacobians[..] else { unreachable!("reshaped to two blocks") };
+        G::right_jacobian_inv_into(out.residual.as_slice(), j2.as_mut_slice());
+        let mut adj = [0.0; MAX * MAX];
+        x12.inverse_elem().adjoint_into(&mut adj[..d * d]);
+        let (jinv, j1) = (j2.as_slice(), j1.as_mut_slice());
+        for c in 0..d {
+            for r in 0..d {
+                j1[r + c * d] = -(0..d).map(|k| jinv[r + k * d] * adj[k + c * d]).sum::<f64>();
+            }
+        }
+        Ok(())
+    }
 }

@@ -133,21 +133,45 @@ fn inverse_depth_reprojection_for_every_camera_model() {
         let f = InverseDepthReprojection::new([X(0), X(1), L(3)], [0.1, -0.08], [400.0, 200.0], cam, &t_bc);
         let rho = Vector1::new(0.35);
         assert_ok(&f, &[&xa, &xj, &rho]);
-        // linearize_into overwrites whatever buffers it is given: fresh ones,
-        // the right shapes full of other numbers, or the wrong shapes.
-        let vars: [&dyn DynVariable; 3] = [&xa, &xj, &rho];
-        let want = f.linearize(Vars::new(&vars)).unwrap();
-        let mut garbage = want.clone();
-        garbage.residual.fill(7.0);
-        garbage.jacobians.iter_mut().for_each(|j| j.fill(-3.0));
-        let wrong =
-            Linearization { residual: nalgebra::DVector::zeros(5), jacobians: vec![nalgebra::DMatrix::zeros(1, 1); 4] };
-        for mut out in [Linearization::default(), garbage, wrong] {
-            f.linearize_into(Vars::new(&vars), &mut out).unwrap();
-            assert_eq!(out.residual, want.residual);
-            assert_eq!(out.jacobians, want.jacobians);
+        assert_linearize_into_matches(&f, &[&xa, &xj, &rho]);
+    }
+}
+
+/// `linearize_into` overwrites whatever buffers it is given — fresh ones, the
+/// right shapes full of other numbers, or the wrong shapes — with what
+/// `linearize` returns (to rounding: the products may be summed in another order).
+fn assert_linearize_into_matches<F: Factor>(f: &F, vars: &[&dyn DynVariable]) {
+    let want = f.linearize(Vars::new(vars)).unwrap();
+    let mut garbage = want.clone();
+    garbage.residual.fill(7.0);
+    garbage.jacobians.iter_mut().for_each(|j| j.fill(-3.0));
+    let wrong =
+        Linearization { residual: nalgebra::DVector::zeros(5), jacobians: vec![nalgebra::DMatrix::zeros(1, 1); 4] };
+    for mut out in [Linearization::default(), garbage, wrong] {
+        f.linearize_into(Vars::new(vars), &mut out).unwrap();
+        assert_eq!(out.residual, want.residual);
+        assert_eq!(out.jacobians.len(), want.jacobians.len());
+        for (a, b) in out.jacobians.iter().zip(&want.jacobians) {
+            assert_eq!(a.shape(), b.shape());
+            assert!((a - b).amax() <= 1e-14 * b.amax().max(1.0), "{a} vs {b}");
         }
     }
+}
+
+#[test]
+fn between_linearize_into_on_every_group() {
+    let a3 = Isometry3F64::exp(Vector6::new(0.4, -0.3, 1.1, 1.0, -2.0, 0.3));
+    let b3 = Isometry3F64::exp(Vector6::new(-0.2, 0.5, 2.0, -1.0, 0.5, 2.0));
+    let z3 = Isometry3F64::exp(Vector6::new(0.1, 0.2, 0.3, 0.3, 0.2, 0.1));
+    assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), z3), &[&a3, &b3]);
+    let r1 = Rotation3F64::exp(Vector3::new(0.4, -0.3, 1.1));
+    let r2 = Rotation3F64::exp(Vector3::new(-1.4, 0.3, 0.1));
+    let rz = Rotation3F64::exp(Vector3::new(0.2, 0.2, -0.1));
+    assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), rz), &[&r1, &r2]);
+    let (p1, p2) = (se2(1.0, 2.0, 0.3), se2(-1.0, 0.5, 2.8));
+    assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), se2(0.5, 0.2, -0.4)), &[&p1, &p2]);
+    let (v1, v2) = (Vector3::new(1.0, 2.0, 3.0), Vector3::new(-1.0, 0.0, 4.0));
+    assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), Vector3::new(0.1, 0.2, 0.3)), &[&v1, &v2]);
 }
 
 /// The audit's factors with every modelled effect switched on at once, with

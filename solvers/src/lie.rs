@@ -140,6 +140,20 @@ pub trait LieGroup: crate::Variable + Copy {
     fn adjoint_mat(&self) -> nalgebra::DMatrix<f64>;
     /// Inverse right Jacobian `Jr⁻¹(ξ)` at tangent `ξ`.
     fn right_jacobian_inv(xi: &nalgebra::DVector<f64>) -> nalgebra::DMatrix<f64>;
+    /// [`LieGroup::log_vec`] into `out` (length `DIM`), without allocating
+    /// (the default allocates; the built-in groups override it).
+    fn log_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.log_vec().as_slice());
+    }
+    /// [`LieGroup::adjoint_mat`] into `out` (`DIM × DIM`, column-major).
+    fn adjoint_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.adjoint_mat().as_slice());
+    }
+    /// [`LieGroup::right_jacobian_inv`] at `xi` (length `DIM`) into `out`
+    /// (`DIM × DIM`, column-major).
+    fn right_jacobian_inv_into(xi: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(Self::right_jacobian_inv(&nalgebra::DVector::from_column_slice(xi)).as_slice());
+    }
 }
 
 use sophus_lie::prelude::*;
@@ -160,6 +174,23 @@ impl<const N: usize> LieGroup for nalgebra::SVector<f64, N> {
     fn right_jacobian_inv(_xi: &nalgebra::DVector<f64>) -> nalgebra::DMatrix<f64> {
         nalgebra::DMatrix::identity(N, N)
     }
+    fn log_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.as_slice());
+    }
+    fn adjoint_into(&self, out: &mut [f64]) {
+        identity_into(N, out);
+    }
+    fn right_jacobian_inv_into(_xi: &[f64], out: &mut [f64]) {
+        identity_into(N, out);
+    }
+}
+
+/// The `n × n` identity into `out` (column-major).
+fn identity_into(n: usize, out: &mut [f64]) {
+    out.fill(0.0);
+    for k in 0..n {
+        out[k * (n + 1)] = 1.0;
+    }
 }
 
 impl LieGroup for sophus_lie::Rotation3F64 {
@@ -178,6 +209,15 @@ impl LieGroup for sophus_lie::Rotation3F64 {
     fn right_jacobian_inv(xi: &nalgebra::DVector<f64>) -> nalgebra::DMatrix<f64> {
         let m = so3_right_jacobian_inv(&Vector3::new(xi[0], xi[1], xi[2]));
         nalgebra::DMatrix::from_column_slice(3, 3, m.as_slice())
+    }
+    fn log_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.log().as_slice());
+    }
+    fn adjoint_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.matrix().as_slice());
+    }
+    fn right_jacobian_inv_into(xi: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(so3_right_jacobian_inv(&Vector3::from_column_slice(xi)).as_slice());
     }
 }
 
@@ -198,6 +238,15 @@ impl LieGroup for sophus_lie::Isometry3F64 {
     fn right_jacobian_inv(xi: &nalgebra::DVector<f64>) -> nalgebra::DMatrix<f64> {
         let m = se3_right_jacobian_inv(&Vector6::from_column_slice(xi.as_slice()));
         nalgebra::DMatrix::from_column_slice(6, 6, m.as_slice())
+    }
+    fn log_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.log().as_slice());
+    }
+    fn adjoint_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(se3_adjoint(&self.rotation().matrix(), &self.translation()).as_slice());
+    }
+    fn right_jacobian_inv_into(xi: &[f64], out: &mut [f64]) {
+        out.copy_from_slice(se3_right_jacobian_inv(&Vector6::from_column_slice(xi)).as_slice());
     }
 }
 
@@ -230,18 +279,28 @@ impl LieGroup for sophus_lie::Isometry2F64 {
         nalgebra::DVector::from_column_slice(self.log().as_slice())
     }
     fn adjoint_mat(&self) -> nalgebra::DMatrix<f64> {
-        let r = self.rotation().matrix();
-        let t = self.translation();
-        nalgebra::DMatrix::from_row_slice(
-            3,
-            3,
-            &[1.0, 0.0, 0.0, t[1], r[(0, 0)], r[(0, 1)], -t[0], r[(1, 0)], r[(1, 1)]],
-        )
+        let mut m = nalgebra::DMatrix::zeros(3, 3);
+        self.adjoint_into(m.as_mut_slice());
+        m
     }
     fn right_jacobian_inv(xi: &nalgebra::DVector<f64>) -> nalgebra::DMatrix<f64> {
-        let jr = se2_right_jacobian(&Vector3::new(xi[0], xi[1], xi[2]));
+        let mut m = nalgebra::DMatrix::zeros(3, 3);
+        Self::right_jacobian_inv_into(xi.as_slice(), m.as_mut_slice());
+        m
+    }
+    fn log_into(&self, out: &mut [f64]) {
+        out.copy_from_slice(self.log().as_slice());
+    }
+    fn adjoint_into(&self, out: &mut [f64]) {
+        let r = self.rotation().matrix();
+        let t = self.translation();
+        let m = Matrix3::new(1.0, 0.0, 0.0, t[1], r[(0, 0)], r[(0, 1)], -t[0], r[(1, 0)], r[(1, 1)]);
+        out.copy_from_slice(m.as_slice());
+    }
+    fn right_jacobian_inv_into(xi: &[f64], out: &mut [f64]) {
+        let jr = se2_right_jacobian(&Vector3::from_column_slice(xi));
         let inv = jr.try_inverse().unwrap_or_else(Matrix3::identity);
-        nalgebra::DMatrix::from_column_slice(3, 3, inv.as_slice())
+        out.copy_from_slice(inv.as_slice());
     }
 }
 

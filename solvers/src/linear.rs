@@ -7,7 +7,6 @@
 //! each iteration only refills numbers.
 
 use crate::error::SolveError;
-use crate::graph::WhitenedLinearization;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::amd;
@@ -17,7 +16,9 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, Par, Side};
 use nalgebra::DMatrix;
-use std::collections::{BTreeSet, HashMap};
+
+mod assembly;
+use assembly::AssemblyPlan;
 
 /// Role of a variable in the linear system.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -97,6 +98,8 @@ pub(crate) struct Structure {
     dense: bool,
     /// Original kept-block index → position in the fill-reducing order.
     rank: Vec<usize>,
+    /// Where each factor's terms go when the system is filled.
+    assembly: AssemblyPlan,
     factor: Option<SparseFactor>,
     /// Reused copy of H for damping and the Schur complement.
     scratch: Vec<f64>,
@@ -175,32 +178,34 @@ impl SparseFactor {
 /// the fill the Schur complement of eliminated blocks creates). Returns the
 /// rank of each block.
 fn block_amd(nk: usize, factor_roles: &[Vec<Role>]) -> Vec<usize> {
-    let mut adj: Vec<BTreeSet<usize>> = vec![BTreeSet::new(); nk];
-    let mut elim_nbrs: HashMap<usize, BTreeSet<usize>> = HashMap::new();
+    let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nk];
+    let mut elim_nbrs: Vec<Vec<usize>> = Vec::new();
+    let mut kept = Vec::new();
     for roles in factor_roles {
-        let kept: Vec<usize> =
-            roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }).collect();
+        kept.clear();
+        kept.extend(roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None }));
         for &a in &kept {
-            for &b in &kept {
-                if a != b {
-                    adj[a].insert(b);
-                }
-            }
+            adj[a].extend(kept.iter().copied().filter(|&b| b != a));
         }
         for r in roles {
             if let Role::Elim(e) = r {
-                elim_nbrs.entry(*e).or_default().extend(kept.iter().copied());
+                if elim_nbrs.len() <= *e {
+                    elim_nbrs.resize_with(e + 1, Vec::new);
+                }
+                elim_nbrs[*e].extend_from_slice(&kept);
             }
         }
     }
-    for nb in elim_nbrs.values() {
-        for &a in nb {
-            for &b in nb {
-                if a != b {
-                    adj[a].insert(b);
-                }
-            }
+    for nb in &mut elim_nbrs {
+        nb.sort_unstable();
+        nb.dedup();
+        for &a in nb.iter() {
+            adj[a].extend(nb.iter().copied().filter(|&b| b != a));
         }
+    }
+    for a in &mut adj {
+        a.sort_unstable();
+        a.dedup();
     }
     let mut col_ptr = Vec::with_capacity(nk + 1);
     let mut row_idx = Vec::new();
@@ -425,7 +430,7 @@ impl Structure {
                 Some(here)
             })
             .collect();
-        Ok(Structure {
+        let mut s = Structure {
             kept_dims,
             kept_offsets,
             n,
@@ -446,7 +451,10 @@ impl Structure {
             factor: None,
             scratch: Vec::new(),
             hessian_cache: Vec::new(),
-        })
+            assembly: AssemblyPlan::default(),
+        };
+        s.assembly = AssemblyPlan::new(&s);
+        Ok(s)
     }
 
     /// Scalar offset of original kept block `b` in the reduced system.
@@ -496,122 +504,6 @@ impl Structure {
                 h[base + c] -= s;
             }
         }
-    }
-
-    /// `H_(big, small) += J_bigᵀ J_small`, without a temporary.
-    #[inline]
-    fn add_jtj(&self, h: &mut [f64], pair: usize, j_big: &DMatrix<f64>, j_small: &DMatrix<f64>) {
-        let m = j_big.nrows();
-        let (big, small) = (j_big.as_slice(), j_small.as_slice());
-        for (r, base, n) in self.pair_rows(pair) {
-            let cr = &big[r * m..(r + 1) * m];
-            for (hv, cs) in h[base..base + n].iter_mut().zip(small.chunks_exact(m)) {
-                *hv += dot(cr, cs);
-            }
-        }
-    }
-
-    /// Mark the factors whose JᵀJ never changes (see [`crate::Factor::constant_jacobians`]).
-    pub fn set_constant_hessians(&mut self, constant: &[bool]) {
-        for (plan, &c) in self.plans.iter_mut().zip(constant) {
-            plan.constant = c;
-        }
-        self.hessian_cache = vec![Vec::new(); self.plans.len()];
-    }
-
-    /// The kept-pair entries of a factor's JᵀJ in the order `add_jtj` visits them.
-    fn jtj_entries(&self, plan: &FactorPlan, js: &[DMatrix<f64>]) -> Vec<f64> {
-        let mut out = Vec::new();
-        for &(p, q, pair) in &plan.pairs {
-            let m = js[p].nrows();
-            let (big, small) = (js[p].as_slice(), js[q].as_slice());
-            for (r, _, n) in self.pair_rows(pair) {
-                let cr = &big[r * m..(r + 1) * m];
-                out.extend(small.chunks_exact(m).take(n).map(|cs| dot(cr, cs)));
-            }
-        }
-        out
-    }
-
-    /// Add entries from [`Structure::jtj_entries`] of a factor into `h`.
-    fn add_entries(&self, h: &mut [f64], plan: &FactorPlan, entries: &[f64]) {
-        let mut k = 0;
-        for &(_, _, pair) in &plan.pairs {
-            for (_, base, n) in self.pair_rows(pair) {
-                for (hv, e) in h[base..base + n].iter_mut().zip(&entries[k..k + n]) {
-                    *hv += e;
-                }
-                k += n;
-            }
-        }
-    }
-
-    /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
-    pub fn assemble(&mut self, lins: &[WhitenedLinearization]) -> System {
-        let mut sys = System::default();
-        self.assemble_into(lins, &mut sys);
-        sys
-    }
-
-    /// As [`Structure::assemble`], reusing the buffers of `sys` (large `h`
-    /// buffers are otherwise returned to the OS and page-faulted back every iteration).
-    pub fn assemble_into(&mut self, lins: &[WhitenedLinearization], sys: &mut System) {
-        fn zeroed(v: &mut Vec<f64>, n: usize) {
-            v.clear();
-            v.resize(n, 0.0);
-        }
-        zeroed(&mut sys.h, self.nnz());
-        zeroed(&mut sys.g, self.n);
-        zeroed(&mut sys.hll, *self.hll_offsets.last().unwrap_or(&0));
-        zeroed(&mut sys.gl, self.elim_dims.iter().sum());
-        zeroed(&mut sys.hcl, *self.hcl_offsets.last().unwrap_or(&0));
-        let System { h, g, hll, gl, hcl } = sys;
-        let mut cache = std::mem::take(&mut self.hessian_cache);
-        for (fi, (plan, wl)) in self.plans.iter().zip(lins).enumerate() {
-            let (r, js) = (wl.lin.residual.as_slice(), &wl.lin.jacobians);
-            let m = r.len();
-            if m == 0 {
-                // E.g. a marginalization prior of rank 0: nothing to add.
-                continue;
-            }
-            for &(p, b) in &plan.kept {
-                let o = self.kept_offsets[b];
-                for (k, col) in js[p].as_slice().chunks_exact(m).enumerate() {
-                    g[o + k] += dot(col, r);
-                }
-            }
-            if plan.constant && fi < cache.len() {
-                if cache[fi].is_empty() {
-                    cache[fi] = self.jtj_entries(plan, js);
-                }
-                self.add_entries(h, plan, &cache[fi]);
-            } else {
-                for &(p, q, pair) in &plan.pairs {
-                    self.add_jtj(h, pair, &js[p], &js[q]);
-                }
-            }
-            if let Some(ep) = &plan.elim {
-                let jl = js[ep.pos].as_slice();
-                let d = self.elim_dims[ep.block];
-                let (ho, go) = (self.hll_offsets[ep.block], self.elim_offsets[ep.block] - self.n);
-                for (a, ca) in jl.chunks_exact(m).enumerate() {
-                    gl[go + a] += dot(ca, r);
-                    for (b, cb) in jl.chunks_exact(m).enumerate() {
-                        hll[ho + a + b * d] += dot(ca, cb);
-                    }
-                }
-                for &(q, off) in &ep.slots {
-                    let jq = &js[q];
-                    let dc = jq.ncols();
-                    for (b, cb) in jl.chunks_exact(m).enumerate() {
-                        for (a, ca) in jq.as_slice().chunks_exact(m).enumerate() {
-                            hcl[off + a + b * dc] += dot(ca, cb);
-                        }
-                    }
-                }
-            }
-        }
-        self.hessian_cache = cache;
     }
 
     /// faer's dense Cholesky of the reduced system: the lower factor L (H = L Lᵀ),

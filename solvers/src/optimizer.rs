@@ -412,6 +412,8 @@ impl Optimizer {
         let gn = o.method == Method::GaussNewton;
         let mut sys = System::default();
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
+        // The trial point, overwritten by each step's retraction.
+        let mut trial: Vec<Box<dyn DynVariable>> = vars.clone();
 
         'outer: while summary.termination != Termination::NothingToOptimize {
             if summary.iterations >= o.max_iterations {
@@ -456,23 +458,21 @@ impl Optimizer {
                 summary.time_build += bs;
                 let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
                 let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
-                // Retract.
+                // Retract into the trial buffers (constants stay as cloned).
                 let t = Instant::now();
-                let trial: Vec<Box<dyn DynVariable>> = vars
-                    .iter()
-                    .enumerate()
-                    .map(|(i, v)| match layout.roles[i] {
-                        Role::Const => v.clone_box(),
+                for (i, (v, out)) in vars.iter().zip(trial.iter_mut()).enumerate() {
+                    match layout.roles[i] {
+                        Role::Const => {}
                         Role::Kept(b) => {
                             let o = structure.kept_offset(b);
-                            v.retract_dyn(&delta[o..o + structure.kept_dim(b)])
+                            v.retract_into(&delta[o..o + structure.kept_dim(b)], out);
                         }
                         Role::Elim(e) => {
                             let o = structure.elim_offsets[e];
-                            v.retract_dyn(&delta[o..o + v.dim()])
+                            v.retract_into(&delta[o..o + v.dim()], out);
                         }
-                    })
-                    .collect();
+                    }
+                }
                 // Linearize at the trial point right away: with small damping
                 // nearly every step is accepted, and then this is the next
                 // iteration's linearization (no second pass over the residuals).
@@ -502,7 +502,7 @@ impl Optimizer {
                 }
                 if accepted && linearized {
                     let decrease = cost - new_cost;
-                    vars = trial;
+                    std::mem::swap(&mut vars, &mut trial);
                     std::mem::swap(&mut lins, &mut trial_lins);
                     cost = new_cost;
                     if !gn {

@@ -66,6 +66,11 @@ pub trait DynVariable: Any + Debug + Send + Sync {
     fn dim(&self) -> usize;
     /// `self ⊞ delta`, boxed.
     fn retract_dyn(&self, delta: &[f64]) -> Box<dyn DynVariable>;
+    /// `self ⊞ delta` into `out`, reusing its box when it holds the same type
+    /// (the default allocates a new one).
+    fn retract_into(&self, delta: &[f64], out: &mut Box<dyn DynVariable>) {
+        *out = self.retract_dyn(delta);
+    }
     /// `self ⊟ other`; `None` if `other` has another type.
     fn local_dyn(&self, other: &dyn DynVariable) -> Option<Vec<f64>>;
     /// See [`Variable::params`].
@@ -88,6 +93,13 @@ impl<V: Variable> DynVariable for V {
     }
     fn retract_dyn(&self, delta: &[f64]) -> Box<dyn DynVariable> {
         Box::new(self.retract(delta))
+    }
+    fn retract_into(&self, delta: &[f64], out: &mut Box<dyn DynVariable>) {
+        let any: &mut dyn Any = &mut **out;
+        match any.downcast_mut::<V>() {
+            Some(o) => *o = self.retract(delta),
+            None => *out = self.retract_dyn(delta),
+        }
     }
     fn local_dyn(&self, other: &dyn DynVariable) -> Option<Vec<f64>> {
         other.as_any().downcast_ref::<V>().map(|o| self.local(o))
@@ -161,6 +173,17 @@ impl DynVariable for DynVector {
     }
     fn retract_dyn(&self, delta: &[f64]) -> Box<dyn DynVariable> {
         Box::new(DynVector(&self.0 + nalgebra::DVector::from_column_slice(delta)))
+    }
+    fn retract_into(&self, delta: &[f64], out: &mut Box<dyn DynVariable>) {
+        let any: &mut dyn Any = &mut **out;
+        match any.downcast_mut::<DynVector>() {
+            Some(o) if o.0.len() == self.0.len() => {
+                for ((x, a), d) in o.0.iter_mut().zip(self.0.iter()).zip(delta) {
+                    *x = a + d;
+                }
+            }
+            _ => *out = self.retract_dyn(delta),
+        }
     }
     fn local_dyn(&self, other: &dyn DynVariable) -> Option<Vec<f64>> {
         let o = other.as_any().downcast_ref::<DynVector>()?;
@@ -339,5 +362,27 @@ mod tests {
     fn sophus_se3_tangent_is_rotation_first() {
         let x = Isometry3F64::exp(Vector6::new(0.0, 0.0, 0.0, 1.0, 2.0, 3.0));
         assert_relative_eq!(x.translation(), Vector3::new(1.0, 2.0, 3.0), epsilon = 1e-12);
+    }
+
+    #[test]
+    fn retract_into_reuses_or_replaces_the_box() {
+        let x = Isometry3F64::exp(Vector6::new(0.1, -0.2, 0.3, 1.0, 2.0, 3.0));
+        let d = [0.01, 0.02, -0.03, 0.1, 0.2, 0.3];
+        let want = x.retract(&d);
+        // Same type: overwritten in place; another type: replaced.
+        let boxes: [Box<dyn DynVariable>; 2] =
+            [Box::new(Isometry3F64::identity()), Box::new(Vector3::new(1.0, 2.0, 3.0))];
+        for mut out in boxes {
+            x.retract_into(&d, &mut out);
+            let got: &Isometry3F64 = out.as_any().downcast_ref().unwrap();
+            assert_eq!(Variable::params(got), Variable::params(&want));
+        }
+        let v = DynVector::from_slice(&[1.0, 2.0]);
+        let boxes: [Box<dyn DynVariable>; 2] =
+            [Box::new(DynVector::from_slice(&[0.0, 0.0])), Box::new(DynVector::from_slice(&[0.0]))];
+        for mut out in boxes {
+            v.retract_into(&[0.5, -1.0], &mut out);
+            assert_eq!(out.params_dyn(), vec![1.5, 1.0]);
+        }
     }
 }

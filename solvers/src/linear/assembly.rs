@@ -1,0 +1,345 @@
+//! Filling the normal equations from whitened linearizations, in parallel over
+//! disjoint parts of the system, with results bit-identical to one thread.
+//!
+//! The kept blocks are cut into a fixed number of chunks of consecutive blocks
+//! (and the eliminated blocks likewise). A chunk owns its slices of H, g (or of
+//! H_ll, g_l, H_cl) and the list of factor terms landing in them, sorted by
+//! factor: every entry receives its terms in factor order, whatever the number
+//! of threads. The cut depends on the structure only, never on the threads.
+
+use super::{dot, FactorPlan, Structure, System};
+use crate::graph::WhitenedLinearization;
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// Factors below which the assembly runs on the calling thread, in one chunk:
+/// a VIO window's few hundred factors cost less than waking the thread pool.
+const PARALLEL_MIN_FACTORS: usize = 4096;
+/// Chunks each part of the system is cut into when it is filled in parallel.
+const CHUNKS: usize = 64;
+
+/// Consecutive kept blocks and the factor terms landing in them.
+#[derive(Debug)]
+struct KeptChunk {
+    blocks: Range<usize>,
+    /// (factor, index into its plan's `pairs`, offset of that pair's entries
+    /// in the factor's cached JᵀJ), by factor.
+    pair_terms: Vec<(usize, usize, usize)>,
+    /// (factor, index into its plan's `kept`), by factor.
+    grad_terms: Vec<(usize, usize)>,
+}
+
+/// Consecutive eliminated blocks and the factors touching them, in order.
+#[derive(Debug)]
+struct ElimChunk {
+    blocks: Range<usize>,
+    factors: Vec<usize>,
+}
+
+/// Where every factor term goes, chunk by chunk: built once per structure.
+#[derive(Debug, Default)]
+pub(super) struct AssemblyPlan {
+    kept: Vec<KeptChunk>,
+    elim: Vec<ElimChunk>,
+}
+
+/// Cut blocks with these amounts of work into about `chunks` (at most one
+/// more) ranges of consecutive blocks of about equal work.
+fn cut(work: &[usize], chunks: usize) -> Vec<Range<usize>> {
+    if chunks <= 1 {
+        return std::iter::once(0..work.len()).collect();
+    }
+    let target = work.iter().sum::<usize>().div_ceil(chunks).max(1);
+    let mut out = Vec::new();
+    let (mut start, mut acc) = (0, 0);
+    for (b, w) in work.iter().enumerate() {
+        acc += w;
+        if acc >= target {
+            out.push(start..b + 1);
+            (start, acc) = (b + 1, 0);
+        }
+    }
+    if start < work.len() || out.is_empty() {
+        out.push(start..work.len());
+    }
+    out
+}
+
+/// Which range of `cut` each block is in.
+fn chunk_index(ranges: &[Range<usize>], n: usize) -> Vec<usize> {
+    let mut idx = vec![0; n];
+    for (c, r) in ranges.iter().enumerate() {
+        idx[r.clone()].fill(c);
+    }
+    idx
+}
+
+/// Split `s` into consecutive slices ending at `ends` (ascending, the last = `s.len()`).
+fn split_at_ends(mut s: &mut [f64], ends: impl Iterator<Item = usize>) -> Vec<&mut [f64]> {
+    let (mut out, mut start) = (Vec::new(), 0);
+    for end in ends {
+        let (a, b) = std::mem::take(&mut s).split_at_mut(end - start);
+        out.push(a);
+        s = b;
+        start = end;
+    }
+    out
+}
+
+/// Stored entries of pair block (big, small) of the upper triangle.
+fn pair_entries(d_big: usize, d_small: usize, diagonal: bool) -> usize {
+    if diagonal {
+        d_big * (d_big + 1) / 2
+    } else {
+        d_big * d_small
+    }
+}
+
+impl AssemblyPlan {
+    /// The plan for `s`'s factors (its `plans` and block layout set).
+    pub(super) fn new(s: &Structure) -> Self {
+        let (nk, ne) = (s.kept_dims.len(), s.elim_dims.len());
+        let (mut kwork, mut ework) = (vec![0; nk], vec![0; ne]);
+        for plan in &s.plans {
+            for &(_, _, pair) in &plan.pairs {
+                kwork[s.pairs[pair].0] += 1;
+            }
+            for &(_, b) in &plan.kept {
+                kwork[b] += 1;
+            }
+            if let Some(ep) = &plan.elim {
+                ework[ep.block] += 1 + ep.slots.len();
+            }
+        }
+        // One chunk (the factors in order, streamed through the caches) unless
+        // the graph is big. The kept part of a bundle adjustment (each camera's
+        // diagonal block, from hundreds of factors scattered over the list) is
+        // slower cut by destination than streamed: it stays in one chunk.
+        let big = s.plans.len() >= PARALLEL_MIN_FACTORS;
+        let kept_chunks = if big && ne == 0 { CHUNKS } else { 1 };
+        let elim_chunks = if big { CHUNKS } else { 1 };
+        let (kranges, eranges) = (cut(&kwork, kept_chunks), cut(&ework, elim_chunks));
+        let (kidx, eidx) = (chunk_index(&kranges, nk), chunk_index(&eranges, ne));
+        let mut kept: Vec<KeptChunk> = kranges
+            .into_iter()
+            .map(|blocks| KeptChunk { blocks, pair_terms: Vec::new(), grad_terms: Vec::new() })
+            .collect();
+        let mut elim: Vec<ElimChunk> =
+            eranges.into_iter().map(|blocks| ElimChunk { blocks, factors: Vec::new() }).collect();
+        for (fi, plan) in s.plans.iter().enumerate() {
+            let mut entry_off = 0;
+            for (k, &(_, _, pair)) in plan.pairs.iter().enumerate() {
+                let (i, j, _) = s.pairs[pair];
+                kept[kidx[i]].pair_terms.push((fi, k, entry_off));
+                entry_off += pair_entries(s.kept_dims[i], s.kept_dims[j], i == j);
+            }
+            for (k, &(_, b)) in plan.kept.iter().enumerate() {
+                kept[kidx[b]].grad_terms.push((fi, k));
+            }
+            if let Some(ep) = &plan.elim {
+                elim[eidx[ep.block]].factors.push(fi);
+            }
+        }
+        AssemblyPlan { kept, elim }
+    }
+}
+
+impl Structure {
+    /// `H_(big, small) += J_bigᵀ J_small` into `h`, which starts at position `h0` of H.
+    #[inline]
+    fn add_jtj(&self, h: &mut [f64], h0: usize, pair: usize, j_big: &DMatrix<f64>, j_small: &DMatrix<f64>) {
+        let m = j_big.nrows();
+        let (big, small) = (j_big.as_slice(), j_small.as_slice());
+        for (r, base, n) in self.pair_rows(pair) {
+            let cr = &big[r * m..(r + 1) * m];
+            for (hv, cs) in h[base - h0..base - h0 + n].iter_mut().zip(small.chunks_exact(m)) {
+                *hv += dot(cr, cs);
+            }
+        }
+    }
+
+    /// Mark the factors whose JᵀJ never changes (see [`crate::Factor::constant_jacobians`]).
+    pub fn set_constant_hessians(&mut self, constant: &[bool]) {
+        for (plan, &c) in self.plans.iter_mut().zip(constant) {
+            plan.constant = c;
+        }
+        self.hessian_cache = vec![Vec::new(); self.plans.len()];
+    }
+
+    /// The kept-pair entries of a factor's JᵀJ, pair after pair in plan order,
+    /// each in the order `add_jtj` visits it.
+    fn jtj_entries(&self, plan: &FactorPlan, js: &[DMatrix<f64>]) -> Vec<f64> {
+        let mut out = Vec::new();
+        for &(p, q, pair) in &plan.pairs {
+            let m = js[p].nrows();
+            let (big, small) = (js[p].as_slice(), js[q].as_slice());
+            for (r, _, n) in self.pair_rows(pair) {
+                let cr = &big[r * m..(r + 1) * m];
+                out.extend(small.chunks_exact(m).take(n).map(|cs| dot(cr, cs)));
+            }
+        }
+        out
+    }
+
+    /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
+    pub fn assemble(&mut self, lins: &[WhitenedLinearization]) -> System {
+        let mut sys = System::default();
+        self.assemble_into(lins, &mut sys);
+        sys
+    }
+
+    /// As [`Structure::assemble`], reusing the buffers of `sys` (large `h`
+    /// buffers are otherwise returned to the OS and page-faulted back every iteration).
+    pub fn assemble_into(&mut self, lins: &[WhitenedLinearization], sys: &mut System) {
+        fn zeroed(v: &mut Vec<f64>, n: usize) {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+        zeroed(&mut sys.h, self.nnz());
+        zeroed(&mut sys.g, self.n);
+        zeroed(&mut sys.hll, *self.hll_offsets.last().unwrap_or(&0));
+        zeroed(&mut sys.gl, self.elim_dims.iter().sum());
+        zeroed(&mut sys.hcl, *self.hcl_offsets.last().unwrap_or(&0));
+        // Constant JᵀJ: formed at the first assembly, added from the cache after.
+        let mut cache = std::mem::take(&mut self.hessian_cache);
+        for (fi, c) in cache.iter_mut().enumerate() {
+            let m = lins[fi].lin.residual.len();
+            if self.plans[fi].constant && c.is_empty() && m > 0 {
+                *c = self.jtj_entries(&self.plans[fi], &lins[fi].lin.jacobians);
+            }
+        }
+        self.hessian_cache = cache;
+        let this = &*self;
+        let plan = &self.assembly;
+        let System { h, g, hll, gl, hcl } = sys;
+
+        let hs = split_at_ends(h, plan.kept.iter().map(|c| this.col_ptr[this.kept_offsets[c.blocks.end]]));
+        let gs = split_at_ends(g, plan.kept.iter().map(|c| this.kept_offsets[c.blocks.end]));
+        let kept_job = |(c, (h, g)): (&KeptChunk, (&mut [f64], &mut [f64]))| this.assemble_kept(c, lins, h, g);
+        if plan.kept.len() > 1 {
+            plan.kept.par_iter().zip(hs.into_par_iter().zip(gs)).for_each(kept_job);
+        } else {
+            plan.kept.iter().zip(hs.into_iter().zip(gs)).for_each(kept_job);
+        }
+
+        if self.elim_dims.is_empty() {
+            return;
+        }
+        let hlls = split_at_ends(hll, plan.elim.iter().map(|c| this.hll_offsets[c.blocks.end]));
+        let gls = split_at_ends(gl, plan.elim.iter().map(|c| this.elim_start(c.blocks.end)));
+        let hcls = split_at_ends(hcl, plan.elim.iter().map(|c| this.hcl_offsets[c.blocks.end]));
+        type ElimParts<'a> = ((&'a mut [f64], &'a mut [f64]), &'a mut [f64]);
+        let elim_job = |(c, ((hll, gl), hcl)): (&ElimChunk, ElimParts<'_>)| this.assemble_elim(c, lins, hll, gl, hcl);
+        if plan.elim.len() > 1 {
+            plan.elim.par_iter().zip(hlls.into_par_iter().zip(gls).zip(hcls)).for_each(elim_job);
+        } else {
+            plan.elim.iter().zip(hlls.into_iter().zip(gls).zip(hcls)).for_each(elim_job);
+        }
+    }
+
+    /// Offset in [`System::gl`] of eliminated block `e` (the end for `e` = their number).
+    fn elim_start(&self, e: usize) -> usize {
+        match self.elim_offsets.get(e) {
+            Some(o) => o - self.n,
+            None => self.elim_offsets.last().map_or(0, |o| o - self.n + self.elim_dims[e - 1]),
+        }
+    }
+
+    /// One kept chunk's terms into its slices `h` and `g` of H and g.
+    fn assemble_kept(&self, chunk: &KeptChunk, lins: &[WhitenedLinearization], h: &mut [f64], g: &mut [f64]) {
+        let h0 = self.col_ptr[self.kept_offsets[chunk.blocks.start]];
+        let g0 = self.kept_offsets[chunk.blocks.start];
+        for &(fi, k) in &chunk.grad_terms {
+            let (r, js) = (lins[fi].lin.residual.as_slice(), &lins[fi].lin.jacobians);
+            let m = r.len();
+            if m == 0 {
+                // E.g. a marginalization prior of rank 0: nothing to add.
+                continue;
+            }
+            let (p, b) = self.plans[fi].kept[k];
+            let o = self.kept_offsets[b] - g0;
+            for (kk, col) in js[p].as_slice().chunks_exact(m).enumerate() {
+                g[o + kk] += dot(col, r);
+            }
+        }
+        for &(fi, k, entry_off) in &chunk.pair_terms {
+            let js = &lins[fi].lin.jacobians;
+            if lins[fi].lin.residual.is_empty() {
+                continue;
+            }
+            let plan = &self.plans[fi];
+            let (p, q, pair) = plan.pairs[k];
+            match self.hessian_cache.get(fi) {
+                Some(entries) if plan.constant => {
+                    let mut e = entry_off;
+                    for (_, base, n) in self.pair_rows(pair) {
+                        for (hv, x) in h[base - h0..base - h0 + n].iter_mut().zip(&entries[e..e + n]) {
+                            *hv += x;
+                        }
+                        e += n;
+                    }
+                }
+                _ => self.add_jtj(h, h0, pair, &js[p], &js[q]),
+            }
+        }
+    }
+
+    /// One eliminated chunk's factors into its slices of H_ll, g_l and H_cl.
+    fn assemble_elim(
+        &self,
+        chunk: &ElimChunk,
+        lins: &[WhitenedLinearization],
+        hll: &mut [f64],
+        gl: &mut [f64],
+        hcl: &mut [f64],
+    ) {
+        let e0 = chunk.blocks.start;
+        let (hll0, gl0, hcl0) = (self.hll_offsets[e0], self.elim_start(e0), self.hcl_offsets[e0]);
+        for &fi in &chunk.factors {
+            let (r, js) = (lins[fi].lin.residual.as_slice(), &lins[fi].lin.jacobians);
+            let m = r.len();
+            let Some(ep) = &self.plans[fi].elim else { continue };
+            if m == 0 {
+                continue;
+            }
+            let jl = js[ep.pos].as_slice();
+            let d = self.elim_dims[ep.block];
+            let (ho, go) = (self.hll_offsets[ep.block] - hll0, self.elim_start(ep.block) - gl0);
+            for (a, ca) in jl.chunks_exact(m).enumerate() {
+                gl[go + a] += dot(ca, r);
+                for (b, cb) in jl.chunks_exact(m).enumerate() {
+                    hll[ho + a + b * d] += dot(ca, cb);
+                }
+            }
+            for &(q, off) in &ep.slots {
+                let jq = &js[q];
+                let dc = jq.ncols();
+                let off = off - hcl0;
+                for (b, cb) in jl.chunks_exact(m).enumerate() {
+                    for (a, ca) in jq.as_slice().chunks_exact(m).enumerate() {
+                        hcl[off + a + b * dc] += dot(ca, cb);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cut_covers_every_block_once() {
+        for (work, chunks) in
+            [(vec![], 64), (vec![0; 5], 64), (vec![1; 1000], 64), (vec![5, 0, 0, 300, 1, 1, 1], 3), (vec![1; 10], 1)]
+        {
+            let r = cut(&work, chunks);
+            assert!(!r.is_empty() && r.len() <= chunks + 1);
+            assert_eq!(r[0].start, 0);
+            assert_eq!(r.last().unwrap().end, work.len());
+            assert!(r.windows(2).all(|w| w[0].end == w[1].start));
+        }
+    }
+}
