@@ -19,15 +19,22 @@ const PARALLEL_MIN_FACTORS: usize = 4096;
 /// Chunks each part of the system is cut into when it is filled in parallel.
 const CHUNKS: usize = 64;
 
-/// Consecutive kept blocks and the factor terms landing in them.
+/// One factor's term landing in a kept chunk.
+#[derive(Clone, Copy, Debug)]
+enum KeptTerm {
+    /// `g_b += J_pᵀ r` for entry `k` = (p, b) of the factor's plan `kept`.
+    Grad { factor: usize, k: usize },
+    /// `H_pq += J_pᵀ J_q` for entry `k` of the factor's plan `pairs`, whose
+    /// entries start at `entry_off` in the factor's cached JᵀJ.
+    Pair { factor: usize, k: usize, entry_off: usize },
+}
+
+/// Consecutive kept blocks and the factor terms landing in them, by factor
+/// (one pass over the linearizations, whose Jacobians are read once).
 #[derive(Debug)]
 struct KeptChunk {
     blocks: Range<usize>,
-    /// (factor, index into its plan's `pairs`, offset of that pair's entries
-    /// in the factor's cached JᵀJ), by factor.
-    pair_terms: Vec<(usize, usize, usize)>,
-    /// (factor, index into its plan's `kept`), by factor.
-    grad_terms: Vec<(usize, usize)>,
+    terms: Vec<KeptTerm>,
 }
 
 /// Consecutive eliminated blocks and the factors touching them, in order.
@@ -121,21 +128,19 @@ impl AssemblyPlan {
         let elim_chunks = if big { CHUNKS } else { 1 };
         let (kranges, eranges) = (cut(&kwork, kept_chunks), cut(&ework, elim_chunks));
         let (kidx, eidx) = (chunk_index(&kranges, nk), chunk_index(&eranges, ne));
-        let mut kept: Vec<KeptChunk> = kranges
-            .into_iter()
-            .map(|blocks| KeptChunk { blocks, pair_terms: Vec::new(), grad_terms: Vec::new() })
-            .collect();
+        let mut kept: Vec<KeptChunk> =
+            kranges.into_iter().map(|blocks| KeptChunk { blocks, terms: Vec::new() }).collect();
         let mut elim: Vec<ElimChunk> =
             eranges.into_iter().map(|blocks| ElimChunk { blocks, factors: Vec::new() }).collect();
         for (fi, plan) in s.plans.iter().enumerate() {
+            for (k, &(_, b)) in plan.kept.iter().enumerate() {
+                kept[kidx[b]].terms.push(KeptTerm::Grad { factor: fi, k });
+            }
             let mut entry_off = 0;
             for (k, &(_, _, pair)) in plan.pairs.iter().enumerate() {
                 let (i, j, _) = s.pairs[pair];
-                kept[kidx[i]].pair_terms.push((fi, k, entry_off));
+                kept[kidx[i]].terms.push(KeptTerm::Pair { factor: fi, k, entry_off });
                 entry_off += pair_entries(s.kept_dims[i], s.kept_dims[j], i == j);
-            }
-            for (k, &(_, b)) in plan.kept.iter().enumerate() {
-                kept[kidx[b]].grad_terms.push((fi, k));
             }
             if let Some(ep) = &plan.elim {
                 elim[eidx[ep.block]].factors.push(fi);
@@ -250,37 +255,40 @@ impl Structure {
     fn assemble_kept(&self, chunk: &KeptChunk, lins: &[WhitenedLinearization], h: &mut [f64], g: &mut [f64]) {
         let h0 = self.col_ptr[self.kept_offsets[chunk.blocks.start]];
         let g0 = self.kept_offsets[chunk.blocks.start];
-        for &(fi, k) in &chunk.grad_terms {
+        for &term in &chunk.terms {
+            let fi = match term {
+                KeptTerm::Grad { factor, .. } | KeptTerm::Pair { factor, .. } => factor,
+            };
             let (r, js) = (lins[fi].lin.residual.as_slice(), &lins[fi].lin.jacobians);
             let m = r.len();
             if m == 0 {
                 // E.g. a marginalization prior of rank 0: nothing to add.
                 continue;
             }
-            let (p, b) = self.plans[fi].kept[k];
-            let o = self.kept_offsets[b] - g0;
-            for (kk, col) in js[p].as_slice().chunks_exact(m).enumerate() {
-                g[o + kk] += dot(col, r);
-            }
-        }
-        for &(fi, k, entry_off) in &chunk.pair_terms {
-            let js = &lins[fi].lin.jacobians;
-            if lins[fi].lin.residual.is_empty() {
-                continue;
-            }
             let plan = &self.plans[fi];
-            let (p, q, pair) = plan.pairs[k];
-            match self.hessian_cache.get(fi) {
-                Some(entries) if plan.constant => {
-                    let mut e = entry_off;
-                    for (_, base, n) in self.pair_rows(pair) {
-                        for (hv, x) in h[base - h0..base - h0 + n].iter_mut().zip(&entries[e..e + n]) {
-                            *hv += x;
-                        }
-                        e += n;
+            match term {
+                KeptTerm::Grad { k, .. } => {
+                    let (p, b) = plan.kept[k];
+                    let o = self.kept_offsets[b] - g0;
+                    for (kk, col) in js[p].as_slice().chunks_exact(m).enumerate() {
+                        g[o + kk] += dot(col, r);
                     }
                 }
-                _ => self.add_jtj(h, h0, pair, &js[p], &js[q]),
+                KeptTerm::Pair { k, entry_off, .. } => {
+                    let (p, q, pair) = plan.pairs[k];
+                    match self.hessian_cache.get(fi) {
+                        Some(entries) if plan.constant => {
+                            let mut e = entry_off;
+                            for (_, base, n) in self.pair_rows(pair) {
+                                for (hv, x) in h[base - h0..base - h0 + n].iter_mut().zip(&entries[e..e + n]) {
+                                    *hv += x;
+                                }
+                                e += n;
+                            }
+                        }
+                        _ => self.add_jtj(h, h0, pair, &js[p], &js[q]),
+                    }
+                }
             }
         }
     }
