@@ -12,7 +12,7 @@
 //! and the ratio of each time to tumble's.
 
 use std::path::PathBuf;
-use std::process::Command;
+use std::process::{Command, Stdio};
 use tumble_bench::{peers, run_tumble, Record};
 
 const SOLVERS: [&str; 5] = ["tumble", "gtsam", "factrs", "tiny-solver", "apex-solver"];
@@ -46,6 +46,7 @@ fn main() {
             "--solvers" => solvers = it.next().map(|s| s.split(',').map(String::from).collect()).unwrap_or_default(),
             "-h" | "--help" => {
                 println!("usage: bench_solver [--json] [--repeat N] [--solvers tumble,gtsam,factrs,tiny-solver,apex-solver] FILE...");
+                println!("  TUMBLE_BENCH_SUMMARY=1 also prints tumble's solver summary (time per phase) on stderr");
                 return;
             }
             f => files.push(PathBuf::from(f)),
@@ -72,6 +73,8 @@ fn main() {
             "vs tumble"
         );
     }
+    // With TUMBLE_BENCH_SUMMARY the workers' stderr (tumble's summary) reaches the terminal.
+    let summary = std::env::var_os("TUMBLE_BENCH_SUMMARY").is_some();
     for file in &files {
         let mut tumble_time = f64::NAN;
         for solver in &solvers {
@@ -82,7 +85,10 @@ fn main() {
                     .args([script, "--repeat", &repeat.to_string(), &file.to_string_lossy()])
                     .output()
             } else {
-                Command::new(&exe).args(["--worker", solver, &file.to_string_lossy(), &repeat.to_string()]).output()
+                Command::new(&exe)
+                    .args(["--worker", solver, &file.to_string_lossy(), &repeat.to_string()])
+                    .stderr(if summary { Stdio::inherit() } else { Stdio::piped() })
+                    .output()
             };
             let rec = match out {
                 Ok(o) => String::from_utf8_lossy(&o.stdout).lines().find_map(Record::from_json).unwrap_or_else(|| {
