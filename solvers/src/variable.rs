@@ -95,6 +95,7 @@ impl<V: Variable> DynVariable for V {
         Box::new(self.retract(delta))
     }
     fn retract_into(&self, delta: &[f64], out: &mut Box<dyn DynVariable>) {
+        // `&mut dyn DynVariable` → `&mut dyn Any`: trait upcasting (Rust 1.86).
         let any: &mut dyn Any = &mut **out;
         match any.downcast_mut::<V>() {
             Some(o) => *o = self.retract(delta),
