@@ -74,7 +74,7 @@ fn main() {
         );
     }
     // With TUMBLE_BENCH_SUMMARY the workers' stderr (tumble's summary) reaches the terminal.
-    let summary = std::env::var_os("TUMBLE_BENCH_SUMMARY").is_some();
+    let summary = std::env::var_os(tumble_bench::SUMMARY_ENV).is_some();
     for file in &files {
         let mut tumble_time = f64::NAN;
         for solver in &solvers {

@@ -143,7 +143,7 @@ pub fn run_tumble(path: &Path, repeat: usize) -> Record {
         }
     }
     let s = last.expect("at least one run");
-    if std::env::var_os("TUMBLE_BENCH_SUMMARY").is_some() {
+    if std::env::var_os(SUMMARY_ENV).is_some() {
         eprintln!("{name}: {s}");
     }
     Record {
@@ -160,6 +160,10 @@ pub fn run_tumble(path: &Path, repeat: usize) -> Record {
         skipped: None,
     }
 }
+
+/// Environment variable that makes tumble's workers print their solver
+/// summary (time per phase) on stderr.
+pub const SUMMARY_ENV: &str = "TUMBLE_BENCH_SUMMARY";
 
 /// File stem of a problem.
 pub fn problem_name(path: &Path) -> String {

@@ -49,33 +49,30 @@ impl<G: LieGroup> Factor for BetweenFactor<G> {
         Ok(self.measured_inv.compose(&x1.inverse_elem().compose(x2)).log_vec())
     }
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-        let x1: &G = vars.get(0)?;
-        let x2: &G = vars.get(1)?;
-        let x12 = x1.inverse_elem().compose(x2);
-        let r = self.measured_inv.compose(&x12).log_vec();
-        let jinv = G::right_jacobian_inv(&r);
-        let mut j1 = &jinv * x12.inverse_elem().adjoint_mat();
-        j1.neg_mut();
-        Ok(Linearization { residual: r, jacobians: vec![j1, jinv] })
+        let mut out = Linearization::default();
+        self.linearize_into(vars, &mut out)?;
+        Ok(out)
     }
-    /// As [`Factor::linearize`], into reused buffers and without allocating:
-    /// `J₂ = Jr⁻¹(r)`, `J₁ = −Jr⁻¹(r) Ad(X₁₂⁻¹)`.
+    /// `J₂ = Jr⁻¹(r)`, `J₁ = −Jr⁻¹(r) Ad(X₁₂⁻¹)`, into reused buffers: no
+    /// allocation for groups of up to 6 dimensions.
     fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
         const MAX: usize = 6;
         let x1: &G = vars.get(0)?;
         let x2: &G = vars.get(1)?;
         let d = G::DIM;
-        if d > MAX {
-            *out = self.linearize(vars)?;
-            return Ok(());
-        }
         out.reshape(d, &[d, d]);
         let x12 = x1.inverse_elem().compose(x2);
         self.measured_inv.compose(&x12).log_into(out.residual.as_mut_slice());
         let [j1, j2] = &mut out.jacobians[..] else { unreachable!("reshaped to two blocks") };
         G::right_jacobian_inv_into(out.residual.as_slice(), j2.as_mut_slice());
-        let mut adj = [0.0; MAX * MAX];
-        x12.inverse_elem().adjoint_into(&mut adj[..d * d]);
+        let (mut adj_small, mut adj_big) = ([0.0; MAX * MAX], Vec::new());
+        let adj: &mut [f64] = if d <= MAX {
+            &mut adj_small[..d * d]
+        } else {
+            adj_big.resize(d * d, 0.0);
+            &mut adj_big
+        };
+        x12.inverse_elem().adjoint_into(adj);
         let (jinv, j1) = (j2.as_slice(), j1.as_mut_slice());
         for c in 0..d {
             for r in 0..d {

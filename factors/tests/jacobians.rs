@@ -172,6 +172,11 @@ fn between_linearize_into_on_every_group() {
     assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), se2(0.5, 0.2, -0.4)), &[&p1, &p2]);
     let (v1, v2) = (Vector3::new(1.0, 2.0, 3.0), Vector3::new(-1.0, 0.0, 4.0));
     assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), Vector3::new(0.1, 0.2, 0.3)), &[&v1, &v2]);
+    // Over 6 dimensions the adjoint goes to the heap.
+    type V9 = nalgebra::SVector<f64, 9>;
+    let (w1, w2, wz) = (V9::from_fn(|i, _| i as f64), V9::from_fn(|i, _| -(i as f64) * 0.5), V9::repeat(0.1));
+    assert_ok(&BetweenFactor::new(X(0), X(1), wz), &[&w1, &w2]);
+    assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), wz), &[&w1, &w2]);
 }
 
 /// The audit's factors with every modelled effect switched on at once, with

@@ -107,26 +107,27 @@ impl AssemblyPlan {
     /// The plan for `s`'s factors (its `plans` and block layout set).
     pub(super) fn new(s: &Structure) -> Self {
         let (nk, ne) = (s.kept_dims.len(), s.elim_dims.len());
-        let (mut kwork, mut ework) = (vec![0; nk], vec![0; ne]);
-        for plan in &s.plans {
-            for &(_, _, pair) in &plan.pairs {
-                kwork[s.pairs[pair].0] += 1;
-            }
-            for &(_, b) in &plan.kept {
-                kwork[b] += 1;
-            }
-            if let Some(ep) = &plan.elim {
-                ework[ep.block] += 1 + ep.slots.len();
-            }
-        }
         // One chunk (the factors in order, streamed through the caches) unless
         // the graph is big. The kept part of a bundle adjustment (each camera's
         // diagonal block, from hundreds of factors scattered over the list) is
         // slower cut by destination than streamed: it stays in one chunk.
-        let big = s.plans.len() >= PARALLEL_MIN_FACTORS;
-        let kept_chunks = if big && ne == 0 { CHUNKS } else { 1 };
-        let elim_chunks = if big { CHUNKS } else { 1 };
-        let (kranges, eranges) = (cut(&kwork, kept_chunks), cut(&ework, elim_chunks));
+        let (kranges, eranges) = if s.plans.len() < PARALLEL_MIN_FACTORS {
+            (std::iter::once(0..nk).collect(), std::iter::once(0..ne).collect())
+        } else {
+            let (mut kwork, mut ework) = (vec![0; nk], vec![0; ne]);
+            for plan in &s.plans {
+                for &(_, _, pair) in &plan.pairs {
+                    kwork[s.pairs[pair].0] += 1;
+                }
+                for &(_, b) in &plan.kept {
+                    kwork[b] += 1;
+                }
+                if let Some(ep) = &plan.elim {
+                    ework[ep.block] += 1 + ep.slots.len();
+                }
+            }
+            (cut(&kwork, if ne == 0 { CHUNKS } else { 1 }), cut(&ework, CHUNKS))
+        };
         let (kidx, eidx) = (chunk_index(&kranges, nk), chunk_index(&eranges, ne));
         let mut kept: Vec<KeptChunk> =
             kranges.into_iter().map(|blocks| KeptChunk { blocks, terms: Vec::new() }).collect();
