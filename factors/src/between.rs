@@ -60,7 +60,7 @@ impl<G: LieGroup> Factor for BetweenFactor<G> {
         let x1: &G = vars.get(0)?;
         let x2: &G = vars.get(1)?;
         let d = G::DIM;
-        out.reshape(d, &[d, d]);
+        out.reshape(d, [d, d]);
         let x12 = x1.inverse_elem().compose(x2);
         self.measured_inv.compose(&x12).log_into(out.residual.as_mut_slice());
         let [j1, j2] = &mut out.jacobians[..] else { unreachable!("reshaped to two blocks") };

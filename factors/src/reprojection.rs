@@ -86,11 +86,11 @@ impl InverseDepthReprojection {
             return Err(FactorError::NonFinite);
         }
         if !jac {
-            out.reshape(2, &[]);
+            out.reshape(2, []);
             out.residual.copy_from_slice(&residual);
             return Ok(());
         }
-        out.reshape(2, &[6, 6, 1]);
+        out.reshape(2, [6, 6, 1]);
         out.residual.copy_from_slice(&residual);
         let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
         let rcb_rjt = self.r_bc.transpose() * rj.transpose();

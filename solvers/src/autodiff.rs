@@ -29,7 +29,7 @@
 use crate::error::FactorError;
 use crate::factor::{Factor, Linearization, Vars};
 use crate::key::Key;
-use nalgebra::{DMatrix, DVector, SVector};
+use nalgebra::{DVector, SVector};
 use num_dual::{Derivative, DualNum, DualSVec64};
 
 /// Scalar a generic residual is written over: `f64` or a dual number.
@@ -79,64 +79,60 @@ impl<R: AutoDiffResidual<N>, const N: usize> Factor for AutoDiff<R, N> {
         Ok(r)
     }
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-        let total: usize = (0..vars.len()).map(|i| vars.get_dyn(i).dim()).sum();
+        let mut out = Linearization::default();
+        self.linearize_into(vars, &mut out)?;
+        Ok(out)
+    }
+    /// One evaluation over dual numbers, written into `out`'s buffers.
+    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+        let dim = |i: usize| vars.get_dyn(i).dim();
+        let total: usize = (0..vars.len()).map(dim).sum();
         if total != N {
             return Err(FactorError::Other(format!(
                 "AutoDiff<_, {N}> used with variables whose tangent dimensions sum to {total}"
             )));
         }
-        let mut lifted: Vec<Vec<DualSVec64<N>>> = Vec::with_capacity(vars.len());
+        // Each variable's ambient parameters as dual numbers whose derivative
+        // part is ∂params/∂δ: a unit vector when the parameters are the tangent
+        // coordinates, else a row of the parameters' Jacobian.
+        let mut lifted: Vec<DualSVec64<N>> = Vec::with_capacity(N);
+        let mut ends = Vec::with_capacity(vars.len());
         let mut offset = 0;
         for i in 0..vars.len() {
             let v = vars.get_dyn(i);
-            let p = v.params_dyn();
-            let lv = if v.params_are_tangent() {
-                p.iter()
-                    .enumerate()
-                    .map(|(row, &re)| {
-                        let mut eps = SVector::<f64, N>::zeros();
-                        eps[offset + row] = 1.0;
-                        DualSVec64::<N>::new(re, Derivative::some(eps))
-                    })
-                    .collect()
-            } else {
-                let jp = v.params_jacobian_dyn();
-                p.iter()
-                    .enumerate()
-                    .map(|(row, &re)| {
-                        let mut eps = SVector::<f64, N>::zeros();
-                        for c in 0..v.dim() {
-                            eps[offset + c] = jp[(row, c)];
-                        }
-                        DualSVec64::<N>::new(re, Derivative::some(eps))
-                    })
-                    .collect()
-            };
-            lifted.push(lv);
+            let jp = (!v.params_are_tangent()).then(|| v.params_jacobian_dyn());
+            lifted.extend(v.params_dyn().iter().enumerate().map(|(row, &re)| {
+                let mut eps = SVector::<f64, N>::zeros();
+                match &jp {
+                    None => eps[offset + row] = 1.0,
+                    Some(jp) => (0..v.dim()).for_each(|c| eps[offset + c] = jp[(row, c)]),
+                }
+                DualSVec64::<N>::new(re, Derivative::some(eps))
+            }));
+            ends.push(lifted.len());
             offset += v.dim();
         }
-        let refs: Vec<&[DualSVec64<N>]> = lifted.iter().map(|p| p.as_slice()).collect();
-        let out = self.0.residual(&refs);
-        let m = out.len();
-        let residual = DVector::from_iterator(m, out.iter().map(|d| d.re));
-        finite(&residual)?;
-        let mut full = DMatrix::zeros(m, N);
-        for (r, d) in out.iter().enumerate() {
-            let eps = d.eps.unwrap_generic(nalgebra::Const::<N>, nalgebra::Const::<1>);
-            for c in 0..N {
-                full[(r, c)] = eps[c];
+        let refs: Vec<&[DualSVec64<N>]> =
+            ends.iter().scan(0, |start, &end| Some(&lifted[std::mem::replace(start, end)..end])).collect();
+        let res = self.0.residual(&refs);
+        out.reshape(res.len(), (0..vars.len()).map(dim));
+        for (r, x) in out.residual.iter_mut().zip(&res) {
+            *r = x.re;
+        }
+        finite(&out.residual)?;
+        let mut offset = 0;
+        for j in out.jacobians.iter_mut() {
+            for (r, x) in res.iter().enumerate() {
+                let eps = x.eps.unwrap_generic(nalgebra::Const::<N>, nalgebra::Const::<1>);
+                for c in 0..j.ncols() {
+                    j[(r, c)] = eps[offset + c];
+                }
+            }
+            offset += j.ncols();
+            if j.iter().any(|x| !x.is_finite()) {
+                return Err(FactorError::NonFinite);
             }
         }
-        let mut jacobians = Vec::with_capacity(vars.len());
-        let mut offset = 0;
-        for i in 0..vars.len() {
-            let d = vars.get_dyn(i).dim();
-            jacobians.push(full.columns(offset, d).into_owned());
-            offset += d;
-        }
-        if full.iter().any(|x| !x.is_finite()) {
-            return Err(FactorError::NonFinite);
-        }
-        Ok(Linearization { residual, jacobians })
+        Ok(())
     }
 }

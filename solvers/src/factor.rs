@@ -66,12 +66,17 @@ impl Linearization {
     /// Give the residual `rows` entries and the Jacobians `rows × cols[k]`
     /// shapes, reusing the buffers when they already have them (contents are
     /// then left as they were: the caller overwrites them).
-    pub fn reshape(&mut self, rows: usize, cols: &[usize]) {
+    pub fn reshape<I>(&mut self, rows: usize, cols: I)
+    where
+        I: IntoIterator<Item = usize>,
+        I::IntoIter: ExactSizeIterator,
+    {
+        let cols = cols.into_iter();
         if self.residual.len() != rows {
             self.residual = DVector::zeros(rows);
         }
         self.jacobians.resize_with(cols.len(), || DMatrix::zeros(0, 0));
-        for (j, &c) in self.jacobians.iter_mut().zip(cols) {
+        for (j, c) in self.jacobians.iter_mut().zip(cols) {
             if j.shape() != (rows, c) {
                 *j = DMatrix::zeros(rows, c);
             }

@@ -18,6 +18,7 @@ use faer::{Conj, Par, Side};
 use nalgebra::DMatrix;
 
 mod assembly;
+mod schur;
 use assembly::AssemblyPlan;
 
 /// Role of a variable in the linear system.
@@ -482,30 +483,6 @@ impl Structure {
         (0..self.kept_dims[i]).map(move |r| (r, self.bases[b0 + r], if i == j { r + 1 } else { cols }))
     }
 
-    /// `H_(big, small) −= W_big H_smallᵀ` (Schur update), without a temporary.
-    /// `w_big` is `d_big × dl`, `h_small` is `d_small × dl`, both column-major.
-    #[inline]
-    fn sub_w_ht(&self, h: &mut [f64], pair: usize, w_big: &[f64], h_small: &[f64], dl: usize) {
-        let (rows, cols) = (w_big.len() / dl, h_small.len() / dl);
-        for (r, base, n) in self.pair_rows(pair) {
-            if dl == 1 {
-                // Inverse depths: an outer product.
-                let w = w_big[r];
-                for (hv, &s) in h[base..base + n].iter_mut().zip(h_small) {
-                    *hv -= w * s;
-                }
-                continue;
-            }
-            for c in 0..n {
-                let mut s = 0.0;
-                for k in 0..dl {
-                    s += w_big[r + k * rows] * h_small[c + k * cols];
-                }
-                h[base + c] -= s;
-            }
-        }
-    }
-
     /// faer's dense Cholesky of the reduced system: the lower factor L (H = L Lᵀ),
     /// blocked and vectorized, several times faster than nalgebra's on the
     /// 100–200 unknowns of a VIO window. Always sequential (`Par::Seq`): with
@@ -617,78 +594,6 @@ impl Structure {
         }
         self.scratch = h;
         Ok((x, fact_s, solve_s + t_back.elapsed().as_secs_f64(), build_s))
-    }
-
-    /// The reduced system: `h` ← upper triangle of `H + diag(damping)` over the
-    /// kept unknowns minus the Schur complement of the eliminated blocks; returns
-    /// the reduced gradient and the eliminated blocks' (damped) inverses, laid
-    /// out as [`System::hll`].
-    fn reduce(
-        &self,
-        sys: &System,
-        damping: Option<&[f64]>,
-        h: &mut Vec<f64>,
-    ) -> Result<(Vec<f64>, Vec<f64>), SolveError> {
-        h.clear();
-        h.extend_from_slice(&sys.h);
-        let mut g = sys.g.clone();
-        if let Some(d) = damping {
-            for (k, &p) in self.diag_positions.iter().enumerate() {
-                h[p] += d[k];
-            }
-        }
-        let mut elim_inv = vec![0.0; sys.hll.len()];
-        let (mut w, mut w_offsets, mut slots) = (Vec::new(), Vec::new(), Vec::new());
-        for (e, &d) in self.elim_dims.iter().enumerate() {
-            let (off, ho) = (self.elim_offsets[e], self.hll_offsets[e]);
-            let inv = &mut elim_inv[ho..ho + d * d];
-            inv.copy_from_slice(&sys.hll[ho..ho + d * d]);
-            if let Some(dmp) = damping {
-                for k in 0..d {
-                    inv[k * (d + 1)] += dmp[off + k];
-                }
-            }
-            let singular = || SolveError::Singular(format!("eliminated block {e} is not positive definite"));
-            if d == 1 {
-                // Inverse depths: a scalar, no factorization needed.
-                if !(inv[0] > 0.0 && inv[0].is_finite()) {
-                    return Err(singular());
-                }
-                inv[0] = 1.0 / inv[0];
-            } else {
-                let a = DMatrix::from_column_slice(d, d, inv);
-                let ai = nalgebra::Cholesky::new(a).ok_or_else(singular)?.inverse();
-                inv.copy_from_slice(ai.as_slice());
-            }
-            // W_s = H_cl,s H_ll⁻¹ per slot.
-            w.clear();
-            w_offsets.clear();
-            slots.clear();
-            for (_, o, len) in self.elim_slots(e) {
-                let hc = &sys.hcl[o..o + len];
-                let dc = len / d;
-                slots.push(o..o + len);
-                w_offsets.push(w.len());
-                for b in 0..d {
-                    for a in 0..dc {
-                        w.push((0..d).map(|k| hc[a + k * dc] * inv[k + b * d]).sum::<f64>());
-                    }
-                }
-            }
-            w_offsets.push(w.len());
-            for &(sa, sb, pair) in &self.elim_pairs[e] {
-                self.sub_w_ht(h, pair, &w[w_offsets[sa]..w_offsets[sa + 1]], &sys.hcl[slots[sb].clone()], d);
-            }
-            let gl = &sys.gl[off - self.n..off - self.n + d];
-            for (s, &c) in self.elim_cams[e].iter().enumerate() {
-                let ws = &w[w_offsets[s]..w_offsets[s + 1]];
-                let (o, dc) = (self.kept_offsets[c], self.kept_dims[c]);
-                for (k, gk) in g[o..o + dc].iter_mut().enumerate() {
-                    *gk -= (0..d).map(|b| ws[k + b * dc] * gl[b]).sum::<f64>();
-                }
-            }
-        }
-        Ok((g, elim_inv))
     }
 
     /// `Hδ` for the predicted decrease, over kept then eliminated unknowns (undamped H).

@@ -152,17 +152,23 @@ impl AssemblyPlan {
 }
 
 impl Structure {
-    /// `H_(big, small) += J_bigᵀ J_small` into `h`, which starts at position `h0` of H.
-    #[inline]
-    fn add_jtj(&self, h: &mut [f64], h0: usize, pair: usize, j_big: &DMatrix<f64>, j_small: &DMatrix<f64>) {
-        let m = j_big.nrows();
-        let (big, small) = (j_big.as_slice(), j_small.as_slice());
+    /// Each entry of `J_bigᵀ J_small` stored for pair `pair`, as (position in
+    /// H, value), row by row; `m` is the Jacobians' row count (a literal at the
+    /// hot call sites, so the column dot products unroll).
+    #[inline(always)]
+    fn jtj_visit(&self, pair: usize, big: &[f64], small: &[f64], m: usize, mut f: impl FnMut(usize, f64)) {
         for (r, base, n) in self.pair_rows(pair) {
             let cr = &big[r * m..(r + 1) * m];
-            for (hv, cs) in h[base - h0..base - h0 + n].iter_mut().zip(small.chunks_exact(m)) {
-                *hv += dot(cr, cs);
+            for (c, cs) in small.chunks_exact(m).take(n).enumerate() {
+                f(base + c, dot(cr, cs));
             }
         }
+    }
+
+    /// `H_(big, small) += J_bigᵀ J_small` into `h`, which starts at position `h0` of H.
+    #[inline(always)]
+    fn add_jtj(&self, h: &mut [f64], h0: usize, pair: usize, big: &[f64], small: &[f64], m: usize) {
+        self.jtj_visit(pair, big, small, m, |pos, v| h[pos - h0] += v);
     }
 
     /// Mark the factors whose JᵀJ never changes (see [`crate::Factor::constant_jacobians`]).
@@ -178,12 +184,7 @@ impl Structure {
     fn jtj_entries(&self, plan: &FactorPlan, js: &[DMatrix<f64>]) -> Vec<f64> {
         let mut out = Vec::new();
         for &(p, q, pair) in &plan.pairs {
-            let m = js[p].nrows();
-            let (big, small) = (js[p].as_slice(), js[q].as_slice());
-            for (r, _, n) in self.pair_rows(pair) {
-                let cr = &big[r * m..(r + 1) * m];
-                out.extend(small.chunks_exact(m).take(n).map(|cs| dot(cr, cs)));
-            }
+            self.jtj_visit(pair, js[p].as_slice(), js[q].as_slice(), js[p].nrows(), |_, v| out.push(v));
         }
         out
     }
@@ -271,8 +272,14 @@ impl Structure {
                 KeptTerm::Grad { k, .. } => {
                     let (p, b) = plan.kept[k];
                     let o = self.kept_offsets[b] - g0;
-                    for (kk, col) in js[p].as_slice().chunks_exact(m).enumerate() {
-                        g[o + kk] += dot(col, r);
+                    let mut add = |m| {
+                        for (kk, col) in js[p].as_slice().chunks_exact(m).enumerate() {
+                            g[o + kk] += dot(col, r);
+                        }
+                    };
+                    match m {
+                        2 => add(2),
+                        _ => add(m),
                     }
                 }
                 KeptTerm::Pair { k, entry_off, .. } => {
@@ -287,7 +294,14 @@ impl Structure {
                                 e += n;
                             }
                         }
-                        _ => self.add_jtj(h, h0, pair, &js[p], &js[q]),
+                        _ => {
+                            let (big, small) = (js[p].as_slice(), js[q].as_slice());
+                            match m {
+                                // Reprojections: two rows.
+                                2 => self.add_jtj(h, h0, pair, big, small, 2),
+                                _ => self.add_jtj(h, h0, pair, big, small, m),
+                            }
+                        }
                     }
                 }
             }
@@ -312,24 +326,31 @@ impl Structure {
             if m == 0 {
                 continue;
             }
-            let jl = js[ep.pos].as_slice();
-            let d = self.elim_dims[ep.block];
             let (ho, go) = (self.hll_offsets[ep.block] - hll0, self.elim_start(ep.block) - gl0);
-            for (a, ca) in jl.chunks_exact(m).enumerate() {
-                gl[go + a] += dot(ca, r);
-                for (b, cb) in jl.chunks_exact(m).enumerate() {
-                    hll[ho + a + b * d] += dot(ca, cb);
-                }
-            }
-            for &(q, off) in &ep.slots {
-                let jq = &js[q];
-                let dc = jq.ncols();
-                let off = off - hcl0;
-                for (b, cb) in jl.chunks_exact(m).enumerate() {
-                    for (a, ca) in jq.as_slice().chunks_exact(m).enumerate() {
-                        hcl[off + a + b * dc] += dot(ca, cb);
+            let mut add = |m| {
+                let jl = js[ep.pos].as_slice();
+                let d = self.elim_dims[ep.block];
+                for (a, ca) in jl.chunks_exact(m).enumerate() {
+                    gl[go + a] += dot(ca, r);
+                    for (b, cb) in jl.chunks_exact(m).enumerate() {
+                        hll[ho + a + b * d] += dot(ca, cb);
                     }
                 }
+                for &(q, off) in &ep.slots {
+                    let jq = &js[q];
+                    let dc = jq.ncols();
+                    let off = off - hcl0;
+                    for (b, cb) in jl.chunks_exact(m).enumerate() {
+                        for (a, ca) in jq.as_slice().chunks_exact(m).enumerate() {
+                            hcl[off + a + b * dc] += dot(ca, cb);
+                        }
+                    }
+                }
+            };
+            // Literal row counts of the common factors unroll the dot products.
+            match m {
+                2 => add(2),
+                _ => add(m),
             }
         }
     }
