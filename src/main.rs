@@ -256,6 +256,12 @@ enum Command {
         /// Length of static, walk and flight scenarios [s] (overrides the config).
         #[arg(long)]
         duration: Option<f64>,
+        /// Add a second camera this far right of cam0 [m] (EuRoC: 0.11): writes
+        /// cam1/sensor.yaml and its matches in cam0/tracks_cam1.csv, which
+        /// `tumble vio` uses to initialize (overrides the config's
+        /// camera.stereo_baseline_m).
+        #[arg(long, value_name = "METRES")]
+        stereo_baseline: Option<f64>,
         /// Print the default config as YAML and exit (a starting point for --config).
         #[arg(long)]
         print_config: bool,
@@ -427,7 +433,8 @@ enum Command {
         init_from_groundtruth: bool,
         /// How the first state is found without ground truth: `static` needs the
         /// recording to start at rest; `motion` solves velocity, roll, pitch and
-        /// scale in closed form from the IMU and the tracks of a moving start;
+        /// scale in closed form from the IMU and the tracks of a moving start
+        /// (with cam1's matches too, when the folder has them: see --mono);
         /// `auto` uses the first when the start is at rest, else the second.
         #[arg(long, value_enum, default_value_t = InitArg::Auto)]
         init: InitArg,
@@ -469,6 +476,11 @@ enum Command {
         /// Seed of the simulated camera's landmarks and noise.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Ignore cam0/tracks_cam1.csv (cam0's features matched into cam1, as
+        /// `tumble track --stereo` or `tumble sim --stereo-baseline` write them):
+        /// initialize from cam0 alone.
+        #[arg(long)]
+        mono: bool,
         /// Also record the run for the rerun viewer into this .rrd file: images with
         /// features, poses, window, landmarks, ground truth, biases (cargo feature
         /// `rerun`; view with `pip install rerun-sdk==0.36.3 && rerun FILE.rrd`).
@@ -625,7 +637,7 @@ fn print_log(s: &Summary) {
 
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     match cli.command {
-        Command::Sim { scenario, out, config, seed, duration, print_config, hide } => {
+        Command::Sim { scenario, out, config, seed, duration, stereo_baseline, print_config, hide } => {
             let mut cfg = match &config {
                 Some(p) => tumble::sim::SimConfig::read(p)?,
                 None => tumble::sim::SimConfig::default(),
@@ -646,6 +658,10 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             }
             if duration.is_some() {
                 cfg.duration_s = duration;
+            }
+            if let Some(b) = stereo_baseline {
+                cfg.camera.stereo_baseline_m = b;
+                cfg.camera.check().map_err(|e| format!("--stereo-baseline: {e}"))?;
             }
             let start = std::time::Instant::now();
             let sim = tumble::sim::simulate_and_write(scenario, &cfg, seed, &out)?;
@@ -901,6 +917,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             bias_after,
             simulate_camera,
             seed,
+            mono,
             rerun,
             frontend,
         } => {
@@ -935,7 +952,22 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if midpoint {
                 opts.imu.scheme = tumble::factors::imu_preint::Scheme::Midpoint;
             }
-            let vin = vio_input(&input, cal.as_ref(), groundtruth.as_deref(), simulate_camera, seed, &frontend, &out)?;
+            let vin = vio_input(
+                &input,
+                cal.as_ref(),
+                groundtruth.as_deref(),
+                (simulate_camera, seed),
+                mono,
+                &frontend,
+                &out,
+            )?;
+            vin.check()?;
+            if let (Some(st), Some(baseline)) = (&vin.stereo, vin.stereo_baseline_m()) {
+                let matches: usize = st.features.iter().map(Vec::len).sum();
+                println!(
+                    "stereo: {matches} matches in cam1 ({baseline:.3} m from cam0) for the initialization (--mono to ignore)"
+                );
+            }
             let given = noise.as_deref().map(ImuNoise::read).transpose()?;
             match vin.apply_noise(given, &mut opts.imu) {
                 tumble::vio::NoiseSource::Given => {}
@@ -1070,7 +1102,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if let Some(p) = vio {
                 let vio_dir = out.join(Stage::Vio.id());
                 inputs.vio = Some(Box::new(move |cal| {
-                    vio_input(&p, cal, groundtruth.as_deref(), simulate_camera, 1, &frontend, &vio_dir)
+                    vio_input(&p, cal, groundtruth.as_deref(), (simulate_camera, 1), false, &frontend, &vio_dir)
                         .map_err(|e| e.to_string())
                 }));
             }
@@ -1196,7 +1228,7 @@ fn audit_vio_command(
     if !(args.offset_step_ms.is_finite() && args.offset_step_ms > 0.0 && args.offset_step_ms <= 20.0) {
         return Err(format!("--offset-step-ms must be in (0, 20], got {}", args.offset_step_ms).into());
     }
-    let vin = vio_input(path, cal, None, false, 0, frontend, out)?;
+    let vin = vio_input(path, cal, None, (false, 0), false, frontend, out)?;
     let mut vopts =
         tumble::vio::VioOptions { pixel_sigma: args.pixel_sigma, gravity: args.gravity, ..Default::default() };
     vin.apply_noise(args.noise, &mut vopts.imu);
@@ -1232,8 +1264,8 @@ fn vio_input(
     input: &std::path::Path,
     cal: Option<&tumble::calib::ImuCalibration>,
     groundtruth: Option<&std::path::Path>,
-    simulate_camera: bool,
-    seed: u64,
+    (simulate_camera, seed): (bool, u64),
+    mono: bool,
     frontend: &FrontendArgs,
     out: &std::path::Path,
 ) -> Result<tumble::vio::VioInput, Box<dyn std::error::Error>> {
@@ -1259,7 +1291,10 @@ fn vio_input(
                 true => Some(run_frontend(&ds, 0, frontend, out)?),
                 false => None,
             };
-            VioInput::from_dataset(ds, cal, tracks)?
+            // Stereo matches next to cam0's tracks.csv (not with the tracks
+            // the frontend just made).
+            let stereo = !mono && tracks.is_none();
+            VioInput::from_dataset(ds, cal, tracks, stereo)?
         }
     };
     if let (Some(g), false) = (groundtruth, is_csv) {

@@ -274,9 +274,18 @@ pub fn read_asl(path: &Path, fmt: &ImuTextFormat) -> Result<AslDataset, InputErr
     Ok(AslDataset { root, imu, imu_sensor, cameras, groundtruth, warnings })
 }
 
+/// One feature observation of a tracks file: time \[ns\], track id, pixel `[u, v]`.
+pub type TrackObservation = (i64, u64, [f64; 2]);
+
 /// Read only the feature-track file `camN/tracks.csv` written by the simulator
 /// or the frontend: `t[ns], track_id, u[px], v[px]` per observation.
-pub fn read_tracks(path: &Path) -> Result<Vec<(i64, u64, [f64; 2])>, InputError> {
+pub fn read_tracks(path: &Path) -> Result<Vec<TrackObservation>, InputError> {
+    read_tracks_with_lines(path).map(|(obs, _)| obs)
+}
+
+/// As [`read_tracks`], with each observation's line number in the file (for
+/// errors found later, such as a stereo match without its cam0 frame).
+pub fn read_tracks_with_lines(path: &Path) -> Result<(Vec<TrackObservation>, Vec<usize>), InputError> {
     let spec = TableSpec {
         time: Some((0, TimeUnit::Ns)),
         values: vec![1, 2, 3],
@@ -295,5 +304,6 @@ pub fn read_tracks(path: &Path) -> Result<Vec<(i64, u64, [f64; 2])>, InputError>
         }
         out.push((t.t_ns[i], id as u64, [t.columns[1][i], t.columns[2][i]]));
     }
-    Ok(out)
+    let lines = (0..out.len()).map(|i| t.lines.line(i)).collect();
+    Ok((out, lines))
 }

@@ -55,6 +55,11 @@ pub struct CameraSettings {
     pub landmarks: usize,
     /// Half extents of the room around the motion's centre \[m\].
     pub room_half_extent: [f64; 3],
+    /// Baseline of a second camera \[m\] (0: none): the same model, placed
+    /// this far along the first camera's x axis (to its right, as EuRoC's
+    /// cam1 at 0.11 m), seeing the first camera's features at the same times
+    /// with its own pixel noise (stereo matches under the same track ids).
+    pub stereo_baseline_m: f64,
 }
 
 impl Default for CameraSettings {
@@ -78,6 +83,7 @@ impl Default for CameraSettings {
             max_features: 150,
             landmarks: 2000,
             room_half_extent: [3.0, 3.0, 1.5],
+            stereo_baseline_m: 0.0,
         }
     }
 }
@@ -99,6 +105,10 @@ impl CameraSettings {
         let q = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
         Isometry3::from_parts(Translation3::from(Vector3::from(self.body_t_camera)), q)
     }
+    /// Body ← second camera transform (see [`CameraSettings::stereo_baseline_m`]).
+    pub fn body_from_second_camera(&self) -> Isometry3<f64> {
+        self.body_from_camera() * Translation3::new(self.stereo_baseline_m, 0.0, 0.0)
+    }
     /// Check for values that cannot be simulated.
     pub fn check(&self) -> Result<(), String> {
         if !(self.rate_hz > 0.0 && self.rate_hz.is_finite()) {
@@ -116,6 +126,9 @@ impl CameraSettings {
             if !(0.0..=1.0).contains(&p) {
                 return Err(format!("camera.{what} must be in [0, 1], found {p}"));
             }
+        }
+        if !(self.stereo_baseline_m >= 0.0 && self.stereo_baseline_m.is_finite()) {
+            return Err(format!("camera.stereo_baseline_m must be ≥ 0 m, found {}", self.stereo_baseline_m));
         }
         if self.pixel_noise_px < 0.0 || self.room_half_extent.iter().any(|x| *x <= 0.0) {
             return Err("camera.pixel_noise_px must be ≥ 0 and the room extents > 0".into());
@@ -148,6 +161,9 @@ pub struct SimulatedTracks {
     pub landmarks: Vec<[f64; 3]>,
     /// Observations in time order.
     pub observations: Vec<Observation>,
+    /// The second camera's observations of the same features at the same
+    /// times, in time order (empty without [`CameraSettings::stereo_baseline_m`]).
+    pub stereo: Vec<Observation>,
 }
 
 /// Landmarks uniformly on the six faces of a box around `centre`.
@@ -174,6 +190,13 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
     let landmarks = room_landmarks(s.landmarks, centre, s.room_half_extent, &mut rng);
     let model = s.model();
     let b_t_c = s.body_from_camera();
+    // The second camera draws its noise from its own stream: a mono
+    // simulation's tracks are the same with or without it.
+    let mut stereo_rng = ChaCha8Rng::seed_from_u64(seed);
+    stereo_rng.set_stream(201);
+    // Second camera ← first camera.
+    let c1_t_c = Isometry3::from_parts(Translation3::new(-s.stereo_baseline_m, 0.0, 0.0), UnitQuaternion::identity());
+    let mut stereo = Vec::new();
     let (w, h) = (s.resolution[0] as f64, s.resolution[1] as f64);
     let mut frames = Vec::new();
     let mut observations = Vec::new();
@@ -227,6 +250,16 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
                 [uv[0] + s.pixel_noise_px * nu, uv[1] + s.pixel_noise_px * nv]
             };
             observations.push(Observation { t, track, landmark: j, uv, outlier });
+            if s.stereo_baseline_m > 0.0 {
+                let pc1 = c1_t_c * c_t_w * Point3::from(landmarks[j]);
+                let seen1 = if pc1.z < 0.2 { None } else { model.project(&[pc1.x, pc1.y, pc1.z]) };
+                if let Some(uv1) = seen1.filter(|uv| uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h) {
+                    let nu: f64 = StandardNormal.sample(&mut stereo_rng);
+                    let nv: f64 = StandardNormal.sample(&mut stereo_rng);
+                    let uv = [uv1[0] + s.pixel_noise_px * nu, uv1[1] + s.pixel_noise_px * nv];
+                    stereo.push(Observation { t, track, landmark: j, uv, outlier: false });
+                }
+            }
         }
         for (j, tr) in track_of.iter_mut().enumerate() {
             if !seen[j] {
@@ -236,5 +269,5 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
         frames.push(t);
         t = frames.len() as f64 * dt;
     }
-    SimulatedTracks { frames, landmarks, observations }
+    SimulatedTracks { frames, landmarks, observations, stereo }
 }

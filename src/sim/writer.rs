@@ -148,9 +148,10 @@ fn imu_yaml(sim: &Simulation) -> String {
     )
 }
 
-fn camera_yaml(sim: &Simulation) -> String {
+/// `sensor.yaml` of camera 0 or (stereo) camera 1.
+fn camera_yaml(sim: &Simulation, second: bool) -> String {
     let c = &sim.config.camera;
-    let t = c.body_from_camera().to_homogeneous();
+    let t = if second { c.body_from_second_camera() } else { c.body_from_camera() }.to_homogeneous();
     let data: Vec<String> = t.transpose().iter().map(|x| format!("{x}")).collect();
     let model = match c.distortion_model {
         super::camera::DistortionKind::RadialTangential => "radial-tangential",
@@ -216,7 +217,7 @@ fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
     let ns = |t: f64| t0 + (t * 1e9).round() as i64;
     if let Some(tr) = &sim.tracks {
         let cam = mav0.join("cam0");
-        write_text(&cam.join("sensor.yaml"), &camera_yaml(sim))?;
+        write_text(&cam.join("sensor.yaml"), &camera_yaml(sim, false))?;
         let mut frames = String::from("#timestamp [ns],filename\n");
         for &t in &tr.frames {
             frames.push_str(&format!("{0},{0}.png\n", ns(t)));
@@ -229,6 +230,18 @@ fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
             truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
         }
         write_text(&cam.join("tracks.csv"), &tracks)?;
+        if sim.config.camera.stereo_baseline_m > 0.0 {
+            // The second camera's matches beside cam0's tracks, as `tumble
+            // track --stereo` writes them, and its sensor.yaml in cam1/.
+            let mut stereo = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
+            for o in &tr.stereo {
+                stereo.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
+            }
+            write_text(&cam.join("tracks_cam1.csv"), &stereo)?;
+            let cam1 = mav0.join("cam1");
+            write_text(&cam1.join("sensor.yaml"), &camera_yaml(sim, true))?;
+            write_text(&cam1.join("data.csv"), &frames)?;
+        }
         write_text(&out.join("truth").join("observations.csv"), &truth_obs)?;
         let mut lm = String::from("#landmark_id,x [m],y [m],z [m]\n");
         for (j, p) in tr.landmarks.iter().enumerate() {

@@ -381,8 +381,12 @@ impl<'a> Estimator<'a> {
             let window: Vec<usize> = (first..=index).collect();
             match super::init::closed_form(self.input, &window, &self.opts) {
                 Ok(m) => {
+                    let stereo = match m.stereo_observations {
+                        0 => String::new(),
+                        n => format!(", {n} stereo matches"),
+                    };
                     self.warn(format!(
-                        "initialized in motion at {t:.3} s from {} frames and {} landmarks (speed {:.2} m/s, free gravity {:.2} m/s²)",
+                        "initialized in motion at {t:.3} s from {} frames and {} landmarks{stereo} (speed {:.2} m/s, free gravity {:.2} m/s²)",
                         window.len(),
                         m.landmarks,
                         m.velocity.norm(),

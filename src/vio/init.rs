@@ -22,6 +22,11 @@
 //! walk at 0.1 m/s over 1.5 s): a solution whose median depth comes out
 //! under 0.3 m is refused, and the estimator tries a window twice as long.
 //!
+//! With a second camera ([`super::StereoCamera`]) its matches add rows of
+//! the same form seen from `t_BC1`; those at a landmark's anchor frame fix
+//! its depth by the baseline alone, so scale no longer waits for parallax:
+//! a slow window that the single camera refuses initializes.
+//!
 //! Noise-free, the solution is exact (the unit tests: tilt 1e-4°, velocity
 //! 1e-4 m/s); with the default simulated noise, over 1.5 s of a one-minute
 //! walk, tilt within 1.5° and velocity within 0.12 m/s.
@@ -45,6 +50,8 @@ pub struct MotionInit {
     pub free_gravity: f64,
     /// Landmarks used.
     pub landmarks: usize,
+    /// Observations of the second camera used (0 without one).
+    pub stereo_observations: usize,
 }
 
 /// Fewest landmarks the solution needs.
@@ -69,8 +76,10 @@ const MAX_GRAVITY_ERROR: f64 = 0.1;
 
 /// Solve the closed-form initialization over the frames `frames` (indices
 /// into `input.frames`, in time order, at least 4), the IMU already corrected
-/// by the calibration. An error says why the window cannot initialize
-/// (too few landmarks, too little motion) — the caller tries a later window.
+/// by the calibration. With [`VioInput::stereo`] the second camera's matches
+/// in those frames join the equations. An error says why the window cannot
+/// initialize (too few landmarks, too little motion) — the caller tries a
+/// later window.
 pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Result<MotionInit, String> {
     if frames.len() < 4 {
         return Err(format!("{} frames in the window, 4 needed", frames.len()));
@@ -97,35 +106,65 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         time.push(t - t0);
     }
     // Observations by track: (window position, undistorted normalized xy).
-    let mut tracks: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
+    let mut by_track: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
     for (w, &k) in frames.iter().enumerate() {
         for (id, uv) in &input.frames[k].features {
             if let Some(xy) = input.camera.unproject(*uv) {
-                tracks.entry(*id).or_default().push((w, Vector3::new(xy[0], xy[1], 1.0)));
+                by_track.entry(*id).or_default().push((w, Vector3::new(xy[0], xy[1], 1.0)));
+            }
+        }
+    }
+    // The second camera's matches of the same tracks, when there is one.
+    let mut stereo: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
+    if let Some(st) = &input.stereo {
+        for (w, &k) in frames.iter().enumerate() {
+            for (id, uv) in st.features.get(k).into_iter().flatten() {
+                if let Some(xy) = st.camera.unproject(*uv) {
+                    stereo.entry(*id).or_default().push((w, Vector3::new(xy[0], xy[1], 1.0)));
+                }
             }
         }
     }
     let (r_bc, t_bc) = parts(&input.body_from_camera);
-    let mut tracks: Vec<Vec<(usize, Vector3<f64>)>> = tracks.into_values().collect();
+    // Camera c's (R_BC, t_BC): 0 the first, 1 the second.
+    let extrinsics = [(r_bc, t_bc), input.stereo.as_ref().map_or((r_bc, t_bc), |st| parts(&st.body_from_camera))];
+    let (ids, mut tracks): (Vec<u64>, Vec<Vec<Bearing>>) = by_track.into_iter().unzip();
     drop_mismatches(&mut tracks, &rot, &r_bc);
-    let mut used: Vec<Vec<(usize, Vector3<f64>)>> = tracks.into_iter().filter(|o| o.len() >= 3).collect();
-    used.sort_by_key(|o| std::cmp::Reverse(o.len()));
+    // Per landmark: its anchor (the first camera's first observation) and
+    // every other observation as (window position, camera, bearing).
+    let mut used: Vec<(Bearing, Vec<CameraBearing>)> = ids
+        .iter()
+        .zip(tracks)
+        .filter_map(|(id, obs)| {
+            let (&anchor, rest) = obs.split_first()?;
+            let second = stereo.get(id).into_iter().flatten().map(|&(w, u)| (w, 1, u));
+            let others: Vec<_> = rest.iter().map(|&(w, u)| (w, 0, u)).chain(second).collect();
+            (others.len() >= 2).then_some((anchor, others))
+        })
+        .collect();
+    used.sort_by_key(|(_, others)| std::cmp::Reverse(others.len()));
     used.truncate(MAX_LANDMARKS);
     if used.len() < MIN_LANDMARKS {
-        return Err(format!("{} landmarks seen in 3 or more frames, {MIN_LANDMARKS} needed", used.len()));
+        return Err(format!("{} landmarks seen 3 or more times, {MIN_LANDMARKS} needed", used.len()));
     }
     // The rows [û_k]× R_ckᵀ (…) = 0, linear in (v₀, g, λ_j): per observation
-    // the 3×6 block of (v₀, g), the column of λ_j and the constant.
+    // the 3×6 block of (v₀, g), the column of λ_j and the constant. An
+    // observation of the second camera sees the landmark from `t_BC1`
+    // instead: one at the anchor's own frame fixes λ_j by the baseline alone.
     let mut rows: Vec<Row> = Vec::new();
-    for (j, obs) in used.iter().enumerate() {
-        let (a, ua) = obs[0];
-        let ray = rot[a] * r_bc * ua;
-        for &(k, uk) in &obs[1..] {
-            let m = cross(&uk.normalize()) * (rot[k] * r_bc).transpose();
+    let mut stereo_rows = Vec::new();
+    for (j, ((a, ua), others)) in used.iter().enumerate() {
+        let ray = rot[*a] * r_bc * ua;
+        for &(k, c, uk) in others {
+            let (r_c, t_c) = &extrinsics[c];
+            let m = cross(&uk.normalize()) * (rot[k] * r_c).transpose();
             let mut jvg = Matrix3x6::zeros();
-            jvg.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * (time[a] - time[k])));
-            jvg.fixed_view_mut::<3, 3>(0, 3).copy_from(&(m * (0.5 * (time[a] * time[a] - time[k] * time[k]))));
-            rows.push((j, jvg, m * ray, m * ((dp[a] - dp[k]) + (rot[a] - rot[k]) * t_bc)));
+            jvg.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * (time[*a] - time[k])));
+            jvg.fixed_view_mut::<3, 3>(0, 3).copy_from(&(m * (0.5 * (time[*a] * time[*a] - time[k] * time[k]))));
+            // The camera's lever arm between the two frames.
+            let lever = if c == 0 { (rot[*a] - rot[k]) * t_bc } else { rot[*a] * t_bc - rot[k] * t_c };
+            stereo_rows.push(c == 1);
+            rows.push((j, jvg, m * ray, m * ((dp[*a] - dp[k]) + lever)));
         }
     }
     // Least squares over the observations still kept (a landmark left
@@ -192,6 +231,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         active[*j] = true;
     }
     let kept = active.iter().filter(|&&a| a).count();
+    let stereo_observations = kept_rows.iter().zip(&stereo_rows).filter(|(&k, &st)| k && st).count();
     if kept < MIN_LANDMARKS {
         return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed"));
     }
@@ -232,8 +272,15 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         velocity: r_w0 * (v0 + g * time[last] + dv[last]),
         free_gravity,
         landmarks: kept,
+        stereo_observations,
     })
 }
+
+/// An observation: window position and undistorted normalized `[x, y, 1]`.
+type Bearing = (usize, Vector3<f64>);
+
+/// An observation by either camera: window position, camera (0, 1), bearing.
+type CameraBearing = (usize, usize, Vector3<f64>);
 
 /// One observation's row: landmark index, the 3×6 block of `(v₀, g)`, the
 /// depth's column and the constant.
@@ -399,6 +446,44 @@ mod tests {
         let opts = VioOptions::for_simulation(&cfg);
         let err = closed_form(&input, &window(&input, 30.0, 31.5), &opts).unwrap_err();
         assert!(err.contains("too little parallax"), "{err}");
+    }
+
+    /// The same slow window with a second camera 0.11 m beside the first
+    /// (EuRoC's baseline): its matches fix the depths, and the window
+    /// initializes — tilt and velocity as close as a fast window's. Noise-free,
+    /// exactly.
+    #[test]
+    fn stereo_initializes_the_slow_window() {
+        for noisy in [true, false] {
+            let mut cfg = SimConfig { duration_s: Some(360.0), ..SimConfig::default() };
+            cfg.camera.stereo_baseline_m = 0.11;
+            let mut opts = VioOptions::for_simulation(&cfg);
+            if !noisy {
+                cfg.imu.effects = Effects::none();
+                cfg.camera.pixel_noise_px = 0.0;
+                opts.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
+            }
+            let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
+            let input = VioInput::from_simulation(&sim).unwrap();
+            input.check().unwrap();
+            let frames = window(&input, 30.0, 31.5);
+            let m = closed_form(&input, &frames, &opts).unwrap();
+            let truth = sim.motion.at(input.frames[*frames.last().unwrap()].t);
+            let up_true = truth.rotation.transpose() * Vector3::z();
+            let tilt_deg = (m.rotation.transpose() * Vector3::z()).angle(&up_true).to_degrees();
+            let dv = (m.velocity.norm() - truth.velocity.norm()).abs().max((m.velocity.z - truth.velocity.z).abs());
+            println!(
+                "noisy {noisy}: {} landmarks, {} stereo matches, free gravity {:.3}, tilt {tilt_deg:.3}°, velocity {dv:.4} m/s of {:.3}",
+                m.landmarks,
+                m.stereo_observations,
+                m.free_gravity,
+                truth.velocity.norm()
+            );
+            assert!(m.stereo_observations > m.landmarks, "{} stereo matches", m.stereo_observations);
+            let (tilt_max, dv_max) = if noisy { (2.0, 0.05) } else { (0.1, 0.01) };
+            assert!(tilt_deg < tilt_max, "tilt error {tilt_deg}°");
+            assert!(dv < dv_max, "velocity error {dv} m/s");
+        }
     }
 
     /// Indices of the frames in `[from, to)` seconds.

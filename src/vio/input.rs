@@ -36,6 +36,20 @@ pub struct Frame {
     pub features: Vec<(u64, [f64; 2])>,
 }
 
+/// A second camera rigidly mounted beside the first (stereo): what it saw at
+/// the times of [`VioInput::frames`], under the first camera's track ids.
+/// The closed-form initialization uses it for metric depth ([`super::init`]).
+#[derive(Debug, Clone)]
+pub struct StereoCamera {
+    /// Camera model of the pixel coordinates in `features`.
+    pub camera: CameraModel,
+    /// This camera's pose in the body (IMU) frame, `T_BC1`.
+    pub body_from_camera: Isometry3F64,
+    /// Per frame of [`VioInput::frames`] (same index), the features matched
+    /// into this camera: `(track id, pixel [u, v])`.
+    pub features: Vec<Vec<(u64, [f64; 2])>>,
+}
+
 /// Where a run's IMU noise came from ([`VioInput::apply_noise`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NoiseSource {
@@ -62,6 +76,8 @@ pub struct VioInput {
     pub camera: CameraModel,
     /// Camera pose in the body (IMU) frame, `T_BC`.
     pub body_from_camera: Isometry3F64,
+    /// A second camera's matches of the same features, when there is one.
+    pub stereo: Option<StereoCamera>,
     /// Ground truth (body poses, and biases when known), for evaluation only.
     pub groundtruth: Option<Trajectory>,
     /// IMU noise figures the input itself gives (ASL `imu0/sensor.yaml`, the
@@ -109,6 +125,14 @@ impl VioInput {
         out
     }
 
+    /// Distance between the two cameras \[m\], with a second one.
+    pub fn stereo_baseline_m(&self) -> Option<f64> {
+        let st = self.stereo.as_ref()?;
+        let (_, t0) = super::geometry::parts(&self.body_from_camera);
+        let (_, t1) = super::geometry::parts(&st.body_from_camera);
+        Some((t1 - t0).norm())
+    }
+
     /// Check what a run needs: samples, frames in order, finite numbers.
     pub fn check(&self) -> Result<(), String> {
         let name = &self.name;
@@ -123,6 +147,18 @@ impl VioInput {
         }
         if let Some(i) = self.frames.windows(2).position(|w| w[1].t <= w[0].t) {
             return Err(format!("{name}: frame {} is not later than the one before", i + 1));
+        }
+        if let Some(st) = &self.stereo {
+            if st.features.len() != self.frames.len() {
+                return Err(format!(
+                    "{name}: the second camera has features for {} frames, the first for {}",
+                    st.features.len(),
+                    self.frames.len()
+                ));
+            }
+            if self.stereo_baseline_m().is_some_and(|b| b < 1e-3) {
+                return Err(format!("{name}: the two cameras are less than 1 mm apart: no stereo baseline"));
+            }
         }
         if let Some(i) = (0..self.imu.t.len())
             .find(|&i| !(self.imu.gyro[i].iter().chain(self.imu.acc[i].iter()).all(|x| x.is_finite())))
@@ -187,8 +223,8 @@ impl VioInput {
             frames[fi].features.push((o.track, o.uv));
         }
         let cs = &sim.config.camera;
-        let bc = cs.body_from_camera();
-        let body_from_camera = pose(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
+        let body_from_camera = iso(&cs.body_from_camera());
+        let stereo = simulated_stereo(cs, &frames, &tracks.stereo);
         let mut gt = Trajectory::default();
         let (mut bga, mut baa) = (Vec::new(), Vec::new());
         for &t in &tracks.frames {
@@ -213,6 +249,7 @@ impl VioInput {
                 frames,
                 camera: cs.model(),
                 body_from_camera,
+                stereo,
                 groundtruth: Some(gt),
                 noise: Some(ImuNoise::from_model(m)),
                 images: Vec::new(),
@@ -226,7 +263,7 @@ impl VioInput {
     /// `calibration` when given.
     pub fn from_asl(path: &Path, calibration: Option<&ImuCalibration>) -> Result<VioInput, InputError> {
         let ds = asl::read_asl(path, &crate::io::imu_text::ImuTextFormat::default())?;
-        Self::from_dataset(ds, calibration, None)
+        Self::from_dataset(ds, calibration, None, true)
     }
 
     /// A dataset with an IMU and a ground truth but no camera, seen by a
@@ -260,8 +297,8 @@ impl VioInput {
                 _ => frames.push(Frame { t: o.t, features: vec![(o.track, o.uv)] }),
             }
         }
-        let bc = cam.body_from_camera();
-        let body_from_camera = pose(bc.rotation.to_rotation_matrix().matrix(), &bc.translation.vector);
+        let body_from_camera = iso(&cam.body_from_camera());
+        let stereo = simulated_stereo(cam, &frames, &tracks.stereo);
         let imu = imu_data(&ds.imu, calibration);
         let noise = sensor_noise(&ds);
         Ok(with_calibrated_offsets(
@@ -272,6 +309,7 @@ impl VioInput {
                 frames,
                 camera: cam.model(),
                 body_from_camera,
+                stereo,
                 groundtruth: ds.groundtruth,
                 noise,
                 images: Vec::new(),
@@ -282,11 +320,16 @@ impl VioInput {
 
     /// As [`VioInput::from_asl`] on a loaded dataset, with the cam0
     /// observations given (e.g. from the [`frontend`](super::frontend) on the
-    /// folder's images) or, when None, read from `cam0/tracks.csv`.
+    /// folder's images) or, when None, read from `cam0/tracks.csv`. With
+    /// `stereo_tracks`, `cam0/tracks_cam1.csv` (cam0's features matched into
+    /// cam1 at the same times, as `tumble track --stereo` writes), when
+    /// present, makes it a stereo input ([`StereoCamera`], cam1's model and
+    /// extrinsic from `cam1/sensor.yaml`).
     pub fn from_dataset(
         ds: asl::AslDataset,
         calibration: Option<&ImuCalibration>,
         tracks: Option<Vec<(i64, u64, [f64; 2])>>,
+        stereo_tracks: bool,
     ) -> Result<VioInput, InputError> {
         let cam = ds.cameras.first().ok_or_else(|| {
             InputError::file(&ds.root, "no cam0/ folder: the estimator needs feature tracks")
@@ -312,15 +355,41 @@ impl VioInput {
             }
         };
         let t0 = ds.imu.t0_ns;
-        let mut frames: BTreeMap<i64, Vec<(u64, [f64; 2])>> = BTreeMap::new();
+        let mut by_time: BTreeMap<i64, Vec<(u64, [f64; 2])>> = BTreeMap::new();
         for (t, id, uv) in obs {
-            frames.entry(t).or_default().push((id, uv));
+            by_time.entry(t).or_default().push((id, uv));
         }
-        let frames = frames.into_iter().map(|(t, features)| Frame { t: (t - t0) as f64 * 1e-9, features }).collect();
+        let frame_ns: Vec<i64> = by_time.keys().copied().collect();
+        let frames = by_time.into_iter().map(|(t, features)| Frame { t: (t - t0) as f64 * 1e-9, features }).collect();
         let imu_t_bs = ds.imu_sensor.as_ref().map(|s| s.t_bs);
-        let cam_t_bs = cam.t_bs.unwrap_or_else(nalgebra::Isometry3::identity);
-        let t_ic = imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs);
-        let body_from_camera = pose(t_ic.rotation.to_rotation_matrix().matrix(), &t_ic.translation.vector);
+        let body_from = |cam_t_bs: Option<nalgebra::Isometry3<f64>>| {
+            let cam_t_bs = cam_t_bs.unwrap_or_else(nalgebra::Isometry3::identity);
+            iso(&imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs))
+        };
+        let body_from_camera = body_from(cam.t_bs);
+        let stereo_path = cam_dir.join("tracks_cam1.csv");
+        let stereo = match (stereo_tracks, stereo_path.is_file()) {
+            (false, _) | (true, false) => None,
+            (true, true) => {
+                let cam1 = ds.cameras.get(1).ok_or_else(|| {
+                    InputError::file(&stereo_path, "stereo matches but no cam1/ folder with the second camera")
+                })?;
+                let yaml1 = ds.root.join(&cam1.name).join("sensor.yaml");
+                let camera = cam1.model.ok_or_else(|| InputError::file(&yaml1, "camera intrinsics missing"))?;
+                if cam1.t_bs.is_none() || cam.t_bs.is_none() {
+                    return Err(InputError::file(&yaml1, "T_BS missing: stereo needs both cameras' extrinsics"));
+                }
+                let (obs1, lines) = asl::read_tracks_with_lines(&stereo_path)?;
+                let mut features = vec![Vec::new(); frame_ns.len()];
+                for ((t, id, uv), line) in obs1.into_iter().zip(lines) {
+                    let k = frame_ns.binary_search(&t).map_err(|_| {
+                        InputError::at(&stereo_path, line, format!("no cam0 observation at {t} ns to match"))
+                    })?;
+                    features[k].push((id, uv));
+                }
+                Some(StereoCamera { camera, body_from_camera: body_from(cam1.t_bs), features })
+            }
+        };
         let imu = imu_data(&ds.imu, calibration);
         let noise = sensor_noise(&ds);
         let images = cam.frames.clone();
@@ -332,6 +401,7 @@ impl VioInput {
                 frames,
                 camera,
                 body_from_camera,
+                stereo,
                 groundtruth: ds.groundtruth,
                 noise,
                 images,
@@ -339,6 +409,31 @@ impl VioInput {
             calibration,
         ))
     }
+}
+
+/// `T_BC` as the solver's SE(3).
+fn iso(t: &nalgebra::Isometry3<f64>) -> Isometry3F64 {
+    pose(t.rotation.to_rotation_matrix().matrix(), &t.translation.vector)
+}
+
+/// The simulated second camera, when the settings have one: its
+/// observations put on the frames of the same times.
+fn simulated_stereo(
+    cam: &crate::sim::CameraSettings,
+    frames: &[Frame],
+    obs: &[crate::sim::camera::Observation],
+) -> Option<StereoCamera> {
+    if cam.stereo_baseline_m <= 0.0 {
+        return None;
+    }
+    let mut features = vec![Vec::new(); frames.len()];
+    for o in obs {
+        let k = frames.partition_point(|f| f.t < o.t - 1e-9);
+        if frames.get(k).is_some_and(|f| (f.t - o.t).abs() < 1e-9) {
+            features[k].push((o.track, o.uv));
+        }
+    }
+    Some(StereoCamera { camera: cam.model(), body_from_camera: iso(&cam.body_from_second_camera()), features })
 }
 
 /// `input` with the calibration's time offsets applied, when it has any.
@@ -468,6 +563,7 @@ pub fn read_eqvio(path: &Path, groundtruth: Option<&Path>) -> Result<VioInput, I
         frames,
         camera: CameraModel { fx, fy, cx, cy, distortion: Distortion::None },
         body_from_camera: pose(q.to_rotation_matrix().matrix(), &t_ci),
+        stereo: None,
         groundtruth,
         noise: None,
         images: Vec::new(),

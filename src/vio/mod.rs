@@ -45,7 +45,7 @@ pub mod record;
 
 pub use crate::io::ImuNoise;
 pub use estimator::{run, run_observed, Estimator, FrameEstimate, ResidualTally, VioResult, WindowState};
-pub use input::{read_eqvio, Frame, ImuData, NoiseSource, VioInput};
+pub use input::{read_eqvio, Frame, ImuData, NoiseSource, StereoCamera, VioInput};
 pub use output::{bias_track, summarize, trajectory, write_outputs, Summary};
 
 use tumble_factors::imu_preint::{PreintegrationParams, Scheme};
