@@ -38,9 +38,15 @@ pub struct InverseDepthReprojection {
     keys: [Key; 3],
     bearing: Vector3<f64>,
     measured: [f64; 2],
+    /// Model of the observing camera.
     camera: CameraModel,
+    /// The anchor camera's `T_BC`.
     r_bc: Matrix3<f64>,
     t_bc: Vector3<f64>,
+    /// The observing camera's `T_BC` (the anchor camera's unless
+    /// [`InverseDepthReprojection::seen_by`] set another).
+    r_bcj: Matrix3<f64>,
+    t_bcj: Vector3<f64>,
 }
 
 impl InverseDepthReprojection {
@@ -53,14 +59,27 @@ impl InverseDepthReprojection {
         camera: CameraModel,
         body_from_camera: &Isometry3F64,
     ) -> Self {
+        let (r_bc, t_bc) = (body_from_camera.rotation().matrix(), body_from_camera.translation());
         InverseDepthReprojection {
             keys,
             bearing: Vector3::new(anchor_xy[0], anchor_xy[1], 1.0),
             measured: measured_uv,
             camera,
-            r_bc: body_from_camera.rotation().matrix(),
-            t_bc: body_from_camera.translation(),
+            r_bc,
+            t_bc,
+            r_bcj: r_bc,
+            t_bcj: t_bc,
         }
+    }
+
+    /// The observation made by another camera of the rig (stereo: the
+    /// second camera at frame j), with its model and `T_BC`; the anchor stays
+    /// the first camera's.
+    pub fn seen_by(mut self, camera: CameraModel, body_from_camera: &Isometry3F64) -> Self {
+        self.camera = camera;
+        self.r_bcj = body_from_camera.rotation().matrix();
+        self.t_bcj = body_from_camera.translation();
+        self
     }
 
     /// Residual \[px\] into `out.residual` and, when `out` is given Jacobian
@@ -77,7 +96,7 @@ impl InverseDepthReprojection {
         let p_ba = self.r_bc * p_ca + self.t_bc;
         let p_w = ra * p_ba + pa;
         let p_bj = rj.transpose() * (p_w - pj);
-        let p_cj = self.r_bc.transpose() * (p_bj - self.t_bc);
+        let p_cj = self.r_bcj.transpose() * (p_bj - self.t_bcj);
         let Some((uv, jp)) = self.camera.project_with_jacobian(&[p_cj.x, p_cj.y, p_cj.z]) else {
             return Err(FactorError::Other(format!("landmark behind camera (depth {:.3} m)", p_cj.z)));
         };
@@ -93,13 +112,13 @@ impl InverseDepthReprojection {
         out.reshape(2, [6, 6, 1]);
         out.residual.copy_from_slice(&residual);
         let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
-        let rcb_rjt = self.r_bc.transpose() * rj.transpose();
+        let rcb_rjt = self.r_bcj.transpose() * rj.transpose();
         let j_pw = jpi * rcb_rjt * ra;
         let [jxa, jxj, jl] = &mut out.jacobians[..] else { unreachable!("reshaped to three blocks") };
         jxa.fixed_view_mut::<2, 3>(0, 0).copy_from(&(j_pw * (-hat(&p_ba))));
         jxa.fixed_view_mut::<2, 3>(0, 3).copy_from(&j_pw);
-        jxj.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * self.r_bc.transpose() * hat(&p_bj)));
-        jxj.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jpi * self.r_bc.transpose()));
+        jxj.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * self.r_bcj.transpose() * hat(&p_bj)));
+        jxj.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jpi * self.r_bcj.transpose()));
         let d_rho = j_pw * self.r_bc * (-self.bearing * (inv * inv));
         jl.copy_from_slice(d_rho.as_slice());
         Ok(())
@@ -107,6 +126,108 @@ impl InverseDepthReprojection {
 }
 
 impl Factor for InverseDepthReprojection {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+        let mut out = Linearization::default();
+        self.evaluate(vars, false, &mut out)?;
+        Ok(out.residual)
+    }
+    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+        let mut out = Linearization::default();
+        self.evaluate(vars, true, &mut out)?;
+        Ok(out)
+    }
+    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+        self.evaluate(vars, true, out)
+    }
+}
+
+/// A landmark's anchor observation matched in a second camera at the same
+/// time (stereo): a factor on its inverse depth alone, `[ρ]` (`Vector1`).
+///
+/// The landmark `p_B = R_BC f_a / ρ + t_BC` in the body frame at the anchor
+/// (first camera `T_BC`, `f_a = [x, y, 1]` the anchor observation's
+/// undistorted normalized coordinates) seen by the second camera
+/// (`T_BC1`): `r = π₁(R_BC1ᵀ (p_B − t_BC1)) − uv₁` in its pixels. The
+/// baseline makes the depth observable without motion. Pair it with a Huber loss.
+///
+/// ```
+/// use nalgebra::{Vector1, Vector3};
+/// use tumble_factors::camera::{CameraModel, Distortion};
+/// use tumble_factors::reprojection::StereoInverseDepth;
+/// use tumble_solvers::{check_jacobians, se3_from_quaternion, L};
+/// let cam = CameraModel { fx: 460.0, fy: 460.0, cx: 376.0, cy: 240.0, distortion: Distortion::None };
+/// let t_bc0 = se3_from_quaternion([1.0, 0.0, 0.0, 0.0], Vector3::zeros());
+/// let t_bc1 = se3_from_quaternion([1.0, 0.0, 0.0, 0.0], Vector3::new(0.11, 0.0, 0.0));
+/// let f = StereoInverseDepth::new(L(7), [0.1, -0.05], [400.0, 215.0], (cam, &t_bc1), &t_bc0);
+/// assert!(check_jacobians(&f, &[&Vector1::new(0.4)]).unwrap().passes(1e-6));
+/// ```
+#[derive(Clone, Debug)]
+pub struct StereoInverseDepth {
+    keys: [Key; 1],
+    /// The landmark in the body frame per unit inverse depth, `R_BC f_a`, and `t_BC`.
+    ray_b: Vector3<f64>,
+    t_bc: Vector3<f64>,
+    measured: [f64; 2],
+    camera: CameraModel,
+    r_bc1: Matrix3<f64>,
+    t_bc1: Vector3<f64>,
+}
+
+impl StereoInverseDepth {
+    /// Factor on `landmark` (inverse depth): anchor observation `anchor_xy`
+    /// (undistorted normalized, first camera `body_from_camera`), its match
+    /// `measured_uv` \[px\] in the second camera `(model, T_BC1)`.
+    pub fn new(
+        landmark: Key,
+        anchor_xy: [f64; 2],
+        measured_uv: [f64; 2],
+        (camera, body_from_second): (CameraModel, &Isometry3F64),
+        body_from_camera: &Isometry3F64,
+    ) -> Self {
+        StereoInverseDepth {
+            keys: [landmark],
+            ray_b: body_from_camera.rotation().matrix() * Vector3::new(anchor_xy[0], anchor_xy[1], 1.0),
+            t_bc: body_from_camera.translation(),
+            measured: measured_uv,
+            camera,
+            r_bc1: body_from_second.rotation().matrix(),
+            t_bc1: body_from_second.translation(),
+        }
+    }
+
+    /// Residual \[px\] and, with `jac`, its derivative by ρ.
+    fn evaluate(&self, vars: Vars<'_>, jac: bool, out: &mut Linearization) -> Result<(), FactorError> {
+        let rho: &Vector1<f64> = vars.get(0)?;
+        let inv = 1.0 / rho[0];
+        let p_c1 = self.r_bc1.transpose() * (self.ray_b * inv + self.t_bc - self.t_bc1);
+        let Some((uv, jp)) = self.camera.project_with_jacobian(&[p_c1.x, p_c1.y, p_c1.z]) else {
+            return Err(FactorError::Other(format!("landmark behind the second camera (depth {:.3} m)", p_c1.z)));
+        };
+        let residual = [uv[0] - self.measured[0], uv[1] - self.measured[1]];
+        if !residual.iter().all(|x| x.is_finite()) {
+            return Err(FactorError::NonFinite);
+        }
+        if !jac {
+            out.reshape(2, []);
+            out.residual.copy_from_slice(&residual);
+            return Ok(());
+        }
+        out.reshape(2, [1]);
+        out.residual.copy_from_slice(&residual);
+        let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
+        let d_rho = jpi * self.r_bc1.transpose() * (-self.ray_b * (inv * inv));
+        out.jacobians[0].copy_from_slice(d_rho.as_slice());
+        Ok(())
+    }
+}
+
+impl Factor for StereoInverseDepth {
     fn keys(&self) -> &[Key] {
         &self.keys
     }

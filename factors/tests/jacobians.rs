@@ -120,6 +120,7 @@ fn imu_factor_and_bias_random_walk() {
 fn inverse_depth_reprojection_for_every_camera_model() {
     use nalgebra::Vector1;
     use tumble_factors::camera::{CameraModel, Distortion};
+    use tumble_factors::reprojection::StereoInverseDepth;
     use tumble_factors::InverseDepthReprojection;
     let t_bc = Isometry3F64::exp(Vector6::new(0.05, -0.02, 0.01, 1.2, -1.2, 1.2));
     let xa = Isometry3F64::exp(Vector6::new(0.3, -0.2, 1.0, 1.0, 2.0, 0.5));
@@ -134,6 +135,15 @@ fn inverse_depth_reprojection_for_every_camera_model() {
         let rho = Vector1::new(0.35);
         assert_ok(&f, &[&xa, &xj, &rho]);
         assert_linearize_into_matches(&f, &[&xa, &xj, &rho]);
+        // Stereo: the same landmark seen by a second camera 0.11 m to the
+        // right, at frame j and at the anchor's own frame.
+        let t_bc1 = t_bc * Isometry3F64::exp(Vector6::new(0.11, 0.0, 0.0, 0.01, -0.02, 0.005));
+        let f1 = f.clone().seen_by(cam, &t_bc1);
+        assert_ok(&f1, &[&xa, &xj, &rho]);
+        assert_linearize_into_matches(&f1, &[&xa, &xj, &rho]);
+        let s = StereoInverseDepth::new(L(3), [0.1, -0.08], [380.0, 240.0], (cam, &t_bc1), &t_bc);
+        assert_ok(&s, &[&rho]);
+        assert_linearize_into_matches(&s, &[&rho]);
     }
 }
 

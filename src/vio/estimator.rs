@@ -8,8 +8,10 @@ use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 use std::time::Instant;
 use tumble_factors::imu_preint::Preintegrated;
+use tumble_factors::reprojection::StereoInverseDepth;
 use tumble_factors::{bias_random_walk, ImuFactor, InverseDepthReprojection, PriorFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::Factor;
 use tumble_solvers::{
     marginalize, Covariances, Graph, Huber, LmOptions, MarginalPrior, NoiseModel, Optimizer, Values, B, L, V, X,
 };
@@ -114,6 +116,8 @@ struct Obs {
     sid: u64,
     uv: [f64; 2],
     xy: [f64; 2],
+    /// The second camera's match at the same time \[px\], when there is one.
+    uv1: Option<[f64; 2]>,
 }
 
 #[derive(Default)]
@@ -468,13 +472,14 @@ impl<'a> Estimator<'a> {
         for tr in self.tracks.values() {
             let Some((lid, anchor)) = tr.landmark else { continue };
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
-            for o in tr.obs.iter().filter(|o| o.sid != anchor) {
-                let f = self.reprojection(anchor, o.sid, lid, a.xy, o.uv);
-                g.add_entry(tumble_solvers::FactorEntry {
-                    factor: Box::new(f),
-                    noise: noise.clone(),
-                    loss: Some(huber.clone()),
-                });
+            for o in &tr.obs {
+                for (factor, _) in self.observation_factors(anchor, lid, a.xy, o) {
+                    g.add_entry(tumble_solvers::FactorEntry {
+                        factor,
+                        noise: noise.clone(),
+                        loss: Some(huber.clone()),
+                    });
+                }
             }
         }
         g
@@ -515,6 +520,36 @@ impl<'a> Estimator<'a> {
         )
     }
 
+    /// The factors of observation `o` of landmark `lid` (anchored at state
+    /// `anchor` with normalized anchor observation `anchor_xy`): the first
+    /// camera's reprojection (none at the anchor itself) and the second
+    /// camera's, when `o` has a stereo match — at the anchor a factor on the
+    /// inverse depth alone. Each with whether it is the stereo one.
+    fn observation_factors(&self, anchor: u64, lid: u64, anchor_xy: [f64; 2], o: &Obs) -> Vec<(Box<dyn Factor>, bool)> {
+        let mut out: Vec<(Box<dyn Factor>, bool)> = Vec::new();
+        if o.sid != anchor {
+            out.push((Box::new(self.reprojection(anchor, o.sid, lid, anchor_xy, o.uv)), false));
+        }
+        if let (Some(uv1), Some(st), true) = (o.uv1, &self.input.stereo, self.opts.stereo_window) {
+            let f: Box<dyn Factor> = if o.sid == anchor {
+                let second = (st.camera, &st.body_from_camera);
+                Box::new(StereoInverseDepth::new(L(lid), anchor_xy, uv1, second, &self.input.body_from_camera))
+            } else {
+                Box::new(self.reprojection(anchor, o.sid, lid, anchor_xy, uv1).seen_by(st.camera, &st.body_from_camera))
+            };
+            out.push((f, true));
+        }
+        out
+    }
+
+    /// A factor's raw residual at the current values (None when a variable
+    /// is missing or the factor cannot be evaluated).
+    fn residual_now(&self, f: &dyn Factor) -> Option<nalgebra::DVector<f64>> {
+        let vars: Vec<&dyn tumble_solvers::DynVariable> =
+            f.keys().iter().map(|&k| self.values.get_dyn(k).ok()).collect::<Option<_>>()?;
+        f.residual(tumble_solvers::Vars::new(&vars)).ok()
+    }
+
     fn landmark_count(&self) -> usize {
         self.tracks.values().filter(|t| t.landmark.is_some()).count()
     }
@@ -523,21 +558,37 @@ impl<'a> Estimator<'a> {
     fn triangulate_new(&mut self) {
         let (r_bc, t_bc) = parts(&self.input.body_from_camera);
         let min_angle = self.opts.min_triangulation_deg.to_radians();
+        let stereo =
+            self.input.stereo.as_ref().filter(|_| self.opts.stereo_window).map(|st| (st, parts(&st.body_from_camera)));
+        // Per state: the first camera's pose in the world, and the second's.
         let mut poses: HashMap<u64, (Matrix3<f64>, Vector3<f64>)> = HashMap::new();
+        let mut poses1: HashMap<u64, (Matrix3<f64>, Vector3<f64>)> = HashMap::new();
         for s in &self.states {
             let (x, _, _) = self.state_values(s.sid);
             let (r, p) = parts(&x);
             poses.insert(s.sid, (r * r_bc, r * t_bc + p));
+            if let Some((_, (r_bc1, t_bc1))) = &stereo {
+                poses1.insert(s.sid, (r * r_bc1, r * t_bc1 + p));
+            }
         }
         for tr in self.tracks.values_mut() {
-            if tr.landmark.is_some() || tr.obs.len() < 2 {
+            if tr.landmark.is_some() {
                 continue;
             }
+            // Rays of both cameras: a stereo match triangulates a track seen once.
             let (mut c, mut d) = (Vec::new(), Vec::new());
             for o in &tr.obs {
                 let (rc, pc) = poses[&o.sid];
                 c.push(pc);
                 d.push((rc * Vector3::new(o.xy[0], o.xy[1], 1.0)).normalize());
+                let xy1 = stereo.as_ref().zip(o.uv1).and_then(|((st, _), uv1)| st.camera.unproject(uv1));
+                if let (Some(xy1), Some((rc1, pc1))) = (xy1, poses1.get(&o.sid)) {
+                    c.push(*pc1);
+                    d.push((rc1 * Vector3::new(xy1[0], xy1[1], 1.0)).normalize());
+                }
+            }
+            if c.len() < 2 {
+                continue;
             }
             let Some((pw, angle)) = triangulate(&c, &d) else { continue };
             if angle < min_angle {
@@ -566,7 +617,7 @@ impl<'a> Estimator<'a> {
     fn reject_outliers(&mut self) {
         let limit = self.opts.outlier_sigmas * self.opts.pixel_sigma;
         let mut drop_landmarks = Vec::new();
-        let mut drop_obs: Vec<(u64, u64)> = Vec::new();
+        let mut drop_obs: Vec<(u64, u64, bool)> = Vec::new();
         for (&id, tr) in &self.tracks {
             let Some((lid, anchor)) = tr.landmark else { continue };
             let rho = self.values.get::<Vector1<f64>>(L(lid)).map(|v| v[0]).unwrap_or(f64::NAN);
@@ -575,21 +626,22 @@ impl<'a> Estimator<'a> {
                 continue;
             }
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor).map(|o| o.xy) else { continue };
-            let xa = *self.values.get::<Isometry3F64>(X(anchor)).expect("anchor");
-            let rho_v = Vector1::new(rho);
-            for o in tr.obs.iter().filter(|o| o.sid != anchor) {
-                let f = self.reprojection(anchor, o.sid, lid, a, o.uv);
-                let xj = *self.values.get::<Isometry3F64>(X(o.sid)).expect("state");
-                let vars: [&dyn tumble_solvers::DynVariable; 3] = [&xa, &xj, &rho_v];
-                let r = tumble_solvers::Factor::residual(&f, tumble_solvers::Vars::new(&vars));
-                if r.map_or(true, |r| r.norm() > limit) {
-                    drop_obs.push((id, o.sid));
+            for o in &tr.obs {
+                for (f, stereo) in self.observation_factors(anchor, lid, a, o) {
+                    if self.residual_now(f.as_ref()).is_none_or(|r| r.norm() > limit) {
+                        drop_obs.push((id, o.sid, stereo));
+                    }
                 }
             }
         }
-        for (id, sid) in drop_obs {
+        for (id, sid, stereo) in drop_obs {
             if let Some(tr) = self.tracks.get_mut(&id) {
-                tr.obs.retain(|o| o.sid != sid);
+                if stereo {
+                    // Only the second camera's match goes.
+                    tr.obs.iter_mut().filter(|o| o.sid == sid).for_each(|o| o.uv1 = None);
+                } else {
+                    tr.obs.retain(|o| o.sid != sid);
+                }
             }
         }
         for id in drop_landmarks {
@@ -668,23 +720,16 @@ impl<'a> Estimator<'a> {
             if anchor != old {
                 continue;
             }
-            let (Some(a), Ok(xa), Ok(rho)) = (
-                tr.obs.iter().find(|o| o.sid == anchor),
-                self.values.get::<Isometry3F64>(X(anchor)),
-                self.values.get::<Vector1<f64>>(L(lid)),
-            ) else {
-                continue;
-            };
+            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             let mut counted = false;
-            for o in tr.obs.iter().filter(|o| o.sid != anchor) {
-                let Ok(xj) = self.values.get::<Isometry3F64>(X(o.sid)) else { continue };
-                let f = self.reprojection(anchor, o.sid, lid, a.xy, o.uv);
-                let vars: [&dyn tumble_solvers::DynVariable; 3] = [xa, xj, rho];
-                if let Ok(r) = tumble_solvers::Factor::residual(&f, tumble_solvers::Vars::new(&vars)) {
-                    // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
-                    t.reprojection_chi2 += r.norm_squared() / (2.0 * self.opts.pixel_sigma.powi(2));
-                    t.reprojection_rows += 2;
-                    counted = true;
+            for o in &tr.obs {
+                for (f, _) in self.observation_factors(anchor, lid, a.xy, o) {
+                    if let Some(r) = self.residual_now(f.as_ref()) {
+                        // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
+                        t.reprojection_chi2 += r.norm_squared() / (2.0 * self.opts.pixel_sigma.powi(2));
+                        t.reprojection_rows += 2;
+                        counted = true;
+                    }
                 }
             }
             t.landmarks += usize::from(counted);
@@ -927,11 +972,9 @@ impl<'a> Estimator<'a> {
             };
             copy(&mut values, X(anchor), true);
             copy(&mut values, L(lid), true);
-            g.add_entry(tumble_solvers::FactorEntry {
-                factor: Box::new(self.reprojection(anchor, sid, lid, a.xy, o.uv)),
-                noise: noise.clone(),
-                loss: Some(huber.clone()),
-            });
+            for (factor, _) in self.observation_factors(anchor, lid, a.xy, o) {
+                g.add_entry(tumble_solvers::FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
+            }
         }
         let keys = [X(sid), V(sid), B(sid)];
         let (solved, covariances) = self.solve(&g, &values, &keys, Vec::new());
@@ -1036,6 +1079,13 @@ impl<'a> Estimator<'a> {
     /// Add frame `index`'s observations (undistorted `obs` by track) to the newest state.
     fn add_observations(&mut self, index: usize, obs: &HashMap<u64, [f64; 2]>) {
         let sid = self.states.last().expect("state").sid;
+        // The second camera's matches in this frame that it can undistort.
+        let stereo: HashMap<u64, [f64; 2]> = match &self.input.stereo {
+            Some(st) => {
+                st.features[index].iter().filter(|(_, uv)| st.camera.unproject(*uv).is_some()).copied().collect()
+            }
+            None => HashMap::new(),
+        };
         let (r_bc, t_bc) = parts(&self.input.body_from_camera);
         let (rj, pj) = parts(self.values.get::<Isometry3F64>(X(sid)).expect("newest state"));
         for (id, uv) in &self.input.frames[index].features {
@@ -1050,7 +1100,8 @@ impl<'a> Estimator<'a> {
                     continue;
                 }
             }
-            tr.obs.push(Obs { sid, uv: *uv, xy });
+            let uv1 = stereo.get(id).copied();
+            tr.obs.push(Obs { sid, uv: *uv, xy, uv1 });
         }
         // Forget tracks that are no longer seen and have no landmark.
         let seen: std::collections::HashSet<u64> = self.input.frames[index].features.iter().map(|f| f.0).collect();

@@ -135,6 +135,11 @@ pub struct VioOptions {
     /// only at keyframes, with the frames in between tracked against the
     /// fixed window (motion-only: their own pose, velocity and bias).
     pub solve_window_every_frame: bool,
+    /// With a second camera ([`VioInput::stereo`]): also put its matches into
+    /// the window (reprojections from cam1, and at a landmark's anchor a
+    /// factor on its depth alone; single-frame stereo tracks triangulated).
+    /// Off, the second camera serves the initialization only.
+    pub stereo_window: bool,
 }
 
 impl Default for VioOptions {
@@ -160,6 +165,7 @@ impl Default for VioOptions {
             max_imu_gap_s: 0.05,
             covariances: true,
             solve_window_every_frame: false,
+            stereo_window: false,
         }
     }
 }
