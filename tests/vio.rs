@@ -179,6 +179,14 @@ fn a_start_in_motion_is_initialized_by_the_closed_form() {
     assert!(s.ate_rmse_m.unwrap() < 0.15, "ATE {:?}", s.ate_rmse_m);
 }
 
+/// A 40 s walk seen by two cameras 0.11 m apart (EuRoC's baseline).
+fn stereo_walk(seed: u64) -> (SimConfig, tumble::sim::Simulation) {
+    let mut cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
+    cfg.camera.stereo_baseline_m = 0.11;
+    let sim = simulate(Scenario::Walk, &cfg, seed).unwrap();
+    (cfg, sim)
+}
+
 /// A stereo folder as `tumble sim walk --stereo-baseline 0.11` writes it: the
 /// second camera's matches (cam0/tracks_cam1.csv, cam1/sensor.yaml) make the
 /// closed form observe scale from the first 1.5 s of the slow start, where
@@ -186,9 +194,7 @@ fn a_start_in_motion_is_initialized_by_the_closed_form() {
 /// (`--mono`) the same folder initializes later.
 #[test]
 fn stereo_matches_initialize_the_slow_start() {
-    let mut cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
-    cfg.camera.stereo_baseline_m = 0.11;
-    let sim = simulate(Scenario::Walk, &cfg, 3).unwrap();
+    let (cfg, sim) = stereo_walk(3);
     let dir = std::env::temp_dir().join(format!("tumble_stereo_{}", std::process::id()));
     tumble::sim::write_asl(&sim, &dir).unwrap();
     let opts = VioOptions { init: Init::Motion, ..VioOptions::for_simulation(&cfg) };
@@ -222,9 +228,7 @@ fn stereo_matches_initialize_the_slow_start() {
 /// vs 0.041 m without), which is why it is off by default.
 #[test]
 fn stereo_matches_in_the_window() {
-    let mut cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
-    cfg.camera.stereo_baseline_m = 0.11;
-    let sim = simulate(Scenario::Walk, &cfg, 3).unwrap();
+    let (cfg, sim) = stereo_walk(3);
     let input = VioInput::from_simulation(&sim).unwrap();
     let rows_and_ate = |stereo_window: bool| {
         let opts = VioOptions { stereo_window, ..VioOptions::for_simulation(&cfg) };
@@ -244,9 +248,7 @@ fn stereo_matches_in_the_window() {
 /// cam0 has no observation names its line; matches without cam1/ are refused.
 #[test]
 fn malformed_stereo_matches_name_file_and_line() {
-    let mut cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
-    cfg.camera.stereo_baseline_m = 0.11;
-    let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
+    let (_, sim) = stereo_walk(1);
     let dir = std::env::temp_dir().join(format!("tumble_stereo_bad_{}", std::process::id()));
     tumble::sim::write_asl(&sim, &dir).unwrap();
     let matches = dir.join("mav0/cam0/tracks_cam1.csv");

@@ -97,21 +97,9 @@ impl InverseDepthReprojection {
         let p_w = ra * p_ba + pa;
         let p_bj = rj.transpose() * (p_w - pj);
         let p_cj = self.r_bcj.transpose() * (p_bj - self.t_bcj);
-        let Some((uv, jp)) = self.camera.project_with_jacobian(&[p_cj.x, p_cj.y, p_cj.z]) else {
-            return Err(FactorError::Other(format!("landmark behind camera (depth {:.3} m)", p_cj.z)));
-        };
-        let residual = [uv[0] - self.measured[0], uv[1] - self.measured[1]];
-        if !residual.iter().all(|x| x.is_finite()) {
-            return Err(FactorError::NonFinite);
-        }
-        if !jac {
-            out.reshape(2, []);
-            out.residual.copy_from_slice(&residual);
+        let Some(jpi) = pixel_residual(&self.camera, &p_cj, self.measured, (jac, &[6, 6, 1]), out)? else {
             return Ok(());
-        }
-        out.reshape(2, [6, 6, 1]);
-        out.residual.copy_from_slice(&residual);
-        let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
+        };
         let rcb_rjt = self.r_bcj.transpose() * rj.transpose();
         let j_pw = jpi * rcb_rjt * ra;
         let [jxa, jxj, jl] = &mut out.jacobians[..] else { unreachable!("reshaped to three blocks") };
@@ -125,27 +113,58 @@ impl InverseDepthReprojection {
     }
 }
 
-impl Factor for InverseDepthReprojection {
-    fn keys(&self) -> &[Key] {
-        &self.keys
+/// Project `p_c` (camera frame \[m\]) and write `π(p_c) − measured` \[px\] into
+/// `out.residual`. With `jac`, `out` gets Jacobian blocks of `cols` columns
+/// for the caller to fill and the projection's Jacobian is returned to chain;
+/// without, `out` holds the residual alone and None is returned.
+fn pixel_residual(
+    camera: &CameraModel,
+    p_c: &Vector3<f64>,
+    measured: [f64; 2],
+    (jac, cols): (bool, &[usize]),
+    out: &mut Linearization,
+) -> Result<Option<Matrix2x3<f64>>, FactorError> {
+    let Some((uv, jp)) = camera.project_with_jacobian(&[p_c.x, p_c.y, p_c.z]) else {
+        return Err(FactorError::Other(format!("landmark behind camera (depth {:.3} m)", p_c.z)));
+    };
+    let residual = [uv[0] - measured[0], uv[1] - measured[1]];
+    if !residual.iter().all(|x| x.is_finite()) {
+        return Err(FactorError::NonFinite);
     }
-    fn residual_dim(&self) -> usize {
-        2
-    }
-    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
-        let mut out = Linearization::default();
-        self.evaluate(vars, false, &mut out)?;
-        Ok(out.residual)
-    }
-    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-        let mut out = Linearization::default();
-        self.evaluate(vars, true, &mut out)?;
-        Ok(out)
-    }
-    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
-        self.evaluate(vars, true, out)
-    }
+    out.reshape(2, if jac { cols } else { &[] }.iter().copied());
+    out.residual.copy_from_slice(&residual);
+    Ok(jac.then(|| Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]])))
 }
+
+/// [`Factor`] for a two-row pixel residual whose `evaluate(vars, jac, out)`
+/// writes the residual and, with `jac`, the Jacobians into `out`.
+macro_rules! pixel_factor {
+    ($t:ty) => {
+        impl Factor for $t {
+            fn keys(&self) -> &[Key] {
+                &self.keys
+            }
+            fn residual_dim(&self) -> usize {
+                2
+            }
+            fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+                let mut out = Linearization::default();
+                self.evaluate(vars, false, &mut out)?;
+                Ok(out.residual)
+            }
+            fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+                let mut out = Linearization::default();
+                self.evaluate(vars, true, &mut out)?;
+                Ok(out)
+            }
+            fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+                self.evaluate(vars, true, out)
+            }
+        }
+    };
+}
+
+pixel_factor!(InverseDepthReprojection);
 
 /// A landmark's anchor observation matched in a second camera at the same
 /// time (stereo): a factor on its inverse depth alone, `[ρ]` (`Vector1`).
@@ -206,45 +225,13 @@ impl StereoInverseDepth {
         let rho: &Vector1<f64> = vars.get(0)?;
         let inv = 1.0 / rho[0];
         let p_c1 = self.r_bc1.transpose() * (self.ray_b * inv + self.t_bc - self.t_bc1);
-        let Some((uv, jp)) = self.camera.project_with_jacobian(&[p_c1.x, p_c1.y, p_c1.z]) else {
-            return Err(FactorError::Other(format!("landmark behind the second camera (depth {:.3} m)", p_c1.z)));
-        };
-        let residual = [uv[0] - self.measured[0], uv[1] - self.measured[1]];
-        if !residual.iter().all(|x| x.is_finite()) {
-            return Err(FactorError::NonFinite);
-        }
-        if !jac {
-            out.reshape(2, []);
-            out.residual.copy_from_slice(&residual);
+        let Some(jpi) = pixel_residual(&self.camera, &p_c1, self.measured, (jac, &[1]), out)? else {
             return Ok(());
-        }
-        out.reshape(2, [1]);
-        out.residual.copy_from_slice(&residual);
-        let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
+        };
         let d_rho = jpi * self.r_bc1.transpose() * (-self.ray_b * (inv * inv));
         out.jacobians[0].copy_from_slice(d_rho.as_slice());
         Ok(())
     }
 }
 
-impl Factor for StereoInverseDepth {
-    fn keys(&self) -> &[Key] {
-        &self.keys
-    }
-    fn residual_dim(&self) -> usize {
-        2
-    }
-    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
-        let mut out = Linearization::default();
-        self.evaluate(vars, false, &mut out)?;
-        Ok(out.residual)
-    }
-    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-        let mut out = Linearization::default();
-        self.evaluate(vars, true, &mut out)?;
-        Ok(out)
-    }
-    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
-        self.evaluate(vars, true, out)
-    }
-}
+pixel_factor!(StereoInverseDepth);
