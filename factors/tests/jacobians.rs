@@ -43,6 +43,7 @@ fn snavely_autodiff_matches_numeric() {
     let cam = nalgebra::SVector::<f64, 9>::from_column_slice(&[0.01, -0.02, 0.03, 0.1, -0.2, -3.0, 500.0, -1e-3, 1e-6]);
     let pt = Vector3::new(0.5, -0.3, 1.0);
     assert_ok(&f, &[&cam, &pt]);
+    assert_linearize_into_matches(&f, &[&cam, &pt]);
     // Zero rotation: the first-order branch of the angle-axis rotation.
     let cam0 = nalgebra::SVector::<f64, 9>::from_column_slice(&[0.0, 0.0, 0.0, 0.1, -0.2, -3.0, 500.0, -1e-3, 1e-6]);
     assert_ok(&f, &[&cam0, &pt]);
