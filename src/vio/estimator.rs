@@ -116,7 +116,8 @@ struct Obs {
     sid: u64,
     uv: [f64; 2],
     xy: [f64; 2],
-    /// The second camera's match at the same time \[px\], when there is one.
+    /// The second camera's match at the same time \[px\], when there is one
+    /// and `VioOptions::stereo_window` puts it into the window.
     uv1: Option<[f64; 2]>,
 }
 
@@ -530,7 +531,7 @@ impl<'a> Estimator<'a> {
         if o.sid != anchor {
             out.push((Box::new(self.reprojection(anchor, o.sid, lid, anchor_xy, o.uv)), false));
         }
-        if let (Some(uv1), Some(st), true) = (o.uv1, &self.input.stereo, self.opts.stereo_window) {
+        if let (Some(uv1), Some(st)) = (o.uv1, &self.input.stereo) {
             let f: Box<dyn Factor> = if o.sid == anchor {
                 let second = (st.camera, &st.body_from_camera);
                 Box::new(StereoInverseDepth::new(L(lid), anchor_xy, uv1, second, &self.input.body_from_camera))
@@ -558,8 +559,7 @@ impl<'a> Estimator<'a> {
     fn triangulate_new(&mut self) {
         let (r_bc, t_bc) = parts(&self.input.body_from_camera);
         let min_angle = self.opts.min_triangulation_deg.to_radians();
-        let stereo =
-            self.input.stereo.as_ref().filter(|_| self.opts.stereo_window).map(|st| (st, parts(&st.body_from_camera)));
+        let stereo = self.input.stereo.as_ref().map(|st| (st, parts(&st.body_from_camera)));
         // Per state: the first camera's pose in the world, and the second's.
         let mut poses: HashMap<u64, (Matrix3<f64>, Vector3<f64>)> = HashMap::new();
         let mut poses1: HashMap<u64, (Matrix3<f64>, Vector3<f64>)> = HashMap::new();
@@ -1079,12 +1079,13 @@ impl<'a> Estimator<'a> {
     /// Add frame `index`'s observations (undistorted `obs` by track) to the newest state.
     fn add_observations(&mut self, index: usize, obs: &HashMap<u64, [f64; 2]>) {
         let sid = self.states.last().expect("state").sid;
-        // The second camera's matches in this frame that it can undistort.
-        let stereo: HashMap<u64, [f64; 2]> = match &self.input.stereo {
-            Some(st) => {
+        // The second camera's matches in this frame that it can undistort,
+        // when they go into the window (`stereo_window`).
+        let stereo: HashMap<u64, [f64; 2]> = match (&self.input.stereo, self.opts.stereo_window) {
+            (Some(st), true) => {
                 st.features[index].iter().filter(|(_, uv)| st.camera.unproject(*uv).is_some()).copied().collect()
             }
-            None => HashMap::new(),
+            _ => HashMap::new(),
         };
         let (r_bc, t_bc) = parts(&self.input.body_from_camera);
         let (rj, pj) = parts(self.values.get::<Isometry3F64>(X(sid)).expect("newest state"));
