@@ -968,7 +968,6 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 &frontend,
                 &out,
             )?;
-            vin.check()?;
             if let (Some(st), Some(baseline)) = (&vin.stereo, vin.stereo_baseline_m()) {
                 let matches: usize = st.features.iter().map(Vec::len).sum();
                 println!(

@@ -209,18 +209,16 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
         let rot = UnitQuaternion::from_matrix(&k.rotation);
         let w_t_b = Isometry3::from_parts(Translation3::from(k.position), rot);
         let c_t_w = (w_t_b * b_t_c).inverse();
-        let mut visible: Vec<(usize, [f64; 2])> = Vec::new();
-        for (j, l) in landmarks.iter().enumerate() {
-            let pc = c_t_w * Point3::from(*l);
-            if pc.z < 0.2 {
-                continue;
-            }
-            if let Some(uv) = model.project(&[pc.x, pc.y, pc.z]) {
-                if uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h {
-                    visible.push((j, uv));
-                }
-            }
-        }
+        // The pixel where a point in a camera's frame is seen, if it is.
+        let pixel = |pc: Point3<f64>| {
+            let uv = if pc.z < 0.2 { None } else { model.project(&[pc.x, pc.y, pc.z]) }?;
+            (uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h).then_some(uv)
+        };
+        let visible: Vec<(usize, [f64; 2])> = landmarks
+            .iter()
+            .enumerate()
+            .filter_map(|(j, l)| pixel(c_t_w * Point3::from(*l)).map(|uv| (j, uv)))
+            .collect();
         // Tracked features first, then new ones in random order, up to the cap.
         let (mut kept, mut fresh): (Vec<_>, Vec<_>) = visible.into_iter().partition(|(j, _)| track_of[*j].is_some());
         for i in (1..fresh.len()).rev() {
@@ -251,9 +249,7 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
             };
             observations.push(Observation { t, track, landmark: j, uv, outlier });
             if s.stereo_baseline_m > 0.0 {
-                let pc1 = c1_t_c * c_t_w * Point3::from(landmarks[j]);
-                let seen1 = if pc1.z < 0.2 { None } else { model.project(&[pc1.x, pc1.y, pc1.z]) };
-                if let Some(uv1) = seen1.filter(|uv| uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h) {
+                if let Some(uv1) = pixel(c1_t_c * c_t_w * Point3::from(landmarks[j])) {
                     let nu: f64 = StandardNormal.sample(&mut stereo_rng);
                     let nv: f64 = StandardNormal.sample(&mut stereo_rng);
                     let uv = [uv1[0] + s.pixel_noise_px * nu, uv1[1] + s.pixel_noise_px * nv];

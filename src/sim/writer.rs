@@ -223,21 +223,23 @@ fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
             frames.push_str(&format!("{0},{0}.png\n", ns(t)));
         }
         write_text(&cam.join("data.csv"), &frames)?;
-        let mut tracks = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
+        // A tracks file (full precision, unlike the frontend's `write_tracks`).
+        let tracks = |obs: &[super::camera::Observation]| {
+            let mut text = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
+            for o in obs {
+                text.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
+            }
+            text
+        };
         let mut truth_obs = String::from("#timestamp [ns],track_id,landmark_id,outlier\n");
         for o in &tr.observations {
-            tracks.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
             truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
         }
-        write_text(&cam.join("tracks.csv"), &tracks)?;
+        write_text(&cam.join("tracks.csv"), &tracks(&tr.observations))?;
         if sim.config.camera.stereo_baseline_m > 0.0 {
             // The second camera's matches beside cam0's tracks, as `tumble
             // track --stereo` writes them, and its sensor.yaml in cam1/.
-            let mut stereo = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
-            for o in &tr.stereo {
-                stereo.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
-            }
-            write_text(&cam.join("tracks_cam1.csv"), &stereo)?;
+            write_text(&cam.join("tracks_cam1.csv"), &tracks(&tr.stereo))?;
             let cam1 = mav0.join("cam1");
             write_text(&cam1.join("sensor.yaml"), &camera_yaml(sim, true))?;
             write_text(&cam1.join("data.csv"), &frames)?;
