@@ -149,25 +149,10 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
     let hss = h.view((nm, nm), (n - nm, n - nm)).into_owned();
     let gm = g.rows(0, nm).into_owned();
     let gs = g.rows(nm, n - nm).into_owned();
-    // Pseudo-inverse of H_mm through its eigen-decomposition (robust to gauge freedom).
-    let eig = nalgebra::SymmetricEigen::new((&hmm + hmm.transpose()) * 0.5);
-    let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
-    let inv_vals = eig.eigenvalues.map(|l| if l > PRIOR_RANK_TOLERANCE * lmax { 1.0 / l } else { 0.0 });
-    let hmm_inv = &eig.eigenvectors * DMatrix::from_diagonal(&inv_vals) * eig.eigenvectors.transpose();
+    let hmm_inv = ScaledEigen::new(&hmm, "information of the marginalized variables")?.pseudo_inverse(nm);
     let hstar = &hss - hms.transpose() * &hmm_inv * &hms;
     let gstar = &gs - hms.transpose() * &hmm_inv * &gm;
-    let eig = nalgebra::SymmetricEigen::new((&hstar + hstar.transpose()) * 0.5);
-    let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
-    let kept: Vec<usize> =
-        (0..eig.eigenvalues.len()).filter(|&i| eig.eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
-    let mut r = DMatrix::zeros(kept.len(), n - nm);
-    let mut e = DVector::zeros(kept.len());
-    for (row, &i) in kept.iter().enumerate() {
-        let l = eig.eigenvalues[i];
-        let v = eig.eigenvectors.column(i);
-        r.row_mut(row).copy_from(&(v.transpose() * l.sqrt()));
-        e[row] = v.dot(&gstar) / l.sqrt();
-    }
+    let (r, e) = ScaledEigen::new(&hstar, "marginal information")?.sqrt_with_offset(n - nm, &gstar);
     let sep_keys: Vec<Key> = order[keys.len()..].to_vec();
     let anchors = sep_keys.iter().map(|k| values.get_dyn(*k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
     Ok(Marginalization {
@@ -180,6 +165,73 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
         },
         removed_factors: removed,
     })
+}
+
+/// The eigen-decomposition of the symmetric positive semi-definite `h` (an
+/// information matrix) scaled to a unit diagonal (Jacobi): `h = S⁻¹ V Λ Vᵀ S⁻¹`
+/// on its rows with a positive diagonal (`live`, with `scale` = S = diag^-½);
+/// rows with a zero diagonal (variables no factor constrains) are left out.
+/// Without the scaling, information spanning ten orders of magnitude (a gyro
+/// bias next to an unobserved landmark) could make the decomposition return
+/// NaN, and a prior silently lost every row.
+struct ScaledEigen {
+    live: Vec<usize>,
+    scale: Vec<f64>,
+    eig: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+    /// Indices of the eigenvalues above [`PRIOR_RANK_TOLERANCE`] × the largest.
+    kept: Vec<usize>,
+}
+
+impl ScaledEigen {
+    fn new(h: &DMatrix<f64>, what: &str) -> Result<ScaledEigen, SolveError> {
+        if !h.iter().all(|x| x.is_finite()) {
+            return Err(SolveError::Singular(format!("the {what} is not finite")));
+        }
+        let live: Vec<usize> = (0..h.nrows()).filter(|&i| h[(i, i)] > 0.0).collect();
+        let scale: Vec<f64> = live.iter().map(|&i| 1.0 / h[(i, i)].sqrt()).collect();
+        let m = live.len();
+        let a =
+            DMatrix::from_fn(m, m, |r, c| 0.5 * (h[(live[r], live[c])] + h[(live[c], live[r])]) * scale[r] * scale[c]);
+        let eig = nalgebra::SymmetricEigen::new(a);
+        if !eig.eigenvalues.iter().chain(eig.eigenvectors.iter()).all(|x| x.is_finite()) {
+            return Err(SolveError::Singular(format!("the eigen-decomposition of the {what} failed")));
+        }
+        let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
+        let kept = (0..m).filter(|&i| eig.eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
+        Ok(ScaledEigen { live, scale, eig, kept })
+    }
+
+    /// The pseudo-inverse of `h` (n × n): zero on the left-out rows.
+    fn pseudo_inverse(&self, n: usize) -> DMatrix<f64> {
+        let mut inv = DMatrix::zeros(n, n);
+        for &k in &self.kept {
+            let v = self.eig.eigenvectors.column(k);
+            let l = self.eig.eigenvalues[k];
+            for (r, &i) in self.live.iter().enumerate() {
+                let vi = v[r] * self.scale[r] / l;
+                for (c, &j) in self.live.iter().enumerate() {
+                    inv[(i, j)] += vi * v[c] * self.scale[c];
+                }
+            }
+        }
+        inv
+    }
+
+    /// A square root `R` of `h` (rank × n, RᵀR = h on the kept eigenvalues)
+    /// and the offset `e` with Rᵀe = `g` (the gradient) on the same subspace.
+    fn sqrt_with_offset(&self, n: usize, g: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
+        let mut r = DMatrix::zeros(self.kept.len(), n);
+        let mut e = DVector::zeros(self.kept.len());
+        for (row, &k) in self.kept.iter().enumerate() {
+            let v = self.eig.eigenvectors.column(k);
+            let l = self.eig.eigenvalues[k].sqrt();
+            for (c, &j) in self.live.iter().enumerate() {
+                r[(row, j)] = l * v[c] / self.scale[c];
+                e[row] += v[c] * self.scale[c] * g[j] / l;
+            }
+        }
+        (r, e)
+    }
 }
 
 /// Marginal covariances of chosen variables at a solution, in their tangent spaces.
