@@ -2,7 +2,8 @@
 //! sliding-window estimator on it and print drift, ATE and bias errors.
 //!
 //! `cargo run --example vio_sim -- [--duration S] [--seed N]
-//! [--keyframe-parallax PX] [--keyframe-interval S] [--out DIR]`
+//! [--keyframe-parallax PX] [--keyframe-interval S] [--window N]
+//! [--max-iterations N] [--out DIR]`
 //!
 //! The IMU is corrected with the simulation's true calibration (what a
 //! perfect `tumble calibrate` would give); the pixel noise is the simulator's.
@@ -35,6 +36,8 @@ fn main() {
     let mut opts = VioOptions::for_simulation(&cfg);
     opts.keyframe_parallax_px = flag(&args, "--keyframe-parallax", opts.keyframe_parallax_px);
     opts.keyframe_max_interval_s = flag(&args, "--keyframe-interval", opts.keyframe_max_interval_s);
+    opts.window = flag(&args, "--window", opts.window);
+    opts.max_iterations = flag(&args, "--max-iterations", opts.max_iterations);
     let out = run(&input, &opts, None).expect("vio");
     let s = summarize(&input, &opts, &out, 20.0);
     println!("{}", s.table());

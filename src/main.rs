@@ -441,10 +441,10 @@ enum Command {
         /// Keyframes in the window.
         #[arg(long, default_value_t = 10)]
         window: usize,
-        /// Mean feature parallax to the last keyframe (rotation taken out) that
+        /// Median feature parallax to the last keyframe (rotation taken out) that
         /// makes a frame a keyframe [px]; larger values stretch the window over
         /// more time.
-        #[arg(long, default_value_t = 20.0)]
+        #[arg(long, default_value_t = 15.0)]
         keyframe_parallax: f64,
         /// Longest time between keyframes [s].
         #[arg(long, default_value_t = 1.0)]

@@ -844,21 +844,27 @@ impl<'a> Estimator<'a> {
         let obs = self.frame_obs(index);
         // Keyframe and zero-velocity decisions from the feature motion.
         let fx = self.input.camera.fx;
-        // Parallax with the rotation (IMU-predicted) taken out: only translation triangulates.
+        // Parallax with the rotation (IMU-predicted) taken out: only translation
+        // triangulates. The median, not the mean: a few landmarks close to the
+        // camera would otherwise make every frame a keyframe while it turns slowly.
         let (r_bc, _) = parts(&self.input.body_from_camera);
         let parallax = |a: &HashMap<u64, [f64; 2]>, r_then: &Matrix3<f64>| -> (f64, usize) {
             let rel = (r_then * r_bc).transpose() * (rj * r_bc);
-            let (mut s, mut n) = (0.0, 0);
+            let mut d = Vec::with_capacity(obs.len());
             for (id, xy) in &obs {
                 if let Some(q) = a.get(id) {
                     let f = rel.transpose() * Vector3::new(q[0], q[1], 1.0);
                     if f.z > 1e-6 {
-                        s += ((xy[0] - f.x / f.z).powi(2) + (xy[1] - f.y / f.z).powi(2)).sqrt() * fx;
-                        n += 1;
+                        d.push(((xy[0] - f.x / f.z).powi(2) + (xy[1] - f.y / f.z).powi(2)).sqrt() * fx);
                     }
                 }
             }
-            (if n > 0 { s / n as f64 } else { f64::INFINITY }, n)
+            let n = d.len();
+            if n == 0 {
+                return (f64::INFINITY, 0);
+            }
+            let (_, median, _) = d.select_nth_unstable_by(n / 2, f64::total_cmp);
+            (*median, n)
         };
         let (par_kf, common_kf) = parallax(&self.last_keyframe_obs, &ri);
         let (par_prev, common_prev) = parallax(&self.prev_frame_obs, &self.prev_frame_rotation);

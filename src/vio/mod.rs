@@ -89,7 +89,7 @@ pub enum Init {
 pub struct VioOptions {
     /// Keyframes kept in the window (VINS-Mono: 10).
     pub window: usize,
-    /// Mean feature parallax to the last keyframe that makes a keyframe \[px\].
+    /// Median feature parallax (rotation taken out) to the last keyframe that makes a keyframe \[px\].
     pub keyframe_parallax_px: f64,
     /// Longest time between keyframes \[s\].
     pub keyframe_max_interval_s: f64,
@@ -146,7 +146,7 @@ impl Default for VioOptions {
     fn default() -> Self {
         VioOptions {
             window: 10,
-            keyframe_parallax_px: 20.0,
+            keyframe_parallax_px: 15.0,
             keyframe_max_interval_s: 1.0,
             pixel_sigma: 1.0,
             huber: 5.99f64.sqrt(),
