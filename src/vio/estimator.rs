@@ -594,18 +594,23 @@ impl<'a> Estimator<'a> {
             if angle < min_angle {
                 continue;
             }
-            // In front of every camera, and not absurdly far.
+            // The landmark as the window will hold it: on the anchor's ray at
+            // the triangulated depth (not the rays' midpoint `pw`, which can
+            // lie on the other side of a camera when the rays nearly agree).
+            let anchor = tr.obs[0].sid;
+            let (rc, pc) = poses[&anchor];
+            let z = (rc.transpose() * (pw - pc)).z;
+            let on_ray = pc + rc * Vector3::new(tr.obs[0].xy[0], tr.obs[0].xy[1], 1.0) * z;
+            // In front of every camera that sees it, and not absurdly far.
             let ok = tr.obs.iter().all(|o| {
-                let (rc, pc) = poses[&o.sid];
-                let z = (rc.transpose() * (pw - pc)).z;
-                z > 0.1 && z < 200.0
+                let depth = |(rc, pc): &(Matrix3<f64>, Vector3<f64>)| (rc.transpose() * (on_ray - pc)).z;
+                let in_front = |d: f64| d > 0.1 && d < 200.0;
+                in_front(depth(&poses[&o.sid]))
+                    && (o.uv1.is_none() || poses1.get(&o.sid).is_none_or(|p| in_front(depth(p))))
             });
             if !ok {
                 continue;
             }
-            let anchor = tr.obs[0].sid;
-            let (rc, pc) = poses[&anchor];
-            let z = (rc.transpose() * (pw - pc)).z;
             let lid = self.next_lid;
             self.next_lid += 1;
             self.values.insert(L(lid), Vector1::new(1.0 / z));
@@ -1098,13 +1103,22 @@ impl<'a> Estimator<'a> {
         for (id, uv) in &self.input.frames[index].features {
             let Some(&xy) = obs.get(id) else { continue };
             let tr = self.tracks.entry(*id).or_default();
-            // A landmark the predicted pose would see behind the camera: skip the observation.
+            // A landmark the predicted pose would see behind the camera, or far
+            // from where it is seen: skip the observation.
             if tr.landmark.is_some() {
                 let Some(pw) = landmark_world(&self.values, &self.input.body_from_camera, tr) else {
                     continue;
                 };
-                if (r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc)).z < 0.05 {
+                let pc = r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc);
+                if pc.z < 0.05 {
                     continue;
+                }
+                // Far from where the predicted pose sees it: a gross outlier,
+                // kept out of the solve rather than only down-weighted there.
+                let gate = self.opts.prediction_gate_px;
+                match self.input.camera.project(&[pc.x, pc.y, pc.z]) {
+                    Some(p) if (p[0] - uv[0]).hypot(p[1] - uv[1]) <= gate => {}
+                    _ => continue,
                 }
             }
             let uv1 = stereo.get(id).copied();

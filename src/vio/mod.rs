@@ -100,6 +100,11 @@ pub struct VioOptions {
     pub huber: f64,
     /// Observations whose error exceeds this after a solve are dropped \[σ\].
     pub outlier_sigmas: f64,
+    /// A new observation of a triangulated landmark farther than this from
+    /// where the IMU-predicted pose projects it is left out before the solve
+    /// (a gross outlier: after the solve, [`VioOptions::outlier_sigmas`]
+    /// judges the rest) \[px\].
+    pub prediction_gate_px: f64,
     /// Smallest angle between the rays of a landmark to triangulate it \[deg\].
     pub min_triangulation_deg: f64,
     /// IMU noise (continuous time) and integration rule.
@@ -151,6 +156,7 @@ impl Default for VioOptions {
             pixel_sigma: 1.0,
             huber: 5.99f64.sqrt(),
             outlier_sigmas: 8.0,
+            prediction_gate_px: 30.0,
             min_triangulation_deg: 1.0,
             imu: PreintegrationParams { scheme: Scheme::ZeroOrderHold, ..PreintegrationParams::default() },
             gravity: 9.81,
