@@ -4,22 +4,33 @@
 mod common;
 
 use tumble::sim::{simulate, Scenario, SimConfig};
-use tumble::vio::{read_eqvio, run, summarize, Init, VioInput, VioOptions};
+use tumble::vio::{read_eqvio, run, summarize, Init, Summary, VioInput, VioOptions, VioResult};
+
+fn simulated(scenario: Scenario, duration: f64, seed: u64) -> (VioInput, VioOptions) {
+    let cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
+    let sim = simulate(scenario, &cfg, seed).unwrap();
+    (VioInput::from_simulation(&sim).unwrap(), VioOptions::for_simulation(&cfg))
+}
 
 fn walk(duration: f64, seed: u64) -> (VioInput, VioOptions) {
-    let cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
-    let sim = simulate(Scenario::Walk, &cfg, seed).unwrap();
-    (VioInput::from_simulation(&sim).unwrap(), VioOptions::for_simulation(&cfg))
+    simulated(Scenario::Walk, duration, seed)
+}
+
+/// Run the estimator, print its summary (bias errors from `bias_after` s) and
+/// check that it never reset.
+fn run_without_resets(input: &VioInput, opts: &VioOptions, bias_after: f64) -> (VioResult, Summary) {
+    let out = run(input, opts, None).unwrap();
+    let s = summarize(input, opts, &out, bias_after);
+    println!("{}", s.table());
+    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    (out, s)
 }
 
 #[test]
 fn simulated_walk_closes_the_loop_far_better_than_the_imu_alone() {
     let (input, opts) = walk(120.0, 3);
-    let out = run(&input, &opts, None).unwrap();
-    let s = summarize(&input, &opts, &out, 30.0);
-    println!("{}", s.table());
+    let (out, s) = run_without_resets(&input, &opts, 30.0);
     assert_eq!(s.returns_to_start, Some(true));
-    assert_eq!(out.resets, 0, "{:?}", out.warnings);
     // Fused drift: a small fraction of the distance walked (0.19 % here; 0.73 %
     // with the window solved at every frame and keyframes by mean parallax,
     // 1.4 % with keyframes every 10 px / 0.5 s as well); IMU-only: orders of
@@ -51,10 +62,7 @@ fn simulated_walk_closes_the_loop_far_better_than_the_imu_alone() {
 #[test]
 fn a_window_with_an_unconstrained_landmark_keeps_its_prior() {
     let (input, opts) = walk(120.0, 12);
-    let out = run(&input, &opts, None).unwrap();
-    let s = summarize(&input, &opts, &out, 30.0);
-    println!("{}", s.table());
-    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    let (_, s) = run_without_resets(&input, &opts, 30.0);
     // 0.59 % and ATE 0.041 m now (the worst of the twelve 2-minute walks);
     // 20.7 % and 2.2 m with the prior lost.
     assert!(s.closed_loop_percent() < 1.0, "{} %", s.closed_loop_percent());
@@ -68,14 +76,8 @@ fn a_window_with_an_unconstrained_landmark_keeps_its_prior() {
 /// three times (ATE 0.44 m).
 #[test]
 fn a_fast_flight_triangulates_only_landmarks_in_front_of_every_camera() {
-    let cfg = SimConfig { duration_s: Some(30.0), ..SimConfig::default() };
-    let sim = simulate(Scenario::Flight, &cfg, 11).unwrap();
-    let input = VioInput::from_simulation(&sim).unwrap();
-    let opts = VioOptions::for_simulation(&cfg);
-    let out = run(&input, &opts, None).unwrap();
-    let s = summarize(&input, &opts, &out, 10.0);
-    println!("{}", s.table());
-    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    let (input, opts) = simulated(Scenario::Flight, 30.0, 11);
+    let (_, s) = run_without_resets(&input, &opts, 10.0);
     assert!(s.ate_rmse_m.unwrap() < 0.1, "ATE {:?}", s.ate_rmse_m);
 }
 
@@ -90,10 +92,7 @@ fn real_euroc_v1_01_with_eqvio_tracks() {
     assert_eq!(input.imu.t.len(), 6001);
     assert_eq!(input.frames.len(), 601);
     let opts = VioOptions { pixel_sigma: 1.93, ..VioOptions::default() };
-    let out = run(&input, &opts, None).unwrap();
-    let s = summarize(&input, &opts, &out, 10.0);
-    println!("{}", s.table());
-    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    let (out, s) = run_without_resets(&input, &opts, 10.0);
     assert!(s.ate_rmse_m.unwrap() < 0.15, "ATE {:?}", s.ate_rmse_m);
     assert!(s.bias_rmse_gyro.unwrap() < 0.005, "{:?}", s.bias_rmse_gyro);
     assert!(s.bias_rmse_accel.unwrap() < 0.2, "{:?}", s.bias_rmse_accel);
@@ -177,11 +176,8 @@ fn a_static_start_refuses_a_moving_recording_with_advice() {
 fn a_start_in_motion_is_initialized_by_the_closed_form() {
     let (input, opts) = walk_started_in_motion(60.0, 8, 6.0);
     assert_eq!(opts.init, Init::Auto);
-    let out = run(&input, &opts, None).unwrap();
-    let s = summarize(&input, &opts, &out, 20.0);
-    println!("{}", s.table());
+    let (out, s) = run_without_resets(&input, &opts, 20.0);
     assert!(out.warnings.iter().any(|w| w.contains("initialized in motion")), "{:?}", out.warnings);
-    assert_eq!(out.resets, 0, "{:?}", out.warnings);
     // The first state against the truth: speed and tilt (yaw is the gauge).
     let gt = input.groundtruth.as_ref().unwrap();
     let first = &out.estimates[0];
