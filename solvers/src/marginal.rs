@@ -79,7 +79,9 @@ pub struct Marginalization {
     pub removed_factors: Vec<usize>,
 }
 
-/// Eigenvalues below this (relative to the largest) are dropped from the prior.
+/// Eigenvalues below this (relative to the largest) are dropped from the prior
+/// and from the pseudo-inverse of the marginalized block; both eigen-decompositions
+/// are of the information scaled to a unit diagonal (see `ScaledEigen`).
 pub const PRIOR_RANK_TOLERANCE: f64 = 1e-10;
 
 /// Marginalize `keys` out of `graph` at `values`: the factors touching them are

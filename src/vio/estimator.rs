@@ -602,12 +602,14 @@ impl<'a> Estimator<'a> {
             let z = (rc.transpose() * (pw - pc)).z;
             let on_ray = pc + rc * Vector3::new(tr.obs[0].xy[0], tr.obs[0].xy[1], 1.0) * z;
             // In front of every camera that sees it, and not absurdly far.
-            let ok = tr.obs.iter().all(|o| {
-                let depth = |(rc, pc): &(Matrix3<f64>, Vector3<f64>)| (rc.transpose() * (on_ray - pc)).z;
-                let in_front = |d: f64| d > 0.1 && d < 200.0;
-                in_front(depth(&poses[&o.sid]))
-                    && (o.uv1.is_none() || poses1.get(&o.sid).is_none_or(|p| in_front(depth(p))))
-            });
+            let in_front = |(rc, pc): &(Matrix3<f64>, Vector3<f64>)| {
+                let depth = (rc.transpose() * (on_ray - pc)).z;
+                depth > 0.1 && depth < 200.0
+            };
+            let ok = tr
+                .obs
+                .iter()
+                .all(|o| in_front(&poses[&o.sid]) && (o.uv1.is_none() || poses1.get(&o.sid).is_none_or(in_front)));
             if !ok {
                 continue;
             }
