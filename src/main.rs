@@ -452,6 +452,15 @@ enum Command {
         /// Feature observation noise [px].
         #[arg(long, default_value_t = 1.0)]
         pixel_sigma: f64,
+        /// A new observation of a landmark farther than this from where the
+        /// IMU-predicted pose projects it stays out of the solve [px].
+        #[arg(long, default_value_t = 30.0)]
+        prediction_gate: f64,
+        /// A track is triangulated only when its observations agree with the
+        /// triangulated point within this; the worst one leaves the track
+        /// otherwise [px].
+        #[arg(long, default_value_t = 12.0)]
+        triangulation_gate: f64,
         /// Solve the whole window at every frame (VINS-Mono's way; several
         /// times slower) instead of at keyframes only, with the frames in
         /// between tracked against the fixed window.
@@ -915,6 +924,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             keyframe_parallax,
             keyframe_interval,
             pixel_sigma,
+            prediction_gate,
+            triangulation_gate,
             solve_every_frame,
             midpoint,
             gravity,
@@ -934,6 +945,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             for (v, name, unit) in [
                 (keyframe_parallax, "--keyframe-parallax", "pixels"),
                 (keyframe_interval, "--keyframe-interval", "seconds"),
+                (prediction_gate, "--prediction-gate", "pixels"),
+                (triangulation_gate, "--triangulation-gate", "pixels"),
             ] {
                 if !(v.is_finite() && v > 0.0) {
                     return Err(format!("{name} must be a positive number of {unit}, got {v}").into());
@@ -945,6 +958,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                 keyframe_parallax_px: keyframe_parallax,
                 keyframe_max_interval_s: keyframe_interval,
                 pixel_sigma,
+                prediction_gate_px: prediction_gate,
+                triangulation_gate_px: triangulation_gate,
                 gravity,
                 noise_from_static,
                 solve_window_every_frame: solve_every_frame,

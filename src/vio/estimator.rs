@@ -3,10 +3,11 @@
 
 use super::geometry::{gravity_aligned, parts, pose, preintegrate, triangulate};
 use super::{Init, VioInput, VioOptions};
-use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector1, Vector3, Vector6};
+use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector1, Vector2, Vector3, Vector6};
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 use std::time::Instant;
+use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::Preintegrated;
 use tumble_factors::reprojection::StereoInverseDepth;
 use tumble_factors::{bias_random_walk, ImuFactor, InverseDepthReprojection, PriorFactor};
@@ -206,6 +207,37 @@ pub struct Estimator<'a> {
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
+}
+
+/// One camera ray of a track: the camera's rotation (world ← camera) and
+/// centre in the world, the normalized image point, and which observation
+/// (index in the track, second camera or not) it comes from.
+struct Ray {
+    rotation: Matrix3<f64>,
+    centre: Vector3<f64>,
+    xy: Vector2<f64>,
+    obs: usize,
+    stereo: bool,
+}
+
+/// The rays of a track's observations in both cameras, from the cameras'
+/// poses per state (`poses`, `poses1`: world ← camera rotation and centre).
+fn rays(
+    tr: &Track,
+    poses: &HashMap<u64, (Matrix3<f64>, Vector3<f64>)>,
+    poses1: &HashMap<u64, (Matrix3<f64>, Vector3<f64>)>,
+    stereo_camera: Option<&CameraModel>,
+) -> Vec<Ray> {
+    let mut out = Vec::with_capacity(tr.obs.len());
+    for (k, o) in tr.obs.iter().enumerate() {
+        let (rotation, centre) = poses[&o.sid];
+        out.push(Ray { rotation, centre, xy: o.xy.into(), obs: k, stereo: false });
+        let xy1 = stereo_camera.zip(o.uv1).and_then(|(cam, uv1)| cam.unproject(uv1));
+        if let (Some(xy1), Some(&(rotation, centre))) = (xy1, poses1.get(&o.sid)) {
+            out.push(Ray { rotation, centre, xy: xy1.into(), obs: k, stereo: true });
+        }
+    }
+    out
 }
 
 /// A track's landmark in the world frame \[m\]: its anchor observation's ray
@@ -571,26 +603,49 @@ impl<'a> Estimator<'a> {
                 poses1.insert(s.sid, (r * r_bc1, r * t_bc1 + p));
             }
         }
+        // The gate in normalized image coordinates.
+        let limit = self.opts.triangulation_gate_px / self.input.camera.fx;
         for tr in self.tracks.values_mut() {
             if tr.landmark.is_some() {
                 continue;
             }
-            // Rays of both cameras: a stereo match triangulates a track seen once.
-            let (mut c, mut d) = (Vec::new(), Vec::new());
-            for o in &tr.obs {
-                let (rc, pc) = poses[&o.sid];
-                c.push(pc);
-                d.push((rc * Vector3::new(o.xy[0], o.xy[1], 1.0)).normalize());
-                let xy1 = stereo.as_ref().zip(o.uv1).and_then(|((st, _), uv1)| st.camera.unproject(uv1));
-                if let (Some(xy1), Some((rc1, pc1))) = (xy1, poses1.get(&o.sid)) {
-                    c.push(*pc1);
-                    d.push((rc1 * Vector3::new(xy1[0], xy1[1], 1.0)).normalize());
+            // An observation that does not agree with the others (a gross
+            // outlier) leaves the track before it is triangulated, so that it
+            // never pulls the solve: the worst one while more than two rays
+            // remain (a ray the point lies behind disagrees too). Two rays
+            // that disagree cannot say which is wrong: the track waits for its
+            // next observation.
+            let agreed = loop {
+                let rays = rays(tr, &poses, &poses1, stereo.as_ref().map(|(st, _)| &st.camera));
+                if rays.len() < 2 {
+                    break None;
                 }
-            }
-            if c.len() < 2 {
-                continue;
-            }
-            let Some((pw, angle)) = triangulate(&c, &d) else { continue };
+                let c: Vec<_> = rays.iter().map(|r| r.centre).collect();
+                let d: Vec<_> = rays.iter().map(|r| (r.rotation * r.xy.push(1.0)).normalize()).collect();
+                let Some((pw, angle)) = triangulate(&c, &d) else { break None };
+                let error = |r: &Ray| {
+                    let q = r.rotation.transpose() * (pw - r.centre);
+                    if q.z <= 0.0 {
+                        f64::INFINITY
+                    } else {
+                        (q.xy() / q.z - r.xy).norm()
+                    }
+                };
+                let (worst, e) = rays.iter().map(error).enumerate().max_by(|a, b| a.1.total_cmp(&b.1)).expect("rays");
+                if e <= limit {
+                    break Some((pw, angle));
+                }
+                if rays.len() == 2 {
+                    break None;
+                }
+                let (k, second) = (rays[worst].obs, rays[worst].stereo);
+                if second {
+                    tr.obs[k].uv1 = None;
+                } else {
+                    tr.obs.remove(k);
+                }
+            };
+            let Some((pw, angle)) = agreed else { continue };
             if angle < min_angle {
                 continue;
             }

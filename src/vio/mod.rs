@@ -105,6 +105,13 @@ pub struct VioOptions {
     /// (a gross outlier: after the solve, [`VioOptions::outlier_sigmas`]
     /// judges the rest) \[px\].
     pub prediction_gate_px: f64,
+    /// A track is triangulated only when every observation lies within this
+    /// of where the triangulated point projects \[px\]. Otherwise, with three
+    /// rays or more, the worst observation (a gross outlier) leaves the track
+    /// and the rest is tried again; with two, triangulation waits for the
+    /// next observation. An outlier that entered a new landmark used to pull
+    /// the whole keyframe solve by up to 2° before it was dropped.
+    pub triangulation_gate_px: f64,
     /// Smallest angle between the rays of a landmark to triangulate it \[deg\].
     pub min_triangulation_deg: f64,
     /// IMU noise (continuous time) and integration rule.
@@ -157,6 +164,7 @@ impl Default for VioOptions {
             huber: 5.99f64.sqrt(),
             outlier_sigmas: 8.0,
             prediction_gate_px: 30.0,
+            triangulation_gate_px: 12.0,
             min_triangulation_deg: 1.0,
             imu: PreintegrationParams { scheme: Scheme::ZeroOrderHold, ..PreintegrationParams::default() },
             gravity: 9.81,
