@@ -1,9 +1,13 @@
 //! The camera model of Bundle Adjustment in the Large (Agarwal et al. 2010).
 
-use tumble_solvers::{AutoDiffResidual, Key, Real};
+use nalgebra::{DVector, Matrix2x3, Matrix3, Vector3};
+use tumble_solvers::lie::{hat, so3_exp, so3_right_jacobian};
+use tumble_solvers::{AutoDiffResidual, Factor, FactorError, Key, Linearization, Real, Vars};
 
-/// Reprojection of a 3D point into a BAL camera, written generically and
-/// differentiated automatically (wrap it in [`tumble_solvers::AutoDiff`] with `N = 12`).
+/// Reprojection of a 3D point into a BAL camera. As a [`Factor`] it has
+/// analytic Jacobians; its residual is also written generically, so that
+/// [`tumble_solvers::AutoDiff`] (with `N = 12`) differentiates it
+/// automatically — the tests check one against the other.
 ///
 /// Camera (R^9): angle-axis rotation `w` \[rad\], translation `t`, focal length `f`
 /// \[px\], radial distortion `k1`, `k2`. Point (R^3) in world coordinates.
@@ -19,6 +23,70 @@ impl SnavelyReprojection {
     /// (BAL convention: origin at the image center, y up).
     pub fn new(camera: Key, point: Key, observed: [f64; 2]) -> Self {
         SnavelyReprojection { keys: [camera, point], observed }
+    }
+}
+
+/// The camera (R^9) and point (R^3) variables of a BAL factor.
+fn camera_and_point<'a>(vars: &Vars<'a>) -> Result<(&'a nalgebra::SVector<f64, 9>, &'a Vector3<f64>), FactorError> {
+    Ok((vars.get(0)?, vars.get(1)?))
+}
+
+impl Factor for SnavelyReprojection {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
+        let (cam, x) = camera_and_point(&vars)?;
+        Ok(DVector::from_vec(AutoDiffResidual::residual(self, &[cam.as_slice(), x.as_slice()])))
+    }
+    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
+        let mut out = Linearization::default();
+        self.linearize_into(vars, &mut out)?;
+        Ok(out)
+    }
+    /// With `P = R(w) X + t`: `∂P/∂w = −R [X]× Jr(w)` (Jr the SO(3) right
+    /// Jacobian; `−[X]×` on the first-order branch near `w = 0`),
+    /// `∂P/∂t = I`, `∂P/∂X = R`, chained through the projection and the
+    /// distortion; `f`, `k1`, `k2` enter linearly.
+    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
+        let (cam, x) = camera_and_point(&vars)?;
+        let w = Vector3::new(cam[0], cam[1], cam[2]);
+        let (rot, dq_dw) = if w.norm_squared() > f64::EPSILON {
+            let r = so3_exp(&w);
+            (r, -r * hat(x) * so3_right_jacobian(&w))
+        } else {
+            (Matrix3::identity() + hat(&w), -hat(x))
+        };
+        let q = Vector3::from(angle_axis_rotate([w.x, w.y, w.z], [x.x, x.y, x.z]));
+        let pc = q + Vector3::new(cam[3], cam[4], cam[5]);
+        let (f, k1, k2) = (cam[6], cam[7], cam[8]);
+        let (u, v) = (-pc.x / pc.z, -pc.y / pc.z);
+        let r2 = u * u + v * v;
+        let d = 1.0 + r2 * (k1 + k2 * r2);
+        out.reshape(2, [9, 3]);
+        out.residual[0] = f * d * u - self.observed[0];
+        out.residual[1] = f * d * v - self.observed[1];
+        // ∂(residual)/∂(u, v), then ∂(u, v)/∂P.
+        let dd = 2.0 * (k1 + 2.0 * k2 * r2);
+        let (ddu, ddv) = (dd * u, dd * v);
+        let j_uv = nalgebra::Matrix2::new(f * (d + u * ddu), f * u * ddv, f * v * ddu, f * (d + v * ddv));
+        let iz = 1.0 / pc.z;
+        let uv_p = Matrix2x3::new(-iz, 0.0, pc.x * iz * iz, 0.0, -iz, pc.y * iz * iz);
+        let j_p = j_uv * uv_p;
+        let (jc, jx) = out.jacobians.split_at_mut(1);
+        let (jc, jx) = (&mut jc[0], &mut jx[0]);
+        jc.fixed_view_mut::<2, 3>(0, 0).copy_from(&(j_p * dq_dw));
+        jc.fixed_view_mut::<2, 3>(0, 3).copy_from(&j_p);
+        for (row, p) in [u, v].into_iter().enumerate() {
+            jc[(row, 6)] = d * p;
+            jc[(row, 7)] = f * r2 * p;
+            jc[(row, 8)] = f * r2 * r2 * p;
+        }
+        jx.copy_from(&(j_p * rot));
+        Ok(())
     }
 }
 

@@ -9,7 +9,7 @@
 //! - [`imu_calib`]: gravity-norm and integrated-rotation factors of turntable-free IMU calibration.
 //! - [`imu_preint`]: IMU preintegration (GTSAM's zero-order hold or VINS-Mono's midpoint), [`ImuFactor`], [`bias_random_walk`].
 //! - [`InverseDepthReprojection`]: VINS-Mono's inverse-depth reprojection through any [`camera::CameraModel`].
-//! - [`SnavelyReprojection`]: the Bundle-Adjustment-in-the-Large camera model (autodiff).
+//! - [`SnavelyReprojection`]: the Bundle-Adjustment-in-the-Large camera model (analytic Jacobians; its residual is generic too, for autodiff).
 //!
 //! Every factor's Jacobians are verified against central differences in tests.
 

@@ -50,6 +50,30 @@ fn snavely_autodiff_matches_numeric() {
 }
 
 #[test]
+fn snavely_analytic_matches_numeric_and_autodiff() {
+    let analytic = SnavelyReprojection::new(C(0), L(0), [10.0, -5.0]);
+    let auto = AutoDiff::new(analytic.clone());
+    let pt = Vector3::new(0.5, -0.3, 1.0);
+    // A large rotation with strong distortion, a small one, and zero (the
+    // first-order branch).
+    for cam in [
+        [0.4, -0.7, 1.1, 0.1, -0.2, -3.0, 500.0, -0.3, 0.05],
+        [0.01, -0.02, 0.03, 0.1, -0.2, -3.0, 500.0, -1e-3, 1e-6],
+        [0.0, 0.0, 0.0, 0.1, -0.2, -3.0, 500.0, -1e-3, 1e-6],
+    ] {
+        let cam = nalgebra::SVector::<f64, 9>::from_column_slice(&cam);
+        let vars: [&dyn tumble_solvers::DynVariable; 2] = [&cam, &pt];
+        assert_ok(&analytic, &vars);
+        assert_linearize_into_matches(&analytic, &vars);
+        let (a, b) = (analytic.linearize(Vars::new(&vars)).unwrap(), auto.linearize(Vars::new(&vars)).unwrap());
+        assert!((&a.residual - &b.residual).norm() < 1e-12);
+        for (ja, jb) in a.jacobians.iter().zip(&b.jacobians) {
+            assert!((ja - jb).norm() <= 1e-9 * jb.norm().max(1.0), "analytic\n{ja}autodiff\n{jb}");
+        }
+    }
+}
+
+#[test]
 fn imu_calibration_factors() {
     use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
     use tumble_factors::{GravityNormFactor, IntegratedRotationFactor};

@@ -10,7 +10,7 @@ use crate::io::tokens::{parse_f64, parse_usize, read_text};
 use nalgebra::{SVector, Vector3};
 use std::path::Path;
 use tumble_factors::SnavelyReprojection;
-use tumble_solvers::{AutoDiff, Graph, NoiseModel, Values, C, L};
+use tumble_solvers::{Graph, NoiseModel, Values, C, L};
 
 /// A bundle-adjustment problem.
 pub struct BalProblem {
@@ -70,7 +70,7 @@ pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
         }
         let x = num(path, next("observation x")?, "observation x")?;
         let y = num(path, next("observation y")?, "observation y")?;
-        graph.add(AutoDiff::new(SnavelyReprojection::new(C(c as u64), L(p as u64), [x, y])), NoiseModel::Unit);
+        graph.add(SnavelyReprojection::new(C(c as u64), L(p as u64), [x, y]), NoiseModel::Unit);
     }
     // Camera and point parameters: `n` numbers named "<what> <k>".
     let mut read_block = |what: &str, n: usize| -> Result<Vec<f64>, InputError> {
