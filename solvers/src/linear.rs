@@ -20,6 +20,7 @@ use nalgebra::DMatrix;
 mod assembly;
 mod schur;
 use assembly::AssemblyPlan;
+use schur::SchurPlan;
 
 /// Role of a variable in the linear system.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -101,6 +102,8 @@ pub(crate) struct Structure {
     rank: Vec<usize>,
     /// Where each factor's terms go when the system is filled.
     assembly: AssemblyPlan,
+    /// How the Schur complement is split over threads (empty: one thread).
+    schur: SchurPlan,
     factor: Option<SparseFactor>,
     /// Reused copy of H for damping and the Schur complement.
     scratch: Vec<f64>,
@@ -453,8 +456,10 @@ impl Structure {
             scratch: Vec::new(),
             hessian_cache: Vec::new(),
             assembly: AssemblyPlan::default(),
+            schur: SchurPlan::default(),
         };
         s.assembly = AssemblyPlan::new(&s);
+        s.schur = SchurPlan::new(&s);
         Ok(s)
     }
 

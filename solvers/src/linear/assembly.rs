@@ -15,9 +15,9 @@ use std::ops::Range;
 
 /// Factors below which the assembly runs on the calling thread, in one chunk:
 /// a VIO window's few hundred factors cost less than waking the thread pool.
-const PARALLEL_MIN_FACTORS: usize = 4096;
+pub(super) const PARALLEL_MIN_FACTORS: usize = 4096;
 /// Chunks each part of the system is cut into when it is filled in parallel.
-const CHUNKS: usize = 64;
+pub(super) const CHUNKS: usize = 64;
 
 /// One factor's term landing in a kept chunk.
 #[derive(Clone, Copy, Debug)]
@@ -53,7 +53,7 @@ pub(super) struct AssemblyPlan {
 
 /// Cut blocks with these amounts of work into about `chunks` (at most one
 /// more) ranges of consecutive blocks of about equal work.
-fn cut(work: &[usize], chunks: usize) -> Vec<Range<usize>> {
+pub(super) fn cut(work: &[usize], chunks: usize) -> Vec<Range<usize>> {
     if chunks <= 1 {
         return std::iter::once(0..work.len()).collect();
     }
@@ -83,7 +83,7 @@ fn chunk_index(ranges: &[Range<usize>], n: usize) -> Vec<usize> {
 }
 
 /// Split `s` into consecutive slices ending at `ends` (ascending, the last = `s.len()`).
-fn split_at_ends(mut s: &mut [f64], ends: impl Iterator<Item = usize>) -> Vec<&mut [f64]> {
+pub(super) fn split_at_ends(mut s: &mut [f64], ends: impl Iterator<Item = usize>) -> Vec<&mut [f64]> {
     let (mut out, mut start) = (Vec::new(), 0);
     for end in ends {
         let (a, b) = std::mem::take(&mut s).split_at_mut(end - start);
