@@ -3,7 +3,7 @@
 //!
 //! `cargo run --example vio_sim -- [--duration S] [--seed N]
 //! [--keyframe-parallax PX] [--keyframe-interval S] [--window N]
-//! [--max-iterations N] [--out DIR]`
+//! [--max-iterations N] [--prediction-gate PX] [--triangulation-gate PX] [--out DIR]`
 //!
 //! The IMU is corrected with the simulation's true calibration (what a
 //! perfect `tumble calibrate` would give); the pixel noise is the simulator's.
@@ -38,6 +38,8 @@ fn main() {
     opts.keyframe_max_interval_s = flag(&args, "--keyframe-interval", opts.keyframe_max_interval_s);
     opts.window = flag(&args, "--window", opts.window);
     opts.max_iterations = flag(&args, "--max-iterations", opts.max_iterations);
+    opts.prediction_gate_px = flag(&args, "--prediction-gate", opts.prediction_gate_px);
+    opts.triangulation_gate_px = flag(&args, "--triangulation-gate", opts.triangulation_gate_px);
     let out = run(&input, &opts, None).expect("vio");
     let s = summarize(&input, &opts, &out, 20.0);
     println!("{}", s.table());
