@@ -4,13 +4,13 @@
 use super::geometry::{gravity_aligned, parts, pose, preintegrate, triangulate};
 use super::{Init, VioInput, VioOptions};
 use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector1, Vector2, Vector3, Vector6};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::sync::Arc;
 use std::time::Instant;
 use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::Preintegrated;
 use tumble_factors::reprojection::StereoInverseDepth;
-use tumble_factors::{bias_random_walk, ImuFactor, InverseDepthReprojection, PriorFactor};
+use tumble_factors::{bias_random_walk, BetweenFactor, ImuFactor, InverseDepthReprojection, PriorFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::Factor;
 use tumble_solvers::{
@@ -186,6 +186,9 @@ pub struct Estimator<'a> {
     last_keyframe_obs: HashMap<u64, [f64; 2]>,
     prev_frame_obs: HashMap<u64, [f64; 2]>,
     prev_frame_rotation: Matrix3<f64>,
+    /// The frames of the last `zero_velocity_span_s`: time and observations,
+    /// oldest first (rest detection over a span).
+    recent: VecDeque<(f64, HashMap<u64, [f64; 2]>)>,
     last_good: Option<(Isometry3F64, Vector3<f64>, Vector6<f64>)>,
     /// Warnings so far.
     pub warnings: Vec<String>,
@@ -204,6 +207,11 @@ pub struct Estimator<'a> {
     no_feature_since: Option<f64>,
     residuals: ResidualTally,
 }
+
+/// Standard deviation of the zero-velocity pseudo-measurement of a frame at
+/// rest \[m/s\] (and of its position change since a previous frame at rest,
+/// times the time between them).
+const REST_SPEED_SIGMA: f64 = 0.01;
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
@@ -281,6 +289,7 @@ impl<'a> Estimator<'a> {
             last_keyframe_obs: HashMap::new(),
             prev_frame_obs: HashMap::new(),
             prev_frame_rotation: Matrix3::identity(),
+            recent: VecDeque::new(),
             last_good: None,
             warnings: Vec::new(),
             resets: 0,
@@ -495,9 +504,20 @@ impl<'a> Estimator<'a> {
         for i in 0..self.links.len() {
             self.add_link(&mut g, i);
         }
-        for s in &self.states {
+        for (i, s) in self.states.iter().enumerate() {
             if s.zero_velocity {
-                g.add(PriorFactor::new(V(s.sid), Vector3::zeros()), NoiseModel::isotropic(3, 0.01).expect("positive"));
+                g.add(
+                    PriorFactor::new(V(s.sid), Vector3::zeros()),
+                    NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
+                );
+                // At rest since the previous state at rest: the position stays
+                // (the IMU factor alone lets it wander by the accelerometer's
+                // noise, centimetres per second for a MEMS part).
+                if let Some(prev) = i.checked_sub(1).map(|k| &self.states[k]).filter(|p| p.zero_velocity) {
+                    let sp = (REST_SPEED_SIGMA * (s.t - prev.t)).max(1e-4);
+                    let noise = NoiseModel::diagonal(&[10.0, 10.0, 10.0, sp, sp, sp]).expect("positive");
+                    g.add(BetweenFactor::new(X(prev.sid), X(s.sid), Isometry3F64::identity()), noise);
+                }
             }
         }
         let noise = NoiseModel::isotropic(2, self.opts.pixel_sigma).expect("positive pixel sigma");
@@ -930,7 +950,17 @@ impl<'a> Estimator<'a> {
         };
         let (par_kf, common_kf) = parallax(&self.last_keyframe_obs, &ri);
         let (par_prev, common_prev) = parallax(&self.prev_frame_obs, &self.prev_frame_rotation);
-        let zero_velocity = common_prev >= 10 && par_prev < self.opts.zero_velocity_px;
+        // At rest: hardly any motion since the previous frame, or motion within
+        // the pixel noise over the last span — there without taking out the
+        // rotation: the IMU-predicted one errs by more than the noise over
+        // half a second (BMI055: 0.2°, 1.7 px), and at rest there is none.
+        let span = self.opts.zero_velocity_span_s;
+        let rest_over_span = self.recent.front().is_some_and(|(t_ref, obs_ref)| {
+            let (par, common) = parallax(obs_ref, &rj);
+            let limit = self.opts.zero_velocity_px.max(super::REST_NOISE_SIGMAS * self.opts.pixel_sigma);
+            t - t_ref >= 0.8 * span && common >= 10 && par < limit
+        });
+        let zero_velocity = (common_prev >= 10 && par_prev < self.opts.zero_velocity_px) || rest_over_span;
         let kf_t = self.states.last().map_or(t, |s| s.t);
         let keyframe = par_kf >= self.opts.keyframe_parallax_px
             || t - kf_t >= self.opts.keyframe_max_interval_s
@@ -949,6 +979,10 @@ impl<'a> Estimator<'a> {
         self.add_observations(index, &obs);
         self.prev_frame_obs = obs.clone();
         self.prev_frame_rotation = rj;
+        self.recent.push_back((t, obs.clone()));
+        while self.recent.front().is_some_and(|f| f.0 < t - span) {
+            self.recent.pop_front();
+        }
         // A frame at rest or a window with few landmarks still gets the full
         // solve: its zero-velocity prior or its IMU link is what holds the
         // window's velocities and biases then.
@@ -1010,7 +1044,10 @@ impl<'a> Estimator<'a> {
         let mut g = Graph::new();
         self.add_link(&mut g, n - 2);
         if self.states[n - 1].zero_velocity {
-            g.add(PriorFactor::new(V(sid), Vector3::zeros()), NoiseModel::isotropic(3, 0.01).expect("positive"));
+            g.add(
+                PriorFactor::new(V(sid), Vector3::zeros()),
+                NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
+            );
         }
         let mut values = Values::new();
         let copy = |values: &mut Values, key, constant: bool| {
