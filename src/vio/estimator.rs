@@ -110,7 +110,9 @@ impl ResidualTally {
 struct State {
     sid: u64,
     t: f64,
-    zero_velocity: bool,
+    /// At rest (zero-velocity pseudo-measurement), continuously since this
+    /// time \[s\]; None while moving.
+    rest_since: Option<f64>,
 }
 
 struct Obs {
@@ -189,6 +191,8 @@ pub struct Estimator<'a> {
     /// The frames of the last `zero_velocity_span_s`: time and observations,
     /// oldest first (rest detection over a span).
     recent: VecDeque<(f64, HashMap<u64, [f64; 2]>)>,
+    /// Since when every frame was at rest \[s\] (None: the last one moved).
+    rest_since: Option<f64>,
     last_good: Option<(Isometry3F64, Vector3<f64>, Vector6<f64>)>,
     /// Warnings so far.
     pub warnings: Vec<String>,
@@ -290,6 +294,7 @@ impl<'a> Estimator<'a> {
             prev_frame_obs: HashMap::new(),
             prev_frame_rotation: Matrix3::identity(),
             recent: VecDeque::new(),
+            rest_since: None,
             last_good: None,
             warnings: Vec::new(),
             resets: 0,
@@ -463,7 +468,7 @@ impl<'a> Estimator<'a> {
         self.values.insert(X(sid), x);
         self.values.insert(V(sid), v);
         self.values.insert(B(sid), b);
-        self.states = vec![State { sid, t, zero_velocity: false }];
+        self.states = vec![State { sid, t, rest_since: None }];
         self.links.clear();
         self.tracks.clear();
         self.marginal = None;
@@ -505,19 +510,18 @@ impl<'a> Estimator<'a> {
             self.add_link(&mut g, i);
         }
         for (i, s) in self.states.iter().enumerate() {
-            if s.zero_velocity {
-                g.add(
-                    PriorFactor::new(V(s.sid), Vector3::zeros()),
-                    NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
-                );
-                // At rest since the previous state at rest: the position stays
-                // (the IMU factor alone lets it wander by the accelerometer's
-                // noise, centimetres per second for a MEMS part).
-                if let Some(prev) = i.checked_sub(1).map(|k| &self.states[k]).filter(|p| p.zero_velocity) {
-                    let sp = (REST_SPEED_SIGMA * (s.t - prev.t)).max(1e-4);
-                    let noise = NoiseModel::diagonal(&[10.0, 10.0, 10.0, sp, sp, sp]).expect("positive");
-                    g.add(BetweenFactor::new(X(prev.sid), X(s.sid), Isometry3F64::identity()), noise);
-                }
+            let Some(rest_since) = s.rest_since else { continue };
+            g.add(
+                PriorFactor::new(V(s.sid), Vector3::zeros()),
+                NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
+            );
+            // At rest ever since the previous state: the position stays (the
+            // IMU factor alone lets it wander by the accelerometer's noise,
+            // centimetres per second for a MEMS part).
+            if let Some(prev) = i.checked_sub(1).map(|k| &self.states[k]).filter(|p| p.t >= rest_since) {
+                let sp = (REST_SPEED_SIGMA * (s.t - prev.t)).max(1e-4);
+                let noise = NoiseModel::diagonal(&[10.0, 10.0, 10.0, sp, sp, sp]).expect("positive");
+                g.add(BetweenFactor::new(X(prev.sid), X(s.sid), Isometry3F64::identity()), noise);
             }
         }
         let noise = NoiseModel::isotropic(2, self.opts.pixel_sigma).expect("positive pixel sigma");
@@ -955,12 +959,18 @@ impl<'a> Estimator<'a> {
         // rotation: the IMU-predicted one errs by more than the noise over
         // half a second (BMI055: 0.2°, 1.7 px), and at rest there is none.
         let span = self.opts.zero_velocity_span_s;
-        let rest_over_span = self.recent.front().is_some_and(|(t_ref, obs_ref)| {
+        let rest_over_span = self.recent.front().and_then(|(t_ref, obs_ref)| {
             let (par, common) = parallax(obs_ref, &rj);
             let limit = self.opts.zero_velocity_px.max(super::REST_NOISE_SIGMAS * self.opts.pixel_sigma);
-            t - t_ref >= 0.8 * span && common >= 10 && par < limit
+            (t - t_ref >= 0.8 * span && common >= 10 && par < limit).then_some(*t_ref)
         });
-        let zero_velocity = (common_prev >= 10 && par_prev < self.opts.zero_velocity_px) || rest_over_span;
+        let rest_since_prev =
+            (common_prev >= 10 && par_prev < self.opts.zero_velocity_px).then(|| self.recent.back().map_or(t, |f| f.0));
+        self.rest_since = match rest_over_span.or(rest_since_prev) {
+            Some(since) => Some(self.rest_since.map_or(since, |r| r.min(since))),
+            None => None,
+        };
+        let zero_velocity = self.rest_since.is_some();
         let kf_t = self.states.last().map_or(t, |s| s.t);
         let keyframe = par_kf >= self.opts.keyframe_parallax_px
             || t - kf_t >= self.opts.keyframe_max_interval_s
@@ -974,7 +984,7 @@ impl<'a> Estimator<'a> {
         } else if let Some(t0) = self.no_feature_since.take() {
             self.warn(format!("features back at {t:.3} s after {:.2} s without", t - t0));
         }
-        self.states.push(State { sid, t, zero_velocity });
+        self.states.push(State { sid, t, rest_since: self.rest_since });
         self.links.push((Arc::new(pim), scale));
         self.add_observations(index, &obs);
         self.prev_frame_obs = obs.clone();
@@ -1043,7 +1053,7 @@ impl<'a> Estimator<'a> {
         let prev = self.states[n - 2].sid;
         let mut g = Graph::new();
         self.add_link(&mut g, n - 2);
-        if self.states[n - 1].zero_velocity {
+        if self.states[n - 1].rest_since.is_some() {
             g.add(
                 PriorFactor::new(V(sid), Vector3::zeros()),
                 NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
