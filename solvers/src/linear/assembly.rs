@@ -74,7 +74,7 @@ pub(super) fn cut(work: &[usize], chunks: usize) -> Vec<Range<usize>> {
 }
 
 /// Which range of `cut` each block is in.
-fn chunk_index(ranges: &[Range<usize>], n: usize) -> Vec<usize> {
+pub(super) fn chunk_index(ranges: &[Range<usize>], n: usize) -> Vec<usize> {
     let mut idx = vec![0; n];
     for (c, r) in ranges.iter().enumerate() {
         idx[r.clone()].fill(c);

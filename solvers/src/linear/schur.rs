@@ -13,7 +13,7 @@
 //! chunk's part of H and g in ascending eliminated-block order — the order the
 //! one-thread loop applies them in.
 
-use super::assembly::{cut, split_at_ends, CHUNKS, PARALLEL_MIN_FACTORS};
+use super::assembly::{chunk_index, cut, split_at_ends, CHUNKS, PARALLEL_MIN_FACTORS};
 use super::Structure;
 use crate::error::SolveError;
 use crate::linear::System;
@@ -109,10 +109,7 @@ impl SchurPlan {
         }
         let ework: Vec<usize> = s.elim_cams.iter().map(|c| c.len() * c.len()).collect();
         let kranges = cut(&kwork, CHUNKS);
-        let mut kidx = vec![0; nk];
-        for (c, r) in kranges.iter().enumerate() {
-            kidx[r.clone()].fill(c);
-        }
+        let kidx = chunk_index(&kranges, nk);
         let mut kept: Vec<SchurChunk> =
             kranges.into_iter().map(|blocks| SchurChunk { blocks, pairs: Vec::new(), grads: Vec::new() }).collect();
         for e in 0..ne {
