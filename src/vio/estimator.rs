@@ -217,6 +217,11 @@ pub struct Estimator<'a> {
 /// times the time between them).
 const REST_SPEED_SIGMA: f64 = 0.01;
 
+/// The zero-velocity pseudo-measurement of state `sid`, at rest.
+fn add_rest_prior(g: &mut Graph, sid: u64) {
+    g.add(PriorFactor::new(V(sid), Vector3::zeros()), NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"));
+}
+
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
 }
@@ -511,10 +516,7 @@ impl<'a> Estimator<'a> {
         }
         for (i, s) in self.states.iter().enumerate() {
             let Some(rest_since) = s.rest_since else { continue };
-            g.add(
-                PriorFactor::new(V(s.sid), Vector3::zeros()),
-                NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
-            );
+            add_rest_prior(&mut g, s.sid);
             // At rest ever since the previous state: the position stays (the
             // IMU factor alone lets it wander by the accelerometer's noise,
             // centimetres per second for a MEMS part).
@@ -966,10 +968,8 @@ impl<'a> Estimator<'a> {
         });
         let rest_since_prev =
             (common_prev >= 10 && par_prev < self.opts.zero_velocity_px).then(|| self.recent.back().map_or(t, |f| f.0));
-        self.rest_since = match rest_over_span.or(rest_since_prev) {
-            Some(since) => Some(self.rest_since.map_or(since, |r| r.min(since))),
-            None => None,
-        };
+        self.rest_since =
+            rest_over_span.or(rest_since_prev).map(|since| self.rest_since.map_or(since, |r| r.min(since)));
         let zero_velocity = self.rest_since.is_some();
         let kf_t = self.states.last().map_or(t, |s| s.t);
         let keyframe = par_kf >= self.opts.keyframe_parallax_px
@@ -1054,10 +1054,7 @@ impl<'a> Estimator<'a> {
         let mut g = Graph::new();
         self.add_link(&mut g, n - 2);
         if self.states[n - 1].rest_since.is_some() {
-            g.add(
-                PriorFactor::new(V(sid), Vector3::zeros()),
-                NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"),
-            );
+            add_rest_prior(&mut g, sid);
         }
         let mut values = Values::new();
         let copy = |values: &mut Values, key, constant: bool| {
