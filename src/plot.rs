@@ -216,7 +216,14 @@ fn tick_format(lo: f64, hi: f64) -> impl Fn(&f64) -> String {
     let span = hi - lo;
     let plain = (1e-2..1e4).contains(&m);
     let digits = if span > 0.0 { (2.0 - span.log10().floor()).clamp(0.0, 4.0) as usize } else { 3 };
-    move |v: &f64| if plain { format!("{v:.digits$}") } else { format!("{v:.2e}") }
+    move |v: &f64| {
+        let label = if plain { format!("{v:.digits$}") } else { format!("{v:.2e}") };
+        // A tick just below zero would read "-0.000".
+        match label.strip_prefix('-') {
+            Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+            _ => label,
+        }
+    }
 }
 
 impl ScatterChart {
@@ -291,15 +298,27 @@ impl ScatterChart {
             let c = s.color;
             let pts: Vec<(f64, f64)> = s.points.iter().copied().filter(finite2).collect();
             let drawn = if s.line {
-                chart.draw_series(LineSeries::new(pts, c.stroke_width(2))).map_err(|e| err(&e))?
+                // plotters draws a 2 px polyline segment by segment, which leaves
+                // gaps where segments are shorter than a pixel: dense lines get 1 px.
+                let width = if pts.len() as u32 > width { 1 } else { 2 };
+                chart.draw_series(LineSeries::new(pts, c.stroke_width(width))).map_err(|e| err(&e))?
             } else {
                 chart.draw_series(pts.into_iter().map(move |p| Circle::new(p, 3, c.filled()))).map_err(|e| err(&e))?
             };
-            if !s.label.is_empty() {
-                drawn.label(s.label.as_str()).legend(move |(x, y)| Circle::new((x + 9, y), 4, c.filled()));
+            if s.label.is_empty() {
+                continue;
+            }
+            let drawn = drawn.label(s.label.as_str());
+            if s.line {
+                drawn.legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c.stroke_width(2)));
+            } else {
+                drawn.legend(move |(x, y)| Circle::new((x + 9, y), 4, c.filled()));
             }
         }
-        legend(chart, path)
+        if self.series.iter().any(|s| !s.label.is_empty()) {
+            legend(chart, path)?;
+        }
+        Ok(())
     }
 
     /// Render to a PNG file of `width`×`height` pixels (axes span the finite data, with 5 % margins).
@@ -321,4 +340,16 @@ pub fn write_panels(path: &Path, charts: &[ScatterChart], width: u32, height: u3
         chart.draw_on(&area, path)?;
     }
     root.present().map_err(|e| err(&e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::tick_format;
+
+    #[test]
+    fn tick_labels_never_read_minus_zero() {
+        let f = tick_format(-0.1, 0.1);
+        assert_eq!(f(&-1e-9), "0.000");
+        assert_eq!(f(&-0.05), "-0.050");
+    }
 }

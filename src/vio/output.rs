@@ -15,10 +15,11 @@ use std::path::{Path, PathBuf};
 pub struct Summary {
     /// Data duration from initialization to the last frame \[s\].
     pub duration_s: f64,
-    /// Length of the estimated path \[m\].
+    /// Length of the estimated path \[m\], through positions at least
+    /// [`PATH_STEP_M`] apart.
     pub distance_m: f64,
     /// Length of the ground-truth path over the matched frames \[m\], when
-    /// known (frame-to-frame jitter makes the estimated path longer).
+    /// known.
     pub groundtruth_distance_m: Option<f64>,
     /// Distance between the last and the first estimated position \[m\].
     pub closed_loop_error_m: f64,
@@ -58,6 +59,30 @@ pub struct Summary {
     pub evaluation: Option<Evaluation>,
 }
 
+/// Shortest step \[m\] of the path the estimated distance is measured along.
+/// Summed frame to frame, the estimate's millimetre jitter makes a 6-minute
+/// walk's 38.5 m path 59.9 m long; through positions at least 2 cm apart it is
+/// 39.9 m (the ground truth's own is 38.3 m at that step), and a 2-minute
+/// walk's 38.8 m path measures 38.7 m instead of 40.5 m.
+pub const PATH_STEP_M: f64 = 0.02;
+
+/// Length \[m\] of the path through `positions`, taking a position only once
+/// it lies `min_step_m` or more from the last one taken; the last position
+/// always closes the path.
+fn path_length(positions: impl IntoIterator<Item = Vector3<f64>>, min_step_m: f64) -> f64 {
+    let mut it = positions.into_iter();
+    let Some(mut taken) = it.next() else { return 0.0 };
+    let (mut length, mut last) = (0.0, taken);
+    for p in it {
+        last = p;
+        if (p - taken).norm() >= min_step_m {
+            length += (p - taken).norm();
+            taken = p;
+        }
+    }
+    length + (last - taken).norm()
+}
+
 fn percentile(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
@@ -88,7 +113,7 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         _ => 0.0,
     };
     let pos: Vec<Vector3<f64>> = e.iter().map(|x| Vector3::from(x.position)).collect();
-    let distance_m = pos.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let distance_m = path_length(pos.iter().copied(), PATH_STEP_M);
     let closed_loop_error_m = match (pos.first(), pos.last()) {
         (Some(a), Some(b)) => (b - a).norm(),
         _ => f64::NAN,
@@ -221,4 +246,23 @@ pub fn write_outputs(
         files.extend(write_report(&dir.join("eval"), ev)?);
     }
     Ok(files)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn path_length_ignores_frame_jitter_and_keeps_the_last_sample() {
+        // 10.05 s along x at a walker's 0.1 m/s, sampled at 20 Hz, with ±2 mm
+        // of sideways jitter.
+        let positions: Vec<Vector3<f64>> =
+            (0..=201).map(|i| Vector3::new(0.005 * i as f64, if i % 2 == 0 { 0.002 } else { -0.002 }, 0.0)).collect();
+        let every_frame = path_length(positions.iter().copied(), 0.0);
+        assert!(every_frame > 1.005 * 1.25, "jitter lengthens the frame-to-frame path: {every_frame}");
+        let stepped = path_length(positions.iter().copied(), PATH_STEP_M);
+        assert!((stepped / 1.005 - 1.0).abs() < 0.02, "{stepped}");
+        assert_eq!(path_length(positions[..1].iter().copied(), PATH_STEP_M), 0.0);
+        assert_eq!(path_length(std::iter::empty(), PATH_STEP_M), 0.0);
+    }
 }
