@@ -262,6 +262,12 @@ enum Command {
         /// camera.stereo_baseline_m).
         #[arg(long, value_name = "METRES")]
         stereo_baseline: Option<f64>,
+        /// Stop a walk or flight on the way: slow down over 1 s from START
+        /// seconds, stand still for LENGTH seconds, speed up over 1 s
+        /// (repeatable; each makes the recording LENGTH + 1 s longer; overrides
+        /// the config's pauses_s).
+        #[arg(long, value_name = "START,LENGTH")]
+        pause: Vec<String>,
         /// Print the default config as YAML and exit (a starting point for --config).
         #[arg(long)]
         print_config: bool,
@@ -651,7 +657,7 @@ fn print_log(s: &Summary) {
 
 fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
     match cli.command {
-        Command::Sim { scenario, out, config, seed, duration, stereo_baseline, print_config, hide } => {
+        Command::Sim { scenario, out, config, seed, duration, stereo_baseline, pause, print_config, hide } => {
             let mut cfg = match &config {
                 Some(p) => tumble::sim::SimConfig::read(p)?,
                 None => tumble::sim::SimConfig::default(),
@@ -672,6 +678,9 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             }
             if duration.is_some() {
                 cfg.duration_s = duration;
+            }
+            if !pause.is_empty() {
+                cfg.pauses_s = pause.iter().map(|p| parse_pause(p)).collect::<Result<_, _>>()?;
             }
             if let Some(b) = stereo_baseline {
                 cfg.camera.stereo_baseline_m = b;
@@ -1376,6 +1385,14 @@ fn parse_span(s: &str) -> Result<(f64, f64), String> {
         return Err(format!("--span: end {b} is not after start {a}"));
     }
     Ok((a, b))
+}
+
+/// `START,LENGTH` seconds of one `--pause` (the simulator checks the values).
+fn parse_pause(s: &str) -> Result<[f64; 2], String> {
+    let bad = || format!("--pause: expected START,LENGTH in seconds, got `{s}`");
+    let (a, b) = s.split_once(',').ok_or_else(bad)?;
+    let num = |v: &str| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(bad);
+    Ok([num(a)?, num(b)?])
 }
 
 fn main() -> ExitCode {

@@ -62,6 +62,11 @@ pub struct SimConfig {
     pub camera_enabled: Option<bool>,
     /// Rate of the written ground truth \[Hz\] (IMU rate when moving, 10 Hz static, when absent).
     pub groundtruth_rate_hz: Option<f64>,
+    /// Stops on the way of a walk or flight: `[start, length]` \[s\] each. The
+    /// motion slows to a standstill over 1 s from `start`, stands still for
+    /// `length` and speeds up again over 1 s; each pause makes the recording
+    /// `length + 1` s longer than `duration_s` (see [`motion::Paused`]).
+    pub pauses_s: Vec<[f64; 2]>,
     /// Absolute time of the first sample \[ns\].
     pub t0_ns: i64,
 }
@@ -76,6 +81,7 @@ impl Default for SimConfig {
             camera: CameraSettings::default(),
             camera_enabled: None,
             groundtruth_rate_hz: None,
+            pauses_s: Vec::new(),
             t0_ns: 1_700_000_000_000_000_000,
         }
     }
@@ -202,7 +208,8 @@ pub struct Simulation {
     pub imu: SimulatedImu,
     /// Camera tracks, when a camera was simulated.
     pub tracks: Option<SimulatedTracks>,
-    /// True still intervals `[start, end]` \[s\] (tumble: the holds; static: all).
+    /// True still intervals `[start, end]` \[s\] (tumble: the holds; static:
+    /// all; walk and flight: the standstills of their pauses).
     pub static_intervals: Vec<[f64; 2]>,
 }
 
@@ -257,15 +264,24 @@ pub fn simulate_with(
                 vec![[0.0, d]],
             )
         }
-        Scenario::Walk => {
-            let m = Loop::handheld(config.duration_s.unwrap_or(360.0), seed);
-            (Box::new(m), Vector3::new(0.0, 0.0, 1.2), Vec::new())
-        }
-        Scenario::Flight => {
-            let m = Loop::flight(config.duration_s.unwrap_or(120.0), seed);
-            (Box::new(m), Vector3::new(0.0, 0.0, 1.5), Vec::new())
+        Scenario::Walk | Scenario::Flight => {
+            let (m, centre) = if scenario == Scenario::Walk {
+                (Loop::handheld(config.duration_s.unwrap_or(360.0), seed), Vector3::new(0.0, 0.0, 1.2))
+            } else {
+                (Loop::flight(config.duration_s.unwrap_or(120.0), seed), Vector3::new(0.0, 0.0, 1.5))
+            };
+            if config.pauses_s.is_empty() {
+                (Box::new(m), centre, Vec::new())
+            } else {
+                let m = motion::Paused::new(m, &config.pauses_s).map_err(|e| format!("pauses_s: {e}"))?;
+                let standstills = m.standstills();
+                (Box::new(m), centre, standstills)
+            }
         }
     };
+    if !config.pauses_s.is_empty() && !matches!(scenario, Scenario::Walk | Scenario::Flight) {
+        return Err("pauses_s: only a walk or a flight can pause".into());
+    }
     if matches!(scenario, Scenario::Walk | Scenario::Flight) {
         check_dynamics(scenario, motion.as_ref())?;
     }

@@ -333,6 +333,103 @@ impl Motion for Loop {
     }
 }
 
+/// Length \[s\] of the slow-down before and of the speed-up after each pause of
+/// a [`Paused`] motion (minimum-jerk in speed).
+pub const PAUSE_RAMP_S: f64 = 1.0;
+
+/// A motion that stops on the way: the inner motion's time runs at speed 1
+/// except around each pause, where it slows to a standstill over
+/// [`PAUSE_RAMP_S`], stands still for the pause's length and speeds up again
+/// over [`PAUSE_RAMP_S`]. Each pause makes the motion `length + PAUSE_RAMP_S`
+/// seconds longer. Used for stop-and-go walks.
+#[derive(Debug, Clone)]
+pub struct Paused<M> {
+    inner: M,
+    /// `(start of the slow-down, length of the standstill)` \[s\], in this
+    /// motion's time, sorted and apart.
+    pauses: Vec<(f64, f64)>,
+}
+
+impl<M: Motion> Paused<M> {
+    /// Pause `inner` at `pauses`: `[start of the slow-down, standstill length]`
+    /// \[s\] in the paused motion's time. Pauses must have positive lengths,
+    /// follow one another after the previous one's speed-up and end before
+    /// the paused motion does.
+    pub fn new(inner: M, pauses: &[[f64; 2]]) -> Result<Paused<M>, String> {
+        let mut end_of_last = 0.0;
+        let total = inner.duration() + pauses.iter().map(|p| p[1] + PAUSE_RAMP_S).sum::<f64>();
+        for (i, &[at, length]) in pauses.iter().enumerate() {
+            if !(at.is_finite() && length.is_finite() && length > 0.0) {
+                return Err(format!(
+                    "pause {}: start {at} s and length {length} s must be finite, the length positive",
+                    i + 1
+                ));
+            }
+            if at < end_of_last {
+                return Err(format!(
+                    "pause {} starts at {at} s, before {}'s speed-up ends at {end_of_last} s (pauses are sorted and {PAUSE_RAMP_S} s ramps apart)",
+                    i + 1,
+                    if i == 0 { "the motion".to_string() } else { format!("pause {i}") }
+                ));
+            }
+            end_of_last = at + length + 2.0 * PAUSE_RAMP_S;
+        }
+        if end_of_last > total {
+            return Err(format!("the last pause ends at {end_of_last} s, after the paused motion's {total} s"));
+        }
+        Ok(Paused { inner, pauses: pauses.iter().map(|p| (p[0], p[1])).collect() })
+    }
+
+    /// The inner motion's time at `t` with its first and second derivatives.
+    fn warp(&self, t: f64) -> (f64, f64, f64) {
+        let r = PAUSE_RAMP_S;
+        let mut lost = 0.0;
+        for &(at, length) in &self.pauses {
+            let u = t - at;
+            if u <= 0.0 {
+                break;
+            }
+            // ∫₀ᵘ s(v) dv of the minimum-jerk blend s: 2.5u⁴ − 3u⁵ + u⁶.
+            let blend_integral = |u: f64| u.powi(4) * (2.5 - 3.0 * u + u * u);
+            if u < r {
+                let (s, ds, _) = min_jerk(u / r);
+                return (t - lost - r * blend_integral(u / r), 1.0 - s, -ds / r);
+            }
+            if u < r + length {
+                return (at + 0.5 * r - lost, 0.0, 0.0);
+            }
+            if u < 2.0 * r + length {
+                let w = (u - r - length) / r;
+                let (s, ds, _) = min_jerk(w);
+                return (at + 0.5 * r - lost + r * blend_integral(w), s, ds / r);
+            }
+            lost += length + r;
+        }
+        (t - lost, 1.0, 0.0)
+    }
+
+    /// The standstills `[start, end]` \[s\].
+    pub fn standstills(&self) -> Vec<[f64; 2]> {
+        self.pauses.iter().map(|&(at, length)| [at + PAUSE_RAMP_S, at + PAUSE_RAMP_S + length]).collect()
+    }
+}
+
+impl<M: Motion> Motion for Paused<M> {
+    fn at(&self, t: f64) -> Kinematics {
+        let (tau, speed, accel) = self.warp(t);
+        let k = self.inner.at(tau);
+        Kinematics {
+            velocity: k.velocity * speed,
+            acceleration: k.acceleration * (speed * speed) + k.velocity * accel,
+            omega: k.omega * speed,
+            ..k
+        }
+    }
+    fn duration(&self) -> f64 {
+        self.inner.duration() + self.pauses.iter().map(|p| p.1 + PAUSE_RAMP_S).sum::<f64>()
+    }
+}
+
 /// Rotation vector from `a` to `b` in `a`'s frame (`Log(aᵀ b)`).
 pub fn relative_rotation(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Vector3<f64> {
     so3_log(&(a.transpose() * b))
@@ -364,6 +461,35 @@ mod tests {
         check_derivatives(&Tumble::new(&TumbleSettings { initial_static_s: 2.0, poses: 10, ..Default::default() }, 3));
         check_derivatives(&Loop::handheld(60.0, 4));
         check_derivatives(&Loop::flight(60.0, 5));
+        check_derivatives(&Paused::new(Loop::handheld(60.0, 4), &[[10.3, 3.0], [20.0, 0.5]]).unwrap());
+    }
+
+    #[test]
+    fn a_paused_motion_stands_still_and_then_goes_on_as_before() {
+        let inner = Loop::handheld(60.0, 4);
+        let m = Paused::new(inner.clone(), &[[10.0, 3.0], [30.0, 2.0]]).unwrap();
+        assert_eq!(m.duration(), 60.0 + 4.0 + 3.0);
+        assert_eq!(m.standstills(), vec![[11.0, 14.0], [31.0, 33.0]]);
+        for t in [11.0, 12.5, 13.999, 31.0, 32.9] {
+            let k = m.at(t);
+            assert!(k.velocity.norm() == 0.0 && k.acceleration.norm() == 0.0 && k.omega.norm() == 0.0, "{t}");
+        }
+        // Before the first pause it is the inner motion; after a pause, the inner
+        // motion shifted by the pause's length plus one ramp.
+        for (t, shift) in [(5.0, 0.0), (20.0, 4.0), (50.0, 7.0), (67.0, 7.0)] {
+            let (a, b) = (m.at(t), inner.at(t - shift));
+            assert!((a.position - b.position).norm() < 1e-12 && (a.velocity - b.velocity).norm() < 1e-12, "{t}");
+        }
+        // Inner time runs on continuously through the ramps.
+        let mut last = m.warp(0.0).0;
+        for k in 1..=6700 {
+            let tau = m.warp(k as f64 * 0.01).0;
+            assert!(tau >= last && tau - last <= 0.01 + 1e-12, "{k}");
+            last = tau;
+        }
+        assert!(Paused::new(Loop::handheld(60.0, 4), &[[10.0, 3.0], [14.0, 1.0]]).unwrap_err().contains("pause 2"));
+        assert!(Paused::new(Loop::handheld(60.0, 4), &[[10.0, 0.0]]).is_err());
+        assert!(Paused::new(Loop::handheld(60.0, 4), &[[60.0, 3.0]]).unwrap_err().contains("after"));
     }
 
     #[test]
