@@ -33,6 +33,7 @@ pub mod graph;
 pub mod key;
 pub mod lie;
 pub mod linear;
+mod linearized;
 pub mod loss;
 pub mod marginal;
 pub mod noise;

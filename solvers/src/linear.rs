@@ -18,6 +18,7 @@ use faer::{Conj, Par, Side};
 use nalgebra::DMatrix;
 
 mod assembly;
+pub(crate) use assembly::split_at_ends;
 mod schur;
 use assembly::AssemblyPlan;
 use schur::SchurPlan;

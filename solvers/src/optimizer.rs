@@ -2,14 +2,13 @@
 //! Ceres) and Gauss–Newton over a [`Graph`], returning a [`Summary`].
 
 use crate::error::SolveError;
-use crate::factor::Vars;
-use crate::graph::{FactorEntry, Graph, WhitenedLinearization};
+use crate::graph::Graph;
 use crate::key::Key;
 use crate::linear::{LinearSolver, Role, Structure, System};
+use crate::linearized::{linearize_all, linearize_all_into, Linearized};
 use crate::marginal::{covariances_of_system, Covariances};
 use crate::values::Values;
 use crate::variable::DynVariable;
-use rayon::prelude::*;
 use std::fmt;
 use std::time::Instant;
 
@@ -250,54 +249,6 @@ impl Layout {
     }
 }
 
-fn gather<'a>(vars: &'a [Box<dyn DynVariable>], idx: &[usize]) -> smallvec::SmallVec<[&'a dyn DynVariable; 4]> {
-    idx.iter().map(|&i| vars[i].as_ref()).collect()
-}
-
-/// Linearize every factor (in parallel, result order fixed) → linearizations and cost.
-pub(crate) fn linearize_all(
-    entries: &[FactorEntry],
-    layout: &Layout,
-    vars: &[Box<dyn DynVariable>],
-) -> Result<(Vec<WhitenedLinearization>, f64), SolveError> {
-    let mut lins = Vec::new();
-    let cost = linearize_all_into(entries, layout, vars, &mut lins)?;
-    Ok((lins, cost))
-}
-
-/// [`linearize_all`] into `lins`, reusing the buffers of an earlier
-/// linearization of the same graph; returns the cost.
-pub(crate) fn linearize_all_into(
-    entries: &[FactorEntry],
-    layout: &Layout,
-    vars: &[Box<dyn DynVariable>],
-    lins: &mut Vec<WhitenedLinearization>,
-) -> Result<f64, SolveError> {
-    lins.resize_with(entries.len(), Default::default);
-    lins.par_iter_mut().zip(entries.par_iter()).zip(layout.factor_vars.par_iter()).enumerate().try_for_each(
-        |(fi, ((wl, e), fv))| {
-            let v = gather(vars, fv);
-            e.linearize_whitened_into(Vars::new(&v), wl).map_err(|source| SolveError::Factor { factor: fi, source })?;
-            if wl.lin.jacobians.len() != fv.len()
-                || wl.lin.residual.len() != e.factor.residual_dim()
-                || wl
-                    .lin
-                    .jacobians
-                    .iter()
-                    .zip(&v)
-                    .any(|(j, x)| j.nrows() != wl.lin.residual.len() || j.ncols() != x.dim())
-            {
-                return Err(SolveError::BadFactor {
-                    factor: fi,
-                    what: "Jacobian or residual has the wrong shape".into(),
-                });
-            }
-            Ok(())
-        },
-    )?;
-    Ok(0.5 * lins.iter().map(|l| l.rho).sum::<f64>())
-}
-
 /// Nonlinear least-squares optimizer over a [`Graph`].
 ///
 /// ```
@@ -401,7 +352,7 @@ impl Optimizer {
         let t = Instant::now();
         let (mut lins, mut cost) = linearize_all(entries, &layout, &vars)?;
         // The trial point's linearization, in buffers reused from step to step.
-        let mut trial_lins = Vec::new();
+        let mut trial_lins = Linearized::default();
         summary.time_linearize += t.elapsed().as_secs_f64();
         summary.initial_cost = cost;
         if summary.variables == 0 {

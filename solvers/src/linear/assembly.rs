@@ -7,9 +7,8 @@
 //! factor: every entry receives its terms in factor order, whatever the number
 //! of threads. The cut depends on the structure only, never on the threads.
 
-use super::{dot, FactorPlan, Structure, System};
-use crate::graph::WhitenedLinearization;
-use nalgebra::DMatrix;
+use super::{dot, Structure, System};
+use crate::linearized::Linearized;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -83,7 +82,7 @@ pub(super) fn chunk_index(ranges: &[Range<usize>], n: usize) -> Vec<usize> {
 }
 
 /// Split `s` into consecutive slices ending at `ends` (ascending, the last = `s.len()`).
-pub(super) fn split_at_ends(mut s: &mut [f64], ends: impl Iterator<Item = usize>) -> Vec<&mut [f64]> {
+pub(crate) fn split_at_ends<T>(mut s: &mut [T], ends: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
     let (mut out, mut start) = (Vec::new(), 0);
     for end in ends {
         let (a, b) = std::mem::take(&mut s).split_at_mut(end - start);
@@ -181,16 +180,17 @@ impl Structure {
 
     /// The kept-pair entries of a factor's JᵀJ, pair after pair in plan order,
     /// each in the order `add_jtj` visits it.
-    fn jtj_entries(&self, plan: &FactorPlan, js: &[DMatrix<f64>]) -> Vec<f64> {
+    fn jtj_entries(&self, lins: &Linearized, fi: usize) -> Vec<f64> {
         let mut out = Vec::new();
-        for &(p, q, pair) in &plan.pairs {
-            self.jtj_visit(pair, js[p].as_slice(), js[q].as_slice(), js[p].nrows(), |_, v| out.push(v));
+        let m = lins.residual(fi).len();
+        for &(p, q, pair) in &self.plans[fi].pairs {
+            self.jtj_visit(pair, lins.jacobian(fi, p), lins.jacobian(fi, q), m, |_, v| out.push(v));
         }
         out
     }
 
     /// Accumulate `H = Σ JᵀJ`, `g = Σ Jᵀr` from whitened linearizations.
-    pub fn assemble(&mut self, lins: &[WhitenedLinearization]) -> System {
+    pub(crate) fn assemble(&mut self, lins: &Linearized) -> System {
         let mut sys = System::default();
         self.assemble_into(lins, &mut sys);
         sys
@@ -198,7 +198,7 @@ impl Structure {
 
     /// As [`Structure::assemble`], reusing the buffers of `sys` (large `h`
     /// buffers are otherwise returned to the OS and page-faulted back every iteration).
-    pub fn assemble_into(&mut self, lins: &[WhitenedLinearization], sys: &mut System) {
+    pub(crate) fn assemble_into(&mut self, lins: &Linearized, sys: &mut System) {
         fn zeroed(v: &mut Vec<f64>, n: usize) {
             v.clear();
             v.resize(n, 0.0);
@@ -211,9 +211,9 @@ impl Structure {
         // Constant JᵀJ: formed at the first assembly, added from the cache after.
         let mut cache = std::mem::take(&mut self.hessian_cache);
         for (fi, c) in cache.iter_mut().enumerate() {
-            let m = lins[fi].lin.residual.len();
+            let m = lins.residual(fi).len();
             if self.plans[fi].constant && c.is_empty() && m > 0 {
-                *c = self.jtj_entries(&self.plans[fi], &lins[fi].lin.jacobians);
+                *c = self.jtj_entries(lins, fi);
             }
         }
         self.hessian_cache = cache;
@@ -254,14 +254,14 @@ impl Structure {
     }
 
     /// One kept chunk's terms into its slices `h` and `g` of H and g.
-    fn assemble_kept(&self, chunk: &KeptChunk, lins: &[WhitenedLinearization], h: &mut [f64], g: &mut [f64]) {
+    fn assemble_kept(&self, chunk: &KeptChunk, lins: &Linearized, h: &mut [f64], g: &mut [f64]) {
         let h0 = self.col_ptr[self.kept_offsets[chunk.blocks.start]];
         let g0 = self.kept_offsets[chunk.blocks.start];
         for &term in &chunk.terms {
             let fi = match term {
                 KeptTerm::Grad { factor, .. } | KeptTerm::Pair { factor, .. } => factor,
             };
-            let (r, js) = (lins[fi].lin.residual.as_slice(), &lins[fi].lin.jacobians);
+            let r = lins.residual(fi);
             let m = r.len();
             if m == 0 {
                 // E.g. a marginalization prior of rank 0: nothing to add.
@@ -273,7 +273,7 @@ impl Structure {
                     let (p, b) = plan.kept[k];
                     let o = self.kept_offsets[b] - g0;
                     let mut add = |m| {
-                        for (kk, col) in js[p].as_slice().chunks_exact(m).enumerate() {
+                        for (kk, col) in lins.jacobian(fi, p).chunks_exact(m).enumerate() {
                             g[o + kk] += dot(col, r);
                         }
                     };
@@ -295,7 +295,7 @@ impl Structure {
                             }
                         }
                         _ => {
-                            let (big, small) = (js[p].as_slice(), js[q].as_slice());
+                            let (big, small) = (lins.jacobian(fi, p), lins.jacobian(fi, q));
                             match m {
                                 // Reprojections: two rows.
                                 2 => self.add_jtj(h, h0, pair, big, small, 2),
@@ -309,18 +309,11 @@ impl Structure {
     }
 
     /// One eliminated chunk's factors into its slices of H_ll, g_l and H_cl.
-    fn assemble_elim(
-        &self,
-        chunk: &ElimChunk,
-        lins: &[WhitenedLinearization],
-        hll: &mut [f64],
-        gl: &mut [f64],
-        hcl: &mut [f64],
-    ) {
+    fn assemble_elim(&self, chunk: &ElimChunk, lins: &Linearized, hll: &mut [f64], gl: &mut [f64], hcl: &mut [f64]) {
         let e0 = chunk.blocks.start;
         let (hll0, gl0, hcl0) = (self.hll_offsets[e0], self.elim_start(e0), self.hcl_offsets[e0]);
         for &fi in &chunk.factors {
-            let (r, js) = (lins[fi].lin.residual.as_slice(), &lins[fi].lin.jacobians);
+            let r = lins.residual(fi);
             let m = r.len();
             let Some(ep) = &self.plans[fi].elim else { continue };
             if m == 0 {
@@ -328,7 +321,7 @@ impl Structure {
             }
             let (ho, go) = (self.hll_offsets[ep.block] - hll0, self.elim_start(ep.block) - gl0);
             let mut add = |m| {
-                let jl = js[ep.pos].as_slice();
+                let jl = lins.jacobian(fi, ep.pos);
                 let d = self.elim_dims[ep.block];
                 for (a, ca) in jl.chunks_exact(m).enumerate() {
                     gl[go + a] += dot(ca, r);
@@ -337,11 +330,10 @@ impl Structure {
                     }
                 }
                 for &(q, off) in &ep.slots {
-                    let jq = &js[q];
-                    let dc = jq.ncols();
+                    let (jq, dc) = (lins.jacobian(fi, q), lins.ncols(fi, q));
                     let off = off - hcl0;
                     for (b, cb) in jl.chunks_exact(m).enumerate() {
-                        for (a, ca) in jq.as_slice().chunks_exact(m).enumerate() {
+                        for (a, ca) in jq.chunks_exact(m).enumerate() {
                             hcl[off + a + b * dc] += dot(ca, cb);
                         }
                     }
