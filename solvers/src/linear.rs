@@ -16,6 +16,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, Par, Side};
 use nalgebra::DMatrix;
+use smallvec::SmallVec;
 
 mod assembly;
 pub(crate) use assembly::split_at_ends;
@@ -33,6 +34,9 @@ pub(crate) enum Role {
     /// Eliminated first by the Schur complement, as eliminated block `e`.
     Elim(usize),
 }
+
+/// The roles of one factor's variables, in key order (inline up to four keys).
+pub(crate) type Roles = SmallVec<[Role; 4]>;
 
 /// Which factorization solves the reduced system.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -53,9 +57,9 @@ pub const DENSE_THRESHOLD: usize = 200;
 #[derive(Clone, Debug, Default)]
 struct FactorPlan {
     /// (position p, position q, pair id) for kept positions with blk(p) ≥ blk(q).
-    pairs: Vec<(usize, usize, usize)>,
+    pairs: SmallVec<[(usize, usize, usize); 3]>,
     /// Kept positions and their block.
-    kept: Vec<(usize, usize)>,
+    kept: SmallVec<[(usize, usize); 2]>,
     /// The factor's eliminated variable, if any.
     elim: Option<ElimPlan>,
     /// Its JᵀJ never changes: formed once into [`Structure::hessian_cache`].
@@ -70,7 +74,7 @@ struct ElimPlan {
     /// Eliminated block index.
     block: usize,
     /// For each kept position of the factor: (position, offset of its H_cl block in [`System::hcl`]).
-    slots: Vec<(usize, usize)>,
+    slots: SmallVec<[(usize, usize); 2]>,
 }
 
 /// Sparsity structure: the upper triangle of the reduced system, in CSC,
@@ -106,11 +110,24 @@ pub(crate) struct Structure {
     /// How the Schur complement is split over threads (empty: one thread).
     schur: SchurPlan,
     factor: Option<SparseFactor>,
-    /// Reused copy of H for damping and the Schur complement.
-    scratch: Vec<f64>,
+    /// Buffers of [`Structure::reduce`], reused from solve to solve (large
+    /// ones are otherwise returned to the OS and page-faulted back each time).
+    scratch: ReduceBuffers,
     /// Per factor with constant JᵀJ: its kept-pair entries, in the order
     /// [`Structure::assemble_into`] adds them (empty until first formed).
     hessian_cache: Vec<Vec<f64>>,
+}
+
+/// What [`Structure::reduce`] leaves behind besides the reduced gradient.
+#[derive(Default)]
+pub(crate) struct ReduceBuffers {
+    /// The reduced (damped, Schur-complemented) H, as [`System::h`].
+    pub h: Vec<f64>,
+    /// The damped inverse of every eliminated block, laid out as [`System::hll`].
+    pub elim_inv: Vec<f64>,
+    /// `W = H_cl H_ll⁻¹` of every eliminated block, laid out as [`System::hcl`]
+    /// (used by the parallel Schur complement only).
+    pub w: Vec<f64>,
 }
 
 /// faer's sparse Cholesky on our pattern, whose blocks are already in a
@@ -182,7 +199,7 @@ impl SparseFactor {
 /// Fill-reducing order of the kept blocks: AMD on the block graph (including
 /// the fill the Schur complement of eliminated blocks creates). Returns the
 /// rank of each block.
-fn block_amd(nk: usize, factor_roles: &[Vec<Role>]) -> Vec<usize> {
+fn block_amd(nk: usize, factor_roles: &[Roles]) -> Vec<usize> {
     let mut adj: Vec<Vec<usize>> = vec![Vec::new(); nk];
     let mut elim_nbrs: Vec<Vec<usize>> = Vec::new();
     let mut kept = Vec::new();
@@ -258,7 +275,7 @@ impl Structure {
     pub fn new(
         kept_dims: Vec<usize>,
         elim_dims: Vec<usize>,
-        factor_roles: &[Vec<Role>],
+        factor_roles: &[Roles],
         solver: LinearSolver,
     ) -> Result<Self, SolveError> {
         let nk = kept_dims.len();
@@ -275,7 +292,7 @@ impl Structure {
             dims_new[rank[b]] = d;
         }
         let kept_dims = dims_new;
-        let remapped: Vec<Vec<Role>> = factor_roles
+        let remapped: Vec<Roles> = factor_roles
             .iter()
             .map(|roles| roles.iter().map(|r| if let Role::Kept(b) = r { Role::Kept(rank[*b]) } else { *r }).collect())
             .collect();
@@ -454,7 +471,7 @@ impl Structure {
             dense,
             rank,
             factor: None,
-            scratch: Vec::new(),
+            scratch: ReduceBuffers::default(),
             hessian_cache: Vec::new(),
             assembly: AssemblyPlan::default(),
             schur: SchurPlan::default(),
@@ -548,8 +565,9 @@ impl Structure {
     /// Returns `(δ, factorize_seconds, solve_seconds, build_seconds)`.
     pub fn solve(&mut self, sys: &System, damping: Option<&[f64]>) -> Result<(Vec<f64>, f64, f64, f64), SolveError> {
         let t_build = std::time::Instant::now();
-        let mut h = std::mem::take(&mut self.scratch);
-        let (g, elim_inv) = self.reduce(sys, damping, &mut h)?;
+        let mut buf = std::mem::take(&mut self.scratch);
+        let g = self.reduce(sys, damping, &mut buf)?;
+        let (h, elim_inv) = (&buf.h, &buf.elim_inv);
         let build_s = t_build.elapsed().as_secs_f64();
 
         let t_fact = std::time::Instant::now();
@@ -558,7 +576,7 @@ impl Structure {
         let mut solve_s = 0.0;
         if self.n == 0 {
         } else if self.dense {
-            let l = self.dense_cholesky(&h).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
+            let l = self.dense_cholesky(h).ok_or_else(|| SolveError::Singular("dense Cholesky failed".into()))?;
             fact_s = t_fact.elapsed().as_secs_f64();
             let t_solve = std::time::Instant::now();
             Self::dense_solve(&l, faer::MatMut::from_column_major_slice_mut(&mut x, self.n, 1));
@@ -569,7 +587,7 @@ impl Structure {
             }
             let factor = self.factor.as_mut().expect("set above");
             let mut rhs = faer::Mat::<f64>::from_fn(self.n, 1, |i, _| x[i]);
-            let (fs, ss) = factor.factor_solve(&self.col_ptr, &self.row_idx, &h, rhs.as_mut())?;
+            let (fs, ss) = factor.factor_solve(&self.col_ptr, &self.row_idx, h, rhs.as_mut())?;
             fact_s = fs;
             solve_s = ss;
             for (i, xi) in x.iter_mut().enumerate() {
@@ -598,7 +616,7 @@ impl Structure {
         if x.iter().any(|v| !v.is_finite()) {
             return Err(SolveError::Singular("non-finite step".into()));
         }
-        self.scratch = h;
+        self.scratch = buf;
         Ok((x, fact_s, solve_s + t_back.elapsed().as_secs_f64(), build_s))
     }
 
@@ -637,8 +655,9 @@ impl Structure {
     /// Selected columns of H⁻¹ over kept unknowns. With eliminated blocks, the
     /// inverse of their Schur complement: the same columns of the full inverse.
     pub fn inverse_columns(&mut self, sys: &System, cols: &[usize]) -> Result<DMatrix<f64>, SolveError> {
-        let mut h = Vec::new();
-        self.reduce(sys, None, &mut h)?;
+        let mut buf = ReduceBuffers::default();
+        self.reduce(sys, None, &mut buf)?;
+        let h = buf.h;
         let mut out = DMatrix::zeros(self.n, cols.len());
         if self.dense || self.n == 0 {
             if self.n == 0 {

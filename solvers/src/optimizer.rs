@@ -4,7 +4,7 @@
 use crate::error::SolveError;
 use crate::graph::Graph;
 use crate::key::Key;
-use crate::linear::{LinearSolver, Role, Structure, System};
+use crate::linear::{LinearSolver, Role, Roles, Structure, System};
 use crate::linearized::{linearize_all, linearize_all_into, Linearized};
 use crate::marginal::{covariances_of_system, Covariances};
 use crate::values::Values;
@@ -183,7 +183,7 @@ pub(crate) struct Layout {
     pub keys: Vec<Key>,
     pub roles: Vec<Role>,
     /// Variable index of each key position of each factor.
-    pub factor_vars: Vec<Vec<usize>>,
+    pub factor_vars: Vec<smallvec::SmallVec<[usize; 4]>>,
     pub kept_vars: Vec<usize>,
     pub elim_vars: Vec<usize>,
     /// Per factor: its JᵀJ never changes (constant Jacobians, no robust loss).
@@ -198,9 +198,6 @@ impl Layout {
             for (a, k) in ks.iter().enumerate() {
                 if ks[..a].contains(k) {
                     return Err(SolveError::BadFactor { factor: fi, what: format!("key {k} appears twice") });
-                }
-                if !values.contains(*k) {
-                    return Err(SolveError::MissingVariable { factor: fi, key: *k });
                 }
             }
             keys.extend_from_slice(ks);
@@ -218,6 +215,11 @@ impl Layout {
         }
         keys.sort_unstable();
         keys.dedup();
+        // Each key looked up once; the first factor naming a missing one is reported.
+        if let Some(&missing) = keys.iter().find(|&&k| !values.contains(k)) {
+            let fi = graph.entries().iter().position(|e| e.factor.keys().contains(&missing)).unwrap_or(0);
+            return Err(SolveError::MissingVariable { factor: fi, key: missing });
+        }
         let index = |k: &Key| keys.binary_search(k).expect("every factor key is in `keys`");
         let mut roles = Vec::with_capacity(keys.len());
         let (mut kept_vars, mut elim_vars) = (Vec::new(), Vec::new());
@@ -241,7 +243,7 @@ impl Layout {
     pub fn structure(&self, vars: &[Box<dyn DynVariable>], solver: LinearSolver) -> Result<Structure, SolveError> {
         let kept_dims = self.kept_vars.iter().map(|&v| vars[v].dim()).collect();
         let elim_dims = self.elim_vars.iter().map(|&v| vars[v].dim()).collect();
-        let factor_roles: Vec<Vec<Role>> =
+        let factor_roles: Vec<Roles> =
             self.factor_vars.iter().map(|fv| fv.iter().map(|&v| self.roles[v]).collect()).collect();
         let mut s = Structure::new(kept_dims, elim_dims, &factor_roles, solver)?;
         s.set_constant_hessians(&self.constant_hessian);

@@ -14,7 +14,7 @@
 //! one-thread loop applies them in.
 
 use super::assembly::{chunk_index, cut, split_at_ends, CHUNKS, PARALLEL_MIN_FACTORS};
-use super::Structure;
+use super::{ReduceBuffers, Structure};
 use crate::error::SolveError;
 use crate::linear::System;
 use rayon::prelude::*;
@@ -100,7 +100,6 @@ impl SchurPlan {
         if ne == 0 || s.plans.len() < PARALLEL_MIN_FACTORS {
             return SchurPlan::default();
         }
-        let slot_offsets = |e: usize| s.elim_slots(e).map(|(_, o, _)| o).collect::<Vec<_>>();
         let mut kwork = vec![0; nk];
         for pairs in &s.elim_pairs {
             for &(_, _, pair) in pairs {
@@ -110,10 +109,29 @@ impl SchurPlan {
         let ework: Vec<usize> = s.elim_cams.iter().map(|c| c.len() * c.len()).collect();
         let kranges = cut(&kwork, CHUNKS);
         let kidx = chunk_index(&kranges, nk);
-        let mut kept: Vec<SchurChunk> =
-            kranges.into_iter().map(|blocks| SchurChunk { blocks, pairs: Vec::new(), grads: Vec::new() }).collect();
+        // Terms per chunk, counted first so that each list is allocated once.
+        let (mut npairs, mut ngrads) = (vec![0; kranges.len()], vec![0; kranges.len()]);
+        for (pairs, cams) in s.elim_pairs.iter().zip(&s.elim_cams) {
+            for &(_, _, pair) in pairs {
+                npairs[kidx[s.pairs[pair].0]] += 1;
+            }
+            for &c in cams {
+                ngrads[kidx[c]] += 1;
+            }
+        }
+        let mut kept: Vec<SchurChunk> = kranges
+            .into_iter()
+            .zip(npairs.into_iter().zip(ngrads))
+            .map(|(blocks, (np, ng))| SchurChunk {
+                blocks,
+                pairs: Vec::with_capacity(np),
+                grads: Vec::with_capacity(ng),
+            })
+            .collect();
+        let mut offs = Vec::new();
         for e in 0..ne {
-            let offs = slot_offsets(e);
+            offs.clear();
+            offs.extend(s.elim_slots(e).map(|(_, o, _)| o));
             for &(sa, sb, pair) in &s.elim_pairs[e] {
                 kept[kidx[s.pairs[pair].0]].pairs.push((e, offs[sa], offs[sb], pair));
             }
@@ -134,8 +152,9 @@ impl Structure {
         &self,
         sys: &System,
         damping: Option<&[f64]>,
-        h: &mut Vec<f64>,
-    ) -> Result<(Vec<f64>, Vec<f64>), SolveError> {
+        buf: &mut ReduceBuffers,
+    ) -> Result<Vec<f64>, SolveError> {
+        let ReduceBuffers { h, elim_inv, w } = buf;
         h.clear();
         h.extend_from_slice(&sys.h);
         let mut g = sys.g.clone();
@@ -144,15 +163,17 @@ impl Structure {
                 h[p] += d[k];
             }
         }
-        let mut elim_inv = vec![0.0; sys.hll.len()];
+        // Every entry is overwritten: the contents may stay from the last call.
+        elim_inv.resize(sys.hll.len(), 0.0);
         if !self.schur.kept.is_empty() {
-            self.reduce_parallel(sys, damping, h, &mut g, &mut elim_inv)?;
-            return Ok((g, elim_inv));
+            w.resize(sys.hcl.len(), 0.0);
+            self.reduce_parallel(sys, damping, h, &mut g, elim_inv, w)?;
+            return Ok(g);
         }
         let mut scratch = Scratch::default();
         for (e, &d) in self.elim_dims.iter().enumerate() {
             // Literal sizes let the compiler unroll the inlined loops.
-            let mut elim = |d| self.eliminate(e, d, sys, damping, &mut elim_inv, &mut scratch, h, &mut g);
+            let mut elim = |d| self.eliminate(e, d, sys, damping, elim_inv, &mut scratch, h, &mut g);
             match d {
                 1 => elim(1),
                 2 => elim(2),
@@ -160,7 +181,7 @@ impl Structure {
                 _ => elim(d),
             }?;
         }
-        Ok((g, elim_inv))
+        Ok(g)
     }
 
     /// Eliminate block `e` of size `d`: its damped inverse into `elim_inv`,
@@ -264,12 +285,12 @@ impl Structure {
         h: &mut [f64],
         g: &mut [f64],
         elim_inv: &mut [f64],
+        w: &mut [f64],
     ) -> Result<(), SolveError> {
         let plan = &self.schur;
         // Every block's inverse and W (W laid out as sys.hcl).
-        let mut w = vec![0.0; sys.hcl.len()];
         let invs = split_at_ends(elim_inv, plan.elim.iter().map(|r| self.hll_offsets[r.end]));
-        let ws = split_at_ends(&mut w, plan.elim.iter().map(|r| self.hcl_offsets[r.end]));
+        let ws = split_at_ends(w, plan.elim.iter().map(|r| self.hcl_offsets[r.end]));
         let results: Vec<Result<(), SolveError>> = plan
             .elim
             .par_iter()
@@ -348,7 +369,7 @@ impl Structure {
 #[cfg(test)]
 mod tests {
     use super::{spd_invert, SchurPlan};
-    use crate::linear::{LinearSolver, Role, Structure, System};
+    use crate::linear::{LinearSolver, ReduceBuffers, Role, Roles, Structure, System};
     use nalgebra::DMatrix;
 
     /// The parallel Schur complement equals the one-thread loop bit for bit:
@@ -357,8 +378,8 @@ mod tests {
     #[test]
     fn parallel_schur_equals_the_one_thread_loop_bit_for_bit() {
         let (nc, np) = (30, 1500);
-        let roles: Vec<Vec<Role>> =
-            (0..6000).map(|f| vec![Role::Kept((f * 7 + f / 50) % nc), Role::Elim(f % np)]).collect();
+        let roles: Vec<Roles> =
+            (0..6000).map(|f| smallvec::smallvec![Role::Kept((f * 7 + f / 50) % nc), Role::Elim(f % np)]).collect();
         let s = Structure::new(vec![9; nc], vec![3; np], &roles, LinearSolver::SparseCholesky).unwrap();
         assert!(!s.schur.kept.is_empty() && s.schur.kept.len() > 1, "the parallel plan is used");
         let mut x = 0.37_f64;
@@ -380,15 +401,19 @@ mod tests {
             sys.hll[o..o + 9].copy_from_slice(a.as_slice());
         }
         let damping: Vec<f64> = (0..s.n + 3 * np).map(|_| next().abs()).collect();
-        let (mut h_par, mut h_seq) = (Vec::new(), Vec::new());
-        let (g_par, inv_par) = s.reduce(&sys, Some(&damping), &mut h_par).unwrap();
+        let (mut par, mut seq) = (ReduceBuffers::default(), ReduceBuffers::default());
+        let g_par = s.reduce(&sys, Some(&damping), &mut par).unwrap();
+        // Reused buffers give the same numbers.
+        let g_again = s.reduce(&sys, Some(&damping), &mut par).unwrap();
         let mut one_thread = s;
         one_thread.schur = SchurPlan::default();
-        let (g_seq, inv_seq) = one_thread.reduce(&sys, Some(&damping), &mut h_seq).unwrap();
+        let g_seq = one_thread.reduce(&sys, Some(&damping), &mut seq).unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&h_par), bits(&h_seq));
+        assert_eq!(bits(&par.h), bits(&seq.h));
         assert_eq!(bits(&g_par), bits(&g_seq));
-        assert_eq!(bits(&inv_par), bits(&inv_seq));
+        assert_eq!(bits(&g_again), bits(&g_seq));
+        assert_eq!(bits(&par.elim_inv), bits(&seq.elim_inv));
+        let h_par = &par.h;
         assert!(h_par.iter().zip(&sys.h).filter(|(a, b)| a != b).count() > 1000, "the complement changed H");
     }
 
