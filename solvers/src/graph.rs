@@ -58,8 +58,9 @@ impl FactorEntry {
         for j in lin.jacobians.iter_mut() {
             self.noise.whiten_jacobian(j);
         }
-        if lin.residual.iter().any(|v| !v.is_finite()) || lin.jacobians.iter().any(|j| j.iter().any(|v| !v.is_finite()))
-        {
+        // Over plain slices (nalgebra's matrix iterators do not vectorize).
+        let finite = |s: &[f64]| s.iter().all(|v| v.is_finite());
+        if !finite(lin.residual.as_slice()) || !lin.jacobians.iter().all(|j| finite(j.as_slice())) {
             return Err(FactorError::NonFinite);
         }
         out.rho = match &self.loss {

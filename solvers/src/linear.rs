@@ -632,17 +632,16 @@ impl Structure {
                 }
             }
         }
+        if self.h_times_elim_parallel(sys, x, &mut y) {
+            return y;
+        }
         for (e, &d) in self.elim_dims.iter().enumerate() {
-            let (off, ho) = (self.elim_offsets[e], self.hll_offsets[e]);
-            let hll = &sys.hll[ho..ho + d * d];
-            for a in 0..d {
-                y[off + a] += (0..d).map(|b| hll[a + b * d] * x[off + b]).sum::<f64>();
-            }
+            self.h_times_elim_block(e, d, sys, x, &mut y[self.elim_offsets[e]..self.elim_offsets[e] + d]);
+            let off = self.elim_offsets[e];
             for (c, o, len) in self.elim_slots(e) {
                 let (oc, dc) = (self.kept_offsets[c], self.kept_dims[c]);
+                // y_c += H_cl x_l.
                 for (b, col) in sys.hcl[o..o + len].chunks_exact(dc).enumerate() {
-                    // y_l += H_clᵀ x_c, y_c += H_cl x_l.
-                    y[off + b] += dot(col, &x[oc..oc + dc]);
                     for (k, &v) in col.iter().enumerate() {
                         y[oc + k] += v * x[off + b];
                     }
@@ -650,6 +649,22 @@ impl Structure {
             }
         }
         y
+    }
+
+    /// Eliminated block `e`'s rows of `Hδ` into `y` (its `d` entries):
+    /// `H_ll x_l`, then `H_clᵀ x_c` slot after slot.
+    pub(super) fn h_times_elim_block(&self, e: usize, d: usize, sys: &System, x: &[f64], y: &mut [f64]) {
+        let (off, ho) = (self.elim_offsets[e], self.hll_offsets[e]);
+        let hll = &sys.hll[ho..ho + d * d];
+        for a in 0..d {
+            y[a] += (0..d).map(|b| hll[a + b * d] * x[off + b]).sum::<f64>();
+        }
+        for (c, o, len) in self.elim_slots(e) {
+            let (oc, dc) = (self.kept_offsets[c], self.kept_dims[c]);
+            for (b, col) in sys.hcl[o..o + len].chunks_exact(dc).enumerate() {
+                y[b] += dot(col, &x[oc..oc + dc]);
+            }
+        }
     }
 
     /// Selected columns of H⁻¹ over kept unknowns. With eliminated blocks, the

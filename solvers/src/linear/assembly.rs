@@ -246,7 +246,7 @@ impl Structure {
     }
 
     /// Offset in [`System::gl`] of eliminated block `e` (the end for `e` = their number).
-    fn elim_start(&self, e: usize) -> usize {
+    pub(super) fn elim_start(&self, e: usize) -> usize {
         match self.elim_offsets.get(e) {
             Some(o) => o - self.n,
             None => self.elim_offsets.last().map_or(0, |o| o - self.n + self.elim_dims[e - 1]),

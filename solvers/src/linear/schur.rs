@@ -336,6 +336,40 @@ impl Structure {
         Ok(())
     }
 
+    /// The eliminated blocks' terms of [`Structure::h_times`] in parallel
+    /// along the Schur plan (`false`, with `y` untouched, when it has none):
+    /// each eliminated chunk its blocks' rows, each kept chunk its `H_cl x_l`
+    /// terms in eliminated-block order, the sums of the one-thread loop.
+    pub(super) fn h_times_elim_parallel(&self, sys: &System, x: &[f64], y: &mut [f64]) -> bool {
+        let plan = &self.schur;
+        if plan.kept.is_empty() {
+            return false;
+        }
+        let (yc, yl) = y.split_at_mut(self.n);
+        let yls = split_at_ends(yl, plan.elim.iter().map(|r| self.elim_start(r.end)));
+        plan.elim.par_iter().zip(yls).for_each(|(range, yl)| {
+            let y0 = self.elim_start(range.start);
+            for e in range.clone() {
+                let (o, d) = (self.elim_start(e) - y0, self.elim_dims[e]);
+                self.h_times_elim_block(e, d, sys, x, &mut yl[o..o + d]);
+            }
+        });
+        let ycs = split_at_ends(yc, plan.kept.iter().map(|c| self.kept_offsets[c.blocks.end]));
+        plan.kept.par_iter().zip(ycs).for_each(|(chunk, yc)| {
+            let y0 = self.kept_offsets[chunk.blocks.start];
+            for &(e, s, c) in &chunk.grads {
+                let (off, d) = (self.elim_offsets[e], self.elim_dims[e]);
+                let (oc, dc) = (self.kept_offsets[c] - y0, self.kept_dims[c]);
+                for (b, col) in sys.hcl[s..s + dc * d].chunks_exact(dc).enumerate() {
+                    for (k, &v) in col.iter().enumerate() {
+                        yc[oc + k] += v * x[off + b];
+                    }
+                }
+            }
+        });
+        true
+    }
+
     /// `H_(big, small) −= W_big H_smallᵀ` (one Schur term), without a temporary;
     /// `h` starts at position `h0` of H. `w_big` is `d_big × dl`, `h_small` is
     /// `d_small × dl`, both column-major.
@@ -372,7 +406,8 @@ mod tests {
     use crate::linear::{LinearSolver, ReduceBuffers, Role, Roles, Structure, System};
     use nalgebra::DMatrix;
 
-    /// The parallel Schur complement equals the one-thread loop bit for bit:
+    /// The parallel Schur complement (and product with H) equals the
+    /// one-thread loop bit for bit:
     /// 6000 factors (a camera and a point each) over 30 cameras (9-dim) and
     /// 1500 points (3-dim), with pseudo-random but positive-definite blocks.
     #[test]
@@ -405,10 +440,13 @@ mod tests {
         let g_par = s.reduce(&sys, Some(&damping), &mut par).unwrap();
         // Reused buffers give the same numbers.
         let g_again = s.reduce(&sys, Some(&damping), &mut par).unwrap();
+        let y_par = s.h_times(&sys, &damping);
         let mut one_thread = s;
         one_thread.schur = SchurPlan::default();
         let g_seq = one_thread.reduce(&sys, Some(&damping), &mut seq).unwrap();
+        let y_seq = one_thread.h_times(&sys, &damping);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&y_par), bits(&y_seq), "H x");
         assert_eq!(bits(&par.h), bits(&seq.h));
         assert_eq!(bits(&g_par), bits(&g_seq));
         assert_eq!(bits(&g_again), bits(&g_seq));
