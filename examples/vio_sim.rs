@@ -3,8 +3,11 @@
 //!
 //! `cargo run --example vio_sim -- [--duration S] [--seed N]
 //! [--keyframe-parallax PX] [--keyframe-interval S] [--window N]
-//! [--max-iterations N] [--prediction-gate PX] [--triangulation-gate PX] [--out DIR]`
+//! [--max-iterations N] [--prediction-gate PX] [--triangulation-gate PX]
+//! [--gyro-rw-scale K] [--accel-rw-scale K] [--out DIR]`
 //!
+//! The scales multiply the estimator's bias random walks (the model's own,
+//! without its bias instability, by default).
 //! The IMU is corrected with the simulation's true calibration (what a
 //! perfect `tumble calibrate` would give); the pixel noise is the simulator's.
 //! With `--out` the run's files and figures are written as `tumble vio` does.
@@ -40,6 +43,8 @@ fn main() {
     opts.max_iterations = flag(&args, "--max-iterations", opts.max_iterations);
     opts.prediction_gate_px = flag(&args, "--prediction-gate", opts.prediction_gate_px);
     opts.triangulation_gate_px = flag(&args, "--triangulation-gate", opts.triangulation_gate_px);
+    opts.imu.gyro_random_walk *= flag(&args, "--gyro-rw-scale", 1.0);
+    opts.imu.accel_random_walk *= flag(&args, "--accel-rw-scale", 1.0);
     let out = run(&input, &opts, None).expect("vio");
     let s = summarize(&input, &opts, &out, 20.0);
     println!("{}", s.table());
