@@ -46,6 +46,14 @@ fn simulated_walk_closes_the_loop_far_better_than_the_imu_alone() {
     assert!(s.closed_loop_percent() < 0.3, "{} %", s.closed_loop_percent());
     assert!(s.imu_only_closed_loop_error_m > 20.0 * s.closed_loop_error_m);
     assert!(s.ate_rmse_m.unwrap() < 0.15);
+    // Bias RMSE after convergence against the steady-state std the noise
+    // coefficients predict, √(N·K): the issue asks for ≤ 2×. The gyro's is met
+    // here; the accelerometer's is not (≈ 5×: its bias is seen only through
+    // the motion, and the simulated bias also has a bias instability the
+    // estimator's random walk does not model).
+    let (gyro_ratio, accel_ratio) = s.bias_rmse_ratios().unwrap();
+    println!("bias RMSE / predicted steady state: gyro {gyro_ratio:.2}, accel {accel_ratio:.2}");
+    assert!(gyro_ratio < 2.0, "{gyro_ratio}");
     // Normalized gyro-bias errors against the reported σ after convergence.
     let gt = input.groundtruth.as_ref().unwrap();
     let (mut z2, mut n) = (0.0, 0usize);

@@ -47,6 +47,11 @@ pub struct Summary {
     pub bias_rmse_accel: Option<f64>,
     /// Start of the bias RMSE window \[s\] (convergence time skipped).
     pub bias_rmse_from_s: f64,
+    /// The gyro bias's steady-state std per axis that the noise coefficients
+    /// predict, `√(N·K)` \[rad/s\] (see [`allan_steady_std`]).
+    pub bias_allan_std_gyro: f64,
+    /// The same for the accelerometer bias \[m/s²\].
+    pub bias_allan_std_accel: f64,
     /// Measurement residuals at their final estimates and their gap
     /// χ²/dof − 1 (the model-discrepancy audit's figure for a VIO run).
     pub residuals: super::ResidualTally,
@@ -81,6 +86,17 @@ fn path_length(positions: impl IntoIterator<Item = Vector3<f64>>, min_step_m: f6
         }
     }
     length + (last - taken).norm()
+}
+
+/// Steady-state std \[unit\] per axis of a bias that walks randomly with
+/// coefficient `k` \[unit/√s\] and is observed through white noise of density
+/// `n` \[unit/√Hz\]: the stationary solution of the scalar Kalman–Bucy
+/// Riccati equation `0 = k² − P²/n²`, `P = n k`, so `σ = √(n k)`. It is the
+/// best any estimator does with those Allan coefficients (an estimator that
+/// sees the bias only through the motion does worse), and the issue's yardstick
+/// for the bias RMSE after convergence (≤ 2× this).
+pub fn allan_steady_std(n: f64, k: f64) -> f64 {
+    (n * k).sqrt()
 }
 
 fn percentile(v: &mut [f64], p: f64) -> f64 {
@@ -154,6 +170,8 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         bias_rmse_gyro: m.and_then(|m| m.bias_rmse_gyro),
         bias_rmse_accel: m.and_then(|m| m.bias_rmse_accel),
         bias_rmse_from_s: first.map_or(0.0, |f| f.t) + bias_from_s,
+        bias_allan_std_gyro: allan_steady_std(opts.imu.gyro_noise_density, opts.imu.gyro_random_walk),
+        bias_allan_std_accel: allan_steady_std(opts.imu.accel_noise_density, opts.imu.accel_random_walk),
         warnings,
         evaluation,
     }
@@ -171,14 +189,31 @@ impl Summary {
         100.0 * self.closed_loop_error_m / self.walked_m().max(1e-9)
     }
 
+    /// The bias RMSEs (of the error norm) over the steady-state std the noise
+    /// coefficients predict for the norm (`√3` × [`Summary::bias_allan_std_gyro`]
+    /// and `_accel`): (gyro, accel), with ground truth.
+    pub fn bias_rmse_ratios(&self) -> Option<(f64, f64)> {
+        let norm = 3f64.sqrt();
+        Some((
+            self.bias_rmse_gyro? / (norm * self.bias_allan_std_gyro),
+            self.bias_rmse_accel? / (norm * self.bias_allan_std_accel),
+        ))
+    }
+
     /// A few lines for the terminal.
     pub fn table(&self) -> String {
         let opt = |v: Option<f64>, unit: &str| v.map_or("—".to_string(), |x| format!("{x:.4} {unit}"));
+        let ratios = self.bias_rmse_ratios().map_or(String::new(), |(g, a)| {
+            format!(
+                " = {g:.1}× and {a:.1}× the steady state √(N·K) predicts ({:.1e} rad/s, {:.1e} m/s² per axis)",
+                self.bias_allan_std_gyro, self.bias_allan_std_accel
+            )
+        });
         format!(
             "duration {:.1} s, path {:.2} m{}, {} frames ({} keyframes), {} resets\n\
              closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
-             bias RMSE after {:.1} s: gyro {}, accel {}\n\
+             bias RMSE after {:.1} s: gyro {}, accel {}{}\n\
              speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
             self.duration_s,
             self.distance_m,
@@ -194,6 +229,7 @@ impl Summary {
             self.bias_rmse_from_s,
             opt(self.bias_rmse_gyro, "rad/s"),
             opt(self.bias_rmse_accel, "m/s²"),
+            ratios,
             self.realtime_factor,
             self.solve_ms_median,
             self.solve_ms_p95,
@@ -251,6 +287,14 @@ pub fn write_outputs(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn allan_steady_std_solves_the_riccati_equation() {
+        // Kalman–Bucy: dP/dt = k² − P²/n² = 0 at P = σ².
+        let (n, k) = (5.25e-3, 2e-5);
+        let p = allan_steady_std(n, k).powi(2);
+        assert!((k * k - p * p / (n * n)).abs() < 1e-12 * k * k, "{p}");
+    }
 
     #[test]
     fn path_length_ignores_frame_jitter_and_keeps_the_last_sample() {
