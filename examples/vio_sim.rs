@@ -1,13 +1,15 @@
 //! Simulate the paper's hand-held walk (BMI055-like IMU + camera), run the
 //! sliding-window estimator on it and print drift, ATE and bias errors.
 //!
-//! `cargo run --example vio_sim -- [--duration S] [--seed N]
+//! `cargo run --example vio_sim -- [--scenario walk|corridor|flight] [--duration S] [--seed N]
 //! [--keyframe-parallax PX] [--keyframe-interval S] [--window N]
 //! [--max-iterations N] [--prediction-gate PX] [--triangulation-gate PX]
-//! [--gyro-rw-scale K] [--accel-rw-scale K] [--out DIR]`
+//! [--gyro-rw-scale K] [--accel-rw-scale K] [--pixel-noise PX] [--imu-noise-scale K] [--out DIR]`
 //!
-//! The scales multiply the estimator's bias random walks (the model's own,
-//! without its bias instability, by default).
+//! The rw scales multiply the estimator's bias random walks (the model's own,
+//! without its bias instability, by default); `--pixel-noise` and
+//! `--imu-noise-scale` change the simulated pixel noise and multiply the
+//! IMU's white noise densities (the estimator is told either).
 //! The IMU is corrected with the simulation's true calibration (what a
 //! perfect `tumble calibrate` would give); the pixel noise is the simulator's.
 //! With `--out` the run's files and figures are written as `tumble vio` does.
@@ -33,8 +35,21 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let duration: f64 = flag(&args, "--duration", 60.0);
     let seed: u64 = flag(&args, "--seed", 1);
-    let cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
-    let sim = simulate(Scenario::Walk, &cfg, seed).expect("simulation");
+    let mut cfg = SimConfig { duration_s: Some(duration), ..SimConfig::default() };
+    cfg.camera.pixel_noise_px = flag(&args, "--pixel-noise", cfg.camera.pixel_noise_px);
+    let white = flag(&args, "--imu-noise-scale", 1.0);
+    for triad in [&mut cfg.imu.gyro, &mut cfg.imu.accel] {
+        triad.noise_density = triad.noise_density.map(|n| n * white);
+    }
+    let name: String = flag(&args, "--scenario", "walk".to_string());
+    let scenario = match <Scenario as clap::ValueEnum>::from_str(&name, true) {
+        Ok(s @ (Scenario::Walk | Scenario::Corridor | Scenario::Flight)) => s,
+        _ => {
+            eprintln!("--scenario: walk, corridor or flight, found {name}");
+            std::process::exit(2);
+        }
+    };
+    let sim = simulate(scenario, &cfg, seed).expect("simulation");
     let input = VioInput::from_simulation(&sim).expect("input");
     let mut opts = VioOptions::for_simulation(&cfg);
     opts.keyframe_parallax_px = flag(&args, "--keyframe-parallax", opts.keyframe_parallax_px);

@@ -253,7 +253,7 @@ enum Command {
         /// Random seed; the same seed and config give the same bytes.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Length of static, walk and flight scenarios [s] (overrides the config).
+        /// Length of static, walk, flight and corridor scenarios [s] (overrides the config).
         #[arg(long)]
         duration: Option<f64>,
         /// Add a second camera this far right of cam0 [m] (EuRoC: 0.11): writes
@@ -262,7 +262,7 @@ enum Command {
         /// camera.stereo_baseline_m).
         #[arg(long, value_name = "METRES")]
         stereo_baseline: Option<f64>,
-        /// Stop a walk or flight on the way: slow down over 1 s from START
+        /// Stop a walk, flight or corridor walk on the way: slow down over 1 s from START
         /// seconds, stand still for LENGTH seconds, speed up over 1 s
         /// (repeatable; each makes the recording LENGTH + 1 s longer; overrides
         /// the config's pauses_s).

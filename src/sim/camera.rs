@@ -5,6 +5,7 @@
 //! Time offset convention (Kalibr, VINS-Mono): an image stamped `t` was taken
 //! at IMU time `t + time_offset_s`.
 
+use super::corridor::Corridor;
 use super::motion::Motion;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -183,11 +184,33 @@ fn room_landmarks(n: usize, centre: Vector3<f64>, half: [f64; 3], rng: &mut ChaC
         .collect()
 }
 
-/// Simulate feature tracks along `motion` with world-frame centre `centre` \[m\].
-pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<f64>, seed: u64) -> SimulatedTracks {
+/// Where the landmarks of a simulation are.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Scene {
+    /// [`CameraSettings::landmarks`] on the faces of a box of half extents
+    /// [`CameraSettings::room_half_extent`] around this world point \[m\].
+    Room(Vector3<f64>),
+    /// The walls, floor and ceiling of a corridor, as densely covered as the
+    /// room's faces would be; its inner block hides what lies behind it.
+    Corridor(Corridor),
+}
+
+/// Simulate feature tracks along `motion` in `scene`.
+pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, scene: &Scene, seed: u64) -> SimulatedTracks {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(200);
-    let landmarks = room_landmarks(s.landmarks, centre, s.room_half_extent, &mut rng);
+    let landmarks = match scene {
+        Scene::Room(centre) => room_landmarks(s.landmarks, *centre, s.room_half_extent, &mut rng),
+        Scene::Corridor(c) => {
+            let [x, y, z] = s.room_half_extent;
+            let room_surface = 8.0 * (x * y + y * z + x * z);
+            c.landmarks(s.landmarks as f64 / room_surface, &mut rng)
+        }
+    };
+    let in_sight = |eye: &Vector3<f64>, l: &[f64; 3]| match scene {
+        Scene::Room(_) => true,
+        Scene::Corridor(c) => c.sees(eye, l),
+    };
     let model = s.model();
     let b_t_c = s.body_from_camera();
     // The second camera draws its noise from its own stream: a mono
@@ -208,7 +231,9 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
         let k = motion.at((t + s.time_offset_s).clamp(0.0, motion.duration()));
         let rot = UnitQuaternion::from_matrix(&k.rotation);
         let w_t_b = Isometry3::from_parts(Translation3::from(k.position), rot);
-        let c_t_w = (w_t_b * b_t_c).inverse();
+        let w_t_c = w_t_b * b_t_c;
+        let eye = w_t_c.translation.vector;
+        let c_t_w = w_t_c.inverse();
         // The pixel where a point in a camera's frame is seen, if it is.
         let pixel = |pc: Point3<f64>| {
             let uv = if pc.z < 0.2 { None } else { model.project(&[pc.x, pc.y, pc.z]) }?;
@@ -217,7 +242,7 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, centre: Vector3<
         let visible: Vec<(usize, [f64; 2])> = landmarks
             .iter()
             .enumerate()
-            .filter_map(|(j, l)| pixel(c_t_w * Point3::from(*l)).map(|uv| (j, uv)))
+            .filter_map(|(j, l)| pixel(c_t_w * Point3::from(*l)).filter(|_| in_sight(&eye, l)).map(|uv| (j, uv)))
             .collect();
         // Tracked features first, then new ones in random order, up to the cap.
         let (mut kept, mut fresh): (Vec<_>, Vec<_>) = visible.into_iter().partition(|(j, _)| track_of[*j].is_some());

@@ -1,5 +1,5 @@
 //! The simulator: scenarios (hand tumble, long static log, hand-held loop,
-//! EuRoC-like flight), the paper's full IMU error model, a camera with feature
+//! EuRoC-like flight, laps of a corridor), the paper's full IMU error model, a camera with feature
 //! tracks, and a writer of the same ASL folder layout real data uses plus a
 //! `truth.json` with every parameter.
 //!
@@ -12,12 +12,14 @@
 //! ```
 
 pub mod camera;
+pub mod corridor;
 pub mod imu;
 pub mod model;
 pub mod motion;
 pub mod writer;
 
-pub use camera::{CameraSettings, SimulatedTracks};
+pub use camera::{CameraSettings, Scene, SimulatedTracks};
+pub use corridor::{Corridor, CorridorWalk};
 pub use imu::{noise_series, simulate_imu, AxisNoise, SimulatedImu};
 pub use model::{Effects, ImuModel, TemperatureTrace, TriadModel};
 pub use motion::{Kinematics, Loop, Motion, Static, Tumble, TumbleSettings};
@@ -42,6 +44,10 @@ pub enum Scenario {
     /// An EuRoC-like flight in a room (default 120 s), with a camera
     /// (time-scaled like the walk; at least ~20 s).
     Flight,
+    /// The paper's walk as a person walks it (default 6 minutes): whole laps
+    /// of a corridor at about 1 m/s, back at the start, with a camera looking
+    /// along it (see [`corridor::CorridorWalk`]; at least 20 s).
+    Corridor,
 }
 
 /// Everything a simulation can be told (all optional in YAML).
@@ -50,19 +56,21 @@ pub enum Scenario {
 pub struct SimConfig {
     /// Gravity magnitude \[m/s²\].
     pub gravity: f64,
-    /// Length of static, walk and flight scenarios \[s\] (scenario default when absent).
+    /// Length of static, walk, flight and corridor scenarios \[s\] (scenario default when absent).
     pub duration_s: Option<f64>,
     /// The IMU and its error model.
     pub imu: ImuModel,
     /// Settings of the tumble scenario.
     pub tumble: TumbleSettings,
-    /// Camera (walk and flight have one by default; set `camera_enabled` to change).
+    /// Camera (walk, flight and corridor have one by default; set `camera_enabled` to change).
     pub camera: CameraSettings,
+    /// Geometry of the corridor scenario.
+    pub corridor: Corridor,
     /// Whether to simulate the camera (scenario default when absent).
     pub camera_enabled: Option<bool>,
     /// Rate of the written ground truth \[Hz\] (IMU rate when moving, 10 Hz static, when absent).
     pub groundtruth_rate_hz: Option<f64>,
-    /// Stops on the way of a walk or flight: `[start, length]` \[s\] each. The
+    /// Stops on the way of a walk, flight or corridor walk: `[start, length]` \[s\] each. The
     /// motion slows to a standstill over 1 s from `start`, stands still for
     /// `length` and speeds up again over 1 s; each pause makes the recording
     /// `length + 1` s longer than `duration_s` (see [`motion::Paused`]).
@@ -79,6 +87,7 @@ impl Default for SimConfig {
             imu: ImuModel::bmi055(),
             tumble: TumbleSettings::default(),
             camera: CameraSettings::default(),
+            corridor: Corridor::default(),
             camera_enabled: None,
             groundtruth_rate_hz: None,
             pauses_s: Vec::new(),
@@ -113,6 +122,7 @@ impl SimConfig {
             return Err("tumble: poses must be ≥ 1 and 0 < hold_s[0] ≤ hold_s[1]".into());
         }
         self.imu.check()?;
+        self.corridor.check()?;
         self.camera.check()
     }
 }
@@ -209,7 +219,7 @@ pub struct Simulation {
     /// Camera tracks, when a camera was simulated.
     pub tracks: Option<SimulatedTracks>,
     /// True still intervals `[start, end]` \[s\] (tumble: the holds; static:
-    /// all; walk and flight: the standstills of their pauses).
+    /// all; walk, flight and corridor: the standstills of their pauses).
     pub static_intervals: Vec<[f64; 2]>,
 }
 
@@ -235,11 +245,28 @@ fn check_dynamics(scenario: Scenario, motion: &dyn Motion) -> Result<(), String>
     Err(format!(
         "a {d:.0} s {} time-compresses its loop to accelerations of {peak:.0} m/s² ({:.1} g), \
          beyond the {:.0} g of a real one: give a duration of at least {:.0} s",
-        if scenario == Scenario::Walk { "walk" } else { "flight" },
+        match scenario {
+            Scenario::Flight => "flight",
+            Scenario::Corridor => "corridor walk",
+            _ => "walk",
+        },
         peak / crate::io::STANDARD_GRAVITY,
         MAX_LOOP_ACCELERATION / crate::io::STANDARD_GRAVITY,
         shortest.ceil()
     ))
+}
+
+/// A scenario's motion, the scene its camera sees and its still intervals `[start, end]` \[s\].
+type Staged = (Box<dyn Motion>, Scene, Vec<[f64; 2]>);
+
+/// A motion with the config's pauses (none: the motion itself), its scene and its standstills.
+fn with_pauses<M: Motion + 'static>(m: M, scene: Scene, pauses_s: &[[f64; 2]]) -> Result<Staged, String> {
+    if pauses_s.is_empty() {
+        return Ok((Box::new(m), scene, Vec::new()));
+    }
+    let m = motion::Paused::new(m, pauses_s).map_err(|e| format!("pauses_s: {e}"))?;
+    let standstills = m.standstills();
+    Ok((Box::new(m), scene, standstills))
 }
 
 /// [`simulate`], handing each finished chunk of IMU samples to `on_chunk`.
@@ -250,44 +277,47 @@ pub fn simulate_with(
     on_chunk: &mut dyn FnMut(&SimulatedImu, std::ops::Range<usize>),
 ) -> Result<Simulation, String> {
     config.check()?;
-    let (motion, centre, intervals): (Box<dyn Motion>, Vector3<f64>, Vec<[f64; 2]>) = match scenario {
+    let (motion, scene, intervals): Staged = match scenario {
         Scenario::Tumble => {
             let m = Tumble::new(&config.tumble, seed);
             let iv = m.static_intervals();
-            (Box::new(m), Vector3::zeros(), iv)
+            (Box::new(m), Scene::Room(Vector3::zeros()), iv)
         }
         Scenario::Static => {
             let d = config.duration_s.unwrap_or(7200.0);
             (
                 Box::new(Static { rotation: nalgebra::Matrix3::identity(), duration: d }),
-                Vector3::zeros(),
+                Scene::Room(Vector3::zeros()),
                 vec![[0.0, d]],
             )
         }
-        Scenario::Walk | Scenario::Flight => {
-            let (m, centre) = if scenario == Scenario::Walk {
-                (Loop::handheld(config.duration_s.unwrap_or(360.0), seed), Vector3::new(0.0, 0.0, 1.2))
-            } else {
-                (Loop::flight(config.duration_s.unwrap_or(120.0), seed), Vector3::new(0.0, 0.0, 1.5))
-            };
-            if config.pauses_s.is_empty() {
-                (Box::new(m), centre, Vec::new())
-            } else {
-                let m = motion::Paused::new(m, &config.pauses_s).map_err(|e| format!("pauses_s: {e}"))?;
-                let standstills = m.standstills();
-                (Box::new(m), centre, standstills)
-            }
+        Scenario::Walk => {
+            let m = Loop::handheld(config.duration_s.unwrap_or(360.0), seed);
+            with_pauses(m, Scene::Room(Vector3::new(0.0, 0.0, 1.2)), &config.pauses_s)?
+        }
+        Scenario::Flight => {
+            let m = Loop::flight(config.duration_s.unwrap_or(120.0), seed);
+            with_pauses(m, Scene::Room(Vector3::new(0.0, 0.0, 1.5)), &config.pauses_s)?
+        }
+        Scenario::Corridor => {
+            let m = CorridorWalk::new(config.corridor, config.duration_s.unwrap_or(360.0), seed)?;
+            with_pauses(m, Scene::Corridor(config.corridor), &config.pauses_s)?
         }
     };
-    if !config.pauses_s.is_empty() && !matches!(scenario, Scenario::Walk | Scenario::Flight) {
-        return Err("pauses_s: only a walk or a flight can pause".into());
+    let moving = matches!(scenario, Scenario::Walk | Scenario::Flight | Scenario::Corridor);
+    if !config.pauses_s.is_empty() && !moving {
+        return Err("pauses_s: only a walk, a flight or a corridor walk can pause".into());
     }
-    if matches!(scenario, Scenario::Walk | Scenario::Flight) {
+    if moving {
         check_dynamics(scenario, motion.as_ref())?;
     }
     let bias_every = ((config.imu.rate_hz / groundtruth_rate(scenario, config)).round() as usize).max(1);
     let imu = imu::simulate_imu_streaming(motion.as_ref(), &config.imu, config.gravity, seed, bias_every, on_chunk);
-    let camera = config.camera_enabled.unwrap_or(matches!(scenario, Scenario::Walk | Scenario::Flight));
-    let tracks = camera.then(|| camera::simulate_tracks(motion.as_ref(), &config.camera, centre, seed));
+    let camera = config.camera_enabled.unwrap_or(moving);
+    let tracks = camera.then(|| camera::simulate_tracks(motion.as_ref(), &config.camera, &scene, seed));
+    let centre = match scene {
+        Scene::Room(c) => c,
+        Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
+    };
     Ok(Simulation { scenario, seed, config: config.clone(), motion, centre, imu, tracks, static_intervals: intervals })
 }

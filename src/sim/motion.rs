@@ -47,7 +47,7 @@ pub trait Motion: Send + Sync {
 }
 
 /// Quintic minimum-jerk blend s(u) on u ∈ \[0, 1\] with its first two derivatives in u.
-fn min_jerk(u: f64) -> (f64, f64, f64) {
+pub(super) fn min_jerk(u: f64) -> (f64, f64, f64) {
     let u = u.clamp(0.0, 1.0);
     let (u2, u3) = (u * u, u * u * u);
     (
@@ -55,6 +55,11 @@ fn min_jerk(u: f64) -> (f64, f64, f64) {
         30.0 * u2 - 60.0 * u3 + 30.0 * u3 * u,
         60.0 * u - 180.0 * u2 + 120.0 * u3,
     )
+}
+
+/// `∫₀ᵘ s(v) dv` of the minimum-jerk blend `s` of [`min_jerk`]: `2.5u⁴ − 3u⁵ + u⁶` (u ∈ \[0, 1\]).
+pub(super) fn min_jerk_integral(u: f64) -> f64 {
+    u.powi(4) * (2.5 - 3.0 * u + u * u)
 }
 
 /// A motionless sensor in a fixed orientation.
@@ -211,13 +216,13 @@ impl Motion for Tumble {
 /// A smooth periodic 3-vector: `Σ_k a_k sin(2π n_k t / T + φ_k)` per axis,
 /// with integer `n_k`, so value and derivatives return to their start at `T`.
 #[derive(Debug, Clone)]
-struct Harmonics {
+pub(super) struct Harmonics {
     period: f64,
     terms: Vec<(Vector3<f64>, f64, Vector3<f64>)>, // amplitude, harmonic number, phase
 }
 
 impl Harmonics {
-    fn random(rng: &mut ChaCha8Rng, period: f64, harmonics: &[f64], amplitude: Vector3<f64>) -> Harmonics {
+    pub(super) fn random(rng: &mut ChaCha8Rng, period: f64, harmonics: &[f64], amplitude: Vector3<f64>) -> Harmonics {
         let terms = harmonics
             .iter()
             .map(|&n| {
@@ -233,7 +238,7 @@ impl Harmonics {
         Harmonics { period, terms }
     }
     /// Value minus its value at 0, first and second derivative.
-    fn eval(&self, t: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    pub(super) fn eval(&self, t: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
         let mut v = Vector3::zeros();
         let mut d = Vector3::zeros();
         let mut dd = Vector3::zeros();
@@ -251,7 +256,7 @@ impl Harmonics {
 }
 
 /// Smooth 0→1 ramp over `[0, ramp]` and 1→0 over `[T − ramp, T]`, with derivatives.
-fn envelope(t: f64, total: f64, ramp: f64) -> (f64, f64, f64) {
+pub(super) fn envelope(t: f64, total: f64, ramp: f64) -> (f64, f64, f64) {
     if t < ramp {
         let (s, ds, dds) = min_jerk(t / ramp);
         (s, ds / ramp, dds / (ramp * ramp))
@@ -389,11 +394,9 @@ impl<M: Motion> Paused<M> {
             if u <= 0.0 {
                 break;
             }
-            // ∫₀ᵘ s(v) dv of the minimum-jerk blend s: 2.5u⁴ − 3u⁵ + u⁶.
-            let blend_integral = |u: f64| u.powi(4) * (2.5 - 3.0 * u + u * u);
             if u < r {
                 let (s, ds, _) = min_jerk(u / r);
-                return (t - lost - r * blend_integral(u / r), 1.0 - s, -ds / r);
+                return (t - lost - r * min_jerk_integral(u / r), 1.0 - s, -ds / r);
             }
             if u < r + length {
                 return (at + 0.5 * r - lost, 0.0, 0.0);
@@ -401,7 +404,7 @@ impl<M: Motion> Paused<M> {
             if u < 2.0 * r + length {
                 let w = (u - r - length) / r;
                 let (s, ds, _) = min_jerk(w);
-                return (at + 0.5 * r - lost + r * blend_integral(w), s, ds / r);
+                return (at + 0.5 * r - lost + r * min_jerk_integral(w), s, ds / r);
             }
             lost += length + r;
         }

@@ -283,7 +283,7 @@ impl VioInput {
         let t0 = ds.imu.t0_ns;
         let motion = crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e))?;
         let centre = motion.p_mean();
-        let tracks = crate::sim::camera::simulate_tracks(&motion, cam, centre, seed);
+        let tracks = crate::sim::camera::simulate_tracks(&motion, cam, &crate::sim::camera::Scene::Room(centre), seed);
         // Frames where both the ground truth and the IMU are.
         let start = (gt.t_ns.iter().copied().find(|&t| t >= t0).unwrap_or(t0) - t0) as f64 * 1e-9;
         let end = match ds.imu.len() {
