@@ -4,12 +4,14 @@
 //! `cargo run --example vio_sim -- [--scenario walk|corridor|flight] [--duration S] [--seed N]
 //! [--keyframe-parallax PX] [--keyframe-interval S] [--window N]
 //! [--max-iterations N] [--prediction-gate PX] [--triangulation-gate PX]
-//! [--gyro-rw-scale K] [--accel-rw-scale K] [--pixel-noise PX] [--imu-noise-scale K] [--out DIR]`
+//! [--gyro-rw-scale K] [--accel-rw-scale K] [--pixel-noise PX] [--imu-noise-scale K]
+//! [--pixel-sigma PX] [--out DIR]`
 //!
-//! The rw scales multiply the estimator's bias random walks (the model's own,
-//! without its bias instability, by default); `--pixel-noise` and
+//! The rw scales multiply the estimator's bias random walks (per axis, the
+//! model's own with its bias instability folded in, by default); `--pixel-noise` and
 //! `--imu-noise-scale` change the simulated pixel noise and multiply the
-//! IMU's white noise densities (the estimator is told either).
+//! IMU's white noise densities (the estimator is told either);
+//! `--pixel-sigma` sets the estimator's pixel σ alone.
 //! The IMU is corrected with the simulation's true calibration (what a
 //! perfect `tumble calibrate` would give); the pixel noise is the simulator's.
 //! With `--out` the run's files and figures are written as `tumble vio` does.
@@ -58,8 +60,14 @@ fn main() {
     opts.max_iterations = flag(&args, "--max-iterations", opts.max_iterations);
     opts.prediction_gate_px = flag(&args, "--prediction-gate", opts.prediction_gate_px);
     opts.triangulation_gate_px = flag(&args, "--triangulation-gate", opts.triangulation_gate_px);
-    opts.imu.gyro_random_walk *= flag(&args, "--gyro-rw-scale", 1.0);
-    opts.imu.accel_random_walk *= flag(&args, "--accel-rw-scale", 1.0);
+    opts.pixel_sigma = flag(&args, "--pixel-sigma", opts.pixel_sigma);
+    let (gyro_rw, accel_rw) = (flag(&args, "--gyro-rw-scale", 1.0), flag(&args, "--accel-rw-scale", 1.0));
+    opts.imu.gyro_random_walk *= gyro_rw;
+    opts.imu.accel_random_walk *= accel_rw;
+    if let Some(axes) = opts.imu.axes.as_mut() {
+        axes.gyro_random_walk = axes.gyro_random_walk.map(|k| k * gyro_rw);
+        axes.accel_random_walk = axes.accel_random_walk.map(|k| k * accel_rw);
+    }
     let out = run(&input, &opts, None).expect("vio");
     let s = summarize(&input, &opts, &out, 20.0);
     println!("{}", s.table());

@@ -431,6 +431,25 @@ fn allan_stage_writes_documented_outputs() {
     ] {
         assert!(yaml.contains(key), "{key} missing in imu.yaml");
     }
+    // The per-axis figures read back: each axis' own white noise (gyro z is
+    // 5× x), and random walks no smaller than the model's own.
+    let noise = tumble::io::ImuNoise::read(&dir.join("imu.yaml")).unwrap();
+    let axes = noise.axes.expect("per-axis figures in imu.yaml");
+    for k in 0..3 {
+        let (n, truth) = (axes.gyroscope_noise_density[k], cfg.imu.gyro.noise_density[k]);
+        assert!((n / truth - 1.0).abs() < 0.05, "gyro {k}: {n} vs {truth}");
+        assert!(axes.gyroscope_random_walk[k] > 0.0 && axes.accelerometer_random_walk[k] > 0.0);
+    }
+    assert_eq!(noise.gyroscope_noise_density, axes.gyroscope_noise_density.iter().fold(0.0, |a: f64, b| a.max(*b)));
+    // Malformed axes are refused with the file and the line or key.
+    let bad = dir.join("bad.yaml");
+    std::fs::write(&bad, yaml.replace("  gyroscope_noise_density: [", "  gyroscope_noise_density: [1, ")).unwrap();
+    let e = tumble::io::ImuNoise::read(&bad).unwrap_err().to_string();
+    assert!(e.contains("bad.yaml:") && e.contains("size 3"), "{e}");
+    let line = yaml.lines().find(|l| l.starts_with("  gyroscope_noise_density: [")).unwrap();
+    std::fs::write(&bad, yaml.replace(line, "  gyroscope_noise_density: [1e-3, -1e-3, 1e-3]")).unwrap();
+    let e = tumble::io::ImuNoise::read(&bad).unwrap_err().to_string();
+    assert!(e.contains("bad.yaml") && e.contains("axes.gyroscope_noise_density"), "{e}");
     for png in ["allan_gyro.png", "allan_accel.png"] {
         let bytes = std::fs::read(dir.join(png)).unwrap();
         assert!(bytes.len() > 10_000 && bytes.starts_with(b"\x89PNG"), "{png}");

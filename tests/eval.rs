@@ -148,6 +148,18 @@ fn bias_errors_against_the_ground_truth_columns() {
     assert!((m.bias_rmse_gyro.unwrap() - expected).abs() < 1e-12, "{:?}", m.bias_rmse_gyro);
     assert!(m.bias_rmse_accel.unwrap() < 1e-12);
     assert!((m.bias_rmse_gyro_axes.unwrap()[2] - 2e-3).abs() < 1e-12);
+    // Without σ columns no normalized errors; with σ = 1e-3 on every axis,
+    // (offset/σ)² per axis: 1, 4, 4 (gyro) and 0 (accel). A NaN σ (no
+    // covariance yet) leaves its sample out.
+    assert!(m.bias_nees_gyro_axes.is_none() && m.bias_nees_accel_axes.is_none());
+    let n = b.t_ns.len();
+    b.gyro_std = Some((0..n).map(|k| if k == n / 2 { [f64::NAN; 3] } else { [1e-3; 3] }).collect());
+    b.accel_std = Some(vec![[0.01; 3]; n]);
+    let m = evaluate(&est, Some(&b), &gt, &opts).unwrap().metrics;
+    let g = m.bias_nees_gyro_axes.unwrap();
+    assert!((g[0] - 1.0).abs() < 1e-9 && (g[1] - 4.0).abs() < 1e-9 && (g[2] - 4.0).abs() < 1e-9, "{g:?}");
+    assert!(m.bias_nees_accel_axes.unwrap().iter().all(|x| x.abs() < 1e-12));
+    assert!(m.table().contains("gyro 1.00 4.00 4.00"), "{}", m.table());
     // Without the ground truth's bias columns: a warning, no figure.
     let mut bare = gt.clone();
     bare.bias_gyro = None;

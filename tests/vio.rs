@@ -48,9 +48,8 @@ fn simulated_walk_closes_the_loop_far_better_than_the_imu_alone() {
     assert!(s.ate_rmse_m.unwrap() < 0.15);
     // Bias RMSE after convergence against the steady-state std the noise
     // coefficients predict, √(N·K): the issue asks for ≤ 2×. The gyro's is met
-    // here; the accelerometer's is not (≈ 5×: its bias is seen only through
-    // the motion, and the simulated bias also has a bias instability the
-    // estimator's random walk does not model).
+    // here; the accelerometer's is not (3.6×, 4.6× before the per-axis noise:
+    // its bias is seen only through the motion).
     let (gyro_ratio, accel_ratio) = s.bias_rmse_ratios().unwrap();
     println!("bias RMSE / predicted steady state: gyro {gyro_ratio:.2}, accel {accel_ratio:.2}");
     assert!(gyro_ratio < 2.0, "{gyro_ratio}");
@@ -66,7 +65,13 @@ fn simulated_walk_closes_the_loop_far_better_than_the_imu_alone() {
     }
     let nees = z2 / n as f64;
     println!("gyro bias: mean normalized squared error {nees:.2} over {n} components (1 = consistent)");
-    assert!(n > 1000 && nees < 4.0 && nees > 0.05, "{nees}");
+    // 1.18 with each axis' own noise and the bias instability in the random
+    // walk; 0.47 with the triad's largest-axis figures (x/y σ pessimistic, z
+    // optimistic), which this bound refuses.
+    assert!(n > 1000 && nees < 2.0 && nees > 0.6, "{nees}");
+    // The evaluation's per-axis figure over its own window (from 30 s after the first estimate).
+    let axes = s.evaluation.as_ref().unwrap().metrics.bias_nees_gyro_axes.unwrap();
+    assert!(axes.iter().all(|z| (0.2..4.0).contains(z)), "{axes:?}");
     // The static start holds still: nothing triangulates at rest, and before
     // rest was detected against the pixel noise the velocity drifted as the
     // IMU's (0.17 m in 2 s on seed 10's 6-minute walk; here 0.134 m; now 0.014 m).
@@ -111,8 +116,8 @@ fn displacement(out: &VioResult, from: f64, to: f64) -> f64 {
 
 /// A walk that stops twice on the way: the estimate holds still while the
 /// camera does and walks on afterwards (rest is detected anew at each stop:
-/// 0.020 and 0.023 m of motion, 5 mm/s; without rest detection the first stop
-/// moves 0.042 m at 32 mm/s).
+/// 0.023 and 0.019 m of motion, 7–8 mm/s; without rest detection the first
+/// stop moved 0.042 m at 32 mm/s).
 #[test]
 fn a_stop_and_go_walk_holds_still_at_each_stop() {
     let cfg = SimConfig { duration_s: Some(60.0), pauses_s: vec![[20.0, 4.0], [40.0, 3.0]], ..SimConfig::default() };
@@ -488,9 +493,10 @@ fn vio_command_refuses_bad_keyframe_settings() {
 }
 
 /// The paper's walk as a person walks it: a lap of the simulated corridor at
-/// about 1 m/s (68 m in 90 s) closes within 0.58 % (0.40 m) of the path,
-/// against 1.3 km for the IMU alone. Over 6 minutes (five laps, 347 m) the
-/// twelve seeds close within 0.28 % on average; see the README.
+/// about 1 m/s (68 m in 90 s) closes within 0.22 % (0.16 m; 0.58 % with the
+/// largest-axis noise) of the path, against 1.3 km for the IMU alone. Over 6
+/// minutes (five laps, 347 m) the twelve seeds close within 0.22 % on
+/// average; see the README.
 #[test]
 fn a_corridor_lap_closes_the_loop() {
     let (input, opts) = simulated(Scenario::Corridor, 90.0, 1);

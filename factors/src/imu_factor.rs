@@ -150,7 +150,19 @@ pub fn bias_random_walk(
     gyro_random_walk: f64,
     dt: f64,
 ) -> Result<(BetweenFactor<Vector6<f64>>, NoiseModel), NoiseError> {
-    let (sa, sg) = (accel_random_walk * dt.sqrt(), gyro_random_walk * dt.sqrt());
-    let noise = NoiseModel::diagonal(&[sa, sa, sa, sg, sg, sg])?;
+    bias_random_walk_axes(bi, bj, [accel_random_walk; 3], [gyro_random_walk; 3], dt)
+}
+
+/// [`bias_random_walk`] with one random walk per body axis (x, y, z) for each
+/// triad (see [`crate::imu_preint::NoiseAxes`]).
+pub fn bias_random_walk_axes(
+    bi: Key,
+    bj: Key,
+    accel_random_walk: [f64; 3],
+    gyro_random_walk: [f64; 3],
+    dt: f64,
+) -> Result<(BetweenFactor<Vector6<f64>>, NoiseModel), NoiseError> {
+    let (a, g, s) = (accel_random_walk, gyro_random_walk, dt.sqrt());
+    let noise = NoiseModel::diagonal(&[a[0] * s, a[1] * s, a[2] * s, g[0] * s, g[1] * s, g[2] * s])?;
     Ok((BetweenFactor::new(bi, bj, Vector6::zeros()), noise))
 }

@@ -61,6 +61,42 @@ pub struct PreintegrationParams {
     pub integration_sigma: f64,
     /// Integration rule.
     pub scheme: Scheme,
+    /// Per-axis densities that replace the four scalars above when given
+    /// (Kalibr's `imu.yaml` has one figure per triad; a MEMS part's axes can
+    /// differ by 5×, and its largest axis' figure overstates the others).
+    pub axes: Option<NoiseAxes>,
+}
+
+/// Per-axis IMU noise (body axes x, y, z; units as in [`PreintegrationParams`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseAxes {
+    /// Accelerometer white noise density \[m/s²/√Hz\].
+    pub accel_noise_density: [f64; 3],
+    /// Gyroscope white noise density \[rad/s/√Hz\].
+    pub gyro_noise_density: [f64; 3],
+    /// Accelerometer bias random walk \[m/s³/√Hz\].
+    pub accel_random_walk: [f64; 3],
+    /// Gyroscope bias random walk \[rad/s²/√Hz\].
+    pub gyro_random_walk: [f64; 3],
+}
+
+impl PreintegrationParams {
+    /// Accelerometer white noise density per axis \[m/s²/√Hz\].
+    pub fn accel_noise(&self) -> Vector3<f64> {
+        self.axes.map_or(Vector3::repeat(self.accel_noise_density), |a| a.accel_noise_density.into())
+    }
+    /// Gyroscope white noise density per axis \[rad/s/√Hz\].
+    pub fn gyro_noise(&self) -> Vector3<f64> {
+        self.axes.map_or(Vector3::repeat(self.gyro_noise_density), |a| a.gyro_noise_density.into())
+    }
+    /// Accelerometer bias random walk per axis \[m/s³/√Hz\].
+    pub fn accel_walk(&self) -> Vector3<f64> {
+        self.axes.map_or(Vector3::repeat(self.accel_random_walk), |a| a.accel_random_walk.into())
+    }
+    /// Gyroscope bias random walk per axis \[rad/s²/√Hz\].
+    pub fn gyro_walk(&self) -> Vector3<f64> {
+        self.axes.map_or(Vector3::repeat(self.gyro_random_walk), |a| a.gyro_random_walk.into())
+    }
 }
 
 impl Default for PreintegrationParams {
@@ -73,6 +109,7 @@ impl Default for PreintegrationParams {
             gyro_random_walk: 1.9393e-5,
             integration_sigma: 0.0,
             scheme: Scheme::ZeroOrderHold,
+            axes: None,
         }
     }
 }
@@ -199,9 +236,8 @@ impl Preintegrated {
         self.dt_sum += dt;
         self.h_ba = a * self.h_ba - b;
         self.h_bg = a * self.h_bg - c;
-        let qa = self.params.accel_noise_density.powi(2) / dt;
-        let qg = self.params.gyro_noise_density.powi(2) / dt;
-        self.cov = a * self.cov * a.transpose() + b * b.transpose() * qa + c * c.transpose() * qg;
+        let (qa, qg) = self.sample_variances(dt, 1.0);
+        self.cov = a * self.cov * a.transpose() + b * qa * b.transpose() + c * qg * c.transpose();
         let qi = self.params.integration_sigma.powi(2) * dt;
         for k in 3..6 {
             self.cov[(k, k)] += qi;
@@ -261,15 +297,22 @@ impl Preintegrated {
         // Each sample enters two adjacent steps with weight ½; giving each end twice
         // the sample variance makes the summed noise equal the continuous-time one
         // (the correlation between adjacent steps is neglected, as in VINS-Mono).
-        let qa = 2.0 * self.params.accel_noise_density.powi(2) / dt;
-        let qg = 2.0 * self.params.gyro_noise_density.powi(2) / dt;
+        let (qa, qg) = self.sample_variances(dt, 2.0);
         self.cov = f * self.cov * f.transpose()
-            + (va0 * va0.transpose() + va1 * va1.transpose()) * qa
-            + vg * vg.transpose() * (2.0 * qg);
+            + va0 * qa * va0.transpose()
+            + va1 * qa * va1.transpose()
+            + vg * (qg * 2.0) * vg.transpose();
         let qi = self.params.integration_sigma.powi(2) * dt;
         for k in 3..6 {
             self.cov[(k, k)] += qi;
         }
+    }
+
+    /// Discrete per-sample noise covariances (accelerometer, gyro) of a step
+    /// of `dt`: `scale · diag(σ²) / dt`.
+    fn sample_variances(&self, dt: f64, scale: f64) -> (Matrix3<f64>, Matrix3<f64>) {
+        let q = |n: Vector3<f64>| Matrix3::from_diagonal(&n.map(|x| scale * x * x / dt));
+        (q(self.params.accel_noise()), q(self.params.gyro_noise()))
     }
 
     /// Redo the integration from the stored samples at a new bias estimate.
@@ -375,6 +418,48 @@ impl Preintegrated {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// At rest without rotation, Δv sums the accelerometer noise and θ the
+    /// gyro's: their covariances grow as diag(σ²)·T, each axis with its own σ
+    /// (both schemes), and equal axes give the scalar densities' covariance.
+    #[test]
+    fn per_axis_noise_reaches_each_axis() {
+        let axes = NoiseAxes {
+            accel_noise_density: [0.01, 0.02, 0.04],
+            gyro_noise_density: [1e-3, 2e-3, 5e-3],
+            accel_random_walk: [1e-4; 3],
+            gyro_random_walk: [1e-5; 3],
+        };
+        for scheme in [Scheme::ZeroOrderHold, Scheme::Midpoint] {
+            let params = PreintegrationParams { scheme, axes: Some(axes), ..Default::default() };
+            let mut pim = Preintegrated::new(params, Vector3::zeros(), Vector3::zeros());
+            for _ in 0..200 {
+                pim.integrate(Vector3::zeros(), Vector3::zeros(), 0.005);
+            }
+            let (t, cov) = (pim.delta_t(), pim.covariance());
+            for k in 0..3 {
+                let (theta, v) = (cov[(k, k)], cov[(6 + k, 6 + k)]);
+                assert!((theta / (axes.gyro_noise_density[k].powi(2) * t) - 1.0).abs() < 1e-9, "{scheme:?} θ{k}");
+                assert!((v / (axes.accel_noise_density[k].powi(2) * t) - 1.0).abs() < 1e-9, "{scheme:?} v{k}");
+            }
+            let scalar = PreintegrationParams { scheme, ..Default::default() };
+            let same = NoiseAxes {
+                accel_noise_density: [scalar.accel_noise_density; 3],
+                gyro_noise_density: [scalar.gyro_noise_density; 3],
+                ..axes
+            };
+            let run = |p: PreintegrationParams| {
+                let mut pim = Preintegrated::new(p, Vector3::zeros(), Vector3::zeros());
+                for i in 0..50 {
+                    let x = i as f64 * 0.1;
+                    pim.integrate(Vector3::new(x.sin(), 9.8, x.cos()), Vector3::new(0.3, -x.cos(), 0.2), 0.005);
+                }
+                pim.covariance()
+            };
+            let (a, b) = (run(scalar), run(PreintegrationParams { axes: Some(same), ..scalar }));
+            assert!((a - b).norm() <= 1e-14 * a.norm(), "{scheme:?}");
+        }
+    }
 
     #[test]
     fn derivative_of_right_jacobian_product_matches_central_differences() {

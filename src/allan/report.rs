@@ -66,6 +66,9 @@ pub struct KalibrNoise {
     pub update_rate: f64,
     /// Where a value is a bound rather than an estimate, and why.
     pub notes: Vec<String>,
+    /// Per-axis figures for the estimator: white noise N and the random walk
+    /// with the bias instability folded in ([`crate::io::noise::estimator_random_walk`]).
+    pub axes: crate::io::ImuNoiseAxes,
 }
 
 impl KalibrNoise {
@@ -76,6 +79,7 @@ impl KalibrNoise {
             accelerometer_random_walk: self.accelerometer_random_walk,
             gyroscope_noise_density: self.gyroscope_noise_density,
             gyroscope_random_walk: self.gyroscope_random_walk,
+            axes: Some(self.axes),
         }
     }
 }
@@ -209,21 +213,34 @@ fn axis_n_k(axis: &AxisResult, label: &str, notes: &mut Vec<String>) -> (f64, f6
 
 fn kalibr_noise(sensors: &[SensorResult], rate: f64, stat: AxisStat) -> KalibrNoise {
     let mut notes = Vec::new();
-    let mut combine = |s: &SensorResult| -> (f64, f64) {
+    // (N, K) combined over the axes, and per axis (N, K with the bias instability).
+    let mut combine = |s: &SensorResult| -> ((f64, f64), [f64; 3], [f64; 3]) {
         let v: Vec<(f64, f64)> = s
             .axes
             .iter()
             .zip(["x", "y", "z"])
             .map(|(a, ax)| axis_n_k(a, &format!("{} {ax}", s.name), &mut notes))
             .collect();
-        match stat {
+        let combined = match stat {
             AxisStat::Max => (v.iter().map(|p| p.0).fold(0.0, f64::max), v.iter().map(|p| p.1).fold(0.0, f64::max)),
             AxisStat::Mean => (v.iter().map(|p| p.0).sum::<f64>() / 3.0, v.iter().map(|p| p.1).sum::<f64>() / 3.0),
-        }
+        };
+        let b = |i: usize| {
+            let id = s.axes[i].id.as_ref().expect("checked by the caller");
+            id.fit.B.or(id.readoff.B).map_or(0.0, |c| c.value)
+        };
+        let walk = [0, 1, 2].map(|i| crate::io::noise::estimator_random_walk(v[i].1, b(i)));
+        (combined, [v[0].0, v[1].0, v[2].0], walk)
     };
-    let (gn, gk) = combine(&sensors[0]);
-    let (an, ak) = combine(&sensors[1]);
+    let ((gn, gk), gn_axes, gk_axes) = combine(&sensors[0]);
+    let ((an, ak), an_axes, ak_axes) = combine(&sensors[1]);
     KalibrNoise {
+        axes: crate::io::ImuNoiseAxes {
+            accelerometer_noise_density: an_axes,
+            accelerometer_random_walk: ak_axes,
+            gyroscope_noise_density: gn_axes,
+            gyroscope_random_walk: gk_axes,
+        },
         accelerometer_noise_density: an,
         accelerometer_random_walk: ak,
         gyroscope_noise_density: gn,
@@ -350,6 +367,22 @@ impl AllanReport {
         let _ = writeln!(s, "gyroscope_noise_density: {:e}  # [rad/s/sqrt(Hz)]", k.gyroscope_noise_density);
         let _ = writeln!(s, "gyroscope_random_walk: {:e}  # [rad/s^2/sqrt(Hz)]", k.gyroscope_random_walk);
         let _ = writeln!(s, "update_rate: {}  # [Hz]", k.update_rate);
+        let a = &k.axes;
+        let _ = writeln!(s, "# Per axis [x, y, z] for tumble's estimator (Kalibr ignores the key); the random");
+        let _ = writeln!(
+            s,
+            "# walks include the bias instability matched over {} s:",
+            crate::io::noise::BIAS_INSTABILITY_MATCH_S
+        );
+        let _ = writeln!(s, "axes:");
+        for (name, v) in [
+            ("accelerometer_noise_density", a.accelerometer_noise_density),
+            ("accelerometer_random_walk", a.accelerometer_random_walk),
+            ("gyroscope_noise_density", a.gyroscope_noise_density),
+            ("gyroscope_random_walk", a.gyroscope_random_walk),
+        ] {
+            let _ = writeln!(s, "  {name}: [{:e}, {:e}, {:e}]", v[0], v[1], v[2]);
+        }
         Some(s)
     }
 

@@ -111,6 +111,12 @@ pub struct Metrics {
     pub bias_rmse_gyro_axes: Option<[f64; 3]>,
     /// Per-axis accelerometer bias RMSE \[m/s²\].
     pub bias_rmse_accel_axes: Option<[f64; 3]>,
+    /// Per-axis mean squared normalized gyro bias error, ((b̂ − b)/σ)², over
+    /// the compared samples with a finite σ: 1 when the reported σ fits the
+    /// errors, above 1 when it is optimistic (needs the bias track's σ).
+    pub bias_nees_gyro_axes: Option<[f64; 3]>,
+    /// The same for the accelerometer bias.
+    pub bias_nees_accel_axes: Option<[f64; 3]>,
     /// Bias samples compared.
     pub bias_samples: usize,
     /// Bias errors count from this time, seconds after the first estimate \[s\].
@@ -275,6 +281,12 @@ fn default_distances(path_m: f64) -> Vec<f64> {
     [0.1, 0.2, 0.3, 0.4, 0.5].iter().map(|f| format!("{:.1e}", f * path_m).parse().unwrap_or(f * path_m)).collect()
 }
 
+/// The per-axis bias NEES as one line: `bias error² / σ² (1 = consistent): gyro x y z, accel x y z`.
+pub fn nees_line(gyro: [f64; 3], accel: [f64; 3]) -> String {
+    let f = |v: [f64; 3]| format!("{:.2} {:.2} {:.2}", v[0], v[1], v[2]);
+    format!("bias error²/σ² per axis (1 = consistent σ): gyro {}, accel {}", f(gyro), f(accel))
+}
+
 /// Compare bias estimates with the ground truth's bias columns.
 fn compare_biases(
     biases: &BiasTrack,
@@ -291,6 +303,11 @@ fn compare_biases(
     let nan = [f64::NAN; 3];
     let mut rows = Vec::with_capacity(biases.t_ns.len());
     let (mut sg, mut sa, mut n) = ([0.0; 3], [0.0; 3], 0usize);
+    // Normalized squared errors per axis: sums and counts (gyro, accel).
+    let (mut zg, mut za, mut ng, mut na) = ([0.0; 3], [0.0; 3], 0usize, 0usize);
+    let sigma = |std: &Option<Vec<[f64; 3]>>, i: usize| {
+        std.as_ref().map(|s| s[i]).filter(|s| s.iter().all(|x| x.is_finite() && *x > 0.0))
+    };
     for i in 0..biases.t_ns.len() {
         let t = (biases.t_ns[i] - t0_ns) as f64 * 1e-9;
         let at = biases_at(gt, biases.t_ns[i], max_gap_ns);
@@ -300,6 +317,17 @@ fn compare_biases(
                 sa[a] += (biases.accel[i][a] - ba[a]).powi(2);
             }
             n += 1;
+            for (est, truth, std, z, count) in [
+                (&biases.gyro[i], bg, sigma(&biases.gyro_std, i), &mut zg, &mut ng),
+                (&biases.accel[i], ba, sigma(&biases.accel_std, i), &mut za, &mut na),
+            ] {
+                if let Some(std) = std {
+                    for a in 0..3 {
+                        z[a] += ((est[a] - truth[a]) / std[a]).powi(2);
+                    }
+                    *count += 1;
+                }
+            }
         }
         rows.push(BiasRow {
             t,
@@ -315,6 +343,9 @@ fn compare_biases(
         m.bias_rmse_accel = Some((sa.iter().sum::<f64>() / n as f64).sqrt());
         m.bias_rmse_gyro_axes = Some(axes(sg));
         m.bias_rmse_accel_axes = Some(axes(sa));
+        let mean = |z: [f64; 3], k: usize| (k > 0).then(|| z.map(|x| x / k as f64));
+        m.bias_nees_gyro_axes = mean(zg, ng);
+        m.bias_nees_accel_axes = mean(za, na);
     } else if truth.is_some() {
         m.warnings.push(format!(
             "no bias estimate falls inside the ground truth after {:.1} s: bias errors not computed",
@@ -385,6 +416,8 @@ pub fn evaluate(
         bias_rmse_accel: None,
         bias_rmse_gyro_axes: None,
         bias_rmse_accel_axes: None,
+        bias_nees_gyro_axes: None,
+        bias_nees_accel_axes: None,
         bias_samples: 0,
         bias_from_s: opts.bias_after_s,
         warnings: Vec::new(),
@@ -448,6 +481,9 @@ impl Metrics {
                 "bias RMSE after {:.1} s ({} samples): gyro {:.3e} rad/s, accel {:.3e} m/s²\n",
                 self.bias_from_s, self.bias_samples, g, a
             ));
+        }
+        if let (Some(g), Some(a)) = (self.bias_nees_gyro_axes, self.bias_nees_accel_axes) {
+            s.push_str(&format!("{}\n", nees_line(g, a)));
         }
         s
     }

@@ -19,6 +19,6 @@ pub mod yaml;
 
 pub use imu::{ImuRecording, Stored};
 pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, STANDARD_GRAVITY};
-pub use noise::ImuNoise;
+pub use noise::{ImuNoise, ImuNoiseAxes};
 pub use recording::{open_recording, RecordingOptions};
 pub use table::TimeUnit;

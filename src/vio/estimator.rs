@@ -10,7 +10,7 @@ use std::time::Instant;
 use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::Preintegrated;
 use tumble_factors::reprojection::StereoInverseDepth;
-use tumble_factors::{bias_random_walk, BetweenFactor, ImuFactor, InverseDepthReprojection, PriorFactor};
+use tumble_factors::{bias_random_walk_axes, BetweenFactor, ImuFactor, InverseDepthReprojection, PriorFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::Factor;
 use tumble_solvers::{
@@ -554,7 +554,7 @@ impl<'a> Estimator<'a> {
         }
         let dt = pim.delta_t().max(1e-3);
         if let Ok((rw, n)) =
-            bias_random_walk(B(a), B(b), self.opts.imu.accel_random_walk, self.opts.imu.gyro_random_walk, dt)
+            bias_random_walk_axes(B(a), B(b), self.opts.imu.accel_walk().into(), self.opts.imu.gyro_walk().into(), dt)
         {
             g.add(rw, n);
         }

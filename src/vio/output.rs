@@ -214,7 +214,7 @@ impl Summary {
              closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
              bias RMSE after {:.1} s: gyro {}, accel {}{}\n\
-             speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
+             {}speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
             self.duration_s,
             self.distance_m,
             self.groundtruth_distance_m.map_or(String::new(), |d| format!(" (ground truth {d:.2} m)")),
@@ -230,6 +230,10 @@ impl Summary {
             opt(self.bias_rmse_gyro, "rad/s"),
             opt(self.bias_rmse_accel, "m/s²"),
             ratios,
+            self.evaluation
+                .as_ref()
+                .and_then(|ev| ev.metrics.bias_nees_gyro_axes.zip(ev.metrics.bias_nees_accel_axes))
+                .map_or(String::new(), |(g, a)| format!("{}\n", crate::eval::nees_line(g, a))),
             self.realtime_factor,
             self.solve_ms_median,
             self.solve_ms_p95,
