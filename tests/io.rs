@@ -262,6 +262,15 @@ fn sensor_yaml_errors() {
     }
     let e = read_imu_sensor(&tmp("imu.yaml", "rate_hz: -5\n")).unwrap_err().to_string();
     assert!(e.contains("rate_hz must be positive"), "{e}");
+    let axes = "rate_hz: 200\naxes:\n  accelerometer_noise_density: [0.02, 0.02, 0.04]\n  accelerometer_random_walk: [3e-4, 3e-4, 3e-4]\n  gyroscope_noise_density: [1e-3, 1e-3, 5e-3]\n  gyroscope_random_walk: [2e-5, 2e-5, 2e-5]\n";
+    assert_eq!(read_imu_sensor(&tmp("imu.yaml", axes)).unwrap().axes.unwrap().gyroscope_noise_density[2], 5e-3);
+    let e = read_imu_sensor(&tmp("imu.yaml", &axes.replace("[1e-3, 1e-3, 5e-3]", "[1e-3, .nan, 5e-3]")))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("imu.yaml") && e.contains("axes.gyroscope_noise_density"), "{e}");
+    let e =
+        read_imu_sensor(&tmp("imu.yaml", &axes.replace("[2e-5, 2e-5, 2e-5]", "[2e-5, 2e-5]"))).unwrap_err().to_string();
+    assert!(e.contains("imu.yaml:6") && e.contains("length 3"), "{e}");
     let e = read_asl(Path::new("/nonexistent/folder"), &ImuTextFormat::default()).unwrap_err().to_string();
     assert!(e.contains("does not exist"), "{e}");
     let e = read_asl(&std::env::temp_dir(), &ImuTextFormat::default()).unwrap_err().to_string();

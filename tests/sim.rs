@@ -162,6 +162,8 @@ fn walk_round_trips_through_the_readers_and_returns_to_start() {
     let (a, b) = (gt.p[0], gt.p[gt.len() - 1]);
     assert!((0..3).all(|k| (a[k] - b[k]).abs() < 1e-9), "{a:?} vs {b:?}");
     assert_eq!(gt.bias_gyro.unwrap()[100], s.imu.bias_gyro[100]);
+    // sensor.yaml carries each axis' own noise as the estimator takes it.
+    assert_eq!(d.imu_sensor.as_ref().unwrap().axes, tumble::io::ImuNoise::from_model(&c.imu).axes);
     let cam = &d.cameras[0];
     let tr = s.tracks.as_ref().unwrap();
     assert_eq!(cam.frames.len(), tr.frames.len());

@@ -374,15 +374,7 @@ impl AllanReport {
             "# walks include the bias instability matched over {} s:",
             crate::io::noise::BIAS_INSTABILITY_MATCH_S
         );
-        let _ = writeln!(s, "axes:");
-        for (name, v) in [
-            ("accelerometer_noise_density", a.accelerometer_noise_density),
-            ("accelerometer_random_walk", a.accelerometer_random_walk),
-            ("gyroscope_noise_density", a.gyroscope_noise_density),
-            ("gyroscope_random_walk", a.gyroscope_random_walk),
-        ] {
-            let _ = writeln!(s, "  {name}: [{:e}, {:e}, {:e}]", v[0], v[1], v[2]);
-        }
+        s.push_str(&a.yaml_block());
         Some(s)
     }
 

@@ -52,6 +52,8 @@ pub struct ImuSensor {
     pub accelerometer_noise_density: Option<f64>,
     /// Accelerometer bias random walk \[m/s³/√Hz\].
     pub accelerometer_random_walk: Option<f64>,
+    /// Per-axis figures (tumble's `axes:` key, see [`super::ImuNoise::axes`]).
+    pub axes: Option<super::ImuNoiseAxes>,
 }
 
 /// A camera of the dataset: its model, extrinsics and frames.
@@ -97,6 +99,7 @@ struct ImuYaml {
     gyroscope_random_walk: Option<f64>,
     accelerometer_noise_density: Option<f64>,
     accelerometer_random_walk: Option<f64>,
+    axes: Option<super::ImuNoiseAxes>,
 }
 
 #[derive(Deserialize)]
@@ -139,7 +142,11 @@ pub fn parse_imu_sensor(path: &Path, text: &str) -> Result<ImuSensor, InputError
             }
         }
     }
+    if let Some(a) = &y.axes {
+        a.check().map_err(|m| InputError::file(path, m))?;
+    }
     Ok(ImuSensor {
+        axes: y.axes,
         t_bs,
         rate_hz,
         gyroscope_noise_density: y.gyroscope_noise_density,

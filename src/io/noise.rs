@@ -36,6 +36,36 @@ pub struct ImuNoiseAxes {
     pub gyroscope_random_walk: [f64; 3],
 }
 
+impl ImuNoiseAxes {
+    /// Check that every figure is a positive number; the error names the key.
+    pub fn check(&self) -> Result<(), String> {
+        for (v, what) in [
+            (self.accelerometer_noise_density, "accelerometer_noise_density"),
+            (self.accelerometer_random_walk, "accelerometer_random_walk"),
+            (self.gyroscope_noise_density, "gyroscope_noise_density"),
+            (self.gyroscope_random_walk, "gyroscope_random_walk"),
+        ] {
+            if !v.iter().all(|x| x.is_finite() && *x > 0.0) {
+                return Err(format!("axes.{what} must be three positive numbers, found {v:?}"));
+            }
+        }
+        Ok(())
+    }
+    /// The `axes:` block of an `imu.yaml` or `sensor.yaml` (two-space indent, one key per line).
+    pub fn yaml_block(&self) -> String {
+        let mut s = String::from("axes:\n");
+        for (name, v) in [
+            ("accelerometer_noise_density", self.accelerometer_noise_density),
+            ("accelerometer_random_walk", self.accelerometer_random_walk),
+            ("gyroscope_noise_density", self.gyroscope_noise_density),
+            ("gyroscope_random_walk", self.gyroscope_random_walk),
+        ] {
+            s.push_str(&format!("  {name}: [{:e}, {:e}, {:e}]\n", v[0], v[1], v[2]));
+        }
+        s
+    }
+}
+
 /// Time over which the estimator's bias random walk is matched to a bias
 /// instability \[s\] (see [`estimator_random_walk`]): about the span of the
 /// VIO's window of keyframes.
@@ -100,19 +130,7 @@ impl ImuNoise {
             }
         }
         if let Some(a) = &n.axes {
-            for (v, what) in [
-                (a.accelerometer_noise_density, "accelerometer_noise_density"),
-                (a.accelerometer_random_walk, "accelerometer_random_walk"),
-                (a.gyroscope_noise_density, "gyroscope_noise_density"),
-                (a.gyroscope_random_walk, "gyroscope_random_walk"),
-            ] {
-                if !v.iter().all(|x| x.is_finite() && *x > 0.0) {
-                    return Err(crate::InputError::file(
-                        path,
-                        format!("axes.{what} must be three positive numbers, found {v:?}"),
-                    ));
-                }
-            }
+            a.check().map_err(|m| crate::InputError::file(path, m))?;
         }
         Ok(n)
     }

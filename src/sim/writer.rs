@@ -145,7 +145,9 @@ fn imu_yaml(sim: &Simulation) -> String {
         worst(&m.gyro.random_walk),
         worst(&m.accel.noise_density),
         worst(&m.accel.random_walk)
-    )
+    ) + &crate::io::ImuNoise::from_model(m).axes.map_or(String::new(), |a| {
+        format!("# Per axis [x, y, z], the random walks with the bias instability folded in (tumble's key):\n{}", a.yaml_block())
+    })
 }
 
 /// `sensor.yaml` of camera 0 or (stereo) camera 1.

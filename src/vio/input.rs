@@ -454,7 +454,7 @@ fn sensor_noise(ds: &asl::AslDataset) -> Option<ImuNoise> {
         accelerometer_random_walk: s.accelerometer_random_walk?,
         gyroscope_noise_density: s.gyroscope_noise_density?,
         gyroscope_random_walk: s.gyroscope_random_walk?,
-        axes: None,
+        axes: s.axes,
     })
 }
 
