@@ -190,8 +190,9 @@ pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanRepo
 }
 
 /// The white-noise density and random walk of one axis for Kalibr, with a
-/// note when the random walk is only an upper bound.
-fn axis_n_k(axis: &AxisResult, label: &str, notes: &mut Vec<String>) -> (f64, f64) {
+/// note when the random walk is only an upper bound, and its bias
+/// instability (0 when not resolved).
+fn axis_n_k_b(axis: &AxisResult, label: &str, notes: &mut Vec<String>) -> (f64, f64, f64) {
     let id = axis.id.as_ref().expect("checked by the caller");
     let c = &axis.curve;
     let n = id.fit.N.or(id.readoff.N).map(|c| c.value).unwrap_or_else(|| {
@@ -208,28 +209,24 @@ fn axis_n_k(axis: &AxisResult, label: &str, notes: &mut Vec<String>) -> (f64, f6
         ));
         b
     });
-    (n, k)
+    (n, k, id.fit.B.or(id.readoff.B).map_or(0.0, |c| c.value))
 }
 
 fn kalibr_noise(sensors: &[SensorResult], rate: f64, stat: AxisStat) -> KalibrNoise {
     let mut notes = Vec::new();
     // (N, K) combined over the axes, and per axis (N, K with the bias instability).
     let mut combine = |s: &SensorResult| -> ((f64, f64), [f64; 3], [f64; 3]) {
-        let v: Vec<(f64, f64)> = s
+        let v: Vec<(f64, f64, f64)> = s
             .axes
             .iter()
             .zip(["x", "y", "z"])
-            .map(|(a, ax)| axis_n_k(a, &format!("{} {ax}", s.name), &mut notes))
+            .map(|(a, ax)| axis_n_k_b(a, &format!("{} {ax}", s.name), &mut notes))
             .collect();
         let combined = match stat {
             AxisStat::Max => (v.iter().map(|p| p.0).fold(0.0, f64::max), v.iter().map(|p| p.1).fold(0.0, f64::max)),
             AxisStat::Mean => (v.iter().map(|p| p.0).sum::<f64>() / 3.0, v.iter().map(|p| p.1).sum::<f64>() / 3.0),
         };
-        let b = |i: usize| {
-            let id = s.axes[i].id.as_ref().expect("checked by the caller");
-            id.fit.B.or(id.readoff.B).map_or(0.0, |c| c.value)
-        };
-        let walk = [0, 1, 2].map(|i| crate::io::noise::estimator_random_walk(v[i].1, b(i)));
+        let walk = [0, 1, 2].map(|i| crate::io::noise::estimator_random_walk(v[i].1, v[i].2));
         (combined, [v[0].0, v[1].0, v[2].0], walk)
     };
     let ((gn, gk), gn_axes, gk_axes) = combine(&sensors[0]);
