@@ -24,6 +24,18 @@ enum MethodArg {
     Gn,
 }
 
+/// `tumble solve --edge-error`: the cost of a 3-D g2o edge.
+#[derive(Clone, Copy, ValueEnum)]
+enum EdgeErrorArg {
+    /// Log(Z⁻¹ X₁⁻¹ X₂), GTSAM's BetweenFactor.
+    Log,
+    /// Ceres' pose_graph_3d error [R₁ᵀ(p₂−p₁) − p_z, 2·vec(q_z q₁₂⁻¹)].
+    Ceres,
+    /// Ceres' error first, then log from its solution (reaches Ceres' minimum
+    /// of torus3D in the log cost).
+    CeresThenLog,
+}
+
 /// `tumble vio --init`: how the first state is found.
 #[derive(Clone, Copy, ValueEnum)]
 enum InitArg {
@@ -636,6 +648,9 @@ enum Command {
         /// positive-definite ones (with a warning each) instead of refusing the file.
         #[arg(long)]
         repair_information: bool,
+        /// g2o: the cost of each 3-D edge.
+        #[arg(long, value_enum, default_value = "log")]
+        edge_error: EdgeErrorArg,
         /// Print the per-iteration log.
         #[arg(long)]
         verbose: bool,
@@ -1168,6 +1183,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             min_lambda_decrease,
             function_tolerance,
             repair_information,
+            edge_error,
             verbose,
             plot,
         } => {
@@ -1187,20 +1203,50 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if plot.is_some() && !is_g2o {
                 return Err(format!("--plot draws pose graphs (.g2o); {} is a BAL problem", file.display()).into());
             }
-            let (graph, values, options) = if is_g2o {
-                let opts = g2o::G2oOptions {
+            // The file's poses (for the plot) and the log cost there, solution and summary.
+            let (values, initial_cost, solved, summary) = if is_g2o {
+                let opts = |edge_error| g2o::G2oOptions {
                     bad_information: if repair_information {
                         g2o::BadInformation::Repair
                     } else {
                         g2o::BadInformation::Refuse
                     },
+                    edge_error,
                 };
-                let pg = g2o::read_g2o(&file, &opts)?;
+                let pg = g2o::read_g2o(
+                    &file,
+                    &opts(match edge_error {
+                        EdgeErrorArg::Log => g2o::EdgeError::Log,
+                        EdgeErrorArg::Ceres | EdgeErrorArg::CeresThenLog => g2o::EdgeError::CeresQuaternion,
+                    }),
+                )?;
                 for w in &pg.warnings {
                     eprintln!("warning: {w}");
                 }
                 println!("{}: {:?} pose graph, {} vertices, {} edges", file.display(), pg.kind, pg.vertices, pg.edges);
-                (pg.graph, pg.values, options)
+                if !matches!(edge_error, EdgeErrorArg::Log) && pg.kind != g2o::PoseKind::Se3 {
+                    return Err(format!("--edge-error applies to 3-D pose graphs; {} is planar", file.display()).into());
+                }
+                if matches!(edge_error, EdgeErrorArg::CeresThenLog) {
+                    let log = g2o::read_g2o(&file, &opts(g2o::EdgeError::Log))?;
+                    let (solved, first, second) =
+                        tumble::posegraph::solve_two_stage(&pg.graph, &log.graph, &pg.values, &options)?;
+                    println!("first stage, Ceres' quaternion edge error:");
+                    if verbose {
+                        print_log(&first);
+                    }
+                    println!("{first}");
+                    println!(
+                        "both stages: {} iterations, {:.3} s; second stage, the log edge error from the first's solution:",
+                        first.iterations + second.iterations,
+                        first.time_total + second.time_total
+                    );
+                    let start_cost = log.graph.cost(&pg.values)?;
+                    (pg.values, start_cost, solved, second)
+                } else {
+                    let (solved, summary) = Optimizer::new(options).optimize(&pg.graph, &pg.values)?;
+                    (pg.values, summary.initial_cost, solved, summary)
+                }
             } else {
                 let p = bal::read_bal(&file)?;
                 println!(
@@ -1210,9 +1256,10 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                     p.points,
                     p.observations
                 );
-                (p.graph, p.values, LmOptions { eliminate: vec!['l'], ..options })
+                let options = LmOptions { eliminate: vec!['l'], ..options };
+                let (solved, summary) = Optimizer::new(options).optimize(&p.graph, &p.values)?;
+                (p.values, summary.initial_cost, solved, summary)
             };
-            let (solved, summary) = Optimizer::new(options).optimize(&graph, &values)?;
             if verbose {
                 print_log(&summary);
             }
@@ -1220,7 +1267,7 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             println!("final chi2 {:.6}", 2.0 * summary.final_cost);
             if let Some(png) = plot {
                 let name = file.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
-                let title = format!("{name}: χ² {:.1} → {:.1}", 2.0 * summary.initial_cost, 2.0 * summary.final_cost);
+                let title = format!("{name}: χ² {:.1} → {:.1}", 2.0 * initial_cost, 2.0 * summary.final_cost);
                 tumble::posegraph::plot_top_view(&values, &solved, &title, &png)?;
                 println!("wrote {}", png.display());
             }

@@ -19,7 +19,7 @@ const SOLVERS: [&str; 5] = ["tumble", "gtsam", "factrs", "tiny-solver", "apex-so
 
 fn worker(solver: &str, file: &std::path::Path, repeat: usize) -> Record {
     match solver {
-        "tumble" => run_tumble(file, repeat),
+        "tumble" | "tumble-ceres-error" | "tumble-two-stage" => run_tumble(file, repeat, solver),
         "factrs" => peers::run_factrs(file, repeat),
         "tiny-solver" => peers::run_tiny(file, repeat),
         "apex-solver" => peers::run_apex(file, repeat),
@@ -46,6 +46,8 @@ fn main() {
             "--solvers" => solvers = it.next().map(|s| s.split(',').map(String::from).collect()).unwrap_or_default(),
             "-h" | "--help" => {
                 println!("usage: bench_solver [--json] [--repeat N] [--solvers tumble,gtsam,factrs,tiny-solver,apex-solver] FILE...");
+                println!("  also, for 3-D graphs: tumble-ceres-error (Ceres' pose_graph_3d edge error; its χ² is Ceres' cost),");
+                println!("  tumble-two-stage (Ceres' error, then the log error from there; χ² in the log cost)");
                 println!("  TUMBLE_BENCH_SUMMARY=1 also prints tumble's solver summary (time per phase) on stderr");
                 return;
             }
@@ -59,7 +61,7 @@ fn main() {
     let exe = std::env::current_exe().expect("own path");
     if !json {
         println!(
-            "{:<16} {:<12} {:>6} {:>6} {:>5} {:>14} {:>14} {:>9} {:>9} {:>8} {:>10}",
+            "{:<16} {:<18} {:>6} {:>6} {:>5} {:>14} {:>14} {:>9} {:>9} {:>8} {:>10}",
             "problem",
             "solver",
             "vars",
@@ -104,10 +106,10 @@ fn main() {
             if json {
                 println!("{}", rec.to_json());
             } else if let Some(why) = &rec.skipped {
-                println!("{:<16} {:<12} skipped: {why}", rec.problem, rec.solver);
+                println!("{:<16} {:<18} skipped: {why}", rec.problem, rec.solver);
             } else {
                 println!(
-                    "{:<16} {:<12} {:>6} {:>6} {:>5} {:>14.6} {:>14.6} {:>9.4} {:>9} {:>8.1} {:>9.2}x",
+                    "{:<16} {:<18} {:>6} {:>6} {:>5} {:>14.6} {:>14.6} {:>9.4} {:>9} {:>8.1} {:>9.2}x",
                     rec.problem,
                     rec.solver,
                     rec.variables,

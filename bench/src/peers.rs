@@ -129,7 +129,9 @@ pub fn run_factrs(path: &Path, repeat: usize) -> Record {
     use factrs::core::{LevenMarquardt, SE2, SE3};
     use factrs::traits::Optimizer as _;
     let name = problem_name(path);
-    let Ok(tp) = crate::load(path) else { return skipped(&name, "factrs", "tumble refuses this file") };
+    let Ok(tp) = crate::load(path, tumble::io::g2o::EdgeError::Log) else {
+        return skipped(&name, "factrs", "tumble refuses this file");
+    };
     if tp.is_bal {
         return skipped(&name, "factrs", "no bundle-adjustment reader");
     }
@@ -256,7 +258,9 @@ fn sqrt_info(info: &na::DMatrix<f64>, perm: &[usize]) -> Option<na::DMatrix<f64>
 pub fn run_tiny(path: &Path, repeat: usize) -> Record {
     use tiny_solver::optimizer::Optimizer as _;
     let name = problem_name(path);
-    let Ok(tp) = crate::load(path) else { return skipped(&name, "tiny-solver", "tumble refuses this file") };
+    let Ok(tp) = crate::load(path, tumble::io::g2o::EdgeError::Log) else {
+        return skipped(&name, "tiny-solver", "tumble refuses this file");
+    };
     if tp.is_bal {
         return skipped(&name, "tiny-solver", "no bundle-adjustment reader");
     }
@@ -334,7 +338,9 @@ pub fn run_apex(path: &Path, repeat: usize) -> Record {
     use apex_solver::optimizer::LevenbergMarquardt;
     use apex_solver::JacobianMode;
     let name = problem_name(path);
-    let Ok(tp) = crate::load(path) else { return skipped(&name, "apex-solver", "tumble refuses this file") };
+    let Ok(tp) = crate::load(path, tumble::io::g2o::EdgeError::Log) else {
+        return skipped(&name, "apex-solver", "tumble refuses this file");
+    };
     if tp.is_bal {
         return skipped(&name, "apex-solver", "not wired up for bundle adjustment here");
     }

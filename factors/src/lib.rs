@@ -5,6 +5,7 @@
 //!
 //! - [`PriorFactor`]: `r = prior ⊟ x` on any [`LieGroup`] variable.
 //! - [`BetweenFactor`]: `r = Log(Z⁻¹ · X₁⁻¹ X₂)`, relative measurement (odometry, loop closures).
+//! - [`pose_graph_3d::QuaternionPoseError`]: Ceres' `pose_graph_3d` edge error `[R₁ᵀ(p₂−p₁) − p_z, 2·vec(q_z q₁₂⁻¹)]` (autodiff), to compare minima with Ceres.
 //! - [`camera::CameraModel`]: pinhole with radial–tangential or equidistant distortion.
 //! - [`imu_calib`]: gravity-norm and integrated-rotation factors of turntable-free IMU calibration.
 //! - [`imu_preint`]: IMU preintegration (GTSAM's zero-order hold or VINS-Mono's midpoint), [`ImuFactor`], [`bias_random_walk`].
@@ -20,6 +21,7 @@ pub mod imu_calib;
 pub mod imu_effects;
 pub mod imu_factor;
 pub mod imu_preint;
+pub mod pose_graph_3d;
 pub mod prior;
 pub mod reprojection;
 

@@ -1,6 +1,7 @@
 //! Every built-in factor's Jacobians against central differences.
 
 use nalgebra::{Vector3, Vector6};
+use tumble_factors::pose_graph_3d::QuaternionPoseError;
 use tumble_factors::{BetweenFactor, PriorFactor, SnavelyReprojection};
 use tumble_solvers::sophus_lie::{Isometry3F64, Rotation3F64};
 use tumble_solvers::{check_jacobians, se2, AutoDiff, DynVariable, Factor, Linearization, Vars, C, L, X};
@@ -17,6 +18,7 @@ fn prior_and_between_on_every_group() {
     let z3 = Isometry3F64::exp(Vector6::new(0.1, 0.2, 0.3, 0.3, 0.2, 0.1));
     assert_ok(&PriorFactor::new(X(0), z3), &[&a3]);
     assert_ok(&BetweenFactor::new(X(0), X(1), z3), &[&a3, &b3]);
+    assert_ok(&QuaternionPoseError::new(X(0), X(1), &z3), &[&a3, &b3]);
 
     let r1 = Rotation3F64::exp(Vector3::new(0.4, -0.3, 1.1));
     let r2 = Rotation3F64::exp(Vector3::new(-1.4, 0.3, 0.1));
@@ -199,6 +201,7 @@ fn between_linearize_into_on_every_group() {
     let b3 = Isometry3F64::exp(Vector6::new(-0.2, 0.5, 2.0, -1.0, 0.5, 2.0));
     let z3 = Isometry3F64::exp(Vector6::new(0.1, 0.2, 0.3, 0.3, 0.2, 0.1));
     assert_linearize_into_matches(&BetweenFactor::new(X(0), X(1), z3), &[&a3, &b3]);
+    assert_linearize_into_matches(&QuaternionPoseError::new(X(0), X(1), &z3), &[&a3, &b3]);
     let r1 = Rotation3F64::exp(Vector3::new(0.4, -0.3, 1.1));
     let r2 = Rotation3F64::exp(Vector3::new(-1.4, 0.3, 0.1));
     let rz = Rotation3F64::exp(Vector3::new(0.2, 0.2, -0.1));

@@ -4,13 +4,15 @@
 //! Conventions: SE(2) tangents in tumble are `[θ, x, y]` and SE(3) `[ω, ν]`, so
 //! g2o's information matrices (ordered `[x, y, θ]` and `[x, y, z, qx, qy, qz]`)
 //! are permuted, not rescaled, exactly as GTSAM's `readG2o` does. The error of
-//! each edge is GTSAM's `BetweenFactor`: `Log(Z⁻¹ X₁⁻¹ X₂)`.
+//! each edge is GTSAM's `BetweenFactor`: `Log(Z⁻¹ X₁⁻¹ X₂)`, or for 3-D edges
+//! optionally Ceres' `pose_graph_3d` error ([`EdgeError`]).
 
 use crate::error::InputError;
 use crate::io::tokens::{read_text, LineTokens};
 use nalgebra::{DMatrix, Vector3};
 use std::collections::BTreeMap;
 use std::path::Path;
+use tumble_factors::pose_graph_3d::QuaternionPoseError;
 use tumble_factors::BetweenFactor;
 use tumble_solvers::{se2, se3_from_quaternion, Graph, NoiseModel, Values, X};
 
@@ -25,11 +27,25 @@ pub enum BadInformation {
     Repair,
 }
 
+/// The error each `EDGE_SE3:QUAT` edge contributes (SE(2) edges always use [`EdgeError::Log`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum EdgeError {
+    /// GTSAM's `BetweenFactor`, `Log(Z⁻¹ X₁⁻¹ X₂)` (the default; GTSAM, factrs,
+    /// tiny-solver and apex-solver minimize this cost).
+    #[default]
+    Log,
+    /// Ceres' `pose_graph_3d` example error `[R₁ᵀ(p₂−p₁) − p_z, 2·vec(q_z q₁₂⁻¹)]`
+    /// ([`tumble_factors::pose_graph_3d::QuaternionPoseError`]), to compare minima with Ceres.
+    CeresQuaternion,
+}
+
 /// Options of [`read_g2o`].
 #[derive(Clone, Debug, Default)]
 pub struct G2oOptions {
     /// Handling of non-positive-definite information matrices.
     pub bad_information: BadInformation,
+    /// The cost of a 3-D edge.
+    pub edge_error: EdgeError,
 }
 
 /// Dimension of a pose graph.
@@ -189,7 +205,10 @@ pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph
                 if (qn - 1.0).abs() > 1e-3 {
                     return Err(InputError::at(path, ln, format!("quaternion norm is {qn}, not 1")));
                 }
-                let noise = information(path, ln, &info, 6, &[3, 4, 5, 0, 1, 2], opts, &mut warnings)?;
+                // Ceres' error is ordered as g2o's matrix, [position, rotation].
+                let perm: &[usize] =
+                    if opts.edge_error == EdgeError::Log { &[3, 4, 5, 0, 1, 2] } else { &[0, 1, 2, 3, 4, 5] };
+                let noise = information(path, ln, &info, 6, perm, opts, &mut warnings)?;
                 edges.push((ln, a, b, EdgeMeas::Se3(se3_from_quaternion([qw, qx, qy, qz], p)), noise));
             }
             "FIX" => {
@@ -218,7 +237,10 @@ pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph
         }
         match meas {
             EdgeMeas::Se2(z) => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
-            EdgeMeas::Se3(z) => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
+            EdgeMeas::Se3(z) => match opts.edge_error {
+                EdgeError::Log => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
+                EdgeError::CeresQuaternion => graph.add(QuaternionPoseError::new(X(a), X(b), &z), noise),
+            },
         };
     }
     if fixed.is_empty() {
