@@ -27,11 +27,20 @@ pub struct DemoOptions {
     pub static_s: f64,
     /// Length of the walk \[s\] (the paper's: 360).
     pub walk_s: f64,
+    /// The walk: [`Scenario::Corridor`] (laps of a corridor at walking speed,
+    /// the default) or [`Scenario::Walk`] (hand motion in a room).
+    pub walk: Scenario,
 }
 
 impl Default for DemoOptions {
     fn default() -> Self {
-        DemoOptions { hidden: ("g_sensitivity".into(), 2.0), seed: 1, static_s: 7200.0, walk_s: 360.0 }
+        DemoOptions {
+            hidden: ("g_sensitivity".into(), 2.0),
+            seed: 1,
+            static_s: 7200.0,
+            walk_s: 360.0,
+            walk: Scenario::Corridor,
+        }
     }
 }
 
@@ -95,6 +104,9 @@ fn triad_rows(out: &mut Vec<Row>, name: &str, truth: &TriadModel, est: &Triad, a
 /// Simulate the three recordings and run the chain of [`crate::pipeline`] on
 /// them into `out` (which gets `report.md`); `stage` is told what starts.
 pub fn run(opts: &DemoOptions, out: &Path, stage: &mut dyn FnMut(&str)) -> Result<DemoReport, String> {
+    if !matches!(opts.walk, Scenario::Walk | Scenario::Corridor) {
+        return Err(format!("the demo walks in a room or a corridor, not {:?}", opts.walk));
+    }
     let mut cfg = SimConfig::default();
     hide_effect(&mut cfg, &opts.hidden.0, opts.hidden.1)?;
     let t = std::time::Instant::now();
@@ -109,7 +121,7 @@ pub fn run(opts: &DemoOptions, out: &Path, stage: &mut dyn FnMut(&str)) -> Resul
     let tumble = simulate(Scenario::Tumble, &cfg, opts.seed)?;
     let still = simulate(Scenario::Static, &SimConfig { duration_s: Some(opts.static_s), ..cfg.clone() }, opts.seed)?;
     let wcfg = SimConfig { duration_s: Some(opts.walk_s), ..cfg.clone() };
-    let walk = simulate(Scenario::Walk, &wcfg, opts.seed)?;
+    let walk = simulate(opts.walk, &wcfg, opts.seed)?;
     let simulate_s = t.elapsed().as_secs_f64();
 
     let inputs = ChainInputs {

@@ -24,6 +24,15 @@ enum MethodArg {
     Gn,
 }
 
+/// `tumble demo --walk`.
+#[derive(Clone, Copy, ValueEnum)]
+enum DemoWalkArg {
+    /// Hand motion in a room, within about a metre (38.5 m in 6 minutes).
+    Room,
+    /// Laps of a 28 m × 14 m elliptical corridor at about 1 m/s (347 m in 6 minutes).
+    Corridor,
+}
+
 /// `tumble solve --edge-error`: the cost of a 3-D g2o edge.
 #[derive(Clone, Copy, ValueEnum)]
 enum EdgeErrorArg {
@@ -624,6 +633,12 @@ enum Command {
         /// Folder for the chain's files and report.md.
         #[arg(long, default_value = "tumble-demo")]
         out: PathBuf,
+        /// The 6-minute walk: laps of a corridor at walking speed, or hand motion in a room.
+        #[arg(long, value_enum, default_value = "corridor")]
+        walk: DemoWalkArg,
+        /// Seed of every simulation.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
     },
     /// Solve a g2o pose graph (.g2o) or a Bundle Adjustment in the Large file (other extensions).
     Solve {
@@ -1169,10 +1184,17 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             }
             print!("\n{}", report.summary());
         }
-        Command::Demo { out } => {
+        Command::Demo { out, walk, seed } => {
             println!("tumble demo: the whole chain on simulated recordings with known truth (BMI055-like IMU)");
-            let report =
-                tumble::demo::run(&tumble::demo::DemoOptions::default(), &out, &mut |stage| eprintln!("{stage}"))?;
+            let opts = tumble::demo::DemoOptions {
+                walk: match walk {
+                    DemoWalkArg::Room => tumble::sim::Scenario::Walk,
+                    DemoWalkArg::Corridor => tumble::sim::Scenario::Corridor,
+                },
+                seed,
+                ..Default::default()
+            };
+            let report = tumble::demo::run(&opts, &out, &mut |stage| eprintln!("{stage}"))?;
             print!("{}", report.table());
         }
         Command::Solve {
