@@ -5,6 +5,8 @@
 //! Levenberg–Marquardt engine ([`tumble_solvers`]) with the factors of
 //! [`tumble_factors`]. This crate holds the pipelines, data I/O and the CLI.
 
+#![warn(missing_docs)]
+
 pub mod allan;
 pub mod audit;
 pub mod calib;

@@ -26,11 +26,36 @@ pub const AXIS_COLORS: [RGBColor; 3] = [RGBColor(214, 39, 40), RGBColor(44, 160,
 /// One item on a log-log chart.
 pub enum Layer {
     /// A polyline with a legend label (empty label: no legend entry).
-    Line { points: Vec<(f64, f64)>, color: RGBColor, width: u32, label: String },
+    Line {
+        /// Vertices (x, y) in data coordinates.
+        points: Vec<(f64, f64)>,
+        /// Line color.
+        color: RGBColor,
+        /// Line width \[px\].
+        width: u32,
+        /// Legend label.
+        label: String,
+    },
     /// A shaded band between lower and upper values at the same abscissae.
-    Band { x: Vec<f64>, lo: Vec<f64>, hi: Vec<f64>, color: RGBColor },
+    Band {
+        /// Abscissae in data coordinates.
+        x: Vec<f64>,
+        /// Lower edge at each abscissa.
+        lo: Vec<f64>,
+        /// Upper edge at each abscissa.
+        hi: Vec<f64>,
+        /// Fill color (drawn translucent).
+        color: RGBColor,
+    },
     /// Markers (circles) with a legend label.
-    Points { points: Vec<(f64, f64)>, color: RGBColor, label: String },
+    Points {
+        /// Marker positions (x, y) in data coordinates.
+        points: Vec<(f64, f64)>,
+        /// Marker color.
+        color: RGBColor,
+        /// Legend label.
+        label: String,
+    },
 }
 
 /// A log-log chart description.

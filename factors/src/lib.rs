@@ -14,6 +14,8 @@
 //!
 //! Every factor's Jacobians are verified against central differences in tests.
 
+#![warn(missing_docs)]
+
 pub mod bal;
 pub mod between;
 pub mod camera;

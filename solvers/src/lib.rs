@@ -26,6 +26,8 @@
 //! automatic differentiation uses `num-dual` over ambient parameters instead of
 //! sophus' own dual types, so one scalar system serves user factors of any variable type.
 
+#![warn(missing_docs)]
+
 pub mod autodiff;
 pub mod error;
 pub mod factor;
