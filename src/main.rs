@@ -1225,7 +1225,8 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
             if plot.is_some() && !is_g2o {
                 return Err(format!("--plot draws pose graphs (.g2o); {} is a BAL problem", file.display()).into());
             }
-            // The file's poses (for the plot) and the log cost there, solution and summary.
+            // The file's poses (for the plot), the cost there (in the error solved
+            // last), the solution and its summary.
             let (values, initial_cost, solved, summary) = if is_g2o {
                 let opts = |edge_error| g2o::G2oOptions {
                     bad_information: if repair_information {
@@ -1246,9 +1247,6 @@ fn run(cli: Cli) -> Result<(), Box<dyn std::error::Error>> {
                     eprintln!("warning: {w}");
                 }
                 println!("{}: {:?} pose graph, {} vertices, {} edges", file.display(), pg.kind, pg.vertices, pg.edges);
-                if !matches!(edge_error, EdgeErrorArg::Log) && pg.kind != g2o::PoseKind::Se3 {
-                    return Err(format!("--edge-error applies to 3-D pose graphs; {} is planar", file.display()).into());
-                }
                 if matches!(edge_error, EdgeErrorArg::CeresThenLog) {
                     let log = g2o::read_g2o(&file, &opts(g2o::EdgeError::Log))?;
                     let (solved, first, second) =

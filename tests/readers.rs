@@ -75,6 +75,9 @@ fn ceres_edge_error_weighs_position_and_rotation_as_the_file_says() {
             assert!((cost - expect).abs() < 1e-3 * expect, "{edge_error:?} {v1}: {cost} vs {expect}");
         }
     }
+    let planar = G2oOptions { edge_error: EdgeError::CeresQuaternion, ..Default::default() };
+    let e = parse_g2o(Path::new("p.g2o"), SE2_OK, &planar).err().expect("refused").to_string();
+    assert!(e.starts_with("p.g2o") && e.contains("planar"), "{e}");
 }
 
 #[test]

@@ -109,9 +109,6 @@ pub fn load(path: &Path, edge_error: g2o::EdgeError) -> Result<TumbleProblem, St
     if path.extension().is_some_and(|e| e == "g2o") {
         let opts = g2o::G2oOptions { edge_error, ..Default::default() };
         let pg = g2o::read_g2o(path, &opts).map_err(|e| e.to_string())?;
-        if edge_error != g2o::EdgeError::Log && pg.kind != g2o::PoseKind::Se3 {
-            return Err("Ceres' quaternion edge error applies to 3-D pose graphs only".into());
-        }
         Ok(TumbleProblem { graph: pg.graph, values: pg.values, options, is_bal: false })
     } else {
         let p = bal::read_bal(path).map_err(|e| e.to_string())?;

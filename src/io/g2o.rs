@@ -27,7 +27,8 @@ pub enum BadInformation {
     Repair,
 }
 
-/// The error each `EDGE_SE3:QUAT` edge contributes (SE(2) edges always use [`EdgeError::Log`]).
+/// The error each `EDGE_SE3:QUAT` edge contributes (a planar file with
+/// anything but [`EdgeError::Log`] is refused).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub enum EdgeError {
     /// GTSAM's `BetweenFactor`, `Log(Z⁻¹ X₁⁻¹ X₂)` (the default; GTSAM, factrs,
@@ -224,6 +225,12 @@ pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph
     }
     let kind =
         kind.ok_or_else(|| InputError::file(path, "no vertex or edge found").with_hint("is this a g2o file?"))?;
+    if kind == PoseKind::Se2 && opts.edge_error != EdgeError::Log {
+        return Err(InputError::file(
+            path,
+            "Ceres' quaternion edge error applies to 3-D pose graphs; this one is planar",
+        ));
+    }
     let mut graph = Graph::new();
     let n_edges = edges.len();
     for (ln, a, b, meas, noise) in edges {
