@@ -2,6 +2,7 @@
 
 use nalgebra::{DVector, Matrix3, Vector3};
 use tumble_solvers::lie::hat;
+use tumble_solvers::sophus_lie::prelude::*;
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{AutoDiffResidual, Factor, FactorError, Key, Linearization, Real, Variable, Vars};
 
@@ -48,7 +49,7 @@ pub struct QuaternionPoseError {
 impl QuaternionPoseError {
     /// The error of measurement `z` (`X₁⁻¹ X₂`).
     pub fn new(k1: Key, k2: Key, z: &Isometry3F64) -> Self {
-        let p = z.params();
+        let p = Variable::params(z);
         QuaternionPoseError {
             keys: [k1, k2],
             rot: std::array::from_fn(|i| p[i]),
@@ -57,10 +58,10 @@ impl QuaternionPoseError {
     }
 }
 
-/// A pose's rotation (row-major parameters) and translation.
+/// A pose's rotation and translation, from sophus' accessors (no allocation:
+/// this runs once per edge and linearization).
 fn rotation_translation(x: &Isometry3F64) -> (Matrix3<f64>, Vector3<f64>) {
-    let p = x.params();
-    (Matrix3::from_row_slice(&p[..9]), Vector3::new(p[9], p[10], p[11]))
+    (x.rotation().matrix(), x.translation())
 }
 
 impl Factor for QuaternionPoseError {
@@ -72,7 +73,7 @@ impl Factor for QuaternionPoseError {
     }
     fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
         let (a, b): (&Isometry3F64, &Isometry3F64) = (vars.get(0)?, vars.get(1)?);
-        Ok(DVector::from_vec(AutoDiffResidual::residual(self, &[&a.params()[..], &b.params()[..]])))
+        Ok(DVector::from_vec(AutoDiffResidual::residual(self, &[&Variable::params(a)[..], &Variable::params(b)[..]])))
     }
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
         let mut out = Linearization::default();
@@ -122,8 +123,8 @@ fn twice_quaternion_vector<T: Real>(m: &[T; 9]) -> [T; 3] {
     let diag = [at(0, 0).re(), at(1, 1).re(), at(2, 2).re()];
     let (imax, dmax) = diag.iter().enumerate().fold((0, f64::MIN), |a, (i, &d)| if d > a.1 { (i, d) } else { a });
     let one = T::from(1.0);
-    // With s = 4·(the branch's component): 2·vec = 2·(others)/… ; the sign
-    // makes the real part w ≥ 0.
+    // The trace branch when it is the largest, else the largest diagonal
+    // entry's; either way the real part w is taken ≥ 0.
     if tr.re() >= dmax {
         // w = √(1 + tr)/2, 2·vec = (R32 − R23, R13 − R31, R21 − R12) / (2w).
         let two_w = (one + tr).sqrt();
@@ -200,7 +201,7 @@ mod tests {
         ] {
             let q = rotation_vector(theta, axis);
             let x = se3_from_quaternion(q, Vector3::zeros());
-            let p = x.params();
+            let p = Variable::params(&x);
             let r: [f64; 9] = std::array::from_fn(|i| p[i]);
             let v = twice_quaternion_vector(&r);
             let sign = if q[0] < 0.0 { -1.0 } else { 1.0 };
@@ -246,7 +247,7 @@ mod tests {
         let rq = Factor::residual(&q, Vars::new(&[&x1, &x2])).unwrap();
         let b = crate::BetweenFactor::new(X(0), X(1), z);
         let rb = b.residual(Vars::new(&[&x1, &x2])).unwrap();
-        let p = z.params();
+        let p = Variable::params(&z);
         let rz = nalgebra::Matrix3::from_row_slice(&p[..9]);
         let (omega, nu) = (rb.fixed_rows::<3>(0), rb.fixed_rows::<3>(3));
         let expect_p = rz * nu;
