@@ -11,7 +11,7 @@ use tumble::audit::vio::{audit_vio, VioAuditOptions};
 use tumble::sim::{hide_effect, simulate, Scenario, SimConfig};
 use tumble::vio::{VioInput, VioOptions};
 
-fn main() -> Result<(), String> {
+fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let effect = args.first().map(String::as_str).unwrap_or("camera_imu_time_offset");
     let strength: f64 = args.get(1).map_or(Ok(1.0), |s| s.parse()).map_err(|e| format!("strength: {e}"))?;

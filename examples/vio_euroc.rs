@@ -23,7 +23,7 @@ fn main() {
         }
     };
     // EqVIO's tuned pixel noise for this file (σ² = 3.72 px²).
-    let opts = VioOptions { pixel_sigma: 1.93, ..VioOptions::default() };
+    let opts = VioOptions::with_pixel_sigma(1.93);
     let out = match run(&input, &opts, None) {
         Ok(o) => o,
         Err(e) => {

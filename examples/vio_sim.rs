@@ -44,7 +44,7 @@ fn main() {
         triad.noise_density = triad.noise_density.map(|n| n * white);
     }
     let name: String = flag(&args, "--scenario", "walk".to_string());
-    let scenario = match <Scenario as clap::ValueEnum>::from_str(&name, true) {
+    let scenario = match name.to_ascii_lowercase().parse::<Scenario>() {
         Ok(s @ (Scenario::Walk | Scenario::Corridor | Scenario::Flight)) => s,
         _ => {
             eprintln!("--scenario: walk, corridor or flight, found {name}");
@@ -54,17 +54,17 @@ fn main() {
     let sim = simulate(scenario, &cfg, seed).expect("simulation");
     let input = VioInput::from_simulation(&sim).expect("input");
     let mut opts = VioOptions::for_simulation(&cfg);
-    opts.keyframe_parallax_px = flag(&args, "--keyframe-parallax", opts.keyframe_parallax_px);
-    opts.keyframe_max_interval_s = flag(&args, "--keyframe-interval", opts.keyframe_max_interval_s);
-    opts.window = flag(&args, "--window", opts.window);
-    opts.max_iterations = flag(&args, "--max-iterations", opts.max_iterations);
-    opts.prediction_gate_px = flag(&args, "--prediction-gate", opts.prediction_gate_px);
-    opts.triangulation_gate_px = flag(&args, "--triangulation-gate", opts.triangulation_gate_px);
-    opts.pixel_sigma = flag(&args, "--pixel-sigma", opts.pixel_sigma);
+    opts.window.keyframe_parallax_px = flag(&args, "--keyframe-parallax", opts.window.keyframe_parallax_px);
+    opts.window.keyframe_max_interval_s = flag(&args, "--keyframe-interval", opts.window.keyframe_max_interval_s);
+    opts.window.size = flag(&args, "--window", opts.window.size);
+    opts.solver.max_iterations = flag(&args, "--max-iterations", opts.solver.max_iterations);
+    opts.gates.prediction_px = flag(&args, "--prediction-gate", opts.gates.prediction_px);
+    opts.gates.triangulation_px = flag(&args, "--triangulation-gate", opts.gates.triangulation_px);
+    opts.noise.pixel_sigma = flag(&args, "--pixel-sigma", opts.noise.pixel_sigma);
     let (gyro_rw, accel_rw) = (flag(&args, "--gyro-rw-scale", 1.0), flag(&args, "--accel-rw-scale", 1.0));
-    opts.imu.gyro_random_walk *= gyro_rw;
-    opts.imu.accel_random_walk *= accel_rw;
-    if let Some(axes) = opts.imu.axes.as_mut() {
+    opts.noise.imu.gyro_random_walk *= gyro_rw;
+    opts.noise.imu.accel_random_walk *= accel_rw;
+    if let Some(axes) = opts.noise.imu.axes.as_mut() {
         axes.gyro_random_walk = axes.gyro_random_walk.map(|k| k * gyro_rw);
         axes.accel_random_walk = axes.accel_random_walk.map(|k| k * accel_rw);
     }

@@ -103,9 +103,13 @@ fn triad_rows(out: &mut Vec<Row>, name: &str, truth: &TriadModel, est: &Triad, a
 
 /// Simulate the three recordings and run the chain of [`crate::pipeline`] on
 /// them into `out` (which gets `report.md`); `stage` is told what starts.
-pub fn run(opts: &DemoOptions, out: &Path, stage: &mut dyn FnMut(&str)) -> Result<DemoReport, String> {
+pub fn run(
+    opts: &DemoOptions,
+    out: &Path,
+    stage: &mut dyn FnMut(&str),
+) -> Result<DemoReport, crate::pipeline::ChainError> {
     if !matches!(opts.walk, Scenario::Walk | Scenario::Corridor) {
-        return Err(format!("the demo walks in a room or a corridor, not {:?}", opts.walk));
+        return Err(format!("the demo walks in a room or a corridor, not {:?}", opts.walk).into());
     }
     let mut cfg = SimConfig::default();
     hide_effect(&mut cfg, &opts.hidden.0, opts.hidden.1)?;
@@ -127,7 +131,7 @@ pub fn run(opts: &DemoOptions, out: &Path, stage: &mut dyn FnMut(&str)) -> Resul
     let inputs = ChainInputs {
         tumble: Some(tumble.imu.to_recording()),
         still: Some(still.imu.to_recording()),
-        vio: Some(Box::new(move |cal| VioInput::from_simulation_calibrated(&walk, cal))),
+        vio: Some(Box::new(move |cal| Ok(VioInput::from_simulation_calibrated(&walk, cal)?))),
         ..Default::default()
     };
     let chain_opts = ChainOptions {

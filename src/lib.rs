@@ -7,19 +7,23 @@
 
 #![warn(missing_docs)]
 
+pub mod aid;
 pub mod allan;
 pub mod audit;
 pub mod calib;
 pub mod demo;
 pub mod error;
 pub mod eval;
+pub mod inputs;
+pub mod inspect;
 pub mod io;
+pub mod model;
 pub mod pipeline;
 pub mod plot;
 pub mod posegraph;
 pub mod sim;
 pub mod vio;
 
-pub use error::InputError;
+pub use error::{InputError, OptionError};
 pub use tumble_factors as factors;
 pub use tumble_solvers as solvers;

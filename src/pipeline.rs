@@ -24,7 +24,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use crate::allan::{run_allan, AllanReport, AllanRunOptions};
+use crate::allan::{run_allan_with_progress, AllanError, AllanReport, AllanRunOptions};
 use crate::audit::{audit, Audit, AuditOptions};
 use crate::calib::model::ImuCalibration;
 use crate::calib::{calibrate, CalibOptions, CalibrationResult};
@@ -60,19 +60,24 @@ impl Stage {
             Stage::Vio => "vio",
         }
     }
+}
 
+impl std::str::FromStr for Stage {
+    type Err = crate::OptionError;
     /// The stage named `s` (as [`Stage::id`]).
-    pub fn parse(s: &str) -> Result<Stage, String> {
-        Stage::ALL
-            .into_iter()
-            .find(|st| st.id() == s.trim())
-            .ok_or_else(|| format!("unknown stage `{s}` (stages: {})", Stage::ALL.map(|s| s.id()).join(", ")))
+    fn from_str(s: &str) -> Result<Stage, crate::OptionError> {
+        Stage::ALL.into_iter().find(|st| st.id() == s.trim()).ok_or_else(|| {
+            crate::OptionError::new(
+                "--skip",
+                format!("names an unknown stage `{s}` (stages: {})", Stage::ALL.map(|s| s.id()).join(", ")),
+            )
+        })
     }
 }
 
 /// Builds the VIO's input once the chain knows the calibration to correct the
 /// IMU with (None: no calibration available, samples used as read).
-pub type VioSource = Box<dyn FnOnce(Option<&ImuCalibration>) -> Result<VioInput, String>>;
+pub type VioSource = Box<dyn FnOnce(Option<&ImuCalibration>) -> Result<VioInput, Box<dyn std::error::Error>>>;
 
 /// What the chain works on; every part optional.
 #[derive(Default)]
@@ -109,6 +114,27 @@ pub struct ChainOptions {
     pub rerun: Option<PathBuf>,
 }
 
+impl ChainOptions {
+    /// Use `calib` for the calibrate stage and its static-interval detection
+    /// for the audit stage (the audit re-detects the intervals the calibration used).
+    pub fn set_calibration(&mut self, calib: CalibOptions) {
+        self.audit.detection = calib.clone();
+        self.calib = calib;
+    }
+
+    /// Check every stage's options once, before any work ([`run_chain`] calls it).
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
+        self.calib.validate()?;
+        self.allan.validate().map_err(|e| crate::OptionError::new("allan stage:", e.0))?;
+        self.audit.validate()?;
+        self.vio.validate()?;
+        if !self.bias_after_s.is_finite() {
+            return Err(crate::OptionError::new("--bias-after", "must be a finite number of seconds"));
+        }
+        Ok(())
+    }
+}
+
 impl Default for ChainOptions {
     fn default() -> Self {
         ChainOptions {
@@ -130,6 +156,8 @@ pub enum Progress<'a> {
     Stage(Stage, &'a str),
     /// VIO frames done out of total.
     Frames(usize, usize),
+    /// Allan stage: τ values done out of total (six axes).
+    Taus(usize, usize),
 }
 
 /// How a stage ended.
@@ -197,6 +225,25 @@ fn earlier(path: PathBuf) -> Option<PathBuf> {
     path.is_file().then_some(path)
 }
 
+/// Why the chain stopped (the message names the stage and the cause).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct ChainError(pub String);
+
+crate::error::message_error_conversions!(ChainError, ChainError);
+
+impl From<crate::vio::VioError> for ChainError {
+    fn from(e: crate::vio::VioError) -> ChainError {
+        ChainError(e.to_string())
+    }
+}
+
+impl From<crate::sim::SimError> for ChainError {
+    fn from(e: crate::sim::SimError) -> ChainError {
+        ChainError(e.to_string())
+    }
+}
+
 /// Run the chain into `out` (created) and write `out/report.md`.
 ///
 /// Errors of a stage that runs stop the chain (a stage's output is the next
@@ -206,7 +253,8 @@ pub fn run_chain(
     opts: &ChainOptions,
     out: &Path,
     progress: &mut dyn FnMut(Progress),
-) -> Result<ChainReport, String> {
+) -> Result<ChainReport, ChainError> {
+    opts.validate().map_err(|e| e.to_string())?;
     if let Some(r) = &opts.rerun {
         crate::vio::rerun_available(r)?;
     }
@@ -256,7 +304,7 @@ pub fn run_chain(
     if let (true, Some(rec)) = (wanted(Stage::Allan), &still) {
         progress(Progress::Stage(Stage::Allan, "identifying the noise by Allan variance"));
         let t = Instant::now();
-        let r = run_allan(rec, &opts.allan).map_err(|e| format!("allan: {e}"))?;
+        let r = allan_with_progress(rec, &opts.allan, progress).map_err(|e| format!("allan: {e}"))?;
         let files = r.write_all(&dir).map_err(|e| format!("allan: {e}"))?;
         let secs = t.elapsed().as_secs_f64();
         warnings.extend(r.warnings.iter().map(|w| format!("allan: {w}")));
@@ -345,7 +393,7 @@ pub fn run_chain(
         (true, Some(source)) => {
             let input = source(final_cal.as_ref().map(|(c, _)| c)).map_err(|e| format!("vio: {e}"))?;
             let mut vopts = opts.vio.clone();
-            let noise_from = match input.apply_noise(noise, &mut vopts.imu) {
+            let noise_from = match input.apply_noise(noise, &mut vopts.noise.imu) {
                 NoiseSource::Given => "the Allan stage",
                 NoiseSource::Input => "the dataset's sensor.yaml",
                 NoiseSource::Default => "the built-in defaults",
@@ -469,4 +517,31 @@ impl ChainReport {
         }
         s
     }
+}
+
+/// The Allan stage on a worker thread, its progress ([`Progress::Taus`])
+/// reported from this one every 100 ms (`progress` need not be `Sync`).
+fn allan_with_progress(
+    rec: &ImuRecording,
+    opts: &AllanRunOptions,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<AllanReport, AllanError> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let (done, total) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    std::thread::scope(|scope| {
+        let worker = scope.spawn(|| {
+            run_allan_with_progress(rec, opts, &|d, n| {
+                total.store(n, Ordering::Relaxed);
+                done.fetch_max(d, Ordering::Relaxed);
+            })
+        });
+        while !worker.is_finished() {
+            std::thread::sleep(std::time::Duration::from_millis(100));
+            let n = total.load(Ordering::Relaxed);
+            if n > 0 {
+                progress(Progress::Taus(done.load(Ordering::Relaxed), n));
+            }
+        }
+        worker.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+    })
 }

@@ -6,8 +6,30 @@
 
 use plotters::prelude::*;
 use plotters::style::FontStyle;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Once;
+
+/// Why a figure could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// No finite point to draw (all series empty or non-finite).
+    #[error("{}: nothing to plot (no finite points)", .0.display())]
+    Empty(PathBuf),
+    /// The drawing backend failed (e.g. the file cannot be written).
+    #[error("{}: {message}", path.display())]
+    Draw {
+        /// The figure's file.
+        path: PathBuf,
+        /// The backend's message.
+        message: String,
+    },
+}
+
+impl PlotError {
+    fn draw(path: &Path, e: &dyn std::fmt::Display) -> PlotError {
+        PlotError::Draw { path: path.to_path_buf(), message: e.to_string() }
+    }
+}
 
 static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
 
@@ -76,7 +98,7 @@ fn finite_positive(v: f64) -> bool {
 
 impl LogLogChart {
     /// Render to a PNG file of `width`×`height` pixels.
-    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), String> {
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), PlotError> {
         ensure_font();
         let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, 0.0f64, f64::INFINITY, 0.0f64);
         let mut grow = |x: f64, y: f64| {
@@ -101,12 +123,12 @@ impl LogLogChart {
             }
         }
         if !(x0 < x1 && y0 < y1) {
-            return Err(format!("{}: nothing to plot", path.display()));
+            return Err(PlotError::Empty(path.to_path_buf()));
         }
         // Whole decades around the data.
         let (x0, x1) = (10f64.powf(x0.log10().floor()), 10f64.powf(x1.log10().ceil()));
         let (y0, y1) = (10f64.powf(y0.log10().floor()), 10f64.powf(y1.log10().ceil()));
-        let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+        let err = |e: &dyn std::fmt::Display| PlotError::draw(path, e);
         let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
         root.fill(&WHITE).map_err(|e| err(&e))?;
         let mut chart = ChartBuilder::on(&root)
@@ -166,17 +188,17 @@ fn finish<'a, DB, CT>(
     chart: ChartContext<'a, DB, CT>,
     root: &DrawingArea<DB, plotters::coord::Shift>,
     path: &Path,
-) -> Result<(), String>
+) -> Result<(), PlotError>
 where
     DB: DrawingBackend + 'a,
     CT: plotters::coord::CoordTranslate,
 {
     legend(chart, path)?;
-    root.present().map_err(|e| format!("{}: {e}", path.display()))
+    root.present().map_err(|e| PlotError::draw(path, &e))
 }
 
 /// Draw the legend (upper right) of a chart.
-fn legend<'a, DB, CT>(mut chart: ChartContext<'a, DB, CT>, path: &Path) -> Result<(), String>
+fn legend<'a, DB, CT>(mut chart: ChartContext<'a, DB, CT>, path: &Path) -> Result<(), PlotError>
 where
     DB: DrawingBackend + 'a,
     CT: plotters::coord::CoordTranslate,
@@ -188,7 +210,7 @@ where
         .border_style(BLACK.mix(0.3))
         .label_font(("sans-serif", 13))
         .draw()
-        .map_err(|e| format!("{}: {e}", path.display()))?;
+        .map_err(|e| PlotError::draw(path, &e))?;
     Ok(())
 }
 
@@ -285,11 +307,10 @@ impl ScatterChart {
     }
 
     /// Draw onto an area of a bitmap (`path` only names errors).
-    fn draw_on(&self, area: &DrawingArea<BitMapBackend, plotters::coord::Shift>, path: &Path) -> Result<(), String> {
+    fn draw_on(&self, area: &DrawingArea<BitMapBackend, plotters::coord::Shift>, path: &Path) -> Result<(), PlotError> {
         let (width, height) = area.dim_in_pixel();
-        let ((x0, x1), (y0, y1)) =
-            self.ranges(width, height).ok_or_else(|| format!("{}: nothing to plot", path.display()))?;
-        let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+        let ((x0, x1), (y0, y1)) = self.ranges(width, height).ok_or_else(|| PlotError::Empty(path.to_path_buf()))?;
+        let err = |e: &dyn std::fmt::Display| PlotError::draw(path, e);
         let mut chart = ChartBuilder::on(area)
             .caption(&self.title, ("sans-serif", 20))
             .margin(14)
@@ -347,18 +368,18 @@ impl ScatterChart {
     }
 
     /// Render to a PNG file of `width`×`height` pixels (axes span the finite data, with 5 % margins).
-    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), String> {
+    pub fn write_png(&self, path: &Path, width: u32, height: u32) -> Result<(), PlotError> {
         write_panels(path, std::slice::from_ref(self), width, height)
     }
 }
 
 /// Render charts stacked vertically into one PNG of `width`×`height` pixels.
-pub fn write_panels(path: &Path, charts: &[ScatterChart], width: u32, height: u32) -> Result<(), String> {
+pub fn write_panels(path: &Path, charts: &[ScatterChart], width: u32, height: u32) -> Result<(), PlotError> {
     ensure_font();
     if charts.is_empty() {
-        return Err(format!("{}: nothing to plot", path.display()));
+        return Err(PlotError::Empty(path.to_path_buf()));
     }
-    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let err = |e: &dyn std::fmt::Display| PlotError::draw(path, e);
     let root = BitMapBackend::new(path, (width, height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     for (chart, area) in charts.iter().zip(root.split_evenly((charts.len(), 1))) {

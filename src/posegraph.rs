@@ -1,13 +1,142 @@
 //! Pose graphs: synthetic ones with known truth (the solver's demo and test
 //! data), plots, and the two-stage solve of a g2o file.
 
-use nalgebra::{Vector3, Vector6};
-use rand::{Rng, SeedableRng};
-use rand_distr::{Distribution, Normal};
-use tumble_factors::{BetweenFactor, PriorFactor};
+pub use tumble_factors::testing::{simulate_helix, SimulatedPoseGraph};
 use tumble_solvers::sophus_lie::Isometry3F64;
 
-use tumble_solvers::{Graph, LmOptions, NoiseModel, Optimizer, SolveError, Summary, Values, X};
+use crate::io::{bal, g2o};
+use crate::plot::PlotError;
+use std::path::Path;
+use tumble_solvers::{Graph, LmOptions, Optimizer, SolveError, Summary, Values};
+
+/// The cost of each 3-D g2o edge in [`solve_file`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum EdgeErrorChoice {
+    /// Log(Z⁻¹ X₁⁻¹ X₂), GTSAM's BetweenFactor.
+    #[default]
+    Log,
+    /// Ceres' `pose_graph_3d` error.
+    Ceres,
+    /// Ceres' error first, then the log error from its solution ([`solve_two_stage`]).
+    CeresThenLog,
+}
+
+/// Settings of [`solve_file`].
+#[derive(Debug, Clone, Default)]
+pub struct SolveFileOptions {
+    /// The optimizer's settings (BAL problems eliminate their points, `l`).
+    pub lm: LmOptions,
+    /// g2o: repair non-positive-definite information matrices instead of refusing the file.
+    pub repair_information: bool,
+    /// g2o: the cost of each 3-D edge.
+    pub edge_error: EdgeErrorChoice,
+    /// A top-view figure will be asked for: refused up front for BAL files.
+    pub plot: bool,
+}
+
+/// A solved g2o or BAL file.
+#[derive(Debug)]
+pub struct SolvedFile {
+    /// The file's starting values.
+    pub initial: Values,
+    /// Cost at the start, in the error solved last.
+    pub initial_cost: f64,
+    /// The solution.
+    pub solution: Values,
+    /// The (last) solve's summary.
+    pub summary: Summary,
+    /// The first stage's summary of a two-stage solve.
+    pub first_stage: Option<Summary>,
+    /// The readers' warnings (e.g. repaired information matrices).
+    pub warnings: Vec<String>,
+}
+
+impl SolvedFile {
+    /// [`plot_top_view`] of the start and the solution, titled with the file's name and χ².
+    pub fn plot_top_view(&self, file: &Path, png: &Path) -> Result<(), PlotError> {
+        let name = file.file_stem().map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let title = format!("{name}: χ² {:.1} → {:.1}", 2.0 * self.initial_cost, 2.0 * self.summary.final_cost);
+        plot_top_view(&self.initial, &self.solution, &title, png)
+    }
+}
+
+/// Why a file cannot be solved.
+#[derive(Debug, thiserror::Error)]
+pub enum PoseGraphError {
+    /// The file is wrong (named with its line).
+    #[error(transparent)]
+    File(#[from] crate::InputError),
+    /// The solver failed.
+    #[error(transparent)]
+    Solve(#[from] SolveError),
+    /// An option does not fit the file.
+    #[error(transparent)]
+    Options(#[from] crate::OptionError),
+}
+
+/// Read and solve a g2o pose graph (`.g2o`) or a BAL problem (any other
+/// extension), telling `describe` what the file holds before the solve.
+pub fn solve_file(
+    file: &Path,
+    opts: &SolveFileOptions,
+    describe: &mut dyn FnMut(String),
+) -> Result<SolvedFile, PoseGraphError> {
+    let is_g2o = file.extension().is_some_and(|e| e.eq_ignore_ascii_case("g2o"));
+    if opts.plot && !is_g2o {
+        return Err(crate::OptionError::new(
+            "--plot",
+            format!("draws pose graphs (.g2o); {} is a BAL problem", file.display()),
+        )
+        .into());
+    }
+    if !is_g2o {
+        let p = bal::read_bal(file)?;
+        describe(format!(
+            "{}: BAL problem, {} cameras, {} points, {} observations",
+            file.display(),
+            p.cameras,
+            p.points,
+            p.observations
+        ));
+        let lm = LmOptions { eliminate: vec!['l'], ..opts.lm.clone() };
+        let (solution, summary) = Optimizer::new(lm).optimize(&p.graph, &p.values)?;
+        let initial_cost = summary.initial_cost;
+        return Ok(SolvedFile {
+            initial: p.values,
+            initial_cost,
+            solution,
+            summary,
+            first_stage: None,
+            warnings: Vec::new(),
+        });
+    }
+    let read = |edge_error| {
+        let bad_information =
+            if opts.repair_information { g2o::BadInformation::Repair } else { g2o::BadInformation::Refuse };
+        g2o::read_g2o(file, &g2o::G2oOptions { bad_information, edge_error })
+    };
+    let pg = read(match opts.edge_error {
+        EdgeErrorChoice::Log => g2o::EdgeError::Log,
+        EdgeErrorChoice::Ceres | EdgeErrorChoice::CeresThenLog => g2o::EdgeError::CeresQuaternion,
+    })?;
+    describe(format!("{}: {:?} pose graph, {} vertices, {} edges", file.display(), pg.kind, pg.vertices, pg.edges));
+    if opts.edge_error == EdgeErrorChoice::CeresThenLog {
+        let log = read(g2o::EdgeError::Log)?;
+        let (solution, first, second) = solve_two_stage(&pg.graph, &log.graph, &pg.values, &opts.lm)?;
+        let initial_cost = log.graph.cost(&pg.values)?;
+        return Ok(SolvedFile {
+            initial: pg.values,
+            initial_cost,
+            solution,
+            summary: second,
+            first_stage: Some(first),
+            warnings: pg.warnings,
+        });
+    }
+    let (solution, summary) = Optimizer::new(opts.lm.clone()).optimize(&pg.graph, &pg.values)?;
+    let initial_cost = summary.initial_cost;
+    Ok(SolvedFile { initial: pg.values, initial_cost, solution, summary, first_stage: None, warnings: pg.warnings })
+}
 
 /// Solve a 3-D pose graph in two stages: first with Ceres' `pose_graph_3d`
 /// edge error (`quaternion`, read with
@@ -41,77 +170,6 @@ pub fn solve_two_stage(
     Ok((solution, first, second))
 }
 
-/// A simulated SE(3) pose graph with its ground truth.
-pub struct SimulatedPoseGraph {
-    /// Odometry and loop-closure factors, plus a prior on pose 0.
-    pub graph: Graph,
-    /// Initial guess: dead-reckoned noisy odometry.
-    pub initial: Values,
-    /// True poses.
-    pub truth: Values,
-    /// Number of poses.
-    pub poses: usize,
-}
-
-/// Poses on `laps` loops of a helix of radius `radius` \[m\]; odometry between
-/// consecutive poses and a loop closure to the pose one lap earlier, all with
-/// noise `sigma_rot` \[rad\] and `sigma_trans` \[m\]. Deterministic for a seed.
-pub fn simulate_helix(
-    poses_per_lap: usize,
-    laps: usize,
-    radius: f64,
-    sigma_rot: f64,
-    sigma_trans: f64,
-    seed: u64,
-) -> SimulatedPoseGraph {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let n = poses_per_lap * laps;
-    let truth_poses: Vec<Isometry3F64> = (0..n)
-        .map(|i| {
-            let a = 2.0 * std::f64::consts::PI * i as f64 / poses_per_lap as f64;
-            let rot = Isometry3F64::exp(Vector6::new(0.0, 0.0, a + std::f64::consts::FRAC_PI_2, 0.0, 0.0, 0.0));
-            let t = Vector3::new(radius * a.cos(), radius * a.sin(), 0.3 * i as f64 / poses_per_lap as f64);
-            Isometry3F64::from_translation(t).group_mul(rot)
-        })
-        .collect();
-    let nr = Normal::new(0.0, sigma_rot).expect("finite sigma");
-    let nt = Normal::new(0.0, sigma_trans).expect("finite sigma");
-    let noisy = |z: Isometry3F64, rng: &mut rand::rngs::StdRng| {
-        let d = Vector6::new(
-            nr.sample(rng),
-            nr.sample(rng),
-            nr.sample(rng),
-            nt.sample(rng),
-            nt.sample(rng),
-            nt.sample(rng),
-        );
-        z.group_mul(Isometry3F64::exp(d))
-    };
-    let noise = NoiseModel::diagonal(&[sigma_rot, sigma_rot, sigma_rot, sigma_trans, sigma_trans, sigma_trans])
-        .expect("positive sigmas");
-    let mut graph = Graph::new();
-    let mut truth = Values::new();
-    let mut initial = Values::new();
-    graph.add(PriorFactor::new(X(0), truth_poses[0]), NoiseModel::isotropic(6, 1e-3).expect("positive"));
-    let mut dead = truth_poses[0];
-    initial.insert(X(0), dead);
-    for i in 0..n {
-        truth.insert(X(i as u64), truth_poses[i]);
-        if i + 1 < n {
-            let z = noisy(truth_poses[i].inverse().group_mul(truth_poses[i + 1]), &mut rng);
-            graph.add(BetweenFactor::new(X(i as u64), X(i as u64 + 1), z), noise.clone());
-            dead = dead.group_mul(z);
-            initial.insert(X(i as u64 + 1), dead);
-        }
-        if i >= poses_per_lap && rng.random::<f64>() < 0.5 {
-            let j = i - poses_per_lap;
-            let z = noisy(truth_poses[j].inverse().group_mul(truth_poses[i]), &mut rng);
-            graph.add(BetweenFactor::new(X(j as u64), X(i as u64), z), noise.clone());
-        }
-    }
-    SimulatedPoseGraph { graph, initial, truth, poses: n }
-}
-
 /// Positions seen from above, `(x, y)` \[m\], of every SE(2) or SE(3) pose in
 /// `values`, in key order (other variable types are skipped).
 pub fn top_view(values: &Values) -> Vec<(f64, f64)> {
@@ -143,12 +201,12 @@ pub fn top_view(values: &Values) -> Vec<(f64, f64)> {
 /// let (solved, _) = Optimizer::new(LmOptions::default()).optimize(&pg.graph, &pg.values).unwrap();
 /// tumble::posegraph::plot_top_view(&pg.values, &solved, "M3500", "m3500.png".as_ref()).unwrap();
 /// ```
-pub fn plot_top_view(initial: &Values, solved: &Values, title: &str, path: &std::path::Path) -> Result<(), String> {
+pub fn plot_top_view(initial: &Values, solved: &Values, title: &str, path: &Path) -> Result<(), PlotError> {
     use crate::plot::{ScatterChart, Series};
     use plotters::style::RGBColor;
     let (a, b) = (top_view(initial), top_view(solved));
     if b.is_empty() {
-        return Err(format!("{}: no SE(2) or SE(3) poses to draw", path.display()));
+        return Err(PlotError::Empty(path.to_path_buf()));
     }
     let chart = ScatterChart {
         title: title.to_string(),

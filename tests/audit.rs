@@ -211,6 +211,6 @@ fn demo_chain_finds_the_hidden_effect() {
     std::fs::remove_dir_all(&dir).ok();
     // The walk is a room or a corridor; anything else is refused before any work.
     let flight = tumble::demo::DemoOptions { walk: tumble::sim::Scenario::Flight, ..opts };
-    let e = tumble::demo::run(&flight, &dir, &mut |_| {}).expect_err("a flight is no walk");
+    let e = tumble::demo::run(&flight, &dir, &mut |_| {}).expect_err("a flight is no walk").to_string();
     assert!(e.contains("room or a corridor"), "{e}");
 }

@@ -213,7 +213,7 @@ fn bad_input_is_refused_clearly() {
     let mut est = moved(&gt, Rotation3::identity(), Vector3::zeros(), 1.0, 0.0, 1);
     let shift = est.t_ns[0];
     est.t_ns.iter_mut().for_each(|t| *t -= shift);
-    let err = evaluate(&est, None, &gt, &EvalOptions::default()).unwrap_err();
+    let err = evaluate(&est, None, &gt, &EvalOptions::default()).unwrap_err().to_string();
     assert!(err.contains("same clock"), "{err}");
     // Partly outside: counted and warned.
     let mut late = moved(&gt, Rotation3::identity(), Vector3::zeros(), 1.0, 0.0, 1);
@@ -224,12 +224,13 @@ fn bad_input_is_refused_clearly() {
     let mut line = gt.clone();
     line.p.iter_mut().enumerate().for_each(|(i, p)| *p = [i as f64 * 0.01, 0.0, 0.0]);
     let est = moved(&line, Rotation3::identity(), Vector3::zeros(), 1.0, 0.0, 1);
-    let err =
-        evaluate(&est, None, &line, &EvalOptions { alignment: Alignment::Se3, ..Default::default() }).unwrap_err();
+    let err = evaluate(&est, None, &line, &EvalOptions { alignment: Alignment::Se3, ..Default::default() })
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("collinear"), "{err}");
     line.p.iter_mut().enumerate().for_each(|(i, p)| *p = [0.0, 0.0, i as f64 * 0.01]);
     let est = moved(&line, Rotation3::identity(), Vector3::zeros(), 1.0, 0.0, 1);
-    let err = evaluate(&est, None, &line, &EvalOptions::default()).unwrap_err();
+    let err = evaluate(&est, None, &line, &EvalOptions::default()).unwrap_err().to_string();
     assert!(err.contains("yaw"), "{err}");
     assert!(evaluate(&Trajectory::default(), None, &gt, &EvalOptions::default()).is_err());
     // Bias tracks: wrong column count, NaN bias, time going back, negative σ.
@@ -258,7 +259,7 @@ fn euroc_v1_01_is_evaluated() {
         return;
     };
     let input = tumble::vio::read_eqvio(&tracks, Some(&gt_path)).unwrap();
-    let opts = tumble::vio::VioOptions { pixel_sigma: 1.93, ..Default::default() };
+    let opts = tumble::vio::VioOptions::with_pixel_sigma(1.93);
     let out = tumble::vio::run(&input, &opts, None).unwrap();
     let gt = read_trajectory(&gt_path).unwrap();
     let est = tumble::vio::trajectory(&input, &out);

@@ -27,7 +27,7 @@ fn walk(seconds: f64) -> (SimConfig, VioInput) {
 fn asking_for_a_recording_without_the_feature_says_how_to_get_it() {
     let (cfg, input) = walk(11.0);
     let path = temp_dir("off").join("walk.rrd");
-    let err = run_recorded(&input, &VioOptions::for_simulation(&cfg), None, Some(&path)).unwrap_err();
+    let err = run_recorded(&input, &VioOptions::for_simulation(&cfg), None, Some(&path)).unwrap_err().to_string();
     assert!(err.contains("--features rerun") && err.contains("walk.rrd"), "{err}");
     assert!(!path.exists());
     assert!(tumble::vio::rerun_available(&path).is_err());

@@ -259,7 +259,7 @@ fn loops_too_short_for_plausible_dynamics_are_refused() {
     // The walk and flight are time-scaled: a 20 s walk would shake at ~25 g.
     for (scenario, seconds) in [(Scenario::Walk, 20.0), (Scenario::Flight, 15.0)] {
         let c = SimConfig { duration_s: Some(seconds), ..SimConfig::default() };
-        let e = simulate(scenario, &c, 1).err().unwrap();
+        let e = simulate(scenario, &c, 1).err().unwrap().to_string();
         assert!(e.contains("at least") && e.contains(" g)"), "{e}");
     }
     for (scenario, seconds) in [(Scenario::Walk, 40.0), (Scenario::Flight, 25.0)] {
@@ -311,5 +311,5 @@ fn a_corridor_walk_sees_only_what_the_block_leaves_in_sight() {
     let share = seen.iter().filter(|&&x| x).count() as f64 / seen.len() as f64;
     assert!(share < 0.3, "{share}");
     let bad = SimConfig { corridor: tumble::sim::Corridor { half_width: 9.0, ..Default::default() }, ..c };
-    assert!(simulate(Scenario::Corridor, &bad, 2).err().unwrap().contains("half width"));
+    assert!(simulate(Scenario::Corridor, &bad, 2).err().unwrap().to_string().contains("half width"));
 }

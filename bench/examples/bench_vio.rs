@@ -43,7 +43,11 @@ fn main() {
     let every = report(
         "simulated flight, the whole window solved at every frame (--solve-every-frame, VINS-Mono's way)",
         &input,
-        &VioOptions { solve_window_every_frame: true, ..opts.clone() },
+        &{
+            let mut o = opts.clone();
+            o.window.solve_every_frame = true;
+            o
+        },
     );
     println!(
         "keyframe-only window solves: {:.1}× real time vs {:.1}× solving the window at every frame → {:.2}× faster",
@@ -56,11 +60,7 @@ fn main() {
     if csv.is_file() {
         let gt = data.join("groundtruth/V1_01_easy.csv");
         let real = read_eqvio(&csv, gt.is_file().then_some(gt.as_path())).expect("eqvio");
-        report(
-            "EuRoC V1_01 (EqVIO tracks, 12–38 per frame)",
-            &real,
-            &VioOptions { pixel_sigma: 1.93, ..VioOptions::default() },
-        );
+        report("EuRoC V1_01 (EqVIO tracks, 12–38 per frame)", &real, &VioOptions::with_pixel_sigma(1.93));
     } else {
         println!("SKIPPED the real-data run: {} is absent", csv.display());
     }

@@ -48,6 +48,27 @@ pub enum Effect {
     BiasDrift,
 }
 
+/// An effect name [`Effect`]'s `FromStr` does not know (the message lists those it does).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UnknownEffect(pub String);
+
+impl std::fmt::Display for UnknownEffect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ids: Vec<&str> = Effect::ALL.iter().map(|e| e.id()).collect();
+        write!(f, "unknown effect `{}` (known: {})", self.0, ids.join(", "))
+    }
+}
+
+impl std::error::Error for UnknownEffect {}
+
+impl std::str::FromStr for Effect {
+    type Err = UnknownEffect;
+    /// The effect with this identifier ([`Effect::id`]), surrounding spaces ignored.
+    fn from_str(s: &str) -> Result<Effect, UnknownEffect> {
+        Effect::from_id(s.trim()).ok_or_else(|| UnknownEffect(s.to_string()))
+    }
+}
+
 impl Effect {
     /// Every effect, in vocabulary order.
     pub const ALL: [Effect; 8] = [

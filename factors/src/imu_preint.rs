@@ -37,7 +37,8 @@ pub type Matrix9 = SMatrix<f64, 9, 9>;
 pub type Matrix93 = SMatrix<f64, 9, 3>;
 
 /// Integration rule.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Scheme {
     /// GTSAM's tangent-space preintegration, zero-order hold of each sample.
     #[default]
@@ -47,7 +48,8 @@ pub enum Scheme {
 }
 
 /// Noise and integration settings (Kalibr's continuous-time `imu.yaml` quantities).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct PreintegrationParams {
     /// Accelerometer white noise density \[m/s²/√Hz\].
     pub accel_noise_density: f64,
@@ -68,7 +70,8 @@ pub struct PreintegrationParams {
 }
 
 /// Per-axis IMU noise (body axes x, y, z; units as in [`PreintegrationParams`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct NoiseAxes {
     /// Accelerometer white noise density \[m/s²/√Hz\].
     pub accel_noise_density: [f64; 3],

@@ -26,6 +26,7 @@ pub mod imu_preint;
 pub mod pose_graph_3d;
 pub mod prior;
 pub mod reprojection;
+pub mod testing;
 
 pub use bal::SnavelyReprojection;
 pub use between::BetweenFactor;

@@ -27,7 +27,7 @@ use realfft::RealFftPlanner;
 use serde::{Deserialize, Serialize};
 
 /// Which Allan-type variance to compute.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum DeviationKind {
     /// Overlapping Allan deviation (the default for IMU noise identification).
@@ -44,7 +44,27 @@ pub enum DeviationKind {
     Ohdev,
 }
 
+impl std::str::FromStr for DeviationKind {
+    type Err = super::AllanError;
+    fn from_str(s: &str) -> Result<DeviationKind, super::AllanError> {
+        let k = DeviationKind::NAMES.iter().position(|n| *n == s.trim()).ok_or_else(|| {
+            super::AllanError(format!("unknown deviation `{s}` (kinds: {})", DeviationKind::NAMES.join(", ")))
+        })?;
+        Ok(DeviationKind::ALL[k])
+    }
+}
+
 impl DeviationKind {
+    /// The names `FromStr` takes, in order.
+    pub const NAMES: [&'static str; 6] = ["oadev", "adev", "mdev", "tdev", "hdev", "ohdev"];
+    const ALL: [DeviationKind; 6] = [
+        DeviationKind::Oadev,
+        DeviationKind::Adev,
+        DeviationKind::Mdev,
+        DeviationKind::Tdev,
+        DeviationKind::Hdev,
+        DeviationKind::Ohdev,
+    ];
     /// Order of the phase difference (2 for Allan, 3 for Hadamard).
     pub fn difference_order(self) -> usize {
         match self {

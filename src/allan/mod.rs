@@ -31,7 +31,7 @@ pub mod report;
 
 pub use deviation::DeviationKind;
 pub use identify::{identify, Coefficient, Identification, NoiseTerms};
-pub use report::{run_allan, AllanReport, AllanRunOptions, AxisStat};
+pub use report::{run_allan, run_allan_with_progress, AllanReport, AllanRunOptions, AxisStat};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
@@ -71,6 +71,83 @@ impl Default for AllanOptions {
     }
 }
 
+impl AllanOptions {
+    /// Check every option once, before any work: the confidence level lies
+    /// strictly between 0 and 1, the largest τ fraction is positive, a
+    /// log-spaced grid has at least one τ per decade, explicit τ are positive.
+    pub fn validate(&self) -> Result<(), AllanError> {
+        if !(self.confidence > 0.0 && self.confidence < 1.0) {
+            return Err(AllanError(format!(
+                "the confidence level (--confidence) must lie strictly between 0 and 1, got {}",
+                self.confidence
+            )));
+        }
+        if self.max_tau_fraction.is_nan() || self.max_tau_fraction <= 0.0 {
+            return Err(AllanError(format!(
+                "the largest τ fraction (--max-tau-fraction) must be positive, got {}",
+                self.max_tau_fraction
+            )));
+        }
+        match &self.taus {
+            TauGrid::LogSpaced(0) => Err(AllanError("a log-spaced τ grid needs at least one τ per decade".into())),
+            TauGrid::Explicit(t) if t.iter().any(|x| !(x.is_finite() && *x > 0.0)) => {
+                Err(AllanError(format!("explicit τ must be positive numbers of seconds, got {t:?}")))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl std::str::FromStr for TauGrid {
+    type Err = AllanError;
+    /// A count of log-spaced τ per decade, `octave` or `all` (`tumble allan --taus`).
+    fn from_str(v: &str) -> Result<TauGrid, AllanError> {
+        match v {
+            "octave" => Ok(TauGrid::Octave),
+            "all" => Ok(TauGrid::All),
+            v => v
+                .parse()
+                .ok()
+                .filter(|&p: &usize| p > 0)
+                .map(TauGrid::LogSpaced)
+                .ok_or_else(|| AllanError(format!("--taus takes a count per decade, `octave` or `all`, got `{v}`"))),
+        }
+    }
+}
+
+/// A span of a recording, seconds from its start (`tumble allan --span A:B`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TimeSpan {
+    /// Start \[s\] (0 when the text leaves it empty).
+    pub start_s: f64,
+    /// End \[s\] (infinite when the text leaves it empty).
+    pub end_s: f64,
+}
+
+impl std::str::FromStr for TimeSpan {
+    type Err = AllanError;
+    /// `A:B` seconds from the start of the recording (either end may be empty).
+    fn from_str(s: &str) -> Result<TimeSpan, AllanError> {
+        let (a, b) =
+            s.split_once(':').ok_or_else(|| AllanError(format!("--span: expected START:END in seconds, got `{s}`")))?;
+        let num = |v: &str, default: f64| -> Result<f64, AllanError> {
+            if v.trim().is_empty() {
+                return Ok(default);
+            }
+            v.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| AllanError(format!("--span: `{v}` is not a number of seconds")))
+        };
+        let (a, b) = (num(a, 0.0)?, num(b, f64::INFINITY)?);
+        if b <= a {
+            return Err(AllanError(format!("--span: end {b} is not after start {a}")));
+        }
+        Ok(TimeSpan { start_s: a, end_s: b })
+    }
+}
+
 /// A deviation curve with its confidence band.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct AllanCurve {
@@ -101,6 +178,8 @@ pub struct AllanCurve {
 /// Why a deviation could not be computed.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AllanError(pub String);
+
+crate::error::message_error_conversions!(AllanError, AllanError);
 
 impl fmt::Display for AllanError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {

@@ -6,18 +6,36 @@ use super::identify::{basis, TERM_NAMES};
 use super::{identify, AllanCurve, AllanError, AllanOptions, Coefficient, Identification};
 use crate::io::{ImuRecording, Stored};
 use crate::plot::{Layer, LogLogChart, AXIS_COLORS};
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// How the three axes of a sensor are combined into Kalibr's one number.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum AxisStat {
     /// The worst (largest) axis: conservative, the default.
     #[default]
     Max,
     /// The mean of the three axes.
     Mean,
+}
+
+impl AxisStat {
+    /// The names `FromStr` takes, in order.
+    pub const NAMES: [&'static str; 2] = ["max", "mean"];
+}
+
+impl std::str::FromStr for AxisStat {
+    type Err = AllanError;
+    fn from_str(s: &str) -> Result<AxisStat, AllanError> {
+        match s.trim() {
+            "max" => Ok(AxisStat::Max),
+            "mean" => Ok(AxisStat::Mean),
+            _ => Err(AllanError(format!("unknown axis statistic `{s}` (use max or mean)"))),
+        }
+    }
 }
 
 /// Options of [`run_allan`].
@@ -27,8 +45,13 @@ pub struct AllanRunOptions {
     pub allan: AllanOptions,
     /// Combination of axes for `imu.yaml`.
     pub axis_stat: AxisStat,
-    /// Show a progress bar on the terminal.
-    pub progress: bool,
+}
+
+impl AllanRunOptions {
+    /// Check every option once (see [`AllanOptions::validate`]).
+    pub fn validate(&self) -> Result<(), AllanError> {
+        self.allan.validate()
+    }
 }
 
 /// One axis: its curve and (for Allan curves) its identified noise.
@@ -107,6 +130,17 @@ pub struct AllanReport {
 
 /// Compute curves and coefficients of all six axes of a static recording.
 pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanReport, AllanError> {
+    run_allan_with_progress(rec, opts, &|_, _| {})
+}
+
+/// [`run_allan`], calling `progress(done, total)` as the τ of the six axes
+/// are computed (from several threads at once).
+pub fn run_allan_with_progress(
+    rec: &ImuRecording,
+    opts: &AllanRunOptions,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<AllanReport, AllanError> {
+    opts.validate()?;
     if rec.len() < 10 {
         return Err(AllanError(format!(
             "{}: {} samples are too few for an Allan analysis",
@@ -121,18 +155,9 @@ pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanRepo
     let tau0 = 1.0 / rate;
     let n_tau =
         super::cluster_sizes(&opts.allan.taus, rec.len(), tau0, opts.allan.kind, opts.allan.max_tau_fraction).len();
-    let bar = if opts.progress {
-        let b = indicatif::ProgressBar::new(6 * n_tau as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} τ  {elapsed_precise} (eta {eta})")
-                .expect("static template")
-                .progress_chars("=> "),
-        );
-        b.set_prefix("allan");
-        b
-    } else {
-        indicatif::ProgressBar::hidden()
-    };
+    let total = 6 * n_tau;
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let tick = || progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
     let mut warnings = rec.warnings.clone();
     if rec.duration() < 3600.0 {
         warnings.push(format!(
@@ -143,7 +168,7 @@ pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanRepo
     let columns: Vec<Vec<f64>> =
         (0..6).map(|k| if k < 3 { &rec.gyro } else { &rec.accel }.iter().map(|s| s[k % 3]).collect()).collect();
     let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
-    let curves = super::allan_deviation_axes(&refs, tau0, &opts.allan, &|| bar.inc(1))
+    let curves = super::allan_deviation_axes(&refs, tau0, &opts.allan, &tick)
         .map_err(|e| AllanError(format!("{}: {e}", rec.source_name())))?;
     drop(columns);
     let mut curves = curves.into_iter();
@@ -164,7 +189,6 @@ pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanRepo
             .collect();
         sensors.push(SensorResult { name, unit, axes });
     }
-    bar.finish_and_clear();
     let si = rec.gyro_units == Stored::Si && rec.accel_units == Stored::Si;
     let kalibr = if si && sensors.iter().all(|s| s.axes.iter().all(|a| a.id.is_some())) {
         Some(kalibr_noise(&sensors, rate, opts.axis_stat))
@@ -481,7 +505,7 @@ impl AllanReport {
     }
 
     /// Draw one log-log PNG per sensor into `dir`; returns the files.
-    pub fn write_plots(&self, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    pub fn write_plots(&self, dir: &Path) -> Result<Vec<PathBuf>, AllanError> {
         let mut files = Vec::new();
         for sensor in &self.sensors {
             let mut layers = Vec::new();
@@ -561,7 +585,7 @@ impl AllanReport {
 
     /// Write `allan.json`, `imu.yaml` (when SI) and the plots into `dir`
     /// (created if needed); returns the files written.
-    pub fn write_all(&self, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    pub fn write_all(&self, dir: &Path) -> Result<Vec<PathBuf>, AllanError> {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create: {e}", dir.display()))?;
         let mut files = Vec::new();
         let json_path = dir.join("allan.json");

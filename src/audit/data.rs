@@ -1,6 +1,7 @@
 //! What the audit compares: the static intervals and the motions between them
 //! of a calibration recording, with the temperature and time of every sample.
 
+use super::AuditError;
 use crate::calib::detect::{mean3, var3, Interval};
 use crate::io::ImuRecording;
 use nalgebra::Vector3;
@@ -44,14 +45,14 @@ pub struct AuditData {
 impl AuditData {
     /// Summarize `rec` over the static `intervals` (sample ranges, sorted, ≥ 2)
     /// under local gravity `gravity` \[m/s²\].
-    pub fn new(rec: &ImuRecording, intervals: &[Interval], gravity: f64) -> Result<AuditData, String> {
+    pub fn new(rec: &ImuRecording, intervals: &[Interval], gravity: f64) -> Result<AuditData, AuditError> {
         if intervals.len() < 2 {
-            return Err(format!("{} static intervals: the audit needs at least 2", intervals.len()));
+            return Err(format!("{} static intervals: the audit needs at least 2", intervals.len()).into());
         }
         let temps = rec.temperature.as_deref();
         if let Some(t) = temps {
             if let Some(i) = t.iter().position(|x| !x.is_finite()) {
-                return Err(format!("temperature of sample {i} (line {}) is not finite", rec.lines.line(i)));
+                return Err(format!("temperature of sample {i} (line {}) is not finite", rec.lines.line(i)).into());
             }
         }
         let first = intervals[0];

@@ -2,6 +2,7 @@
 //! + the effects switched on, as one factor graph on the solver.
 
 use super::data::AuditData;
+use super::AuditError;
 use nalgebra::{DMatrix, Vector3};
 use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
 use tumble_factors::imu_effects::{Layout, MotionFactor, StaticFactor};
@@ -40,7 +41,7 @@ pub struct Noise {
 impl Noise {
     /// Noise models at `values` (the base calibration) with bias random walks
     /// `gyro_rw`, `accel_rw` \[raw units/√s\].
-    pub fn new(data: &AuditData, values: &Values, gyro_rw: f64, accel_rw: f64) -> Result<Noise, String> {
+    pub fn new(data: &AuditData, values: &Values, gyro_rw: f64, accel_rw: f64) -> Result<Noise, AuditError> {
         let a = *values.get::<AccelParams>(KEY_ACCEL).map_err(|e| e.to_string())?;
         let g = *values.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
         let base = Layout { effects: Vec::new() };
@@ -85,19 +86,19 @@ fn effect_keys(layout: &Layout) -> impl Iterator<Item = Key> + '_ {
     (0..layout.effects.len()).map(key_effect)
 }
 
-fn statics_factors(data: &AuditData, layout: &Layout) -> Result<Vec<StaticFactor>, String> {
+fn statics_factors(data: &AuditData, layout: &Layout) -> Result<Vec<StaticFactor>, AuditError> {
     data.statics
         .iter()
         .enumerate()
         .map(|(k, s)| {
             let keys = base_keys(k).into_iter().chain(effect_keys(layout)).collect();
             StaticFactor::new(keys, layout.clone(), s.raw_accel, s.raw_gyro, s.context, data.gravity)
-                .map_err(|e| format!("static interval {k}: {e}"))
+                .map_err(|e| AuditError(format!("static interval {k}: {e}")))
         })
         .collect()
 }
 
-fn motion_factors(data: &AuditData, layout: &Layout) -> Result<Vec<MotionFactor>, String> {
+fn motion_factors(data: &AuditData, layout: &Layout) -> Result<Vec<MotionFactor>, AuditError> {
     data.motions
         .iter()
         .enumerate()
@@ -115,7 +116,7 @@ fn motion_factors(data: &AuditData, layout: &Layout) -> Result<Vec<MotionFactor>
                 [s0.context, s1.context],
                 [s0.samples, s1.samples],
             )
-            .map_err(|e| format!("motion {k}: {e}"))
+            .map_err(|e| AuditError(format!("motion {k}: {e}")))
         })
         .collect()
 }
@@ -162,7 +163,7 @@ impl Fit {
 
 /// Solve with the effects of `layout`, starting from `start` (missing effect
 /// values start at zero).
-pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -> Result<Fit, String> {
+pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -> Result<Fit, AuditError> {
     let mut values = start.clone();
     for (j, e) in layout.effects.iter().enumerate() {
         if !values.contains(key_effect(j)) {
@@ -225,7 +226,7 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
 }
 
 /// Marginal covariance of the calibration blocks (`M_a/b_a`, `M_g`, `b_g` of the first interval).
-pub fn calibration_covariance(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<[DMatrix<f64>; 3], String> {
+pub fn calibration_covariance(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<[DMatrix<f64>; 3], AuditError> {
     let graph = build(data, noise, &fit.layout)?;
     let keys = [KEY_ACCEL, KEY_GYRO, key_bias(0)];
     let cov = covariances(&graph, &fit.values, &keys).map_err(|e| e.to_string())?;
@@ -234,7 +235,7 @@ pub fn calibration_covariance(data: &AuditData, noise: &Noise, fit: &Fit) -> Res
     Ok([get(keys[0])?, get(keys[1])?, get(keys[2])?])
 }
 
-fn build(data: &AuditData, noise: &Noise, layout: &Layout) -> Result<Graph, String> {
+fn build(data: &AuditData, noise: &Noise, layout: &Layout) -> Result<Graph, AuditError> {
     let mut graph = Graph::new();
     for (f, n) in statics_factors(data, layout)?.into_iter().zip(&noise.statics) {
         graph.add(f, n.clone());
@@ -271,8 +272,8 @@ pub fn start_values(data: &AuditData, accel: AccelParams, gyro: GyroMatrix, gyro
 pub type Residuals = (Vec<[f64; 4]>, Vec<[f64; 2]>);
 
 /// See [`Residuals`].
-pub fn residuals(data: &AuditData, layout: &Layout, values: &Values) -> Result<Residuals, String> {
-    fn eval<F: tumble_solvers::Factor>(f: &F, values: &Values) -> Result<Vec<f64>, String> {
+pub fn residuals(data: &AuditData, layout: &Layout, values: &Values) -> Result<Residuals, AuditError> {
+    fn eval<F: tumble_solvers::Factor>(f: &F, values: &Values) -> Result<Vec<f64>, AuditError> {
         let vars: Vec<&dyn tumble_solvers::DynVariable> =
             f.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
         Ok(f.residual(Vars::new(&vars)).map_err(|e| e.to_string())?.as_slice().to_vec())

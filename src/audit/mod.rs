@@ -84,6 +84,16 @@ impl Default for AuditOptions {
     }
 }
 
+impl AuditOptions {
+    /// Check every option once, before any work ([`audit`] calls it).
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(crate::OptionError::new("--alpha", format!("must be in (0, 1), got {}", self.alpha)));
+        }
+        self.detection.validate()
+    }
+}
+
 /// Score of one candidate effect against the current model.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CandidateScore {
@@ -172,6 +182,14 @@ impl Audit {
 #[derive(Debug, Clone)]
 pub struct AuditError(pub String);
 
+crate::error::message_error_conversions!(AuditError, AuditError);
+
+impl From<crate::vio::VioError> for AuditError {
+    fn from(e: crate::vio::VioError) -> AuditError {
+        AuditError(e.to_string())
+    }
+}
+
 impl std::fmt::Display for AuditError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(&self.0)
@@ -182,12 +200,13 @@ impl std::error::Error for AuditError {}
 /// Run the audit of a calibration recording against `calibration`.
 pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptions) -> Result<Audit, AuditError> {
     let fail = |m: String| AuditError(format!("{}: {m}", rec.source_name()));
-    let (accel, gyro, gyro_bias) = calibration.inverse_params().map_err(&fail)?;
+    opts.validate().map_err(|e| fail(e.to_string()))?;
+    let (accel, gyro, gyro_bias) = calibration.inverse_params().map_err(|e| fail(e.to_string()))?;
     let detection = CalibOptions { gravity: calibration.gravity, ..opts.detection.clone() };
     let detected = calibrate(rec, &detection).map_err(|e| fail(format!("static intervals: {}", e.message)))?;
     let mut notes = Vec::new();
     let intervals = still_intervals(rec, &detected.intervals, &gyro, &gyro_bias, 0.5 * detection.window_s, &mut notes);
-    let data = AuditData::new(rec, &intervals, calibration.gravity).map_err(&fail)?;
+    let data = AuditData::new(rec, &intervals, calibration.gravity).map_err(|e| fail(e.to_string()))?;
     // Random walks in raw units: physical ones times the sensor scale (raw per physical unit).
     let (rw_g, rw_a) = match &opts.noise {
         Some(n) => (n.gyroscope_random_walk, n.accelerometer_random_walk),
@@ -227,8 +246,8 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
         }
     }
     let start = fit::start_values(&data, accel, gyro, gyro_bias);
-    let noise = Noise::new(&data, &start, random_walk.0, random_walk.1).map_err(&fail)?;
-    let base = fit::solve(&data, &noise, &Layout { effects: Vec::new() }, &start).map_err(&fail)?;
+    let noise = Noise::new(&data, &start, random_walk.0, random_walk.1).map_err(|e| fail(e.to_string()))?;
+    let base = fit::solve(&data, &noise, &Layout { effects: Vec::new() }, &start).map_err(|e| fail(e.to_string()))?;
     let mut current = base.clone();
     let mut iterations = Vec::new();
     let mut last_round = Vec::new();
@@ -239,7 +258,7 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
             break;
         }
         let threshold = opts.alpha / remaining.len() as f64;
-        let fits: Vec<(Effect, Result<Fit, String>)> = remaining
+        let fits: Vec<(Effect, Result<Fit, AuditError>)> = remaining
             .par_iter()
             .map(|&e| {
                 let mut layout = current.layout.clone();
@@ -279,7 +298,7 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
         });
         current = f;
     }
-    let calibration = calibrated(calibration, &data, &noise, &current).map_err(&fail)?;
+    let calibration = calibrated(calibration, &data, &noise, &current).map_err(|e| fail(e.to_string()))?;
     Ok(Audit { data, base, iterations, last_round, calibration, random_walk, notes })
 }
 
@@ -385,7 +404,12 @@ impl CandidateScore {
 }
 
 /// The calibration re-solved with the effects, in the paper's convention.
-fn calibrated(given: &ImuCalibration, data: &AuditData, noise: &Noise, fit: &Fit) -> Result<ImuCalibration, String> {
+fn calibrated(
+    given: &ImuCalibration,
+    data: &AuditData,
+    noise: &Noise,
+    fit: &Fit,
+) -> Result<ImuCalibration, AuditError> {
     let a = *fit.values.get::<AccelParams>(fit::KEY_ACCEL).map_err(|e| e.to_string())?;
     let g = *fit.values.get::<GyroMatrix>(fit::KEY_GYRO).map_err(|e| e.to_string())?;
     let b = *fit.values.get::<Vector3<f64>>(fit::key_bias(0)).map_err(|e| e.to_string())?;
@@ -408,8 +432,8 @@ fn calibrated(given: &ImuCalibration, data: &AuditData, noise: &Noise, fit: &Fit
             .collect(),
     };
     Ok(ImuCalibration {
-        accel: crate::calib::solve::accel_triad(&a, &ca, 1.0),
-        gyro: crate::calib::solve::gyro_triad(&x, &cov),
+        accel: crate::calib::accel_triad(&a, &ca, 1.0),
+        gyro: crate::calib::gyro_triad(&x, &cov),
         gravity: given.gravity,
         units: given.units.clone(),
         effects: (!effects.effects.is_empty()).then_some(effects),

@@ -3,6 +3,7 @@
 //! effect added: residuals before and after against the effect's regressor).
 
 use super::fit::{self, Fit};
+use super::AuditError;
 use super::{Audit, CandidateScore, Effect};
 use crate::plot::{ScatterChart, Series, AXIS_COLORS};
 use plotters::style::RGBColor;
@@ -105,7 +106,7 @@ pub fn summary_table(a: &Audit) -> String {
 }
 
 /// Write `text` to `dir/name` (creating `dir`); the name back, or an error naming the file.
-pub(super) fn put_file(dir: &Path, name: &str, text: String) -> Result<String, String> {
+pub(super) fn put_file(dir: &Path, name: &str, text: String) -> Result<String, AuditError> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let p = dir.join(name);
     std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
@@ -113,7 +114,7 @@ pub(super) fn put_file(dir: &Path, name: &str, text: String) -> Result<String, S
 }
 
 /// Write `audit.json`, `calibration.json` (with the effects), `audit.md` and the figures into `dir`.
-pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, String> {
+pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
     let put = |name: &str, text: String| put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     let file = crate::calib::model::CalibrationFile::from(&a.calibration);
@@ -130,7 +131,7 @@ pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, String> {
     Ok(written)
 }
 
-fn gap_figure(a: &Audit, path: &Path) -> Result<String, String> {
+fn gap_figure(a: &Audit, path: &Path) -> Result<String, AuditError> {
     let mut pts = vec![(0.0, a.base.gap())];
     pts.extend(a.iterations.iter().enumerate().map(|(i, it)| ((i + 1) as f64, it.gap_after)));
     let labels: Vec<String> =
@@ -150,7 +151,7 @@ fn gap_figure(a: &Audit, path: &Path) -> Result<String, String> {
 }
 
 /// Residuals before (previous model) and after adding `effect`, against its regressor.
-fn effect_figure(a: &Audit, prev: &Fit, next: &Fit, effect: Effect, path: &Path) -> Result<(), String> {
+fn effect_figure(a: &Audit, prev: &Fit, next: &Fit, effect: Effect, path: &Path) -> Result<(), AuditError> {
     let data = &a.data;
     let before = fit::residuals(data, &prev.layout, &prev.values)?;
     let j = next.layout.effects.len() - 1;
@@ -227,7 +228,8 @@ fn effect_figure(a: &Audit, prev: &Fit, next: &Fit, effect: Effect, path: &Path)
         series,
         ..Default::default()
     }
-    .write_png(path, 900, 560)
+    .write_png(path, 900, 560)?;
+    Ok(())
 }
 
 fn markdown(a: &Audit, figures: &[String]) -> String {

@@ -29,10 +29,12 @@
 //! println!("{}", audit.verdict());
 //! ```
 
+use super::AuditError;
 use super::{CandidateScore, Effect};
 use crate::calib::ImuCalibration;
 use crate::plot::{ScatterChart, Series, AXIS_COLORS};
 use crate::vio::{run, ResidualTally, VioInput, VioOptions};
+use crate::OptionError;
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use statrs::distribution::{ContinuousCDF, StudentsT};
@@ -68,6 +70,18 @@ impl Default for VioAuditOptions {
 }
 
 impl VioAuditOptions {
+    /// Check every option once, before any work ([`audit_vio`] calls it).
+    pub fn validate(&self) -> Result<(), OptionError> {
+        if !(self.alpha > 0.0 && self.alpha < 1.0) {
+            return Err(OptionError::new("--alpha", format!("must be in (0, 1), got {}", self.alpha)));
+        }
+        if !(self.step_s.is_finite() && self.step_s > 0.0 && self.step_s <= 0.02) {
+            return Err(OptionError::new("--offset-step-ms", format!("must be in (0, 20], got {}", 1e3 * self.step_s)));
+        }
+        OptionError::positive("--max-offset", self.max_offset_s, "seconds")?;
+        self.vio.validate()
+    }
+
     /// The audit's defaults around the estimator options `vio`, with five
     /// changes: the triad's single noise figures instead of per-axis ones
     /// (see the comment in the body); no covariances (not needed); midpoint IMU integration —
@@ -79,14 +93,12 @@ impl VioAuditOptions {
     /// 20 px / 1 s a hidden 10 ms offset was missed); and the whole window
     /// solved at every frame, the estimator these figures were validated with.
     pub fn new(vio: VioOptions) -> Self {
-        let mut vio = VioOptions {
-            covariances: false,
-            keyframe_parallax_px: vio.keyframe_parallax_px.min(AUDIT_KEYFRAME_PARALLAX_PX),
-            keyframe_max_interval_s: vio.keyframe_max_interval_s.min(AUDIT_KEYFRAME_INTERVAL_S),
-            solve_window_every_frame: true,
-            ..vio
-        };
-        vio.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
+        let mut vio = vio;
+        vio.solver.covariances = false;
+        vio.window.keyframe_parallax_px = vio.window.keyframe_parallax_px.min(AUDIT_KEYFRAME_PARALLAX_PX);
+        vio.window.keyframe_max_interval_s = vio.window.keyframe_max_interval_s.min(AUDIT_KEYFRAME_INTERVAL_S);
+        vio.window.solve_every_frame = true;
+        vio.noise.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
         // The triad's single (largest-axis) noise figures, not the per-axis
         // ones: the profiles need a VIO that keeps its vision at the wrong
         // offsets it tries. With the BMI055's per-axis figures (gyro x/y 5×
@@ -94,7 +106,7 @@ impl VioAuditOptions {
         // under a hidden 10 ms camera–IMU offset (2 900 residual rows instead
         // of 19 000) and the χ² profile lost its parabola (p 5e-4 instead of
         // 2e-7 for the same offset found).
-        vio.imu.axes = None;
+        vio.noise.imu.axes = None;
         VioAuditOptions {
             vio,
             alpha: 1e-3,
@@ -186,7 +198,7 @@ fn slot(e: Effect) -> Option<usize> {
 }
 
 /// The run's residuals with the input corrected by `offsets`.
-fn tally(input: &VioInput, opts: &VioOptions, offsets: [f64; 2]) -> Result<ResidualTally, String> {
+fn tally(input: &VioInput, opts: &VioOptions, offsets: [f64; 2]) -> Result<ResidualTally, AuditError> {
     let shifted = input.with_time_offsets(offsets[0], offsets[1]);
     let r = run(&shifted, opts, None)?;
     if r.residuals.dof() == 0 {
@@ -222,9 +234,9 @@ fn profile(
     at: [f64; 2],
     k: usize,
     runs: &mut dyn FnMut(usize),
-) -> Result<(Minimum, Vec<(f64, f64)>), String> {
+) -> Result<(Minimum, Vec<(f64, f64)>), AuditError> {
     let h = opts.step_s;
-    let eval = |xs: &[f64]| -> Vec<(f64, Result<ResidualTally, String>)> {
+    let eval = |xs: &[f64]| -> Vec<(f64, Result<ResidualTally, AuditError>)> {
         xs.par_iter()
             .map(|&x| {
                 let mut o = at;
@@ -249,7 +261,7 @@ fn profile(
     add(&[c - 2.0 * h, c - h, c, c + h, c + 2.0 * h], &mut pts);
     loop {
         if pts.len() < 3 {
-            return Err(format!("only {} of the trial runs succeeded", pts.len()));
+            return Err(format!("only {} of the trial runs succeeded", pts.len()).into());
         }
         let i = argmin(&pts);
         let next = if i == 0 {
@@ -260,7 +272,7 @@ fn profile(
             break;
         };
         if (next - c).abs() > opts.max_offset_s {
-            return Err(format!("the minimum lies beyond ±{:.0} ms", 1e3 * opts.max_offset_s));
+            return Err(format!("the minimum lies beyond ±{:.0} ms", 1e3 * opts.max_offset_s).into());
         }
         add(&[next, next + (next - pts[i].0)], &mut pts);
     }
@@ -364,7 +376,8 @@ pub fn audit_vio(
     input: &VioInput,
     opts: &VioAuditOptions,
     mut progress: Option<&mut dyn FnMut(usize)>,
-) -> Result<VioAudit, String> {
+) -> Result<VioAudit, AuditError> {
+    opts.validate().map_err(|e| e.to_string())?;
     let mut notes = Vec::new();
     let mut candidates = Vec::new();
     for &e in &opts.candidates {
@@ -377,7 +390,8 @@ pub fn audit_vio(
         return Err(format!(
             "the offset step ({} s) must be > 0 and ≤ the largest offset ({} s)",
             opts.step_s, opts.max_offset_s
-        ));
+        )
+        .into());
     }
     let mut done = 0;
     let mut runs = |n: usize| {
@@ -489,7 +503,7 @@ pub fn with_offsets(cal: &ImuCalibration, a: &VioAudit) -> ImuCalibration {
 /// Write `audit.json`, `audit.md`, `audit_time_offsets.png` (χ²/dof of every
 /// run against the offset tried) and, when a calibration was given,
 /// `calibration.json` with the offsets, into `dir`.
-pub fn write(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> Result<Vec<String>, String> {
+pub fn write(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> Result<Vec<String>, AuditError> {
     let put = |name: &str, text: String| super::report::put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     if let Some(c) = calibration {
@@ -528,7 +542,7 @@ pub fn write(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> 
     Ok(written)
 }
 
-fn profile_figure(a: &VioAudit, path: &Path) -> Result<(), String> {
+fn profile_figure(a: &VioAudit, path: &Path) -> Result<(), AuditError> {
     let series = a
         .profiles
         .iter()
@@ -549,5 +563,6 @@ fn profile_figure(a: &VioAudit, path: &Path) -> Result<(), String> {
         series,
         ..Default::default()
     }
-    .write_png(path, 900, 500)
+    .write_png(path, 900, 500)?;
+    Ok(())
 }

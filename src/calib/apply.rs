@@ -1,7 +1,10 @@
 //! `tumble apply`: write a corrected recording in the layout it was read from.
 
+use crate::error::OutputError;
 use crate::io::imu_write::{write_asl_imu, write_imu_columns, write_imu_tk_pair};
+use crate::io::Stored;
 use crate::io::{ImuRecording, RecordingOptions};
+use crate::model::calibration::{Corrector, ImuCalibration};
 use std::path::{Path, PathBuf};
 
 /// Write `rec` (already corrected) into `out` in the layout of `input`: an
@@ -13,7 +16,7 @@ pub fn write_like_input(
     input: &Path,
     opts: &RecordingOptions,
     out: &Path,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, OutputError> {
     let name = |p: &Path| -> Result<PathBuf, String> {
         let f = p.file_name().ok_or_else(|| format!("{}: not a file", p.display()))?;
         Ok(out.join(f))
@@ -29,7 +32,8 @@ pub fn write_like_input(
         return Err(format!(
             "{}: apply cannot write ROS bags or MCAP files; convert to an ASL folder or CSV first",
             input.display()
-        ));
+        )
+        .into());
     }
     if let Some(g) = &opts.gyro_file {
         let (a, g) = (name(input)?, name(g)?);
@@ -42,4 +46,96 @@ pub fn write_like_input(
     }
     write_imu_columns(&p, rec, &opts.format.columns, opts.format.time_unit).map_err(err)?;
     Ok(vec![p])
+}
+
+impl Corrector {
+    /// Correct every sample of a recording with [`Corrector::sample`] (its
+    /// temperature column, when present, and its time stamps): specific forces
+    /// \[m/s²\] and rates \[rad/s\].
+    pub fn correct_recording(&self, rec: &ImuRecording) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let temps = rec.temperature.as_deref();
+        (0..rec.len()).map(|i| self.sample(rec.accel[i], rec.gyro[i], temps.map(|t| t[i]), rec.t[i])).unzip()
+    }
+
+    /// Problems applying the effects to `rec` (missing temperature, a drift
+    /// fitted on another recording), for the user.
+    pub fn warnings_for(&self, rec: &ImuRecording) -> Vec<String> {
+        self.warnings(rec.temperature.is_some())
+    }
+}
+
+/// Why a calibration cannot be applied to a recording.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ApplyError {
+    /// The recording's samples are read in other units than the calibration was made on.
+    #[error(
+        "{calibration}: the {what} was calibrated on {expected} input but this recording's {what} is read as {got}"
+    )]
+    Units {
+        /// The calibration file.
+        calibration: PathBuf,
+        /// `accelerometer` or `gyro`.
+        what: &'static str,
+        /// The calibration's input units (`SI` or `counts`).
+        expected: &'static str,
+        /// The recording's (`SI` or `counts`).
+        got: &'static str,
+    },
+    /// A calibration matrix cannot be inverted.
+    #[error("{}: calibration matrices are singular", .0.display())]
+    Singular(PathBuf),
+}
+
+/// A recording corrected by [`apply_calibration`].
+#[derive(Debug, Clone)]
+pub struct Applied {
+    /// The corrected recording (SI units).
+    pub recording: ImuRecording,
+    /// The effects applied beyond eq. 16 (their ids).
+    pub effects: Vec<String>,
+    /// Problems applying them (see [`Corrector::warnings_for`]).
+    pub warnings: Vec<String>,
+    /// What else was done (the accelerometer resampled for an accel–gyro offset).
+    pub notes: Vec<String>,
+}
+
+/// Correct `rec` with `cal` (read from `calibration`, named in errors): eq. 16
+/// and the audit's effects, and the accelerometer resampled onto the gyro's
+/// stamps when the calibration has an accel–gyro time offset. The recording's
+/// units must be those the calibration was made on.
+pub fn apply_calibration(
+    mut rec: ImuRecording,
+    cal: &ImuCalibration,
+    calibration: &Path,
+) -> Result<Applied, ApplyError> {
+    let name = |u: &str| if u == "counts" { "counts" } else { "SI" };
+    let read_as = |stored: Stored| if stored == Stored::RawCounts { "counts" } else { "SI" };
+    for (what, stored, expected) in [
+        ("accelerometer", rec.accel_units, cal.units.accel_input.as_str()),
+        ("gyro", rec.gyro_units, cal.units.gyro_input.as_str()),
+    ] {
+        if read_as(stored) != name(expected) {
+            return Err(ApplyError::Units {
+                calibration: calibration.to_path_buf(),
+                what,
+                expected: name(expected),
+                got: read_as(stored),
+            });
+        }
+    }
+    let corr = cal.corrector().ok_or_else(|| ApplyError::Singular(calibration.to_path_buf()))?;
+    let warnings = corr.warnings_for(&rec);
+    (rec.accel, rec.gyro) = corr.correct_recording(&rec);
+    let mut notes = Vec::new();
+    if let Some(o) = cal.time_offsets.filter(|o| o.accel_gyro_s != 0.0) {
+        rec.accel = crate::io::imu::resample_delayed(&rec.t, &rec.accel, o.accel_gyro_s);
+        notes.push(format!(
+            "accelerometer resampled onto the gyro's stamps (accel–gyro offset {:+.3} ms)",
+            1e3 * o.accel_gyro_s
+        ));
+    }
+    rec.accel_units = Stored::Si;
+    rec.gyro_units = Stored::Si;
+    let effects = if corr.has_effects() { cal.effect_ids() } else { Vec::new() };
+    Ok(Applied { recording: rec, effects, warnings, notes })
 }

@@ -21,6 +21,44 @@ pub fn normal_gravity(latitude_deg: f64, height_m: f64) -> f64 {
     g0 * (1.0 - 2.0 / A * (1.0 + F + M - 2.0 * F * s2) * height_m + 3.0 * height_m * height_m / (A * A))
 }
 
+/// Local gravity and how it was found (see [`local_gravity`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LocalGravity {
+    /// Gravity magnitude \[m/s²\].
+    pub value: f64,
+    /// A note for the user when nothing was given and standard gravity is used.
+    pub note: Option<&'static str>,
+}
+
+/// Gravity from what the user gave: the value itself, or WGS-84 normal
+/// gravity at a latitude \[°\] and height \[m\], or (neither) standard
+/// gravity, with a note saying so.
+pub fn local_gravity(
+    gravity: Option<f64>,
+    latitude_deg: Option<f64>,
+    height_m: f64,
+) -> Result<LocalGravity, crate::OptionError> {
+    let value = match (gravity, latitude_deg) {
+        (Some(g), _) => g,
+        (None, Some(lat)) => {
+            if !(-90.0..=90.0).contains(&lat) || !height_m.is_finite() {
+                return Err(crate::OptionError::new(
+                    "--latitude",
+                    format!("must be within ±90° and --height finite, got {lat}, {height_m}"),
+                ));
+            }
+            normal_gravity(lat, height_m)
+        }
+        (None, None) => {
+            return Ok(LocalGravity {
+                value: crate::model::STANDARD_GRAVITY,
+                note: Some("no --gravity or --latitude given; using standard gravity 9.80665 m/s²"),
+            })
+        }
+    };
+    Ok(LocalGravity { value, note: None })
+}
+
 #[cfg(test)]
 mod tests {
     use super::normal_gravity;

@@ -26,12 +26,15 @@
 
 pub mod apply;
 pub mod detect;
+mod fit;
 pub mod gravity;
-pub mod model;
+pub use crate::model::calibration as model;
 pub mod report;
 pub mod solve;
 
+pub use crate::io::calibration::read_imu_tk_calib;
 pub use apply::write_like_input;
-pub use gravity::normal_gravity;
-pub use model::{read_imu_tk_calib, Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
-pub use solve::{calibrate, CalibError, CalibOptions, CalibrationResult, RECORDING_ADVICE};
+pub(crate) use fit::{accel_triad, gyro_triad};
+pub use gravity::{local_gravity, normal_gravity, LocalGravity};
+pub use model::{Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
+pub use solve::{calibrate, parse_multipliers, CalibError, CalibOptions, CalibrationResult, RECORDING_ADVICE};

@@ -4,6 +4,7 @@
 
 use super::model::{imu_tk_calib_text, CalibrationFile, Triad};
 use super::solve::{CalibOptions, CalibrationResult, FitStats, RotationResidual, StaticInterval, SweepEntry};
+use crate::error::OutputError;
 use crate::io::ImuRecording;
 use crate::plot::{ensure_font, AXIS_COLORS};
 use plotters::prelude::*;
@@ -86,8 +87,8 @@ impl CalibrationResult {
     }
 
     /// `calibration.yaml` text (same content as the JSON).
-    pub fn to_yaml(&self, opts: &CalibOptions) -> Result<String, String> {
-        serde_saphyr::to_string(&self.output(opts)).map_err(|e| e.to_string())
+    pub fn to_yaml(&self, opts: &CalibOptions) -> Result<String, OutputError> {
+        serde_saphyr::to_string(&self.output(opts)).map_err(|e| OutputError::Failed(e.to_string()))
     }
 
     /// A short human-readable summary (parameters ± 1σ, fit quality).
@@ -139,7 +140,7 @@ impl CalibrationResult {
     }
 
     /// Write every output into `dir` (created); returns the files written.
-    pub fn write_all(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, String> {
+    pub fn write_all(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, OutputError> {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let mut files = Vec::new();
         let mut write = |name: &str, text: String| -> Result<(), String> {
@@ -165,7 +166,7 @@ impl CalibrationResult {
 
     /// The recording's accelerometer with the static intervals shaded (top)
     /// and the sliding variance against the threshold (bottom).
-    pub fn plot_detection(&self, rec: &ImuRecording, path: &Path) -> Result<(), String> {
+    pub fn plot_detection(&self, rec: &ImuRecording, path: &Path) -> Result<(), OutputError> {
         ensure_font();
         let e = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
         let root = BitMapBackend::new(path, (1400, 800)).into_drawing_area();

@@ -4,20 +4,20 @@
 //! the estimates and their covariances into the paper's convention.
 
 use super::detect::{intervals_below, mean3, sliding_variance_norm, var3, Interval};
-use super::model::{split_unit_diagonal, ImuCalibration, Triad, Units};
+use super::fit::*;
+use super::model::{ImuCalibration, Units};
 use crate::io::{ImuRecording, Stored};
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use crate::OptionError;
+use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;
-use tumble_factors::imu_calib::{
-    accel_matrix, gyro_matrix, AccelParams, GravityNormFactor, GyroMatrix, IntegratedRotationFactor, UPPER,
-};
-use tumble_solvers::{covariances, Factor, Graph, Key, LmOptions, NoiseModel, Optimizer, Values, Vars};
+use tumble_factors::imu_calib::accel_matrix;
+use tumble_solvers::Key;
 
-const KEY_ACCEL: Key = Key::new('a', 0);
-const KEY_GYRO: Key = Key::new('g', 0);
-const KEY_GYRO_BIAS: Key = Key::new('g', 1);
+pub(super) const KEY_ACCEL: Key = Key::new('a', 0);
+pub(super) const KEY_GYRO: Key = Key::new('g', 0);
+pub(super) const KEY_GYRO_BIAS: Key = Key::new('g', 1);
 
 /// Settings of [`calibrate`].
 #[derive(Debug, Clone, PartialEq)]
@@ -56,6 +56,46 @@ impl Default for CalibOptions {
             detect_with_gyro: true,
         }
     }
+}
+
+impl CalibOptions {
+    /// Check every option once, before any work (every [`calibrate`] calls it):
+    /// gravity, periods and windows positive, multipliers positive, at least
+    /// one interval asked for.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        OptionError::positive("--gravity", self.gravity, "m/s²")?;
+        OptionError::positive("--init-static", self.init_static_s, "seconds")?;
+        OptionError::positive("--window", self.window_s, "seconds")?;
+        OptionError::positive("--min-interval", self.min_interval_s, "seconds")?;
+        if self.multipliers.is_empty() || self.multipliers.iter().any(|k| !(k.is_finite() && *k > 0.0)) {
+            return Err(OptionError::new(
+                "--multipliers",
+                format!("must be positive numbers, got {:?}", self.multipliers),
+            ));
+        }
+        if self.min_intervals == 0 {
+            return Err(OptionError::new("--min-intervals", "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// `FIRST:LAST` (integer steps) or a comma-separated list of positive
+/// threshold multipliers (`tumble calibrate --multipliers`).
+pub fn parse_multipliers(s: &str) -> Result<Vec<f64>, OptionError> {
+    let bad = || {
+        OptionError::new("--multipliers", format!("takes FIRST:LAST or a comma list of positive numbers, got `{s}`"))
+    };
+    let v: Vec<f64> = if let Some((a, b)) = s.split_once(':') {
+        let (a, b): (u32, u32) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+        (a..=b).map(f64::from).collect()
+    } else {
+        s.split(',').map(|x| x.trim().parse::<f64>().map_err(|_| bad())).collect::<Result<_, _>>()?
+    };
+    if v.is_empty() || v.iter().any(|x| !(x.is_finite() && *x > 0.0)) {
+        return Err(bad());
+    }
+    Ok(v)
 }
 
 /// Why a recording cannot be calibrated.
@@ -186,13 +226,6 @@ pub struct CalibrationResult {
     pub warnings: Vec<String>,
 }
 
-/// The accelerometer estimate of one detection.
-struct AccelFit {
-    params: AccelParams,
-    cov: DMatrix<f64>,
-    stats: FitStats,
-}
-
 /// Calibrate accelerometer and gyroscope from one hand-tumbled recording.
 ///
 /// ```no_run
@@ -211,6 +244,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     if !(opts.gravity.is_finite() && opts.gravity > 0.0) {
         return Err(err(format!("gravity must be positive, got {}", opts.gravity), None));
     }
+    opts.validate().map_err(|e| err(e.to_string(), None))?;
     if rec.accel.len() != rec.len() || rec.gyro.len() != rec.len() {
         return Err(err("calibration needs both accelerometer and gyro samples".into(), None));
     }
@@ -482,464 +516,4 @@ fn excitation_warnings(dirs: &[Vector3<f64>], warnings: &mut Vec<String>) -> Res
         }
     }
     Ok(())
-}
-
-/// Axis-aligned ellipsoid through the interval means (linear least squares):
-/// the initial bias (centre) and inverse scale (g / semi-axis).
-fn ellipsoid_guess(means: &[Vector3<f64>], g: f64) -> Option<AccelParams> {
-    // Centre the data for conditioning.
-    let c0 = means.iter().sum::<Vector3<f64>>() / means.len() as f64;
-    let spread = means.iter().map(|m| (m - c0).amax()).fold(0.0, f64::max).max(1e-300);
-    let mut a = DMatrix::zeros(means.len(), 6);
-    let rhs = DVector::from_element(means.len(), 1.0);
-    for (i, m) in means.iter().enumerate() {
-        let x = (m - c0) / spread;
-        for k in 0..3 {
-            a[(i, k)] = x[k] * x[k];
-            a[(i, 3 + k)] = x[k];
-        }
-    }
-    let sol = a.svd(true, true).solve(&rhs, 1e-12).ok()?;
-    let mut p = AccelParams::zeros();
-    let centre: Vector3<f64> = Vector3::from_fn(|k, _| -sol[3 + k] / (2.0 * sol[k]));
-    let rhs = 1.0 + (0..3).map(|k| sol[k] * centre[k] * centre[k]).sum::<f64>();
-    for k in 0..3 {
-        let r2 = rhs / sol[k];
-        if !(r2 > 0.0 && r2.is_finite()) {
-            return None;
-        }
-        p[[0, 3, 5][k]] = g / (r2.sqrt() * spread);
-        p[6 + k] = c0[k] + centre[k] * spread;
-    }
-    p.iter().all(|x| x.is_finite()).then_some(p)
-}
-
-/// Fallback guess: centre and half-range of each axis's interval means.
-fn range_guess(means: &[Vector3<f64>], g: f64) -> AccelParams {
-    let mut p = AccelParams::zeros();
-    for k in 0..3 {
-        let lo = means.iter().map(|m| m[k]).fold(f64::MAX, f64::min);
-        let hi = means.iter().map(|m| m[k]).fold(f64::MIN, f64::max);
-        p[6 + k] = 0.5 * (lo + hi);
-        p[[0, 3, 5][k]] = 2.0 * g / (hi - lo).max(1e-300);
-    }
-    p
-}
-
-fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_a: &[f64; 3]) -> Option<AccelFit> {
-    let means: Vec<Vector3<f64>> =
-        intervals.iter().map(|iv| Vector3::from(mean3(&rec.accel[iv.start..iv.end]))).collect();
-    let x0 = ellipsoid_guess(&means, g).unwrap_or_else(|| range_guess(&means, g));
-    let m0 = accel_matrix(&x0);
-    let b0 = Vector3::new(x0[6], x0[7], x0[8]);
-    let mut factors = Vec::new();
-    let mut base = Vec::new();
-    for (iv, m) in intervals.iter().zip(&means) {
-        // Noise of g² − |a|²: 2g times the noise of |a| along gravity (white noise of the mean).
-        let u = (m0 * (m - b0)).normalize();
-        let var: f64 = (0..3).map(|k| (u[k] * m0[(k, k)]).powi(2) * var_a[k]).sum::<f64>() / iv.len() as f64;
-        base.push(DMatrix::from_element(1, 1, (2.0 * g * var.sqrt()).max(1e-9 * g * g).powi(2)));
-        factors.push(GravityNormFactor::new(KEY_ACCEL, *m, g));
-    }
-    let mut values = Values::new();
-    values.insert(KEY_ACCEL, x0);
-    let fit = solve_with_floor(&factors, &base, &values, 9).ok()?;
-    let (sol, graph) = (&fit.values, &fit.graph);
-    let params = *sol.get::<AccelParams>(KEY_ACCEL).ok()?;
-    let cov = covariances(graph, sol, &[KEY_ACCEL]).ok()?.get(KEY_ACCEL)?;
-    let chi2 = fit.chi2_white;
-    let ma = accel_matrix(&params);
-    let ba = Vector3::new(params[6], params[7], params[8]);
-    let rms = (means.iter().map(|m| ((ma * (m - ba)).norm() - g).powi(2)).sum::<f64>() / means.len() as f64).sqrt();
-    let imu_tk_cost = 0.5
-        * intervals
-            .iter()
-            .flat_map(|iv| &rec.accel[iv.start..iv.start + iv.len().min(100)])
-            .map(|a| (g * g - (ma * (Vector3::from(*a) - ba)).norm_squared()).powi(2))
-            .sum::<f64>();
-    if !chi2.is_finite() {
-        return None;
-    }
-    Some(AccelFit {
-        params,
-        cov,
-        stats: FitStats {
-            residuals: intervals.len(),
-            parameters: 9,
-            chi2_per_dof: chi2,
-            unmodelled_sigma: fit.floor / (2.0 * g),
-            covariance_inflation: fit.chi2_final.max(1.0),
-            rms,
-            imu_tk_cost,
-            iterations: fit.iterations,
-        },
-    })
-}
-
-/// A solve whose noise model may have been widened by an unmodelled-error floor.
-struct FloorFit {
-    values: Values,
-    graph: Graph,
-    /// χ²/dof with the base noise.
-    chi2_white: f64,
-    /// χ²/dof with the floor (≈ 1 when a floor was added).
-    chi2_final: f64,
-    /// The floor, in residual units.
-    floor: f64,
-    iterations: usize,
-}
-
-/// Solve factors with per-factor noise covariances `base`; when the residuals
-/// exceed that noise (χ²/dof > 1), add a common isotropic floor `s²` (C_k + s² I)
-/// that makes χ²/dof = 1 — a variance-component estimate of what the model does
-/// not explain, which evens out the weights of long and short intervals — and re-solve.
-fn solve_with_floor<F: Factor + Clone + 'static>(
-    factors: &[F],
-    base: &[DMatrix<f64>],
-    values: &Values,
-    n_params: usize,
-) -> Result<FloorFit, String> {
-    let dim = factors.first().map(|f| f.residual_dim()).unwrap_or(1);
-    let dof = (dim * factors.len()).saturating_sub(n_params).max(1) as f64;
-    let lm = Optimizer::new(LmOptions { function_tolerance: 1e-10, ..LmOptions::default() });
-    let widen = |c: &DMatrix<f64>, s2: f64| c + DMatrix::identity(dim, dim) * s2;
-    let build = |s2: f64| -> Result<Graph, String> {
-        let mut g = Graph::new();
-        for (f, c) in factors.iter().zip(base) {
-            g.add(f.clone(), NoiseModel::from_covariance(&widen(c, s2)).map_err(|e| e.to_string())?);
-        }
-        Ok(g)
-    };
-    let graph = build(0.0)?;
-    let (mut sol, summary) = lm.optimize(&graph, values).map_err(|e| e.to_string())?;
-    let chi2_white = 2.0 * summary.final_cost / dof;
-    let mut iterations = summary.iterations;
-    let (mut graph, mut s2, mut chi2_final) = (graph, 0.0, chi2_white);
-    for _ in 0..3 {
-        if chi2_final <= 1.0 + 1e-3 {
-            break;
-        }
-        let residual = |f: &F| -> Result<DVector<f64>, String> {
-            let vars: Vec<&dyn tumble_solvers::DynVariable> =
-                f.keys().iter().map(|k| sol.get_dyn(*k)).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
-            f.residual(Vars::new(&vars)).map_err(|e| e.to_string())
-        };
-        let rs: Vec<DVector<f64>> = factors.iter().map(residual).collect::<Result<_, _>>()?;
-        let chi2 = |s2: f64| {
-            rs.iter()
-                .zip(base)
-                .map(|(r, c)| widen(c, s2).cholesky().map(|ch| r.dot(&ch.solve(r))).unwrap_or(f64::MAX))
-                .sum::<f64>()
-                / dof
-        };
-        let (mut lo, mut hi) = (s2, rs.iter().map(|r| r.norm_squared()).fold(0.0, f64::max).max(1e-300));
-        while chi2(hi) > 1.0 {
-            hi *= 4.0;
-        }
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if chi2(mid) > 1.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        s2 = hi;
-        graph = build(s2)?;
-        let (next, summary) = lm.optimize(&graph, &sol).map_err(|e| e.to_string())?;
-        sol = next;
-        iterations += summary.iterations;
-        chi2_final = 2.0 * summary.final_cost / dof;
-    }
-    Ok(FloorFit { values: sol, graph, chi2_white, chi2_final, floor: s2.sqrt(), iterations })
-}
-
-struct GyroFit {
-    /// `[M_g row major (9), b_g (3)]`.
-    x: [f64; 12],
-    /// Its covariance (12×12, inflated).
-    cov: DMatrix<f64>,
-    stats: FitStats,
-    rotations: Vec<RotationResidual>,
-    warnings: Vec<String>,
-}
-
-#[allow(clippy::too_many_arguments)]
-fn fit_gyro(
-    rec: &ImuRecording,
-    intervals: &[Interval],
-    means: &[Vector3<f64>],
-    accel: &AccelFit,
-    var_a: &[f64; 3],
-    var_g: &[f64; 3],
-    n_init: usize,
-    opts: &CalibOptions,
-) -> Result<GyroFit, String> {
-    let directions = |pa: &AccelParams| -> Vec<Vector3<f64>> {
-        let (ma, ba) = (accel_matrix(pa), Vector3::new(pa[6], pa[7], pa[8]));
-        means.iter().map(|m| ma * (m - ba)).collect()
-    };
-    let dirs = directions(&accel.params);
-    let ma = &accel_matrix(&accel.params);
-    let b0 = Vector3::from(mean3(&rec.gyro[..n_init]));
-    let mut factors = Vec::new();
-    let mut pairs = Vec::new();
-    for k in 1..intervals.len() {
-        let (a, b) = (intervals[k - 1].end - 1, intervals[k].start);
-        let raw = rec.gyro[a..=b].to_vec();
-        let dt = rec.t[a..=b].windows(2).map(|w| w[1] - w[0]).collect();
-        let f = IntegratedRotationFactor::new([KEY_GYRO, KEY_GYRO_BIAS], raw, dt, dirs[k - 1], dirs[k])
-            .map_err(|e| format!("motion between static intervals {} and {k}: {e}", k - 1))?;
-        factors.push(f);
-        pairs.push((k - 1, k));
-    }
-    // Initial isotropic scale: every turn's gravity angle θ ≤ s ∫|ω̃ − b| dt gives a lower
-    // bound on s; then a golden-section search of the isotropic cost above it.
-    let mut s_lo = 0.0f64;
-    for &(i, j) in &pairs {
-        let theta = dirs[i].normalize().dot(&dirs[j].normalize()).clamp(-1.0, 1.0).acos();
-        let len: f64 = integrated_raw_angle(rec, intervals[i].end - 1, intervals[j].start, &b0);
-        if len > 0.0 && theta > 0.2 {
-            s_lo = s_lo.max(theta / len);
-        }
-    }
-    if !(s_lo > 0.0 && s_lo.is_finite()) {
-        return Err("no turn between static intervals rotates gravity by more than 11°: nothing to calibrate the \
-                    gyroscope with"
-            .into());
-    }
-    let iso_cost = |s: f64| -> f64 {
-        let m = Matrix3::identity() * s;
-        factors
-            .par_iter()
-            .map(|f| {
-                let vars: [&dyn tumble_solvers::DynVariable; 2] = [&gyro_vec(&m), &b0];
-                f.residual(Vars::new(&vars)).map(|r| r.norm_squared()).unwrap_or(f64::MAX)
-            })
-            .sum()
-    };
-    let (mut lo, mut hi) = ((0.8 * s_lo).ln(), (4.0 * s_lo).ln());
-    let phi = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut x1, mut x2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
-    let (mut f1, mut f2) = (iso_cost(x1.exp()), iso_cost(x2.exp()));
-    for _ in 0..20 {
-        if f1 < f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - phi * (hi - lo);
-            f1 = iso_cost(x1.exp());
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + phi * (hi - lo);
-            f2 = iso_cost(x2.exp());
-        }
-    }
-    let s0 = (0.5 * (lo + hi)).exp();
-
-    // Noise: the gyro's white noise integrated over each turn (per axis, through the
-    // steps' Jacobians) plus the two gravity directions' noise.
-    let m0 = Matrix3::identity() * s0;
-    let var_acc: f64 = (0..3).map(|k| ma[(k, k)].powi(2) * var_a[k]).sum::<f64>() / 3.0;
-    let g2 = opts.gravity * opts.gravity;
-    let raw_var = Vector3::from(*var_g);
-    let base: Vec<DMatrix<f64>> = factors
-        .par_iter()
-        .zip(&pairs)
-        .map(|(f, &(i, j))| {
-            let dir = var_acc / g2 * (1.0 / intervals[i].len() as f64 + 1.0 / intervals[j].len() as f64);
-            let c = f.noise_covariance(&m0, &b0, &raw_var) + nalgebra::Matrix2::identity() * dir.max(1e-24);
-            DMatrix::from_column_slice(2, 2, c.as_slice())
-        })
-        .collect();
-    let mut values = Values::new();
-    values.insert(KEY_GYRO, gyro_vec(&(Matrix3::identity() * s0)));
-    values.insert(KEY_GYRO_BIAS, b0);
-    values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
-    let n_params = 9 + 3 * opts.estimate_gyro_bias as usize;
-    let fit = solve_with_floor(&factors, &base, &values, n_params).map_err(|e| format!("gyroscope fit failed: {e}"))?;
-    let (sol, graph) = (&fit.values, &fit.graph);
-    let p = *sol.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
-    let b = *sol.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
-    let m = gyro_matrix(&p);
-    let keys: Vec<Key> = if opts.estimate_gyro_bias { vec![KEY_GYRO, KEY_GYRO_BIAS] } else { vec![KEY_GYRO] };
-    let cv = covariances(graph, sol, &keys).map_err(|e| format!("gyroscope covariance: {e}"))?;
-    let inflation = fit.chi2_final.max(1.0);
-    let mut cov = DMatrix::zeros(12, 12);
-    cov.view_mut((0, 0), (9, 9)).copy_from(&(cv.get(KEY_GYRO).ok_or("no covariance")? * inflation));
-    if opts.estimate_gyro_bias {
-        cov.view_mut((9, 9), (3, 3)).copy_from(&(cv.get(KEY_GYRO_BIAS).ok_or("no covariance")? * inflation));
-        let cross = cv.block(KEY_GYRO, KEY_GYRO_BIAS).ok_or("no covariance")? * inflation;
-        cov.view_mut((0, 9), (9, 3)).copy_from(&cross);
-        cov.view_mut((9, 0), (3, 9)).copy_from(&cross.transpose());
-    } else {
-        // Mean of the initial static period: white-noise standard error.
-        for k in 0..3 {
-            cov[(9 + k, 9 + k)] = var_g[k] / n_init as f64;
-        }
-    }
-    // The gravity directions come from the accelerometer fit: carry its uncertainty
-    // into the gyro parameters, ∂x_g/∂x_a by re-solving with each accelerometer
-    // parameter moved by ±1σ (central differences).
-    let acc_cov = &accel.cov * accel.stats.covariance_inflation;
-    let resolve = |pa: &AccelParams| -> Option<[f64; 12]> {
-        let d = directions(pa);
-        let mut g = Graph::new();
-        for ((f, &(i, j)), c) in factors.iter().zip(&pairs).zip(&base) {
-            let c = c + DMatrix::identity(2, 2) * fit.floor.powi(2);
-            g.add(f.with_directions(d[i], d[j]), NoiseModel::from_covariance(&c).ok()?);
-        }
-        let (s, _) =
-            Optimizer::new(LmOptions { function_tolerance: 1e-12, ..LmOptions::default() }).optimize(&g, sol).ok()?;
-        let mut x = [0.0; 12];
-        x[..9].copy_from_slice(s.get::<GyroMatrix>(KEY_GYRO).ok()?.as_slice());
-        x[9..].copy_from_slice(s.get::<Vector3<f64>>(KEY_GYRO_BIAS).ok()?.as_slice());
-        Some(x)
-    };
-    let columns: Vec<Option<Vec<f64>>> = (0..9)
-        .into_par_iter()
-        .map(|k| {
-            let h = acc_cov[(k, k)].max(0.0).sqrt();
-            if h == 0.0 {
-                return Some(vec![0.0; 12]);
-            }
-            let (mut lo, mut hi) = (accel.params, accel.params);
-            lo[k] -= h;
-            hi[k] += h;
-            let (a, b) = (resolve(&lo)?, resolve(&hi)?);
-            Some((0..12).map(|i| (b[i] - a[i]) / (2.0 * h)).collect())
-        })
-        .collect();
-    if let Some(cols) = columns.into_iter().collect::<Option<Vec<_>>>() {
-        let j = DMatrix::from_fn(12, 9, |r, c| cols[c][r]);
-        cov += &j * acc_cov * j.transpose();
-    } else {
-        return Err("gyroscope fit does not converge when the accelerometer parameters move by 1σ".into());
-    }
-    let mut rotations = Vec::new();
-    let (mut sq, mut tk) = (0.0, 0.0);
-    for (f, &(i, j)) in factors.iter().zip(&pairs) {
-        let r = f.rotation(&m, &b);
-        let (g0, g1) = (dirs[i].normalize(), dirs[j].normalize());
-        let pred = r.transpose() * g0;
-        let e = pred.cross(&g1).norm().atan2(pred.dot(&g1));
-        sq += e * e;
-        tk += 0.5 * (pred - g1).norm_squared();
-        let turn = nalgebra::Rotation3::from_matrix_unchecked(r).angle().to_degrees();
-        rotations.push(RotationResidual { from: i, to: j, rotation_deg: turn, error_rad: e });
-    }
-    let mut x = [0.0; 12];
-    x[..9].copy_from_slice(p.as_slice());
-    x[9..].copy_from_slice(b.as_slice());
-    let mut warnings = Vec::new();
-    let sv = m.svd(false, false).singular_values;
-    if sv.min() <= 0.0 || sv.max() / sv.min() > 1.5 {
-        warnings.push(format!("gyro matrix is far from a rotation-free scale (singular values {sv:?}): check the fit"));
-    }
-    Ok(GyroFit {
-        x,
-        cov,
-        stats: FitStats {
-            residuals: 2 * factors.len(),
-            parameters: n_params,
-            chi2_per_dof: fit.chi2_white,
-            unmodelled_sigma: fit.floor,
-            covariance_inflation: inflation,
-            rms: (sq / factors.len() as f64).sqrt(),
-            imu_tk_cost: tk,
-            iterations: fit.iterations,
-        },
-        rotations,
-        warnings,
-    })
-}
-
-/// `Σ |ū_i − b| Δt_i` over samples `a..=b` (raw units · s).
-fn integrated_raw_angle(rec: &ImuRecording, a: usize, b: usize, bias: &Vector3<f64>) -> f64 {
-    (a..b)
-        .map(|i| {
-            let u = (Vector3::from(rec.gyro[i]) + Vector3::from(rec.gyro[i + 1])) * 0.5 - bias;
-            u.norm() * (rec.t[i + 1] - rec.t[i])
-        })
-        .sum()
-}
-
-fn gyro_vec(m: &Matrix3<f64>) -> GyroMatrix {
-    GyroMatrix::from_row_slice(&[
-        m[(0, 0)],
-        m[(0, 1)],
-        m[(0, 2)],
-        m[(1, 0)],
-        m[(1, 1)],
-        m[(1, 2)],
-        m[(2, 0)],
-        m[(2, 1)],
-        m[(2, 2)],
-    ])
-}
-
-/// Standard deviations of `f(x)` from `cov(x)` by a central-difference Jacobian.
-fn propagate_std(f: &dyn Fn(&[f64]) -> Vec<f64>, x: &[f64], cov: &DMatrix<f64>) -> Vec<f64> {
-    let y0 = f(x);
-    let mut j = DMatrix::zeros(y0.len(), x.len());
-    for c in 0..x.len() {
-        let h = 1e-6 * x[c].abs().max(1e-6);
-        let mut xp = x.to_vec();
-        let mut xm = x.to_vec();
-        xp[c] += h;
-        xm[c] -= h;
-        let (yp, ym) = (f(&xp), f(&xm));
-        for r in 0..y0.len() {
-            j[(r, c)] = (yp[r] - ym[r]) / (2.0 * h);
-        }
-    }
-    let c = &j * cov * j.transpose();
-    (0..y0.len()).map(|i| c[(i, i)].max(0.0).sqrt()).collect()
-}
-
-/// `(T, K)` of the paper from the inverse model matrix `M = (T K)⁻¹`, as
-/// `[T row major (9), K (3)]` (NaN when singular).
-fn paper_tk(m: &Matrix3<f64>) -> Vec<f64> {
-    let Some((t, k)) = m.try_inverse().and_then(|n| split_unit_diagonal(&n)) else {
-        return vec![f64::NAN; 12];
-    };
-    let mut v: Vec<f64> = (0..9).map(|i| t[(i / 3, i % 3)]).collect();
-    v.extend(k.iter());
-    v
-}
-
-fn triad_from(y: &[f64], s: &[f64], b: Vector3<f64>, b_std: Vector3<f64>) -> Triad {
-    Triad {
-        t: Matrix3::from_row_slice(&y[..9]),
-        k: Vector3::new(y[9], y[10], y[11]),
-        b,
-        t_std: Matrix3::from_row_slice(&s[..9]),
-        k_std: Vector3::new(s[9], s[10], s[11]),
-        b_std,
-    }
-}
-
-pub(crate) fn accel_triad(p: &AccelParams, cov: &DMatrix<f64>, inflation: f64) -> Triad {
-    let f = |x: &[f64]| {
-        let mut m = Matrix3::zeros();
-        for (k, &(r, c)) in UPPER.iter().enumerate() {
-            m[(r, c)] = x[k];
-        }
-        paper_tk(&m)
-    };
-    let cov = cov * inflation;
-    let y = f(p.as_slice());
-    let s = propagate_std(&f, &p.as_slice()[..6], &cov.view((0, 0), (6, 6)).into_owned());
-    let b_std = Vector3::from_fn(|k, _| (cov[(6 + k, 6 + k)]).max(0.0).sqrt());
-    triad_from(&y, &s, Vector3::new(p[6], p[7], p[8]), b_std)
-}
-
-pub(crate) fn gyro_triad(x: &[f64; 12], cov: &DMatrix<f64>) -> Triad {
-    let f = |x: &[f64]| paper_tk(&Matrix3::from_row_slice(&x[..9]));
-    let y = f(x);
-    let s = propagate_std(&f, &x[..9], &cov.view((0, 0), (9, 9)).into_owned());
-    let b_std = Vector3::from_fn(|k, _| cov[(9 + k, 9 + k)].max(0.0).sqrt());
-    triad_from(&y, &s, Vector3::new(x[9], x[10], x[11]), b_std)
 }

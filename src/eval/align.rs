@@ -3,6 +3,7 @@
 //! position+yaw (4-DOF, the unobservable directions of visual-inertial
 //! odometry) flavours.
 
+use super::EvalError;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -32,13 +33,21 @@ impl Alignment {
         }
     }
     /// Parse `se3`, `sim3`, `posyaw` or `none`.
-    pub fn parse(s: &str) -> Result<Alignment, String> {
+    pub fn parse(s: &str) -> Result<Alignment, super::EvalError> {
+        s.parse()
+    }
+}
+
+impl std::str::FromStr for Alignment {
+    type Err = super::EvalError;
+    /// `se3`, `sim3`, `posyaw` (or `pos-yaw`, `4dof`) or `none`, any case.
+    fn from_str(s: &str) -> Result<Alignment, super::EvalError> {
         match s.to_ascii_lowercase().as_str() {
             "se3" => Ok(Alignment::Se3),
             "sim3" => Ok(Alignment::Sim3),
             "posyaw" | "pos-yaw" | "4dof" => Ok(Alignment::PosYaw),
             "none" => Ok(Alignment::None),
-            _ => Err(format!("unknown alignment '{s}': use se3, sim3, posyaw or none")),
+            _ => Err(super::EvalError::Invalid(format!("unknown alignment '{s}': use se3, sim3, posyaw or none"))),
         }
     }
 }
@@ -86,15 +95,15 @@ fn centroid(p: &[Vector3<f64>]) -> Vector3<f64> {
 /// let s = align(&est, &gt, Alignment::PosYaw).unwrap();
 /// assert!((s.apply(&est[5]) - gt[5]).norm() < 1e-12);
 /// ```
-pub fn align(est: &[Vector3<f64>], gt: &[Vector3<f64>], kind: Alignment) -> Result<Similarity, String> {
+pub fn align(est: &[Vector3<f64>], gt: &[Vector3<f64>], kind: Alignment) -> Result<Similarity, EvalError> {
     if est.len() != gt.len() {
-        return Err(format!("alignment needs paired positions ({} vs {})", est.len(), gt.len()));
+        return Err(format!("alignment needs paired positions ({} vs {})", est.len(), gt.len()).into());
     }
     if kind == Alignment::None {
         return Ok(Similarity::default());
     }
     if est.len() < 3 {
-        return Err(format!("alignment needs at least 3 matched poses, got {}", est.len()));
+        return Err(format!("alignment needs at least 3 matched poses, got {}", est.len()).into());
     }
     let (ce, cg) = (centroid(est), centroid(gt));
     let n = est.len() as f64;
@@ -136,7 +145,8 @@ pub fn align(est: &[Vector3<f64>], gt: &[Vector3<f64>], kind: Alignment) -> Resu
             "degenerate geometry: the positions are (nearly) collinear, so a {} alignment is not determined \
              (use --align posyaw or none)",
             kind.name()
-        ));
+        )
+        .into());
     }
     let mut d = Matrix3::identity();
     if (u.determinant() * v_t.determinant()) < 0.0 {

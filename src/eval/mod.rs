@@ -51,6 +51,78 @@ pub struct EvalOptions {
     pub max_gap_s: f64,
 }
 
+impl EvalOptions {
+    /// Check every option once, before any work ([`evaluate`] calls it).
+    pub fn validate(&self) -> Result<(), crate::OptionError> {
+        if let Some(d) = self.rpe_distances.iter().find(|d| !(d.is_finite() && **d > 0.0)) {
+            return Err(crate::OptionError::new(
+                "--rpe-distances",
+                format!("must be positive distances in metres, got {d}"),
+            ));
+        }
+        if !(self.max_gap_s.is_finite() && self.max_gap_s > 0.0) {
+            return Err(crate::OptionError::new(
+                "--max-gap",
+                format!("must be a positive time in seconds, got {}", self.max_gap_s),
+            ));
+        }
+        if !self.bias_after_s.is_finite() {
+            return Err(crate::OptionError::new("--bias-after", "must be a finite number of seconds"));
+        }
+        Ok(())
+    }
+}
+
+/// Why an evaluation cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// An option cannot work.
+    #[error(transparent)]
+    Options(#[from] crate::OptionError),
+    /// A file cannot be read (named with its line).
+    #[error(transparent)]
+    File(#[from] crate::InputError),
+    /// The trajectories cannot be compared (the message says why).
+    #[error("{0}")]
+    Invalid(String),
+}
+
+crate::error::message_error_conversions!(EvalError, EvalError::Invalid);
+
+/// The files an evaluation reads (see [`EvalInputs::read`]).
+#[derive(Debug, Clone)]
+pub struct EvalInputs {
+    /// The estimated trajectory.
+    pub estimate: Trajectory,
+    /// The ground truth.
+    pub groundtruth: Trajectory,
+    /// The estimate's bias track, when there is one.
+    pub biases: Option<BiasTrack>,
+    /// The bias file read, when there is one.
+    pub biases_file: Option<std::path::PathBuf>,
+}
+
+impl EvalInputs {
+    /// Read the estimate and the ground truth (TUM or ASL), and the bias track
+    /// `biases` or, when not given, `biases.csv` beside the estimate when it is there.
+    pub fn read(
+        estimate: &std::path::Path,
+        groundtruth: &std::path::Path,
+        biases: Option<&std::path::Path>,
+    ) -> Result<EvalInputs, crate::InputError> {
+        use crate::io::{biases::read_biases, trajectory::read_trajectory};
+        let est = read_trajectory(estimate)?;
+        let gt = read_trajectory(groundtruth)?;
+        let beside = estimate.with_file_name("biases.csv");
+        let biases_file = match biases {
+            Some(b) => Some(b.to_path_buf()),
+            None => beside.is_file().then_some(beside),
+        };
+        let biases = biases_file.as_deref().map(read_biases).transpose()?;
+        Ok(EvalInputs { estimate: est, groundtruth: gt, biases, biases_file })
+    }
+}
+
 impl Default for EvalOptions {
     fn default() -> Self {
         EvalOptions { alignment: Alignment::PosYaw, rpe_distances: Vec::new(), bias_after_s: 0.0, max_gap_s: 0.1 }
@@ -365,9 +437,12 @@ pub fn evaluate(
     biases: Option<&BiasTrack>,
     gt: &Trajectory,
     opts: &EvalOptions,
-) -> Result<Evaluation, String> {
+) -> Result<Evaluation, EvalError> {
+    opts.validate()?;
     if est.is_empty() || gt.is_empty() {
-        return Err(format!("nothing to compare: {} estimated poses, {} ground-truth poses", est.len(), gt.len()));
+        return Err(
+            format!("nothing to compare: {} estimated poses, {} ground-truth poses", est.len(), gt.len()).into()
+        );
     }
     let t0_ns = est.t_ns[0];
     let max_gap_ns = opts.max_gap_s * 1e9;
@@ -386,7 +461,8 @@ pub fn evaluate(
             est.len(),
             span(&est.t_ns),
             span(&gt.t_ns)
-        ));
+        )
+        .into());
     }
     let pe: Vec<Vector3<f64>> = pairs.iter().map(|p| p.est.translation.vector).collect();
     let pg: Vec<Vector3<f64>> = pairs.iter().map(|p| p.gt.translation.vector).collect();

@@ -1,5 +1,6 @@
 //! The files of an evaluation: `metrics.json` and the PNG figures.
 
+use super::EvalError;
 use super::Evaluation;
 use crate::plot::{write_panels, Band, ScatterChart, Series, AXIS_COLORS};
 use plotters::style::RGBColor;
@@ -13,7 +14,7 @@ fn line(label: &str, color: RGBColor, points: Vec<(f64, f64)>) -> Series {
 }
 
 /// Top view (x–y) of the ground truth and the aligned estimate, equal scales.
-fn top_view(e: &Evaluation, path: &Path) -> Result<(), String> {
+fn top_view(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
     // The ground truth over the estimate's span only.
     let (t0, t1) = (e.pairs[0].t, e.pairs[e.pairs.len() - 1].t);
     let gt = (0..e.groundtruth.len())
@@ -45,7 +46,7 @@ fn top_view(e: &Evaluation, path: &Path) -> Result<(), String> {
 }
 
 /// Position and rotation error over time.
-fn errors_over_time(e: &Evaluation, path: &Path) -> Result<(), String> {
+fn errors_over_time(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
     let align_q = nalgebra::UnitQuaternion::from_rotation_matrix(&e.similarity.rotation);
     let pos = e.pairs.iter().zip(&e.position_errors).map(|(p, &d)| (p.t, d)).collect();
     let rot = e
@@ -72,7 +73,7 @@ fn errors_over_time(e: &Evaluation, path: &Path) -> Result<(), String> {
 }
 
 /// One figure per sensor: a panel per axis with the estimate, its ±σ band and the ground truth.
-fn bias_tracks(e: &Evaluation, gyro: bool, path: &Path) -> Result<(), String> {
+fn bias_tracks(e: &Evaluation, gyro: bool, path: &Path) -> Result<(), crate::plot::PlotError> {
     let (name, unit) = if gyro { ("Gyro bias", "rad/s") } else { ("Accelerometer bias", "m/s²") };
     let panels: Vec<ScatterChart> = (0..3)
         .map(|a| {
@@ -107,7 +108,7 @@ fn bias_tracks(e: &Evaluation, gyro: bool, path: &Path) -> Result<(), String> {
 }
 
 /// Relative translation error against the travelled distance.
-fn rpe_chart(e: &Evaluation, path: &Path) -> Result<(), String> {
+fn rpe_chart(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
     let pts = |f: fn(&super::RpeEntry) -> f64| e.metrics.rpe.iter().map(|r| (r.distance_m, f(r))).collect::<Vec<_>>();
     ScatterChart {
         title: "Relative translation error over travelled distance".into(),
@@ -126,19 +127,20 @@ fn rpe_chart(e: &Evaluation, path: &Path) -> Result<(), String> {
 /// Write `metrics.json`, `trajectory_top.png`, `errors.png`, `rpe.png` and,
 /// with a bias track, `bias_gyro.png` and `bias_accel.png` into `dir`;
 /// returns the paths written.
-pub fn write_report(dir: &Path, e: &Evaluation) -> Result<Vec<PathBuf>, String> {
+pub fn write_report(dir: &Path, e: &Evaluation) -> Result<Vec<PathBuf>, EvalError> {
     std::fs::create_dir_all(dir).map_err(|err| format!("{}: {err}", dir.display()))?;
     let mut out = Vec::new();
     let metrics = dir.join("metrics.json");
     let text = serde_json::to_string_pretty(&e.metrics).map_err(|err| err.to_string())?;
     std::fs::write(&metrics, text).map_err(|err| format!("{}: {err}", metrics.display()))?;
     out.push(metrics);
-    let mut figure = |name: &str, draw: &dyn Fn(&Path) -> Result<(), String>| -> Result<(), String> {
-        let p = dir.join(name);
-        draw(&p)?;
-        out.push(p);
-        Ok(())
-    };
+    let mut figure =
+        |name: &str, draw: &dyn Fn(&Path) -> Result<(), crate::plot::PlotError>| -> Result<(), EvalError> {
+            let p = dir.join(name);
+            draw(&p)?;
+            out.push(p);
+            Ok(())
+        };
     figure("trajectory_top.png", &|p| top_view(e, p))?;
     figure("errors.png", &|p| errors_over_time(e, p))?;
     if !e.metrics.rpe.is_empty() {

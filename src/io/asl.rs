@@ -237,6 +237,16 @@ pub fn read_frames(cam_dir: &Path) -> Result<Vec<(i64, PathBuf)>, InputError> {
     Ok(frames)
 }
 
+impl AslDataset {
+    /// The index of the camera folder `name` (e.g. `cam0`); the error lists the cameras there are.
+    pub fn camera_index(&self, name: &str) -> Result<usize, InputError> {
+        self.cameras.iter().position(|c| c.name == name).ok_or_else(|| {
+            let names: Vec<&str> = self.cameras.iter().map(|c| c.name.as_str()).collect();
+            InputError::file(&self.root, format!("no camera '{name}' (found: {})", names.join(", ")))
+        })
+    }
+}
+
 /// Load an ASL dataset: IMU (validated), sensors, cameras and ground truth.
 pub fn read_asl(path: &Path, fmt: &ImuTextFormat) -> Result<AslDataset, InputError> {
     let root = resolve_mav0(path)?;

@@ -68,79 +68,24 @@ impl ImuRecording {
     pub fn source_name(&self) -> String {
         self.sources.first().map(|p| p.display().to_string()).unwrap_or_else(|| "<memory>".into())
     }
-    /// Write a PNG overview (1200 × 900, or × 1150 with a temperature column):
-    /// the accelerometer and the gyro, per axis, against time \[s\] (and the
-    /// temperature). Long recordings keep each axis' envelope: every pixel
-    /// column holds the minimum and maximum of its samples, so spikes and
-    /// saturation stay visible.
-    ///
-    /// ```no_run
-    /// use tumble::io::{open_recording, RecordingOptions};
-    /// let rec = open_recording("mav0/".as_ref(), &RecordingOptions::default()).unwrap();
-    /// rec.write_overview_png("imu.png".as_ref()).unwrap();
-    /// ```
-    pub fn write_overview_png(&self, path: &std::path::Path) -> Result<(), String> {
-        use crate::plot::{write_panels, ScatterChart, Series};
-        use plotters::style::RGBColor;
-        const COLUMNS: usize = 1000;
-        const COLORS: [RGBColor; 3] = [RGBColor(214, 39, 40), RGBColor(44, 160, 44), RGBColor(31, 119, 180)];
-        if self.is_empty() {
-            return Err(format!("{}: no samples to plot", path.display()));
-        }
-        let per = self.len().div_ceil(COLUMNS);
-        let envelope = |value: &dyn Fn(usize) -> f64| -> Vec<(f64, f64)> {
-            let mut pts = Vec::with_capacity(2 * COLUMNS);
-            for start in (0..self.len()).step_by(per) {
-                let end = (start + per).min(self.len());
-                let (lo, hi) =
-                    (start..end).map(value).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-                let t = self.t[start];
-                pts.push((t, lo));
-                if hi > lo {
-                    pts.push((t, hi));
-                }
+    /// Mean and standard deviation per axis of the accelerometer and the
+    /// gyro (in the stored units), and the temperature range \[°C\].
+    pub fn stats(&self) -> RecordingStats {
+        let axes = |v: &[[f64; 3]]| -> Option<AxisStats> {
+            if v.is_empty() {
+                return None;
             }
-            pts
+            let n = v.len() as f64;
+            let mean = [0, 1, 2].map(|k| v.iter().map(|s| s[k]).sum::<f64>() / n);
+            let std = [0, 1, 2].map(|k| (v.iter().map(|s| (s[k] - mean[k]).powi(2)).sum::<f64>() / n).sqrt());
+            Some(AxisStats { mean, std })
         };
-        // imu_tk layouts hold the gyro in a second file.
-        let gyro_source = self.sources.last().map_or_else(|| self.source_name(), |p| p.display().to_string());
-        let axes = |data: &[[f64; 3]], what: &str, unit: &str, source: &str| ScatterChart {
-            title: format!("{what} — {source}"),
-            x_label: "time [s]".into(),
-            y_label: unit.into(),
-            series: (0..3)
-                .map(|k| Series {
-                    label: ["x", "y", "z"][k].into(),
-                    color: COLORS[k],
-                    points: envelope(&|i| data[i][k]),
-                    line: true,
-                })
-                .collect(),
-            ..Default::default()
-        };
-        let unit = |u: Stored, si: &str| if u == Stored::Si { si.to_string() } else { "raw counts".into() };
-        let mut charts = vec![
-            axes(&self.accel, "accelerometer", &unit(self.accel_units, "m/s²"), &self.source_name()),
-            axes(&self.gyro, "gyroscope", &unit(self.gyro_units, "rad/s"), &gyro_source),
-        ];
-        if let Some(temp) = &self.temperature {
-            charts.push(ScatterChart {
-                title: "temperature".into(),
-                x_label: "time [s]".into(),
-                y_label: "°C".into(),
-                series: vec![Series {
-                    color: RGBColor(120, 120, 120),
-                    points: envelope(&|i| temp[i]),
-                    line: true,
-                    ..Default::default()
-                }],
-                ..Default::default()
-            });
-        }
-        let height = if charts.len() == 3 { 1150 } else { 900 };
-        write_panels(path, &charts, 1200, height)
+        let temperature = self
+            .temperature
+            .as_ref()
+            .map(|t| t.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x))));
+        RecordingStats { accel: axes(&self.accel), gyro: axes(&self.gyro), temperature }
     }
-
     /// Samples with `t` in `[t_start, t_end)` \[s\] as a new recording (warnings dropped).
     pub fn slice_time(&self, t_start: f64, t_end: f64) -> ImuRecording {
         let a = self.t.partition_point(|&x| x < t_start);
@@ -187,4 +132,24 @@ pub fn resample_delayed(t: &[f64], x: &[[f64; 3]], delay: f64) -> Vec<[f64; 3]> 
             }
         })
         .collect()
+}
+
+/// Per-axis statistics of one sensor triad (see [`ImuRecording::stats`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisStats {
+    /// Mean per axis (x, y, z), in the stored units.
+    pub mean: [f64; 3],
+    /// Population standard deviation per axis, in the stored units.
+    pub std: [f64; 3],
+}
+
+/// What [`ImuRecording::stats`] reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordingStats {
+    /// Accelerometer statistics (None without samples).
+    pub accel: Option<AxisStats>,
+    /// Gyro statistics (None without samples).
+    pub gyro: Option<AxisStats>,
+    /// Lowest and highest temperature \[°C\], when the recording has a temperature column.
+    pub temperature: Option<(f64, f64)>,
 }

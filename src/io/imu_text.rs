@@ -18,11 +18,11 @@ use super::imu::{ImuRecording, Stored};
 use super::table::{peek_header, read_table, Table, TableSpec, TimeUnit};
 use super::validate::{validate, ValidateOptions};
 use crate::error::InputError;
+use crate::OptionError;
 use rayon::prelude::*;
 use std::path::Path;
 
-/// Standard gravity used to convert g to m/s² \[m/s²\].
-pub const STANDARD_GRAVITY: f64 = 9.80665;
+pub use crate::model::STANDARD_GRAVITY;
 
 /// Unit of the gyro columns.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -60,11 +60,13 @@ pub enum AccelUnit {
 
 impl GyroUnit {
     /// Parse `rad/s`, `deg/s`, `counts` or `counts:SCALE[:OFFSET]`.
-    pub fn parse(s: &str) -> Result<GyroUnit, String> {
+    pub fn parse(s: &str) -> Result<GyroUnit, OptionError> {
         match s {
             "rad/s" => Ok(GyroUnit::RadPerS),
             "deg/s" => Ok(GyroUnit::DegPerS),
-            _ => parse_counts(s).map(|(scale, offset)| GyroUnit::Counts { scale, offset }),
+            _ => parse_counts(s)
+                .map(|(scale, offset)| GyroUnit::Counts { scale, offset })
+                .map_err(|m| OptionError::new("--gyro-unit", format!("cannot be read: {m}"))),
         }
     }
     fn convert(self, v: f64) -> f64 {
@@ -86,11 +88,13 @@ impl GyroUnit {
 
 impl AccelUnit {
     /// Parse `m/s2` (or `m/s^2`, `m/s²`), `g`, `counts` or `counts:SCALE[:OFFSET]`.
-    pub fn parse(s: &str) -> Result<AccelUnit, String> {
+    pub fn parse(s: &str) -> Result<AccelUnit, OptionError> {
         match s {
             "m/s2" | "m/s^2" | "m/s²" => Ok(AccelUnit::MetersPerS2),
             "g" => Ok(AccelUnit::G),
-            _ => parse_counts(s).map(|(scale, offset)| AccelUnit::Counts { scale, offset }),
+            _ => parse_counts(s)
+                .map(|(scale, offset)| AccelUnit::Counts { scale, offset })
+                .map_err(|m| OptionError::new("--accel-unit", format!("cannot be read: {m}"))),
         }
     }
     fn convert(self, v: f64) -> f64 {
@@ -148,7 +152,11 @@ impl ImuColumns {
     /// Parse a comma-separated list naming each column in file order:
     /// `t`, `gx gy gz`, `ax ay az`, `temp`, and `_` for a column to skip.
     /// Without `t`, samples are stamped from the nominal rate.
-    pub fn parse(spec: &str) -> Result<ImuColumns, String> {
+    pub fn parse(spec: &str) -> Result<ImuColumns, OptionError> {
+        Self::parse_spec(spec).map_err(|m| OptionError::new("--columns", format!("cannot be read: {m}")))
+    }
+
+    fn parse_spec(spec: &str) -> Result<ImuColumns, String> {
         let mut time = None;
         let mut gyro = [None; 3];
         let mut accel = [None; 3];

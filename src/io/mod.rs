@@ -3,6 +3,7 @@
 pub mod asl;
 pub mod bal;
 pub mod biases;
+pub mod calibration;
 pub mod g2o;
 pub mod imu;
 pub mod imu_text;
@@ -17,7 +18,7 @@ pub mod trajectory;
 pub mod validate;
 pub mod yaml;
 
-pub use imu::{ImuRecording, Stored};
+pub use imu::{AxisStats, ImuRecording, RecordingStats, Stored};
 pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, STANDARD_GRAVITY};
 pub use noise::{ImuNoise, ImuNoiseAxes};
 pub use recording::{open_recording, RecordingOptions};

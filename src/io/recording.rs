@@ -48,3 +48,97 @@ pub fn open_recording(path: &Path, opts: &RecordingOptions) -> Result<ImuRecordi
         None => read_imu_text(path, &opts.format),
     }
 }
+
+/// Which text-layout settings the user declared (the rest take the layout's
+/// defaults: imu_tk pairs are stamped in seconds and recognised as SI or raw
+/// counts from the data).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Declared {
+    /// The time unit was given.
+    pub time_unit: bool,
+    /// The accelerometer or gyro unit was given.
+    pub units: bool,
+}
+
+/// Why a recording's paths and layout do not fit together.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum SourceError {
+    /// Both a recording and an imu_tk pair were named.
+    #[error("give either a recording or --accel/--gyro, not both")]
+    Both,
+    /// Nothing was named.
+    #[error("no input: give a recording (ASL folder, bag, text) or --accel and --gyro")]
+    Nothing,
+    /// imu_tk's layout without its gyro file.
+    #[error("--format imu_tk needs --accel FILE --gyro FILE (or --gyro-file)")]
+    NoGyroFile,
+}
+
+/// A recording named on a command line: one path (ASL folder, bag, MCAP,
+/// text) or imu_tk's pair of accelerometer and gyro files, with the options
+/// to read it.
+#[derive(Debug, Clone)]
+pub struct RecordingSource {
+    /// The recording, or imu_tk's accelerometer file.
+    pub path: PathBuf,
+    /// How to read it (imu_tk's gyro file in [`RecordingOptions::gyro_file`]).
+    pub options: RecordingOptions,
+    /// imu_tk units to be recognised from the data (see [`RecordingSource::open`]).
+    auto_units: bool,
+}
+
+impl RecordingSource {
+    /// The recording `recording`, or the imu_tk pair `(accel, gyro)`; `imu_tk`
+    /// says the path is imu_tk's accelerometer file (its gyro file then in
+    /// `options.gyro_file`). An imu_tk pair is stamped in seconds unless the
+    /// time unit was `declared`, and its units are recognised from the data
+    /// unless declared.
+    pub fn new(
+        recording: Option<PathBuf>,
+        pair: Option<(PathBuf, PathBuf)>,
+        imu_tk: bool,
+        mut options: RecordingOptions,
+        declared: Declared,
+    ) -> Result<RecordingSource, SourceError> {
+        let imu_tk = imu_tk || pair.is_some();
+        let path = match (recording, pair) {
+            (Some(_), Some(_)) => return Err(SourceError::Both),
+            (Some(p), None) => p,
+            (None, Some((a, g))) => {
+                options.gyro_file = Some(g);
+                a
+            }
+            (None, None) => return Err(SourceError::Nothing),
+        };
+        if imu_tk {
+            if options.gyro_file.is_none() {
+                return Err(SourceError::NoGyroFile);
+            }
+            if !declared.time_unit {
+                options.format.time_unit = super::TimeUnit::S;
+            }
+            if !declared.units {
+                options.format.accel_unit = super::AccelUnit::Counts { scale: None, offset: 0.0 };
+                options.format.gyro_unit = super::GyroUnit::Counts { scale: None, offset: 0.0 };
+            }
+        }
+        Ok(RecordingSource { path, options, auto_units: imu_tk && !declared.units })
+    }
+
+    /// Read the recording. imu_tk files without declared units are SI when
+    /// the accelerometer reads between 7 and 13 m/s² over its first 5 s (at
+    /// rest, ≈ 1 g), raw counts otherwise.
+    pub fn open(&self) -> Result<ImuRecording, InputError> {
+        let mut rec = open_recording(&self.path, &self.options)?;
+        if self.auto_units {
+            let n = rec.len().min(((rec.mean_rate() * 5.0) as usize).max(10));
+            let m = rec.accel[..n].iter().fold([0.0; 3], |s, a| [s[0] + a[0], s[1] + a[1], s[2] + a[2]]);
+            let g = m.iter().map(|x| (x / n as f64).powi(2)).sum::<f64>().sqrt();
+            if (7.0..13.0).contains(&g) {
+                rec.accel_units = super::Stored::Si;
+                rec.gyro_units = super::Stored::Si;
+            }
+        }
+        Ok(rec)
+    }
+}

@@ -7,6 +7,7 @@
 
 use super::corridor::Corridor;
 use super::motion::Motion;
+use super::SimError;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -111,7 +112,7 @@ impl CameraSettings {
         self.body_from_camera() * Translation3::new(self.stereo_baseline_m, 0.0, 0.0)
     }
     /// Check for values that cannot be simulated.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SimError> {
         if !(self.rate_hz > 0.0 && self.rate_hz.is_finite()) {
             return Err("camera.rate_hz must be positive".into());
         }
@@ -121,15 +122,15 @@ impl CameraSettings {
         }
         let qn = self.body_q_camera.iter().map(|x| x * x).sum::<f64>().sqrt();
         if (qn - 1.0).abs() > 1e-3 {
-            return Err(format!("camera.body_q_camera has norm {qn:.4}, not 1"));
+            return Err(format!("camera.body_q_camera has norm {qn:.4}, not 1").into());
         }
         for (p, what) in [(self.track_loss, "track_loss"), (self.outlier_fraction, "outlier_fraction")] {
             if !(0.0..=1.0).contains(&p) {
-                return Err(format!("camera.{what} must be in [0, 1], found {p}"));
+                return Err(format!("camera.{what} must be in [0, 1], found {p}").into());
             }
         }
         if !(self.stereo_baseline_m >= 0.0 && self.stereo_baseline_m.is_finite()) {
-            return Err(format!("camera.stereo_baseline_m must be ≥ 0 m, found {}", self.stereo_baseline_m));
+            return Err(format!("camera.stereo_baseline_m must be ≥ 0 m, found {}", self.stereo_baseline_m).into());
         }
         if self.pixel_noise_px < 0.0 || self.room_half_extent.iter().any(|x| *x <= 0.0) {
             return Err("camera.pixel_noise_px must be ≥ 0 and the room extents > 0".into());

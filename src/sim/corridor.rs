@@ -7,6 +7,7 @@
 //! corridor's centre line an ellipse around the world origin.
 
 use super::motion::{envelope, min_jerk_integral, Harmonics, Kinematics, Motion};
+use super::SimError;
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -60,7 +61,7 @@ impl Corridor {
         (ellipse_perimeter(ai, bi) + ellipse_perimeter(ao, bo)) * self.height + 2.0 * PI * (ao * bo - ai * bi)
     }
     /// Check the geometry; the error names the field.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SimError> {
         let [a, b] = self.semi_axes;
         if !(a.is_finite() && b.is_finite() && self.half_width > 0.0 && self.height > 0.0 && self.height.is_finite()) {
             return Err("corridor: semi-axes, half width and height must be finite and positive".into());
@@ -69,7 +70,8 @@ impl Corridor {
             return Err(format!(
                 "corridor: the semi-axes {a} m and {b} m must exceed the half width {} m",
                 self.half_width
-            ));
+            )
+            .into());
         }
         Ok(())
     }
@@ -150,11 +152,11 @@ pub struct CorridorWalk {
 
 impl CorridorWalk {
     /// A walk of `duration` \[s\] (at least 20 s) through `corridor`, its hand motion drawn from `seed`.
-    pub fn new(corridor: Corridor, duration: f64, seed: u64) -> Result<CorridorWalk, String> {
+    pub fn new(corridor: Corridor, duration: f64, seed: u64) -> Result<CorridorWalk, SimError> {
         corridor.check()?;
         let (rest_s, ramp_s) = (3.0, 2.0);
         if !(duration.is_finite() && duration >= 20.0) {
-            return Err(format!("a corridor walk needs at least 20 s, found {duration} s"));
+            return Err(format!("a corridor walk needs at least 20 s, found {duration} s").into());
         }
         let moving = duration - 2.0 * rest_s;
         let laps = ((WALKING_SPEED * (moving - ramp_s) / corridor.lap_length()).round() as u32).max(1);

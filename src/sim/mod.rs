@@ -14,7 +14,7 @@
 pub mod camera;
 pub mod corridor;
 pub mod imu;
-pub mod model;
+pub use crate::model::imu_model as model;
 pub mod motion;
 pub mod writer;
 
@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// What is simulated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Scenario {
     /// The paper's hand-tumble calibration recording (≥ 50 s static, ≥ 50 held poses).
@@ -48,6 +48,61 @@ pub enum Scenario {
     /// of a corridor at about 1 m/s, back at the start, with a camera looking
     /// along it (see [`corridor::CorridorWalk`]; at least 20 s).
     Corridor,
+}
+
+impl Scenario {
+    /// The names [`Scenario`]'s `FromStr` takes, in order.
+    pub const NAMES: [&'static str; 5] = ["tumble", "static", "walk", "flight", "corridor"];
+    const ALL: [Scenario; 5] =
+        [Scenario::Tumble, Scenario::Static, Scenario::Walk, Scenario::Flight, Scenario::Corridor];
+}
+
+impl std::str::FromStr for Scenario {
+    type Err = SimError;
+    fn from_str(s: &str) -> Result<Scenario, SimError> {
+        let k = Scenario::NAMES.iter().position(|n| *n == s.trim()).ok_or_else(|| {
+            SimError::Invalid(format!("unknown scenario `{s}` (scenarios: {})", Scenario::NAMES.join(", ")))
+        })?;
+        Ok(Scenario::ALL[k])
+    }
+}
+
+/// Why a simulation cannot be made.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// A setting that cannot be simulated (named in the message).
+    #[error("{0}")]
+    Invalid(String),
+    /// A config file that cannot be read.
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// The IMU model cannot be simulated.
+    #[error(transparent)]
+    Model(#[from] crate::model::ModelError),
+}
+
+crate::error::message_error_conversions!(SimError, SimError::Invalid);
+
+/// `START,LENGTH` seconds of one pause (`tumble sim --pause`; the simulator
+/// checks the values against the motion).
+pub fn parse_pause(s: &str) -> Result<[f64; 2], SimError> {
+    let bad = || SimError::Invalid(format!("--pause: expected START,LENGTH in seconds, got `{s}`"));
+    let (a, b) = s.split_once(',').ok_or_else(bad)?;
+    let num = |v: &str| v.trim().parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(bad);
+    Ok([num(a)?, num(b)?])
+}
+
+/// [`hide_effect`] from `EFFECT` or `EFFECT:STRENGTH` (`tumble sim --hide`).
+pub fn hide_effect_spec(config: &mut SimConfig, spec: &str) -> Result<(), SimError> {
+    let (name, strength) = match spec.split_once(':') {
+        Some((n, s)) => (
+            n,
+            s.parse::<f64>()
+                .map_err(|e| SimError::Invalid(format!("--hide {spec}: strength `{s}` is not a number ({e})")))?,
+        ),
+        None => (spec, 1.0),
+    };
+    hide_effect(config, name, strength).map_err(|e| SimError::Invalid(format!("--hide {spec}: {e}")))
 }
 
 /// Everything a simulation can be told (all optional in YAML).
@@ -104,18 +159,18 @@ impl SimConfig {
         Ok(cfg)
     }
     /// Check for values that cannot be simulated.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), SimError> {
         if !(self.gravity.is_finite() && self.gravity > 0.0) {
-            return Err(format!("gravity must be positive, found {}", self.gravity));
+            return Err(format!("gravity must be positive, found {}", self.gravity).into());
         }
         if let Some(d) = self.duration_s {
             if !(d.is_finite() && d > 10.0) {
-                return Err(format!("duration_s must be more than 10 s, found {d}"));
+                return Err(format!("duration_s must be more than 10 s, found {d}").into());
             }
         }
         if let Some(r) = self.groundtruth_rate_hz {
             if !(r.is_finite() && r > 0.0) {
-                return Err(format!("groundtruth_rate_hz must be positive, found {r}"));
+                return Err(format!("groundtruth_rate_hz must be positive, found {r}").into());
             }
         }
         if self.tumble.poses == 0 || self.tumble.hold_s[0] <= 0.0 || self.tumble.hold_s[1] < self.tumble.hold_s[0] {
@@ -143,9 +198,9 @@ pub const ACCEL_GYRO_TIME_OFFSET_S: f64 = 0.005;
 /// [`ACCEL_GYRO_TIME_OFFSET_S`] times `strength`). Temperature effects also get a warm-up from 10 °C
 /// to 50 °C (time constant 150 s) so the temperature changes during a tumble
 /// recording; the nonlinearity of the other triad stays zero.
-pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Result<(), String> {
+pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Result<(), SimError> {
     if !(strength.is_finite() && strength >= 0.0) {
-        return Err(format!("effect strength must be ≥ 0, found {strength}"));
+        return Err(format!("effect strength must be ≥ 0, found {strength}").into());
     }
     let m = &mut config.imu;
     let scale3 = |v: &mut [f64; 3]| v.iter_mut().for_each(|x| *x *= strength);
@@ -191,7 +246,8 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
             return Err(format!(
                 "unknown effect `{other}`: use g_sensitivity, temperature_bias, temperature_scale, gyro_nonlinearity, \
                  accel_nonlinearity, bias_drift, camera_imu_time_offset, accel_gyro_time_offset or none"
-            ))
+            )
+            .into())
         }
     }
     Ok(())
@@ -224,7 +280,7 @@ pub struct Simulation {
 }
 
 /// Run a scenario. Deterministic: the same seed and config give the same samples.
-pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Simulation, String> {
+pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Simulation, SimError> {
     simulate_with(scenario, config, seed, &mut |_, _| {})
 }
 
@@ -234,7 +290,7 @@ pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Sim
 pub const MAX_LOOP_ACCELERATION: f64 = 4.0 * crate::io::STANDARD_GRAVITY;
 
 /// Refuse a loop whose duration compresses it into implausible dynamics.
-fn check_dynamics(scenario: Scenario, motion: &dyn Motion) -> Result<(), String> {
+fn check_dynamics(scenario: Scenario, motion: &dyn Motion) -> Result<(), SimError> {
     let d = motion.duration();
     let peak = (0..=(d * 50.0) as usize).map(|k| motion.at(k as f64 / 50.0).acceleration.norm()).fold(0.0, f64::max);
     if peak <= MAX_LOOP_ACCELERATION {
@@ -253,14 +309,15 @@ fn check_dynamics(scenario: Scenario, motion: &dyn Motion) -> Result<(), String>
         peak / crate::io::STANDARD_GRAVITY,
         MAX_LOOP_ACCELERATION / crate::io::STANDARD_GRAVITY,
         shortest.ceil()
-    ))
+    )
+    .into())
 }
 
 /// A scenario's motion, the scene its camera sees and its still intervals `[start, end]` \[s\].
 type Staged = (Box<dyn Motion>, Scene, Vec<[f64; 2]>);
 
 /// A motion with the config's pauses (none: the motion itself), its scene and its standstills.
-fn with_pauses<M: Motion + 'static>(m: M, scene: Scene, pauses_s: &[[f64; 2]]) -> Result<Staged, String> {
+fn with_pauses<M: Motion + 'static>(m: M, scene: Scene, pauses_s: &[[f64; 2]]) -> Result<Staged, SimError> {
     if pauses_s.is_empty() {
         return Ok((Box::new(m), scene, Vec::new()));
     }
@@ -275,7 +332,7 @@ pub fn simulate_with(
     config: &SimConfig,
     seed: u64,
     on_chunk: &mut dyn FnMut(&SimulatedImu, std::ops::Range<usize>),
-) -> Result<Simulation, String> {
+) -> Result<Simulation, SimError> {
     config.check()?;
     let (motion, scene, intervals): Staged = match scenario {
         Scenario::Tumble => {

@@ -6,6 +6,7 @@
 //! the body frame, so a gyro measures `ω_B` and an accelerometer measures the
 //! specific force `R⁻¹ (a_W − g_W)`.
 
+use super::SimError;
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -360,27 +361,28 @@ impl<M: Motion> Paused<M> {
     /// \[s\] in the paused motion's time. Pauses must have positive lengths,
     /// follow one another after the previous one's speed-up and end before
     /// the paused motion does.
-    pub fn new(inner: M, pauses: &[[f64; 2]]) -> Result<Paused<M>, String> {
+    pub fn new(inner: M, pauses: &[[f64; 2]]) -> Result<Paused<M>, SimError> {
         let mut end_of_last = 0.0;
         let total = inner.duration() + pauses.iter().map(|p| p[1] + PAUSE_RAMP_S).sum::<f64>();
         for (i, &[at, length]) in pauses.iter().enumerate() {
             if !(at.is_finite() && length.is_finite() && length > 0.0) {
-                return Err(format!(
+                return Err((format!(
                     "pause {}: start {at} s and length {length} s must be finite, the length positive",
                     i + 1
-                ));
+                ))
+                .into());
             }
             if at < end_of_last {
-                return Err(format!(
+                return Err((format!(
                     "pause {} starts at {at} s, before {}'s speed-up ends at {end_of_last} s (pauses are sorted and {PAUSE_RAMP_S} s ramps apart)",
                     i + 1,
                     if i == 0 { "the motion".to_string() } else { format!("pause {i}") }
-                ));
+                )).into());
             }
             end_of_last = at + length + 2.0 * PAUSE_RAMP_S;
         }
         if end_of_last > total {
-            return Err(format!("the last pause ends at {end_of_last} s, after the paused motion's {total} s"));
+            return Err(format!("the last pause ends at {end_of_last} s, after the paused motion's {total} s").into());
         }
         Ok(Paused { inner, pauses: pauses.iter().map(|p| (p[0], p[1])).collect() })
     }
@@ -490,9 +492,12 @@ mod tests {
             assert!(tau >= last && tau - last <= 0.01 + 1e-12, "{k}");
             last = tau;
         }
-        assert!(Paused::new(Loop::handheld(60.0, 4), &[[10.0, 3.0], [14.0, 1.0]]).unwrap_err().contains("pause 2"));
+        assert!(Paused::new(Loop::handheld(60.0, 4), &[[10.0, 3.0], [14.0, 1.0]])
+            .unwrap_err()
+            .to_string()
+            .contains("pause 2"));
         assert!(Paused::new(Loop::handheld(60.0, 4), &[[10.0, 0.0]]).is_err());
-        assert!(Paused::new(Loop::handheld(60.0, 4), &[[60.0, 3.0]]).unwrap_err().contains("after"));
+        assert!(Paused::new(Loop::handheld(60.0, 4), &[[60.0, 3.0]]).unwrap_err().to_string().contains("after"));
     }
 
     #[test]
@@ -536,7 +541,7 @@ pub struct Replay {
 impl Replay {
     /// Replay `tr` with time measured from `t0_ns` \[ns\]; samples before `t0_ns` are dropped.
     /// Errors on fewer than two samples after `t0_ns`.
-    pub fn new(tr: &crate::io::trajectory::Trajectory, t0_ns: i64) -> Result<Replay, String> {
+    pub fn new(tr: &crate::io::trajectory::Trajectory, t0_ns: i64) -> Result<Replay, SimError> {
         let (mut t, mut p, mut q) = (Vec::new(), Vec::new(), Vec::new());
         for i in 0..tr.len() {
             if tr.t_ns[i] < t0_ns {

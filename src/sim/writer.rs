@@ -11,6 +11,7 @@
 //! ```
 
 use super::imu::SimulatedImu;
+use super::SimError;
 use super::Simulation;
 use crate::error::InputError;
 use crate::io::trajectory::{write_asl_groundtruth, Trajectory};
@@ -73,8 +74,8 @@ pub fn simulate_and_write(
     config: &super::SimConfig,
     seed: u64,
     out: &Path,
-) -> Result<Simulation, String> {
-    let refused = |m: String| format!("simulation: {m}");
+) -> Result<Simulation, SimError> {
+    let refused = |m: SimError| format!("simulation: {m}");
     config.check().map_err(refused)?;
     let csv = out.join("mav0").join("imu0").join("data.csv");
     let mut w = create(&csv).map_err(|e| e.to_string())?;

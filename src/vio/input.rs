@@ -4,12 +4,12 @@
 
 use super::geometry::pose;
 use super::ImuNoise;
+use super::VioError;
 use crate::calib::model::ImuCalibration;
 use crate::io::trajectory::read_asl_groundtruth;
 use crate::io::{asl, trajectory::Trajectory};
-use crate::sim::Simulation;
 use crate::InputError;
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
 use std::path::Path;
 use tumble_factors::camera::{CameraModel, Distortion};
@@ -134,19 +134,19 @@ impl VioInput {
     }
 
     /// Check what a run needs: samples, frames in order, finite numbers.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), VioError> {
         let name = &self.name;
         if self.imu.t.len() < 10 {
-            return Err(format!("{name}: fewer than 10 IMU samples"));
+            return Err(format!("{name}: fewer than 10 IMU samples").into());
         }
         if self.frames.is_empty() {
-            return Err(format!("{name}: no camera frames (feature tracks) to fuse"));
+            return Err(format!("{name}: no camera frames (feature tracks) to fuse").into());
         }
         if let Some(i) = self.imu.t.windows(2).position(|w| w[1] <= w[0]) {
-            return Err(format!("{name}: IMU sample {} is not later than the one before", i + 1));
+            return Err((format!("{name}: IMU sample {} is not later than the one before", i + 1)).into());
         }
         if let Some(i) = self.frames.windows(2).position(|w| w[1].t <= w[0].t) {
-            return Err(format!("{name}: frame {} is not later than the one before", i + 1));
+            return Err((format!("{name}: frame {} is not later than the one before", i + 1)).into());
         }
         if let Some(st) = &self.stereo {
             if st.features.len() != self.frames.len() {
@@ -154,108 +154,19 @@ impl VioInput {
                     "{name}: the second camera has features for {} frames, the first for {}",
                     st.features.len(),
                     self.frames.len()
-                ));
+                )
+                .into());
             }
             if self.stereo_baseline_m().is_some_and(|b| b < 1e-3) {
-                return Err(format!("{name}: the two cameras are less than 1 mm apart: no stereo baseline"));
+                return Err(format!("{name}: the two cameras are less than 1 mm apart: no stereo baseline").into());
             }
         }
         if let Some(i) = (0..self.imu.t.len())
             .find(|&i| !(self.imu.gyro[i].iter().chain(self.imu.acc[i].iter()).all(|x| x.is_finite())))
         {
-            return Err(format!("{name}: IMU sample {i} is not finite"));
+            return Err(format!("{name}: IMU sample {i} is not finite").into());
         }
         Ok(())
-    }
-
-    /// The simulator's walk or flight: IMU corrected with the true `T`, `K`
-    /// (the calibration a perfect `tumble calibrate` would give), so the
-    /// remaining biases are the simulated turn-on bias and its drift; tracks in
-    /// pixels; ground truth at the frame times with the true biases in the body frame.
-    pub fn from_simulation(sim: &Simulation) -> Result<VioInput, String> {
-        Self::from_simulation_calibrated(sim, None)
-    }
-
-    /// As [`VioInput::from_simulation`], but the IMU corrected with an
-    /// estimated `calibration` (e.g. from `tumble calibrate` on the same
-    /// simulated IMU's tumble) instead of the true `T`, `K`: what a user's
-    /// pipeline does. The ground-truth biases are then what the calibration
-    /// leaves of the simulated ones, `(T K)⁻¹_est (b_true − b_est)`.
-    pub fn from_simulation_calibrated(
-        sim: &Simulation,
-        calibration: Option<&ImuCalibration>,
-    ) -> Result<VioInput, String> {
-        let tracks = sim.tracks.as_ref().ok_or("the simulation has no camera")?;
-        let m = &sim.config.imu;
-        // The simulator applies T and K only when their effects are on.
-        let inv = |t: &crate::sim::TriadModel| -> Result<Matrix3<f64>, String> {
-            let tm = if m.effects.misalignment {
-                Matrix3::from_fn(|r, c| t.misalignment[r][c])
-            } else {
-                Matrix3::identity()
-            };
-            let k = if m.effects.scale { Vector3::from(t.scale) } else { Vector3::repeat(1.0) };
-            (tm * Matrix3::from_diagonal(&k)).try_inverse().ok_or("singular T K".to_string())
-        };
-        // Raw-bias-to-body maps and the bias the correction already removes.
-        let (ma, mg, ba0, bg0, imu) = match calibration {
-            Some(cal) => {
-                let ma = cal.accel.inverse_matrix().ok_or("calibration: singular accelerometer T K")?;
-                let mg = cal.gyro.inverse_matrix().ok_or("calibration: singular gyro T K")?;
-                (ma, mg, cal.accel.b, cal.gyro.b, imu_data(&sim.imu.to_recording(), Some(cal)))
-            }
-            None => {
-                let (ma, mg) = (inv(&m.accel)?, inv(&m.gyro)?);
-                let imu = ImuData {
-                    t: sim.imu.t.clone(),
-                    gyro: sim.imu.gyro.iter().map(|g| mg * Vector3::from(*g)).collect(),
-                    acc: sim.imu.accel.iter().map(|a| ma * Vector3::from(*a)).collect(),
-                };
-                (ma, mg, Vector3::zeros(), Vector3::zeros(), imu)
-            }
-        };
-        let mut frames: Vec<Frame> = tracks.frames.iter().map(|&t| Frame { t, features: Vec::new() }).collect();
-        let mut fi = 0;
-        for o in &tracks.observations {
-            while fi + 1 < frames.len() && frames[fi].t < o.t {
-                fi += 1;
-            }
-            frames[fi].features.push((o.track, o.uv));
-        }
-        let cs = &sim.config.camera;
-        let body_from_camera = iso(&cs.body_from_camera());
-        let stereo = simulated_stereo(cs, &frames, &tracks.stereo);
-        let mut gt = Trajectory::default();
-        let (mut bga, mut baa) = (Vec::new(), Vec::new());
-        for &t in &tracks.frames {
-            let k = sim.motion.at(t);
-            let q = UnitQuaternion::from_matrix(&k.rotation);
-            gt.t_ns.push(sim.config.t0_ns + (t * 1e9).round() as i64);
-            gt.p.push([k.position.x, k.position.y, k.position.z]);
-            gt.q.push([q.w, q.i, q.j, q.k]);
-            let i = ((t * m.rate_hz).round() as usize / sim.imu.bias_every).min(sim.imu.bias_gyro.len() - 1);
-            let bg = mg * (Vector3::from(sim.imu.bias_gyro[i]) - bg0);
-            let ba = ma * (Vector3::from(sim.imu.bias_accel[i]) - ba0);
-            bga.push([bg.x, bg.y, bg.z]);
-            baa.push([ba.x, ba.y, ba.z]);
-        }
-        gt.bias_gyro = Some(bga);
-        gt.bias_accel = Some(baa);
-        Ok(with_calibrated_offsets(
-            VioInput {
-                name: format!("simulated {:?} (seed {})", sim.scenario, sim.seed).to_lowercase(),
-                t0_ns: sim.config.t0_ns,
-                imu,
-                frames,
-                camera: cs.model(),
-                body_from_camera,
-                stereo,
-                groundtruth: Some(gt),
-                noise: Some(ImuNoise::from_model(m)),
-                images: Vec::new(),
-            },
-            calibration,
-        ))
     }
 
     /// An ASL folder with `imu0/`, `cam0/sensor.yaml` and `cam0/tracks.csv`
@@ -264,58 +175,6 @@ impl VioInput {
     pub fn from_asl(path: &Path, calibration: Option<&ImuCalibration>) -> Result<VioInput, InputError> {
         let ds = asl::read_asl(path, &crate::io::imu_text::ImuTextFormat::default())?;
         Self::from_dataset(ds, calibration, None, true)
-    }
-
-    /// A dataset with an IMU and a ground truth but no camera, seen by a
-    /// simulated camera (`cam`) that flies the ground-truth path through a room
-    /// of random landmarks around it: real IMU, simulated vision — for
-    /// evaluating the estimator on real inertial data without images.
-    pub fn from_dataset_with_simulated_camera(
-        ds: asl::AslDataset,
-        calibration: Option<&ImuCalibration>,
-        cam: &crate::sim::CameraSettings,
-        seed: u64,
-    ) -> Result<VioInput, InputError> {
-        let gt = ds.groundtruth.as_ref().ok_or_else(|| {
-            InputError::file(&ds.root, "no ground truth (state_groundtruth_estimate0/, gt0/ or mocap0/)")
-                .with_hint("a simulated camera needs the true path to look from")
-        })?;
-        let t0 = ds.imu.t0_ns;
-        let motion = crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e))?;
-        let centre = motion.p_mean();
-        let tracks = crate::sim::camera::simulate_tracks(&motion, cam, &crate::sim::camera::Scene::Room(centre), seed);
-        // Frames where both the ground truth and the IMU are.
-        let start = (gt.t_ns.iter().copied().find(|&t| t >= t0).unwrap_or(t0) - t0) as f64 * 1e-9;
-        let end = match ds.imu.len() {
-            0 => 0.0,
-            n => (ds.imu.t_ns(n - 1) - t0) as f64 * 1e-9,
-        };
-        let mut frames: Vec<Frame> = Vec::new();
-        for o in tracks.observations.iter().filter(|o| o.t >= start && o.t <= end) {
-            match frames.last_mut() {
-                Some(f) if f.t == o.t => f.features.push((o.track, o.uv)),
-                _ => frames.push(Frame { t: o.t, features: vec![(o.track, o.uv)] }),
-            }
-        }
-        let body_from_camera = iso(&cam.body_from_camera());
-        let stereo = simulated_stereo(cam, &frames, &tracks.stereo);
-        let imu = imu_data(&ds.imu, calibration);
-        let noise = sensor_noise(&ds);
-        Ok(with_calibrated_offsets(
-            VioInput {
-                name: format!("{} (simulated camera)", ds.root.display()),
-                t0_ns: t0,
-                imu,
-                frames,
-                camera: cam.model(),
-                body_from_camera,
-                stereo,
-                groundtruth: ds.groundtruth,
-                noise,
-                images: Vec::new(),
-            },
-            calibration,
-        ))
     }
 
     /// As [`VioInput::from_asl`] on a loaded dataset, with the cam0
@@ -412,32 +271,12 @@ impl VioInput {
 }
 
 /// `T_BC` as the solver's SE(3).
-fn iso(t: &nalgebra::Isometry3<f64>) -> Isometry3F64 {
+pub(crate) fn iso(t: &nalgebra::Isometry3<f64>) -> Isometry3F64 {
     pose(t.rotation.to_rotation_matrix().matrix(), &t.translation.vector)
 }
 
-/// The simulated second camera, when the settings have one: its
-/// observations put on the frames of the same times.
-fn simulated_stereo(
-    cam: &crate::sim::CameraSettings,
-    frames: &[Frame],
-    obs: &[crate::sim::camera::Observation],
-) -> Option<StereoCamera> {
-    if cam.stereo_baseline_m <= 0.0 {
-        return None;
-    }
-    let mut features = vec![Vec::new(); frames.len()];
-    for o in obs {
-        let k = frames.partition_point(|f| f.t < o.t - 1e-9);
-        if frames.get(k).is_some_and(|f| (f.t - o.t).abs() < 1e-9) {
-            features[k].push((o.track, o.uv));
-        }
-    }
-    Some(StereoCamera { camera: cam.model(), body_from_camera: iso(&cam.body_from_second_camera()), features })
-}
-
 /// `input` with the calibration's time offsets applied, when it has any.
-fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuCalibration>) -> VioInput {
+pub(crate) fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuCalibration>) -> VioInput {
     match calibration.and_then(|c| c.time_offsets) {
         Some(o) if o.camera_imu_s != 0.0 || o.accel_gyro_s != 0.0 => {
             input.with_time_offsets(o.camera_imu_s, o.accel_gyro_s)
@@ -447,7 +286,7 @@ fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuCalibration>
 }
 
 /// The noise figures of the dataset's `imu0/sensor.yaml`, when it gives all four.
-fn sensor_noise(ds: &asl::AslDataset) -> Option<ImuNoise> {
+pub(crate) fn sensor_noise(ds: &asl::AslDataset) -> Option<ImuNoise> {
     let s = ds.imu_sensor.as_ref()?;
     Some(ImuNoise {
         accelerometer_noise_density: s.accelerometer_noise_density?,
@@ -569,4 +408,47 @@ pub fn read_eqvio(path: &Path, groundtruth: Option<&Path>) -> Result<VioInput, I
         noise: None,
         images: Vec::new(),
     })
+}
+
+impl super::Init {
+    /// The ground-truth state at `input`'s first frame, as an initialization
+    /// (evaluation aid: `tumble vio --init-from-groundtruth`).
+    pub fn from_groundtruth(input: &VioInput) -> Result<super::Init, super::VioError> {
+        let err = |m: &str| super::VioError::Invalid(format!("{}: {m}", input.name));
+        let gt = input.groundtruth.as_ref().ok_or_else(|| {
+            err("--init-from-groundtruth needs ground truth (--groundtruth FILE, or the folder's own)")
+        })?;
+        let t_first = input.frames.first().ok_or_else(|| err("no frames"))?.t;
+        let want = input.t0_ns + (t_first * 1e9).round() as i64;
+        let k = gt.t_ns.partition_point(|&s| s < want);
+        if k >= gt.len() {
+            return Err(err("the ground truth ends before the first frame"));
+        }
+        let t = (gt.t_ns[k] - input.t0_ns) as f64 * 1e-9;
+        let v = gt.v.as_ref().map_or([0.0; 3], |x| x[k]);
+        let bias_accel = gt.bias_accel.as_ref().map_or([0.0; 3], |x| x[k]);
+        let bias_gyro = gt.bias_gyro.as_ref().map_or([0.0; 3], |x| x[k]);
+        Ok(super::Init::Given { q: gt.q[k], p: gt.p[k], v, bias_accel, bias_gyro, t })
+    }
+}
+
+#[cfg(test)]
+impl VioInput {
+    /// An input for the estimator's unit tests: a pinhole camera (500 px
+    /// focal length, principal point (320, 240), no distortion) at the body
+    /// origin looking along the body's z axis, with these samples and frames.
+    pub(crate) fn for_tests(imu: ImuData, frames: Vec<Frame>) -> VioInput {
+        VioInput {
+            name: "test".into(),
+            t0_ns: 0,
+            imu,
+            frames,
+            camera: CameraModel { fx: 500.0, fy: 500.0, cx: 320.0, cy: 240.0, distortion: Distortion::None },
+            body_from_camera: pose(&nalgebra::Matrix3::identity(), &Vector3::zeros()),
+            stereo: None,
+            groundtruth: None,
+            noise: None,
+            images: Vec::new(),
+        }
+    }
 }

@@ -2,6 +2,7 @@
 //! errors, speed) and the files `tumble vio` writes.
 
 use super::geometry::preintegrate;
+use super::VioError;
 use super::{FrameEstimate, VioInput, VioOptions, VioResult};
 use crate::eval::{evaluate, write_report, Alignment, EvalOptions, Evaluation};
 use crate::io::biases::{write_biases, BiasTrack};
@@ -111,10 +112,10 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
 /// end position \[m\] with the initial bias held.
 fn imu_only_end(input: &VioInput, opts: &VioOptions, first: &FrameEstimate, t_end: f64) -> Vector3<f64> {
     let bias = (Vector3::from(first.bias_accel), Vector3::from(first.bias_gyro));
-    let (pim, _) = preintegrate(&input.imu, first.t, t_end, bias, opts.imu);
+    let (pim, _) = preintegrate(&input.imu, first.t, t_end, bias, opts.noise.imu);
     let q = first.rotation;
     let r = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3])).to_rotation_matrix();
-    let g = Vector3::new(0.0, 0.0, -opts.gravity);
+    let g = Vector3::new(0.0, 0.0, -opts.noise.gravity);
     let dt = pim.delta_t();
     Vector3::from(first.position) + Vector3::from(first.velocity) * dt + g * (0.5 * dt * dt) + r * pim.delta_position()
 }
@@ -170,8 +171,8 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         bias_rmse_gyro: m.and_then(|m| m.bias_rmse_gyro),
         bias_rmse_accel: m.and_then(|m| m.bias_rmse_accel),
         bias_rmse_from_s: first.map_or(0.0, |f| f.t) + bias_from_s,
-        bias_allan_std_gyro: allan_steady_std(opts.imu.gyro_noise_density, opts.imu.gyro_random_walk),
-        bias_allan_std_accel: allan_steady_std(opts.imu.accel_noise_density, opts.imu.accel_random_walk),
+        bias_allan_std_gyro: allan_steady_std(opts.noise.imu.gyro_noise_density, opts.noise.imu.gyro_random_walk),
+        bias_allan_std_accel: allan_steady_std(opts.noise.imu.accel_noise_density, opts.noise.imu.accel_random_walk),
         warnings,
         evaluation,
     }
@@ -272,7 +273,7 @@ pub fn write_outputs(
     input: &VioInput,
     result: &VioResult,
     summary: &Summary,
-) -> Result<Vec<PathBuf>, String> {
+) -> Result<Vec<PathBuf>, VioError> {
     std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
     let traj = dir.join("trajectory.txt");
     write_tum(&traj, &trajectory(input, result)).map_err(|e| e.to_string())?;

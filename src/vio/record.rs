@@ -32,6 +32,7 @@
 //! rec.finish().unwrap();
 //! ```
 
+use super::VioError;
 use super::{Estimator, FrameEstimate, VioInput};
 use crate::eval::{biases_at, iso, pose_at};
 use nalgebra::{Point3, UnitQuaternion, Vector3};
@@ -77,7 +78,7 @@ impl<'a> Recorder<'a> {
     /// Create `path` (and its folder) and log what does not change: the world's up axis, the
     /// camera's mounting and pinhole model (resolution taken as twice the
     /// principal point; distortion is not drawn).
-    pub fn create(path: &Path, input: &'a VioInput) -> Result<Self, String> {
+    pub fn create(path: &Path, input: &'a VioInput) -> Result<Self, VioError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create the folder: {e}", dir.display()))?;
         }
@@ -112,7 +113,7 @@ impl<'a> Recorder<'a> {
         })();
         r.check(result);
         match r.error.take() {
-            Some(e) => Err(e),
+            Some(e) => Err(e.into()),
             None => Ok(r),
         }
     }
@@ -220,10 +221,10 @@ impl<'a> Recorder<'a> {
 
     /// Flush the file; returns it and the warnings (images that could not be
     /// read), or the first error met while logging.
-    pub fn finish(self) -> Result<(PathBuf, Vec<String>), String> {
+    pub fn finish(self) -> Result<(PathBuf, Vec<String>), VioError> {
         self.rec.flush_blocking().map_err(|e| format!("{}: rerun: {e}", self.path.display()))?;
         match self.error {
-            Some(e) => Err(e),
+            Some(e) => Err(e.into()),
             None => Ok((self.path, self.warnings)),
         }
     }
@@ -245,7 +246,7 @@ impl RrdContents {
 }
 
 /// Read an `.rrd` file back (e.g. to check what a run recorded).
-pub fn read_rrd(path: &Path) -> Result<RrdContents, String> {
+pub fn read_rrd(path: &Path) -> Result<RrdContents, VioError> {
     use re_log_encoding::DecoderApp;
     let err = |e: &dyn std::fmt::Display| format!("{}: not a readable rerun recording: {e}", path.display());
     let file = std::fs::File::open(path).map_err(|e| format!("{}: {e}", path.display()))?;

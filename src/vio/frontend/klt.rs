@@ -1,5 +1,6 @@
 //! The KLT tracker on OpenCV (feature `opencv`).
 
+use super::FrontendError;
 use super::{FrontendOptions, FrontendStats, Observation, StereoStats};
 use opencv::core::{self, Mat, Point, Point2f, Scalar, Size, TermCriteria, Vector};
 use opencv::prelude::*;
@@ -108,7 +109,7 @@ impl KltTracker {
     }
 
     /// The image pyramid with derivatives, built once per image and used by both KLT passes.
-    fn pyramid(&self, img: &Mat) -> Result<Vector<Mat>, String> {
+    fn pyramid(&self, img: &Mat) -> Result<Vector<Mat>, FrontendError> {
         let mut pyr = Vector::<Mat>::new();
         let win = Size::new(self.opts.window, self.opts.window);
         video::build_optical_flow_pyramid(
@@ -126,7 +127,7 @@ impl KltTracker {
     }
 
     /// Pyramidal KLT from `prev` to `img` (pyramids) with the forward–backward check; returns what survived.
-    fn klt(&mut self, prev: &Vector<Mat>, img: &Vector<Mat>, size: Size) -> Result<Vec<bool>, String> {
+    fn klt(&mut self, prev: &Vector<Mat>, img: &Vector<Mat>, size: Size) -> Result<Vec<bool>, FrontendError> {
         let o = &self.opts;
         let win = Size::new(o.window, o.window);
         let prev_pts: Vector<Point2f> = self.pts.iter().copied().collect();
@@ -153,7 +154,7 @@ impl KltTracker {
     }
 
     /// RANSAC on the fundamental matrix between the undistorted old and new points.
-    fn ransac(&mut self, old: &[Point2f]) -> Result<Vec<bool>, String> {
+    fn ransac(&mut self, old: &[Point2f]) -> Result<Vec<bool>, FrontendError> {
         let n = self.pts.len();
         if n < 8 {
             return Ok(vec![true; n]);
@@ -191,7 +192,7 @@ impl KltTracker {
     }
 
     /// Longest tracks first; drop those within `min_distance` of a longer one; returns the mask for new corners.
-    fn spread(&mut self, rows: i32, cols: i32) -> Result<Mat, String> {
+    fn spread(&mut self, rows: i32, cols: i32) -> Result<Mat, FrontendError> {
         let mut mask = Mat::new_rows_cols_with_default(rows, cols, core::CV_8UC1, Scalar::all(255.0)).map_err(cv)?;
         let mut order: Vec<usize> = (0..self.pts.len()).collect();
         order.sort_by(|&i, &j| self.ages[j].cmp(&self.ages[i]).then(self.ids[i].cmp(&self.ids[j])));
@@ -212,12 +213,12 @@ impl KltTracker {
     }
 
     /// Track into the next image (8-bit grayscale); returns the features seen, `(track id, [u, v])`.
-    pub fn track(&mut self, image: &Mat) -> Result<Vec<(u64, [f64; 2])>, String> {
+    pub fn track(&mut self, image: &Mat) -> Result<Vec<(u64, [f64; 2])>, FrontendError> {
         if image.empty() {
             return Err("empty image".into());
         }
         if image.typ() != core::CV_8UC1 {
-            return Err(format!("the tracker wants 8-bit grayscale images, got OpenCV type {}", image.typ()));
+            return Err(format!("the tracker wants 8-bit grayscale images, got OpenCV type {}", image.typ()).into());
         }
         let start = Instant::now();
         let img = match self.opts.equalize {
@@ -273,16 +274,18 @@ impl KltTracker {
 }
 
 /// Read one image as 8-bit grayscale, with errors naming the file.
-pub fn read_gray(path: &Path) -> Result<Mat, String> {
+pub fn read_gray(path: &Path) -> Result<Mat, FrontendError> {
     let img = imgcodecs::imread(path, imgcodecs::IMREAD_GRAYSCALE).map_err(|e| format!("{}: {e}", path.display()))?;
     if img.empty() {
-        return Err(format!("{}: not a readable image (missing, truncated or an unknown format)", path.display()));
+        return Err(
+            format!("{}: not a readable image (missing, truncated or an unknown format)", path.display()).into()
+        );
     }
     Ok(img)
 }
 
 /// [`read_gray`], refusing an image whose size is not `resolution` `[w, h]` (from sensor.yaml) when given.
-fn read_sized(path: &Path, resolution: Option<[u32; 2]>) -> Result<Mat, String> {
+fn read_sized(path: &Path, resolution: Option<[u32; 2]>) -> Result<Mat, FrontendError> {
     let img = read_gray(path)?;
     if let Some([w, h]) = resolution {
         if img.cols() as u32 != w || img.rows() as u32 != h {
@@ -291,7 +294,8 @@ fn read_sized(path: &Path, resolution: Option<[u32; 2]>) -> Result<Mat, String> 
                 path.display(),
                 img.cols(),
                 img.rows()
-            ));
+            )
+            .into());
         }
     }
     Ok(img)
@@ -305,7 +309,7 @@ pub fn track_camera(
     resolution: Option<[u32; 2]>,
     opts: &FrontendOptions,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(Vec<Observation>, FrontendStats), String> {
+) -> Result<(Vec<Observation>, FrontendStats), FrontendError> {
     let mut tracker = KltTracker::new(camera, opts.clone());
     let mut obs = Vec::new();
     for (k, (t, path)) in frames.iter().enumerate() {
@@ -320,7 +324,13 @@ pub fn track_camera(
 /// Draw the tracks seen in frame `t_ns` over its image: each feature's path
 /// over the last `history` frames, colored from red (new) to blue (tracked
 /// for 20 frames or more); written as PNG to `out`.
-pub fn draw_tracks(image: &Path, t_ns: i64, obs: &[Observation], history: usize, out: &Path) -> Result<(), String> {
+pub fn draw_tracks(
+    image: &Path,
+    t_ns: i64,
+    obs: &[Observation],
+    history: usize,
+    out: &Path,
+) -> Result<(), FrontendError> {
     let gray = read_gray(image)?;
     let mut img = Mat::default();
     imgproc::cvt_color(&gray, &mut img, imgproc::COLOR_GRAY2BGR, 0).map_err(cv)?;
@@ -348,7 +358,7 @@ pub fn draw_tracks(image: &Path, t_ns: i64, obs: &[Observation], history: usize,
     }
     let ok = imgcodecs::imwrite(out, &img, &Vector::new()).map_err(|e| format!("{}: {e}", out.display()))?;
     if !ok {
-        return Err(format!("{}: could not write the image", out.display()));
+        return Err(format!("{}: could not write the image", out.display()).into());
     }
     Ok(())
 }
@@ -365,7 +375,7 @@ pub fn moving_window(
     frames: usize,
     px_per_frame: [f64; 2],
     deg_per_frame: f64,
-) -> Result<(Vec<Mat>, Vec<nalgebra::Matrix2x3<f64>>), String> {
+) -> Result<(Vec<Mat>, Vec<nalgebra::Matrix2x3<f64>>), FrontendError> {
     let (bw, bh) = (base.cols() as f64, base.rows() as f64);
     let (w, h) = (size[0] as f64, size[1] as f64);
     let n = frames.saturating_sub(1) as f64;
@@ -374,7 +384,7 @@ pub fn moving_window(
     let reach_x = 0.5 * w * ang.cos() + 0.5 * h * ang.sin() + n * px_per_frame[0].abs();
     let reach_y = 0.5 * h * ang.cos() + 0.5 * w * ang.sin() + n * px_per_frame[1].abs();
     if reach_x > 0.5 * bw || reach_y > 0.5 * bh || half_diag * ang > 0.5 * bw {
-        return Err(format!("a {w}×{h} window moving this far leaves the {bw}×{bh} image"));
+        return Err(format!("a {w}×{h} window moving this far leaves the {bw}×{bh} image").into());
     }
     let (cx, cy) = (0.5 * bw, 0.5 * bh);
     let (ox, oy) = (cx - 0.5 * w, cy - 0.5 * h);
@@ -428,7 +438,7 @@ fn klt_both_ways(
     win: Size,
     levels: [i32; 2],
     initial: bool,
-) -> Result<BothWays, String> {
+) -> Result<BothWays, FrontendError> {
     let crit = TermCriteria::new(core::TermCriteria_COUNT + core::TermCriteria_EPS, 30, 0.01).map_err(cv)?;
     let (mut status, mut err) = (Vector::<u8>::new(), Vector::<f32>::new());
     let flags = if initial { video::OPTFLOW_USE_INITIAL_FLOW } else { 0 };
@@ -479,7 +489,7 @@ pub fn match_stereo(
     prior: &std::collections::HashMap<u64, f64>,
     opts: &FrontendOptions,
     stats: &mut StereoStats,
-) -> Result<Vec<(u64, [f64; 2], f64)>, String> {
+) -> Result<Vec<(u64, [f64; 2], f64)>, FrontendError> {
     use nalgebra::Vector3;
     let [cam0, cam1] = cams;
     stats.pairs += 1;
@@ -569,7 +579,7 @@ pub fn track_stereo(
     right_from_left: &nalgebra::Isometry3<f64>,
     opts: &FrontendOptions,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(Vec<Observation>, Vec<Observation>, FrontendStats), String> {
+) -> Result<(Vec<Observation>, Vec<Observation>, FrontendStats), FrontendError> {
     let mut tracker = KltTracker::new(cams[0], opts.clone());
     let mut stereo = StereoStats::default();
     let mut depths = std::collections::HashMap::new();

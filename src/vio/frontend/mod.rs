@@ -190,17 +190,17 @@ pub fn track_asl(
     camera: usize,
     opts: &FrontendOptions,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(Vec<Observation>, FrontendStats), String> {
+) -> Result<(Vec<Observation>, FrontendStats), FrontendError> {
     let cam = ds.cameras.get(camera).ok_or_else(|| format!("{}: no camera {camera}", ds.root.display()))?;
     let dir = ds.root.join(&cam.name);
     if cam.frames.is_empty() {
-        return Err(format!("{}: no images (data.csv and data/ are empty or missing)", dir.display()));
+        return Err(format!("{}: no images (data.csv and data/ are empty or missing)", dir.display()).into());
     }
     let model = cam.model.ok_or_else(|| format!("{}: camera intrinsics missing", dir.join("sensor.yaml").display()))?;
     // data.csv may list images the folder lacks (EuRoC extracts cut short): skipped, said.
     let frames: Vec<(i64, std::path::PathBuf)> = cam.frames.iter().filter(|f| f.1.is_file()).cloned().collect();
     if frames.is_empty() {
-        return Err(format!("{}: none of the {} images data.csv lists exists", dir.display(), cam.frames.len()));
+        return Err(format!("{}: none of the {} images data.csv lists exists", dir.display(), cam.frames.len()).into());
     }
     let mut warnings = Vec::new();
     if frames.len() < cam.frames.len() {
@@ -221,7 +221,7 @@ pub fn track_asl(
     #[cfg(not(feature = "opencv"))]
     {
         let _ = (model, opts, progress, warnings);
-        Err(format!("{}: {NEEDS_OPENCV}", dir.display()))
+        Err(format!("{}: {NEEDS_OPENCV}", dir.display()).into())
     }
 }
 
@@ -234,10 +234,10 @@ pub fn track_asl_stereo(
     ds: &crate::io::asl::AslDataset,
     opts: &FrontendOptions,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(Vec<Observation>, Vec<Observation>, FrontendStats), String> {
+) -> Result<(Vec<Observation>, Vec<Observation>, FrontendStats), FrontendError> {
     let [c0, c1] = [0, 1].map(|k| ds.cameras.get(k));
     let (Some(c0), Some(c1)) = (c0, c1) else {
-        return Err(format!("{}: stereo matching needs cam0 and cam1", ds.root.display()));
+        return Err(format!("{}: stereo matching needs cam0 and cam1", ds.root.display()).into());
     };
     let yaml = |c: &crate::io::asl::Camera| ds.root.join(&c.name).join("sensor.yaml");
     let model =
@@ -251,7 +251,8 @@ pub fn track_asl_stereo(
         return Err(format!(
             "{}: cam0 and cam1 are less than 1 mm apart (T_BS): no stereo baseline",
             ds.root.display()
-        ));
+        )
+        .into());
     }
     let right: std::collections::HashMap<i64, &std::path::PathBuf> =
         c1.frames.iter().filter(|f| f.1.is_file()).map(|(t, p)| (*t, p)).collect();
@@ -262,7 +263,7 @@ pub fn track_asl_stereo(
         .map(|(t, p)| (*t, p.clone(), right.get(t).map(|p| (*p).clone())))
         .collect();
     if frames.is_empty() {
-        return Err(format!("{}: no cam0 images", ds.root.join(&c0.name).display()));
+        return Err(format!("{}: no cam0 images", ds.root.join(&c0.name).display()).into());
     }
     let unpaired = frames.iter().filter(|f| f.2.is_none()).count();
     #[cfg(feature = "opencv")]
@@ -277,26 +278,26 @@ pub fn track_asl_stereo(
     #[cfg(not(feature = "opencv"))]
     {
         let _ = (m0, m1, opts, progress, unpaired);
-        Err(format!("{}: {NEEDS_OPENCV}", ds.root.display()))
+        Err(format!("{}: {NEEDS_OPENCV}", ds.root.display()).into())
     }
 }
 
 /// [`track_asl`], then write into `dir`: `tracks.csv`, `frontend.json` (the
 /// statistics and options) and `tracks.png` (the middle frame with its tracks).
-/// Returns the observations, the statistics and the files written.
+/// Returns the observations and the statistics with the files written.
 pub fn track_asl_into(
     ds: &crate::io::asl::AslDataset,
     camera: usize,
     opts: &FrontendOptions,
     dir: &Path,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<(Vec<Observation>, FrontendStats, Vec<std::path::PathBuf>), String> {
+) -> Result<(Vec<Observation>, FrontendReport), FrontendError> {
     let (obs, right, stats) = match opts.stereo {
         true if camera == 0 => {
             let (o0, o1, s) = track_asl_stereo(ds, opts, progress)?;
             (o0, Some(o1), s)
         }
-        true => return Err(format!("{}: stereo matching starts from cam0", ds.root.display())),
+        true => return Err(format!("{}: stereo matching starts from cam0", ds.root.display()).into()),
         false => {
             let (o, s) = track_asl(ds, camera, opts, progress)?;
             (o, None, s)
@@ -337,5 +338,27 @@ pub fn track_asl_into(
             }
         }
     }
-    Ok((obs, stats, files))
+    Ok((obs, FrontendReport { stats, files }))
+}
+
+/// Why the visual frontend could not track a camera (the message names the file).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct FrontendError(pub String);
+
+crate::error::message_error_conversions!(FrontendError, FrontendError);
+
+impl From<crate::InputError> for FrontendError {
+    fn from(e: crate::InputError) -> FrontendError {
+        FrontendError(e.to_string())
+    }
+}
+
+/// What [`track_asl_into`] reports besides the observations.
+#[derive(Debug, Clone)]
+pub struct FrontendReport {
+    /// Tracking statistics (and the stereo matching's).
+    pub stats: FrontendStats,
+    /// The files written (`tracks.csv`, `tracks_cam1.csv`, `frontend.json`, `tracks.png`).
+    pub files: Vec<std::path::PathBuf>,
 }

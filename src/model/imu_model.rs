@@ -16,6 +16,7 @@
 //! Defaults are the paper's BMI055 results (eq. 20–21) and its Table 1 noise;
 //! see [`ImuModel::bmi055`] for how Table 1 was read.
 
+use super::ModelError;
 use serde::{Deserialize, Serialize};
 
 /// The deterministic and random error terms of one triad (gyro or accelerometer).
@@ -286,9 +287,9 @@ impl ImuModel {
     }
 
     /// Check the model for values that cannot be simulated; the error names the field.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), ModelError> {
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {
-            return Err(format!("rate_hz must be positive, found {}", self.rate_hz));
+            return Err(format!("rate_hz must be positive, found {}", self.rate_hz).into());
         }
         for (t, name) in [(&self.gyro, "gyro"), (&self.accel, "accel")] {
             let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
@@ -298,27 +299,27 @@ impl ImuModel {
                 || !finite(&t.nonlinearity)
                 || !finite(&t.bias_drift)
             {
-                return Err(format!("{name}: misalignment, bias, bias_drift and nonlinearity must be finite"));
+                return Err(format!("{name}: misalignment, bias, bias_drift and nonlinearity must be finite").into());
             }
             if t.scale.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-                return Err(format!("{name}.scale must be positive, found {:?}", t.scale));
+                return Err(format!("{name}.scale must be positive, found {:?}", t.scale).into());
             }
             if !nonneg(&t.noise_density) || !nonneg(&t.random_walk) || !nonneg(&t.bias_instability) {
-                return Err(format!("{name}: noise_density, random_walk and bias_instability must be ≥ 0"));
+                return Err(format!("{name}: noise_density, random_walk and bias_instability must be ≥ 0").into());
             }
             let [lo, hi] = t.bias_instability_band;
             if !(lo > 0.0 && hi > lo && hi.is_finite()) {
-                return Err(format!("{name}.bias_instability_band must be 0 < lo < hi, found [{lo}, {hi}]"));
+                return Err(format!("{name}.bias_instability_band must be 0 < lo < hi, found [{lo}, {hi}]").into());
             }
             if !(t.lsb.is_finite() && t.lsb >= 0.0 && t.range.is_finite() && t.range > 0.0) {
-                return Err(format!("{name}: lsb must be ≥ 0 and range > 0"));
+                return Err(format!("{name}: lsb must be ≥ 0 and range > 0").into());
             }
         }
         if !(self.jitter_s.is_finite() && self.jitter_s >= 0.0) {
             return Err("jitter_s must be ≥ 0".into());
         }
         if !(self.accel_time_offset_s.is_finite() && self.accel_time_offset_s.abs() <= 1.0) {
-            return Err(format!("accel_time_offset_s must be within ±1 s, found {}", self.accel_time_offset_s));
+            return Err(format!("accel_time_offset_s must be within ±1 s, found {}", self.accel_time_offset_s).into());
         }
         Ok(())
     }

@@ -520,20 +520,6 @@ fn schur_complement_matches_full_solve() {
 }
 
 /// The pose-graph picture: initial guess and solution seen from above.
-#[test]
-fn pose_graph_top_view_png() {
-    let sim = tumble::posegraph::simulate_helix(20, 2, 3.0, 0.01, 0.05, 2);
-    let (solved, _) = Optimizer::new(lm()).optimize(&sim.graph, &sim.initial).unwrap();
-    let top = tumble::posegraph::top_view(&solved);
-    assert_eq!(top.len(), 40);
-    let truth = tumble::posegraph::top_view(&sim.truth);
-    assert!(top.iter().zip(&truth).all(|(a, b)| (a.0 - b.0).hypot(a.1 - b.1) < 0.5));
-    let png = std::env::temp_dir().join("tumble_test_top_view.png");
-    tumble::posegraph::plot_top_view(&sim.initial, &solved, "helix", &png).unwrap();
-    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
-    assert!(tumble::posegraph::plot_top_view(&Values::new(), &Values::new(), "none", &png).is_err());
-}
-
 /// Results are bit-identical whatever the number of threads: small graphs,
 /// and graphs big enough (over 4096 factors) for the linearization and the
 /// assembly of the normal equations — kept and Schur-eliminated parts — to be
@@ -546,7 +532,7 @@ fn parallel_solves_are_deterministic() {
         pool.install(|| opt.optimize(g, v).unwrap())
     }
     for (per_lap, laps) in [(50, 2), (400, 8)] {
-        let sim = tumble::posegraph::simulate_helix(per_lap, laps, 5.0, 0.02, 0.1, 3);
+        let sim = tumble_factors::testing::simulate_helix(per_lap, laps, 5.0, 0.02, 0.1, 3);
         assert!(laps == 2 || sim.graph.len() > 4096, "{} factors", sim.graph.len());
         let (a, sa) = solve_with(1, &sim.graph, &sim.initial, &[]);
         let (b, sb) = solve_with(3, &sim.graph, &sim.initial, &[]);
@@ -595,7 +581,7 @@ impl Factor for Varying {
 fn constant_jacobians_are_formed_once_with_the_same_result() {
     let build = |varying: bool| {
         let mut rng = rand::rngs::StdRng::seed_from_u64(4);
-        let mut sim = tumble::posegraph::simulate_helix(12, 1, 2.0, 0.02, 0.1, 9);
+        let mut sim = tumble_factors::testing::simulate_helix(12, 1, 2.0, 0.02, 0.1, 9);
         // A dense linear factor over three more variables, solved in the same
         // nonlinear problem (so assembled several times).
         let a: Vec<DMatrix<f64>> = (0..3).map(|_| DMatrix::from_fn(24, 6, |_, _| rng.random::<f64>() - 0.5)).collect();

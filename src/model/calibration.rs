@@ -11,11 +11,10 @@
 //! is in m/s², `ω` in rad/s. Both conventions describe the same map:
 //! `T' K' = (T K)⁻¹`, with the same bias.
 
-use crate::error::InputError;
+use super::ModelError;
 use nalgebra::{Matrix3, Vector3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
-use std::path::Path;
 use tumble_factors::imu_calib::{AccelParams, GyroMatrix, UPPER};
 use tumble_factors::imu_effects::{correct, Context, Effect, Layout, ModelParams};
 
@@ -144,10 +143,10 @@ pub struct TimeOffsets {
 
 impl TimeOffsets {
     /// Check that both offsets are finite and within ±1 s.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), ModelError> {
         for (name, v) in [("camera_imu_s", self.camera_imu_s), ("accel_gyro_s", self.accel_gyro_s)] {
             if !(v.is_finite() && v.abs() <= 1.0) {
-                return Err(format!("time_offsets: {name} = {v} is not a time offset within ±1 s"));
+                return Err(format!("time_offsets: {name} = {v} is not a time offset within ±1 s").into());
             }
         }
         Ok(())
@@ -192,23 +191,23 @@ impl EffectTerm {
     }
 
     /// The effect and its values in parameter order; errors name what is wrong.
-    pub fn values(&self) -> Result<(Effect, Vec<f64>), String> {
+    pub fn values(&self) -> Result<(Effect, Vec<f64>), ModelError> {
         let effect = Effect::from_id(&self.id).ok_or_else(|| format!("unknown effect `{}`", self.id))?;
         if !effect.in_sensor_model() {
-            return Err(format!("effect `{}` is not applied to IMU samples", self.id));
+            return Err(format!("effect `{}` is not applied to IMU samples", self.id).into());
         }
         let names = effect.param_names();
         if let Some(k) = self.params.keys().find(|k| !names.contains(&k.as_str())) {
-            return Err(format!("effect `{}` has no parameter `{k}` (it has {})", self.id, names.join(", ")));
+            return Err(format!("effect `{}` has no parameter `{k}` (it has {})", self.id, names.join(", ")).into());
         }
         let values = names
             .iter()
             .map(|n| match self.params.get(*n) {
                 Some(v) if v.is_finite() => Ok(*v),
-                Some(v) => Err(format!("effect `{}`: {n} = {v} is not finite", self.id)),
-                None => Err(format!("effect `{}` lacks parameter `{n}`", self.id)),
+                Some(v) => Err(format!("effect `{}`: {n} = {v} is not finite", self.id).into()),
+                None => Err(format!("effect `{}` lacks parameter `{n}`", self.id).into()),
             })
-            .collect::<Result<_, _>>()?;
+            .collect::<Result<_, ModelError>>()?;
         Ok((effect, values))
     }
 }
@@ -262,7 +261,7 @@ pub struct CalibrationFile {
 }
 
 fn default_gravity() -> f64 {
-    crate::io::STANDARD_GRAVITY
+    super::STANDARD_GRAVITY
 }
 
 fn rows(m: &Matrix3<f64>) -> [[f64; 3]; 3] {
@@ -300,7 +299,7 @@ impl From<&ImuCalibration> for CalibrationFile {
 
 impl CalibrationFile {
     /// Check and convert to the in-memory model.
-    pub fn to_calibration(&self) -> Result<ImuCalibration, String> {
+    pub fn to_calibration(&self) -> Result<ImuCalibration, ModelError> {
         let triad = |t: &[[f64; 3]; 3], ts, k: &[f64; 3], ks, b: &[f64; 3], bs, name: &str| -> Result<Triad, String> {
             let all: Vec<f64> = t.as_flattened().iter().chain(k).chain(b).copied().collect();
             if all.iter().any(|x| !x.is_finite()) {
@@ -359,23 +358,11 @@ impl ImuCalibration {
         ImuCalibration {
             accel: Triad::identity(),
             gyro: Triad::identity(),
-            gravity: crate::io::STANDARD_GRAVITY,
+            gravity: super::STANDARD_GRAVITY,
             units: Units::default(),
             effects: None,
             time_offsets: None,
         }
-    }
-
-    /// Read a `calibration.json` (or `.yaml`) written by `tumble calibrate`
-    /// (diagnostic keys are ignored; the `*_std` keys are optional).
-    pub fn read(path: &Path) -> Result<ImuCalibration, InputError> {
-        let file: CalibrationFile = if path.extension().is_some_and(|e| e == "yaml" || e == "yml") {
-            crate::io::yaml::read_yaml(path)?
-        } else {
-            let text = std::fs::read_to_string(path).map_err(|e| InputError::file(path, e.to_string()))?;
-            serde_json::from_str(&text).map_err(|e| InputError::at(path, e.line(), e.to_string()))?
-        };
-        file.to_calibration().map_err(|m| InputError::file(path, m))
     }
 
     /// A [`Corrector`] applying eq. 16 (and the audit's effects, if any) to raw
@@ -410,7 +397,7 @@ impl ImuCalibration {
     /// The inverse model's parameters ([`tumble_factors::imu_calib`]): `M_a`
     /// (upper triangle) with `b_a`, `M_g` row major, `b_g`. Errors when a matrix
     /// is singular or `(T_a K_a)⁻¹` is not upper triangular.
-    pub fn inverse_params(&self) -> Result<(AccelParams, GyroMatrix, Vector3<f64>), String> {
+    pub fn inverse_params(&self) -> Result<(AccelParams, GyroMatrix, Vector3<f64>), ModelError> {
         let ma = self.accel.inverse_matrix().ok_or("accelerometer T·K is singular")?;
         let scale = ma.amax().max(1e-300);
         if [(1, 0), (2, 0), (2, 1)].iter().any(|&(r, c)| ma[(r, c)].abs() > 1e-9 * scale) {
@@ -499,20 +486,12 @@ impl Corrector {
         (arr(&c.accel), arr(&c.gyro))
     }
 
-    /// Correct every sample of a recording with [`Corrector::sample`] (its
-    /// temperature column, when present, and its time stamps): specific forces
-    /// \[m/s²\] and rates \[rad/s\].
-    pub fn correct_recording(&self, rec: &crate::io::ImuRecording) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-        let temps = rec.temperature.as_deref();
-        (0..rec.len()).map(|i| self.sample(rec.accel[i], rec.gyro[i], temps.map(|t| t[i]), rec.t[i])).unzip()
-    }
-
     /// Problems applying the effects to `rec` (missing temperature, a drift
-    /// fitted on another recording), for the user.
-    pub fn warnings_for(&self, rec: &crate::io::ImuRecording) -> Vec<String> {
+    /// fitted on another recording), for the user, on a recording with or without temperatures.
+    pub fn warnings(&self, has_temperature: bool) -> Vec<String> {
         let mut w = Vec::new();
         if let Some(x) = &self.extended {
-            if self.needs_temperature() && rec.temperature.is_none() {
+            if self.needs_temperature() && !has_temperature {
                 w.push(
                     "the calibration has temperature effects but the recording has no temperature column: \
                         they are not applied"
@@ -563,33 +542,6 @@ pub fn imu_tk_calib_text(t: &Matrix3<f64>, k: &Vector3<f64>, b: &Vector3<f64>) -
     s
 }
 
-/// Read an imu_tk `.calib` file: `(T', K', b)` (21 numbers: 9, 9, 3).
-pub fn read_imu_tk_calib(path: &Path) -> Result<ImuTkTriad, InputError> {
-    let text = std::fs::read_to_string(path).map_err(|e| InputError::file(path, e.to_string()))?;
-    let mut v = Vec::with_capacity(21);
-    for (i, line) in text.lines().enumerate() {
-        for tok in line.split_whitespace() {
-            let x: f64 = tok.parse().map_err(|_| InputError::at(path, i + 1, format!("'{tok}' is not a number")))?;
-            if !x.is_finite() {
-                return Err(InputError::at(path, i + 1, format!("'{tok}' is not finite")));
-            }
-            v.push(x);
-        }
-    }
-    if v.len() != 21 {
-        return Err(InputError::file(
-            path,
-            format!("has {} numbers; an imu_tk .calib file has 21 (T 3×3, K 3×3, b 3)", v.len()),
-        ));
-    }
-    let t = Matrix3::from_row_slice(&v[0..9]);
-    let kk = Matrix3::from_row_slice(&v[9..18]);
-    if (0..3).any(|r| (0..3).any(|c| r != c && kk[(r, c)] != 0.0)) {
-        return Err(InputError::file(path, "the scale matrix K (numbers 10–18) is not diagonal"));
-    }
-    Ok((t, kk.diagonal(), Vector3::new(v[18], v[19], v[20])))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -605,13 +557,5 @@ mod tests {
         let (t, k, b) = tr.to_imu_tk().unwrap();
         let back = Triad::from_imu_tk(&t, &k, &b).unwrap();
         assert!((back.t - tr.t).amax() < 1e-14 && (back.k - tr.k).amax() < 1e-14);
-        let text = imu_tk_calib_text(&t, &k, &b);
-        let dir = std::env::temp_dir().join(format!("tumble-calib-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("x.calib");
-        std::fs::write(&p, text).unwrap();
-        let (t2, k2, b2) = read_imu_tk_calib(&p).unwrap();
-        assert_eq!((t2, k2, b2), (t, k, b));
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

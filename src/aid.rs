@@ -1,0 +1,189 @@
+//! Evaluation aids that join the simulator and the VIO: a simulated recording
+//! as a VIO input, a real IMU with ground truth seen by a simulated camera,
+//! and estimator settings matching a simulation. They sit above both `sim`
+//! and `vio`, so that neither imports the other.
+
+use crate::calib::model::ImuCalibration;
+use crate::io::{asl, trajectory::Trajectory};
+use crate::sim::{CameraSettings, SimConfig, Simulation, TriadModel};
+use crate::vio::input::{imu_data, iso, sensor_noise, with_calibrated_offsets};
+use crate::vio::VioError;
+use crate::vio::{Frame, ImuData, ImuNoise, StereoCamera, VioInput, VioOptions};
+use crate::InputError;
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+
+impl VioInput {
+    /// The simulator's walk or flight: IMU corrected with the true `T`, `K`
+    /// (the calibration a perfect `tumble calibrate` would give), so the
+    /// remaining biases are the simulated turn-on bias and its drift; tracks in
+    /// pixels; ground truth at the frame times with the true biases in the body frame.
+    pub fn from_simulation(sim: &Simulation) -> Result<VioInput, VioError> {
+        Self::from_simulation_calibrated(sim, None)
+    }
+
+    /// As [`VioInput::from_simulation`], but the IMU corrected with an
+    /// estimated `calibration` (e.g. from `tumble calibrate` on the same
+    /// simulated IMU's tumble) instead of the true `T`, `K`: what a user's
+    /// pipeline does. The ground-truth biases are then what the calibration
+    /// leaves of the simulated ones, `(T K)⁻¹_est (b_true − b_est)`.
+    pub fn from_simulation_calibrated(
+        sim: &Simulation,
+        calibration: Option<&ImuCalibration>,
+    ) -> Result<VioInput, VioError> {
+        let tracks = sim.tracks.as_ref().ok_or("the simulation has no camera")?;
+        let m = &sim.config.imu;
+        // The simulator applies T and K only when their effects are on.
+        let inv = |t: &TriadModel| -> Result<Matrix3<f64>, String> {
+            let tm = if m.effects.misalignment {
+                Matrix3::from_fn(|r, c| t.misalignment[r][c])
+            } else {
+                Matrix3::identity()
+            };
+            let k = if m.effects.scale { Vector3::from(t.scale) } else { Vector3::repeat(1.0) };
+            (tm * Matrix3::from_diagonal(&k)).try_inverse().ok_or("singular T K".to_string())
+        };
+        // Raw-bias-to-body maps and the bias the correction already removes.
+        let (ma, mg, ba0, bg0, imu) = match calibration {
+            Some(cal) => {
+                let ma = cal.accel.inverse_matrix().ok_or("calibration: singular accelerometer T K")?;
+                let mg = cal.gyro.inverse_matrix().ok_or("calibration: singular gyro T K")?;
+                (ma, mg, cal.accel.b, cal.gyro.b, imu_data(&sim.imu.to_recording(), Some(cal)))
+            }
+            None => {
+                let (ma, mg) = (inv(&m.accel)?, inv(&m.gyro)?);
+                let imu = ImuData {
+                    t: sim.imu.t.clone(),
+                    gyro: sim.imu.gyro.iter().map(|g| mg * Vector3::from(*g)).collect(),
+                    acc: sim.imu.accel.iter().map(|a| ma * Vector3::from(*a)).collect(),
+                };
+                (ma, mg, Vector3::zeros(), Vector3::zeros(), imu)
+            }
+        };
+        let mut frames: Vec<Frame> = tracks.frames.iter().map(|&t| Frame { t, features: Vec::new() }).collect();
+        let mut fi = 0;
+        for o in &tracks.observations {
+            while fi + 1 < frames.len() && frames[fi].t < o.t {
+                fi += 1;
+            }
+            frames[fi].features.push((o.track, o.uv));
+        }
+        let cs = &sim.config.camera;
+        let body_from_camera = iso(&cs.body_from_camera());
+        let stereo = simulated_stereo(cs, &frames, &tracks.stereo);
+        let mut gt = Trajectory::default();
+        let (mut bga, mut baa) = (Vec::new(), Vec::new());
+        for &t in &tracks.frames {
+            let k = sim.motion.at(t);
+            let q = UnitQuaternion::from_matrix(&k.rotation);
+            gt.t_ns.push(sim.config.t0_ns + (t * 1e9).round() as i64);
+            gt.p.push([k.position.x, k.position.y, k.position.z]);
+            gt.q.push([q.w, q.i, q.j, q.k]);
+            let i = ((t * m.rate_hz).round() as usize / sim.imu.bias_every).min(sim.imu.bias_gyro.len() - 1);
+            let bg = mg * (Vector3::from(sim.imu.bias_gyro[i]) - bg0);
+            let ba = ma * (Vector3::from(sim.imu.bias_accel[i]) - ba0);
+            bga.push([bg.x, bg.y, bg.z]);
+            baa.push([ba.x, ba.y, ba.z]);
+        }
+        gt.bias_gyro = Some(bga);
+        gt.bias_accel = Some(baa);
+        Ok(with_calibrated_offsets(
+            VioInput {
+                name: format!("simulated {:?} (seed {})", sim.scenario, sim.seed).to_lowercase(),
+                t0_ns: sim.config.t0_ns,
+                imu,
+                frames,
+                camera: cs.model(),
+                body_from_camera,
+                stereo,
+                groundtruth: Some(gt),
+                noise: Some(ImuNoise::from_model(m)),
+                images: Vec::new(),
+            },
+            calibration,
+        ))
+    }
+
+    /// A dataset with an IMU and a ground truth but no camera, seen by a
+    /// simulated camera (`cam`) that flies the ground-truth path through a room
+    /// of random landmarks around it: real IMU, simulated vision — for
+    /// evaluating the estimator on real inertial data without images.
+    pub fn from_dataset_with_simulated_camera(
+        ds: asl::AslDataset,
+        calibration: Option<&ImuCalibration>,
+        cam: &CameraSettings,
+        seed: u64,
+    ) -> Result<VioInput, InputError> {
+        let gt = ds.groundtruth.as_ref().ok_or_else(|| {
+            InputError::file(&ds.root, "no ground truth (state_groundtruth_estimate0/, gt0/ or mocap0/)")
+                .with_hint("a simulated camera needs the true path to look from")
+        })?;
+        let t0 = ds.imu.t0_ns;
+        let motion = crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e.to_string()))?;
+        let centre = motion.p_mean();
+        let tracks = crate::sim::camera::simulate_tracks(&motion, cam, &crate::sim::camera::Scene::Room(centre), seed);
+        // Frames where both the ground truth and the IMU are.
+        let start = (gt.t_ns.iter().copied().find(|&t| t >= t0).unwrap_or(t0) - t0) as f64 * 1e-9;
+        let end = match ds.imu.len() {
+            0 => 0.0,
+            n => (ds.imu.t_ns(n - 1) - t0) as f64 * 1e-9,
+        };
+        let mut frames: Vec<Frame> = Vec::new();
+        for o in tracks.observations.iter().filter(|o| o.t >= start && o.t <= end) {
+            match frames.last_mut() {
+                Some(f) if f.t == o.t => f.features.push((o.track, o.uv)),
+                _ => frames.push(Frame { t: o.t, features: vec![(o.track, o.uv)] }),
+            }
+        }
+        let body_from_camera = iso(&cam.body_from_camera());
+        let stereo = simulated_stereo(cam, &frames, &tracks.stereo);
+        let imu = imu_data(&ds.imu, calibration);
+        let noise = sensor_noise(&ds);
+        Ok(with_calibrated_offsets(
+            VioInput {
+                name: format!("{} (simulated camera)", ds.root.display()),
+                t0_ns: t0,
+                imu,
+                frames,
+                camera: cam.model(),
+                body_from_camera,
+                stereo,
+                groundtruth: ds.groundtruth,
+                noise,
+                images: Vec::new(),
+            },
+            calibration,
+        ))
+    }
+}
+
+/// The simulated second camera, when the settings have one: its
+/// observations put on the frames of the same times.
+fn simulated_stereo(
+    cam: &CameraSettings,
+    frames: &[Frame],
+    obs: &[crate::sim::camera::Observation],
+) -> Option<StereoCamera> {
+    if cam.stereo_baseline_m <= 0.0 {
+        return None;
+    }
+    let mut features = vec![Vec::new(); frames.len()];
+    for o in obs {
+        let k = frames.partition_point(|f| f.t < o.t - 1e-9);
+        if frames.get(k).is_some_and(|f| (f.t - o.t).abs() < 1e-9) {
+            features[k].push((o.track, o.uv));
+        }
+    }
+    Some(StereoCamera { camera: cam.model(), body_from_camera: iso(&cam.body_from_second_camera()), features })
+}
+
+impl VioOptions {
+    /// Defaults with the noise, gravity and pixel noise a simulation was made with
+    /// (what `tumble allan` and the camera's specification would tell).
+    pub fn for_simulation(cfg: &SimConfig) -> VioOptions {
+        let mut o = VioOptions::default();
+        o.noise.gravity = cfg.gravity;
+        o.noise.pixel_sigma = cfg.camera.pixel_noise_px.max(0.1);
+        ImuNoise::from_model(&cfg.imu).apply(&mut o.noise.imu);
+        o
+    }
+}

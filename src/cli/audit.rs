@@ -1,0 +1,151 @@
+//! `tumble audit`: the model-discrepancy audit of a calibration, or (`--vio`)
+//! of a VIO run's time offsets.
+
+use super::common::{print_frontend, progress_bar, track_bar, CalibInput, FrontendArgs};
+use super::CliResult;
+use clap::Args;
+use std::path::PathBuf;
+use tumble::audit::{AuditOptions, Effect};
+use tumble::calib::ImuCalibration;
+use tumble::vio::ImuNoise;
+
+/// Flags of `tumble audit`.
+#[derive(Args)]
+pub struct AuditArgs {
+    #[command(flatten)]
+    input: CalibInput,
+    /// calibration.json or .yaml from `tumble calibrate` (or imu_tk's, converted by it);
+    /// optional with --vio (then calibration.json with the offsets is written only when given).
+    #[arg(long)]
+    calibration: Option<PathBuf>,
+    /// Audit a VIO run on this input instead (as `tumble vio` takes it: ASL folder with
+    /// tracks or images, or an EqVIO .csv): fits the time offsets by re-running the estimator.
+    #[arg(long, conflicts_with_all = ["recording", "accel", "gyro"])]
+    vio: Option<PathBuf>,
+    /// With --vio: feature observation noise [px].
+    #[arg(long, default_value_t = 1.0)]
+    pixel_sigma: f64,
+    /// With --vio: gravity magnitude [m/s²].
+    #[arg(long, default_value_t = 9.81)]
+    gravity: f64,
+    /// With --vio: spacing of the offsets tried [ms].
+    #[arg(long, default_value_t = 4.0)]
+    offset_step_ms: f64,
+    #[command(flatten)]
+    frontend: FrontendArgs,
+    /// Kalibr imu.yaml with the noise (from `tumble allan`): its bias random walks set how
+    /// far biases may wander (default: generous consumer-MEMS values).
+    #[arg(long)]
+    noise: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Family-wise significance level (each candidate is tested at alpha / candidates).
+    #[arg(long, default_value_t = 1e-3)]
+    alpha: f64,
+    /// Most effects to add.
+    #[arg(long, default_value_t = 4)]
+    max_effects: usize,
+    /// Candidates to test, comma separated (default: all the sensor model holds).
+    #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<Effect>())]
+    candidates: Vec<Effect>,
+    /// Length of the initial static period [s] (for the static-interval detection).
+    #[arg(long, default_value_t = 50.0)]
+    init_static: f64,
+}
+
+impl AuditArgs {
+    pub fn run(self) -> CliResult {
+        let noise = self.noise.as_deref().map(ImuNoise::read).transpose()?;
+        if let Some(path) = &self.vio {
+            let cal = self.calibration.as_deref().map(ImuCalibration::read).transpose()?;
+            return self.run_vio(path, cal.as_ref(), noise);
+        }
+        let calibration =
+            self.calibration.as_ref().ok_or("--calibration is required to audit a calibration recording")?;
+        let cal = ImuCalibration::read(calibration)?;
+        let mut opts = AuditOptions { alpha: self.alpha, max_effects: self.max_effects, noise, ..Default::default() };
+        opts.detection.init_static_s = self.init_static;
+        if !self.candidates.is_empty() {
+            opts.candidates = self.candidates;
+        }
+        opts.validate()?;
+        let rec = self.input.source()?.open()?;
+        for w in &rec.warnings {
+            eprintln!("warning: {w}");
+        }
+        let t = std::time::Instant::now();
+        let result = tumble::audit::audit(&rec, &cal, &opts)?;
+        print!("{}", tumble::audit::report::summary_table(&result));
+        for n in &result.notes {
+            eprintln!("note: {n}");
+        }
+        let files = tumble::audit::report::write(&result, &self.out)?;
+        println!("{}", result.verdict());
+        println!("audited in {:.2} s; wrote {} in {}", t.elapsed().as_secs_f64(), files.join(", "), self.out.display());
+        Ok(())
+    }
+
+    /// `tumble audit --vio`: fit the time offsets of a VIO input and write the audit.
+    fn run_vio(&self, path: &std::path::Path, cal: Option<&ImuCalibration>, noise: Option<ImuNoise>) -> CliResult {
+        use tumble::audit::vio::{audit_vio, VioAuditOptions};
+        let mut vopts = tumble::vio::VioOptions::default();
+        vopts.noise.pixel_sigma = self.pixel_sigma;
+        vopts.noise.gravity = self.gravity;
+        // The audit's options around the estimator's, once the noise is known.
+        let audit_options = |vio| {
+            let mut opts = VioAuditOptions::new(vio);
+            opts.alpha = self.alpha;
+            opts.max_effects = self.max_effects;
+            opts.step_s = 1e-3 * self.offset_step_ms;
+            if !self.candidates.is_empty() {
+                opts.candidates = self.candidates.clone();
+            }
+            opts
+        };
+        audit_options(vopts.clone()).validate()?;
+        let source = tumble::inputs::VioSource {
+            calibration: cal.cloned(),
+            frontend: self.frontend.options(),
+            frontend_dir: self.out.clone(),
+            ..Default::default()
+        };
+        let bar = track_bar(0);
+        let opened = tumble::inputs::open_vio(path, &source, &mut |d, n| {
+            bar.set_length(n as u64);
+            bar.set_position(d as u64)
+        })?;
+        bar.finish_and_clear();
+        for n in &opened.notes {
+            println!("{n}");
+        }
+        for w in &opened.warnings {
+            eprintln!("warning: {w}");
+        }
+        if let Some(f) = &opened.frontend {
+            print_frontend(f);
+        }
+        let vin = opened.input;
+        vin.apply_noise(noise, &mut vopts.noise.imu);
+        let opts = audit_options(vopts);
+        if let Some(o) = cal.and_then(|c| c.time_offsets) {
+            println!(
+                "the calibration's time offsets are applied: camera–IMU {:+.3} ms, accel–gyro {:+.3} ms",
+                1e3 * o.camera_imu_s,
+                1e3 * o.accel_gyro_s
+            );
+        }
+        let bar = progress_bar(0, "audit [{elapsed_precise}] {pos} VIO runs {msg}");
+        let mut tick = |done: usize| bar.set_position(done as u64);
+        let t = std::time::Instant::now();
+        let result = audit_vio(&vin, &opts, Some(&mut tick))?;
+        bar.finish_and_clear();
+        for n in &result.notes {
+            eprintln!("note: {n}");
+        }
+        let files = tumble::audit::vio::write(&result, cal, &self.out)?;
+        println!("{}", result.verdict());
+        println!("audited in {:.1} s; wrote {} in {}", t.elapsed().as_secs_f64(), files.join(", "), self.out.display());
+        Ok(())
+    }
+}

@@ -1,0 +1,85 @@
+//! `tumble calibrate`: deterministic calibration from a hand tumble.
+
+use super::common::{paths, CalibInput};
+use super::CliResult;
+use clap::Args;
+use std::path::PathBuf;
+use tumble::calib::{local_gravity, parse_multipliers, CalibOptions};
+
+/// Flags of `tumble calibrate`.
+#[derive(Args)]
+pub struct CalibrateArgs {
+    #[command(flatten)]
+    input: CalibInput,
+    /// Output folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Local gravity [m/s²] (default: WGS-84 at --latitude/--height, else 9.80665).
+    #[arg(long, conflicts_with = "latitude")]
+    gravity: Option<f64>,
+    /// Geodetic latitude [deg] for WGS-84 normal gravity.
+    #[arg(long)]
+    latitude: Option<f64>,
+    /// Ellipsoidal height [m] for WGS-84 normal gravity (with --latitude).
+    #[arg(long, default_value_t = 0.0, requires = "latitude")]
+    height: f64,
+    /// Length of the initial static period [s].
+    #[arg(long, default_value_t = 50.0)]
+    init_static: f64,
+    /// Window of the sliding accelerometer variance [s] (imu_tk: 101 samples).
+    #[arg(long, default_value_t = 0.5)]
+    window: f64,
+    /// Shortest usable static interval [s] (imu_tk: 100 samples).
+    #[arg(long, default_value_t = 0.5)]
+    min_interval: f64,
+    /// Threshold multipliers to sweep: FIRST:LAST (integers) or a comma list.
+    #[arg(long, default_value = "2:10", value_parser = parse_multipliers)]
+    multipliers: Vec<f64>,
+    /// Estimate the gyro bias with the other gyro parameters (default: mean of the initial static period).
+    #[arg(long)]
+    estimate_gyro_bias: bool,
+    /// Fewest static intervals accepted.
+    #[arg(long, default_value_t = 12)]
+    min_intervals: usize,
+    /// Detect static intervals from the accelerometer alone, as imu_tk does
+    /// (default: the gyro must be still too).
+    #[arg(long)]
+    accel_only_detection: bool,
+}
+
+impl CalibrateArgs {
+    pub fn run(self) -> CliResult {
+        let start = std::time::Instant::now();
+        let source = self.input.source()?;
+        let rec = source.open()?;
+        for w in &rec.warnings {
+            eprintln!("warning: {w}");
+        }
+        let gravity = local_gravity(self.gravity, self.latitude, self.height)?;
+        if let Some(note) = gravity.note {
+            eprintln!("note: {note}");
+        }
+        let opts = CalibOptions {
+            gravity: gravity.value,
+            init_static_s: self.init_static,
+            window_s: self.window,
+            min_interval_s: self.min_interval,
+            multipliers: self.multipliers,
+            estimate_gyro_bias: self.estimate_gyro_bias,
+            min_intervals: self.min_intervals.max(10),
+            detect_with_gyro: !self.accel_only_detection,
+        };
+        opts.validate()?;
+        eprintln!("read {} samples ({:.1} s) in {:.2} s", rec.len(), rec.duration(), start.elapsed().as_secs_f64());
+        let t = std::time::Instant::now();
+        let result = tumble::calib::calibrate(&rec, &opts)?;
+        let elapsed = t.elapsed().as_secs_f64();
+        print!("{}", result.summary_table());
+        for w in &result.warnings {
+            eprintln!("warning: {w}");
+        }
+        let files = result.write_all(&rec, &opts, &self.out)?;
+        println!("calibrated in {elapsed:.3} s; wrote {}", paths(&files));
+        Ok(())
+    }
+}

@@ -1,0 +1,175 @@
+//! Flags several commands share, and the terminal's progress bars.
+
+use clap::Args;
+use std::path::PathBuf;
+use tumble::io::recording::RecordingSource;
+use tumble::io::validate::Duplicates;
+use tumble::io::{AccelUnit, GyroUnit, ImuColumns, RecordingOptions, TimeUnit};
+
+/// How to read an IMU recording given on the command line.
+#[derive(Args, Clone)]
+pub struct RecordingArgs {
+    /// Text files: column names in file order, from t, gx, gy, gz, ax, ay, az, temp and _ (skip).
+    #[arg(long, default_value = "t,gx,gy,gz,ax,ay,az", value_parser = |s: &str| ImuColumns::parse(s))]
+    pub columns: ImuColumns,
+    /// Text files: unit of the time column (s, ms, us, ns; default ns, imu_tk files s).
+    #[arg(long, value_parser = |s: &str| TimeUnit::parse(s).ok_or("use s, ms, us or ns"))]
+    pub time_unit: Option<TimeUnit>,
+    /// Text files: gyro unit: rad/s (default), deg/s, counts (kept raw) or counts:SCALE[:OFFSET] (SCALE in rad/s per count).
+    #[arg(long, value_parser = |s: &str| GyroUnit::parse(s))]
+    pub gyro_unit: Option<GyroUnit>,
+    /// Text files: accelerometer unit: m/s2 (default), g, counts or counts:SCALE[:OFFSET] (SCALE in m/s² per count).
+    #[arg(long, value_parser = |s: &str| AccelUnit::parse(s))]
+    pub accel_unit: Option<AccelUnit>,
+    /// imu_tk layout: the gyro file (`t x y z`); the recording argument is then the accelerometer file.
+    #[arg(long)]
+    pub gyro_file: Option<PathBuf>,
+    /// ROS bag / MCAP: the sensor_msgs/Imu topic (needed when the file has several).
+    #[arg(long)]
+    pub topic: Option<String>,
+    /// Nominal sample rate [Hz] (estimated from the timestamps when absent).
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Refuse duplicated timestamps instead of re-stamping at the nominal rate.
+    #[arg(long)]
+    pub strict_timestamps: bool,
+    /// Skip the check that values at rest look like rad/s and m/s².
+    #[arg(long)]
+    pub no_unit_check: bool,
+}
+
+impl RecordingArgs {
+    /// The reader's options: what the flags say, the readers' defaults elsewhere.
+    pub fn options(&self) -> RecordingOptions {
+        let mut o = RecordingOptions::default();
+        o.format.columns = self.columns.clone();
+        o.format.time_unit = self.time_unit.unwrap_or(TimeUnit::Ns);
+        o.format.gyro_unit = self.gyro_unit.unwrap_or(GyroUnit::RadPerS);
+        o.format.accel_unit = self.accel_unit.unwrap_or(AccelUnit::MetersPerS2);
+        o.format.validate.nominal_rate = self.rate;
+        o.format.validate.check_units = !self.no_unit_check;
+        if self.strict_timestamps {
+            o.format.validate.duplicates = Duplicates::Error;
+        }
+        o.gyro_file = self.gyro_file.clone();
+        o.topic = self.topic.clone();
+        o
+    }
+
+    /// Which of the layout's settings the user gave (imu_tk pairs default the rest).
+    fn declared(&self) -> tumble::io::recording::Declared {
+        tumble::io::recording::Declared {
+            time_unit: self.time_unit.is_some(),
+            units: self.accel_unit.is_some() || self.gyro_unit.is_some(),
+        }
+    }
+}
+
+/// Settings of the visual frontend (`track`, and `vio` on image folders).
+#[derive(Args, Clone)]
+pub struct FrontendArgs {
+    /// Features kept per frame.
+    #[arg(long, default_value_t = 150)]
+    pub max_features: usize,
+    /// Smallest distance between two features [px].
+    #[arg(long, default_value_t = 30.0)]
+    pub min_distance: f64,
+    /// Largest forward–backward KLT disagreement [px].
+    #[arg(long, default_value_t = 0.5)]
+    pub fb_threshold: f64,
+    /// RANSAC epipolar threshold [px of the undistorted image].
+    #[arg(long, default_value_t = 1.0)]
+    pub ransac_threshold: f64,
+    /// Equalize images (CLAHE) before tracking: for dark or low-contrast sequences (costs track accuracy).
+    #[arg(long)]
+    pub equalize: bool,
+    /// Also match cam0's features into cam1 (same time; epipolar check with both
+    /// sensor.yaml extrinsics) and write tracks_cam1.csv with the same track ids.
+    #[arg(long)]
+    pub stereo: bool,
+}
+
+impl FrontendArgs {
+    /// The frontend's options.
+    pub fn options(&self) -> tumble::vio::frontend::FrontendOptions {
+        tumble::vio::frontend::FrontendOptions {
+            max_features: self.max_features,
+            min_distance: self.min_distance,
+            fb_threshold: self.fb_threshold,
+            ransac_threshold: self.ransac_threshold,
+            equalize: self.equalize,
+            stereo: self.stereo,
+            ..Default::default()
+        }
+    }
+}
+
+/// Input layouts of `calibrate`, `apply` and `audit`.
+#[derive(Clone, Copy, clap::ValueEnum, PartialEq)]
+pub enum InputFormat {
+    /// By the path: ASL folder, .bag/.mcap, or text with --columns.
+    Auto,
+    /// imu_tk's two files `t x y z` (time in s; raw counts or SI, recognised from the data).
+    #[value(alias = "imu_tk")]
+    ImuTk,
+}
+
+/// The recording a calibration command reads.
+#[derive(Args, Clone)]
+pub struct CalibInput {
+    /// ASL folder, ROS bag/MCAP or text file (or give --accel and --gyro).
+    pub recording: Option<PathBuf>,
+    /// imu_tk layout: the accelerometer file.
+    #[arg(long, requires = "gyro")]
+    pub accel: Option<PathBuf>,
+    /// imu_tk layout: the gyro file.
+    #[arg(long, requires = "accel")]
+    pub gyro: Option<PathBuf>,
+    /// Input layout.
+    #[arg(long, value_enum, default_value = "auto")]
+    pub format: InputFormat,
+    #[command(flatten)]
+    pub read: RecordingArgs,
+}
+
+impl CalibInput {
+    /// The recording these flags name (the library resolves imu_tk pairs).
+    pub fn source(&self) -> Result<RecordingSource, tumble::io::recording::SourceError> {
+        RecordingSource::new(
+            self.recording.clone(),
+            self.accel.clone().zip(self.gyro.clone()),
+            self.format == InputFormat::ImuTk,
+            self.read.options(),
+            self.read.declared(),
+        )
+    }
+}
+
+/// Paths for a "wrote …" line.
+pub fn paths(files: &[PathBuf]) -> String {
+    files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+}
+
+/// A progress bar on standard error (hidden when it is not a terminal).
+pub fn progress_bar(len: u64, template: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(indicatif::ProgressStyle::with_template(template).expect("static template").progress_chars("=> "));
+    bar
+}
+
+/// The bar of a frontend run over `n` images.
+pub fn track_bar(n: usize) -> indicatif::ProgressBar {
+    progress_bar(n as u64, "track [{bar:40}] {pos}/{len} images {elapsed_precise} (eta {eta})")
+}
+
+/// Print what a frontend run reports.
+pub fn print_frontend(report: &tumble::vio::frontend::FrontendReport) {
+    for w in &report.stats.warnings {
+        eprintln!("warning: {w}");
+    }
+    println!("frontend: {}", report.stats.line());
+    if let Some(s) = &report.stats.stereo {
+        println!("frontend: {}", s.line());
+    }
+    println!("wrote {}", paths(&report.files));
+}

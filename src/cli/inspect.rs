@@ -1,0 +1,54 @@
+//! `tumble inspect`: what a recording holds and what looks wrong.
+
+use super::common::RecordingArgs;
+use super::CliResult;
+use clap::Args;
+use std::path::PathBuf;
+use tumble::io::{AxisStats, Stored};
+
+/// Flags of `tumble inspect`.
+#[derive(Args)]
+pub struct InspectArgs {
+    /// ASL dataset folder (or its mav0/), a ROS .bag or .mcap, a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
+    recording: PathBuf,
+    #[command(flatten)]
+    read: RecordingArgs,
+    /// Also write a PNG of the accelerometer and gyro (and temperature) against time.
+    #[arg(long, value_name = "FILE.png")]
+    plot: Option<PathBuf>,
+}
+
+impl InspectArgs {
+    pub fn run(self) -> CliResult {
+        let start = std::time::Instant::now();
+        let r = tumble::io::open_recording(&self.recording, &self.read.options())?;
+        println!("{}: {} samples in {:.2} s", r.source_name(), r.len(), start.elapsed().as_secs_f64());
+        println!("  duration {:.3} s, mean rate {:.3} Hz", r.duration(), r.mean_rate());
+        let stats = r.stats();
+        let unit = |u: Stored, si: &'static str| if u == Stored::Si { si } else { "counts" };
+        let line = |s: Option<AxisStats>, name: &str, unit: &str| {
+            if let Some(AxisStats { mean: m, std: sd }) = s {
+                println!(
+                    "  {name:<6} mean [{:+.5}, {:+.5}, {:+.5}] std [{:.5}, {:.5}, {:.5}] {unit}",
+                    m[0], m[1], m[2], sd[0], sd[1], sd[2]
+                );
+            }
+        };
+        line(stats.gyro, "gyro", unit(r.gyro_units, "rad/s"));
+        line(stats.accel, "accel", unit(r.accel_units, "m/s²"));
+        if let Some((lo, hi)) = stats.temperature {
+            println!("  temperature {lo:.2} … {hi:.2} °C");
+        }
+        if r.warnings.is_empty() {
+            println!("  no problems found");
+        }
+        for w in &r.warnings {
+            println!("warning: {w}");
+        }
+        if let Some(png) = self.plot {
+            tumble::inspect::write_overview_png(&r, &png)?;
+            println!("wrote {}", png.display());
+        }
+        Ok(())
+    }
+}

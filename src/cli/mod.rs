@@ -1,0 +1,126 @@
+//! The command line: one module per command, each an `Args` struct (clap) and
+//! a `run` that maps its flags to the library's options, calls the library
+//! and prints. Decisions (what an input is, what is valid, what is written)
+//! live in the library; progress bars live here and are driven by the
+//! library's callbacks.
+
+mod allan;
+mod apply;
+mod audit;
+mod calibrate;
+mod common;
+mod demo;
+mod eval;
+mod inspect;
+mod run;
+mod sim;
+mod solve;
+mod track;
+mod vio;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+/// What a command returns: any library error, printed with its causes.
+pub(crate) type CliResult = Result<(), Box<dyn std::error::Error>>;
+
+#[derive(Parser)]
+#[command(
+    name = "tumble",
+    version,
+    about = "Turntable-free IMU calibration, Allan noise identification and visual-inertial bias estimation"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a recording with known truth and write it as an ASL dataset folder.
+    Sim(sim::SimArgs),
+    /// Read an IMU recording, check it, and print what it holds and what looks wrong.
+    Inspect(inspect::InspectArgs),
+    /// Identify IMU noise from a static recording by Allan variance: writes
+    /// allan.json, Kalibr's imu.yaml and allan_gyro.png / allan_accel.png.
+    Allan(allan::AllanArgs),
+    /// Calibrate accelerometer and gyroscope from one hand-tumbled recording
+    /// (≥ 50 s still, then many poses held still): writes calibration.json/.yaml,
+    /// imu_tk_acc.calib, imu_tk_gyro.calib and static_detection.png.
+    Calibrate(calibrate::CalibrateArgs),
+    /// Correct a recording with a calibration (paper eq. 16) and write it in the format it was read.
+    Apply(apply::ApplyArgs),
+    /// Model-discrepancy audit of a calibration recording: find the effect the
+    /// calibration lacks, add it, show the gap shrink. Writes audit.json,
+    /// audit.md, calibration.json (with the effects) and figures. With --vio,
+    /// the audit of a VIO run instead: camera–IMU and accelerometer–gyro time offsets.
+    Audit(audit::AuditArgs),
+    /// Visual-inertial bias estimation (sliding window, paper §4): writes
+    /// trajectory.txt (TUM), biases.csv and summary.json.
+    Vio(vio::VioArgs),
+    /// Track features in an ASL folder's camera images (visual frontend, cargo
+    /// feature `opencv`): writes tracks.csv, frontend.json and tracks.png.
+    Track(track::TrackArgs),
+    /// Evaluate a trajectory against ground truth: ATE after alignment, RPE over
+    /// distances, bias errors; writes metrics.json and plots.
+    Eval(eval::EvalArgs),
+    /// The whole chain on your recordings: calibrate → allan → audit → vio, each
+    /// stage in its own folder of --out, then report.md with every table and figure.
+    Run(run::RunArgs),
+    /// The whole chain on simulated recordings with known truth: calibrate a hand
+    /// tumble with a hidden effect, identify the noise (Allan), audit, and run the
+    /// VIO on the 6-minute walk; prints every estimate next to the truth.
+    Demo(demo::DemoArgs),
+    /// Solve a g2o pose graph (.g2o) or a Bundle Adjustment in the Large file (other extensions).
+    Solve(solve::SolveArgs),
+}
+
+/// Parse the command line, run the command, print any error with its causes.
+pub fn main() -> ExitCode {
+    // Die quietly on a closed pipe (`tumble inspect … | head`) instead of panicking in println!.
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+    // Large buffers always mmap'd, so what one stage frees goes back to the
+    // system (glibc otherwise raises its mmap threshold after the first free
+    // and keeps the memory in its heap: the Allan stage's axes would add up).
+    #[cfg(target_os = "linux")]
+    // SAFETY: called before any other thread starts; only tunes the allocator.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 20);
+    }
+    let result = match Cli::parse().command {
+        Command::Sim(a) => a.run(),
+        Command::Inspect(a) => a.run(),
+        Command::Allan(a) => a.run(),
+        Command::Calibrate(a) => a.run(),
+        Command::Apply(a) => a.run(),
+        Command::Audit(a) => a.run(),
+        Command::Vio(a) => a.run(),
+        Command::Track(a) => a.run(),
+        Command::Eval(a) => a.run(),
+        Command::Run(a) => a.run(),
+        Command::Demo(a) => a.run(),
+        Command::Solve(a) => a.run(),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            // The causes a message does not already quote.
+            let mut shown = e.to_string();
+            let mut cause = e.source();
+            while let Some(c) = cause {
+                let text = c.to_string();
+                if !shown.contains(&text) {
+                    eprintln!("  caused by: {text}");
+                    shown.push_str(&text);
+                }
+                cause = c.source();
+            }
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,88 @@
+//! `tumble sim`: simulate a recording with known truth.
+
+use super::CliResult;
+use clap::builder::TypedValueParser as _;
+use clap::Args;
+use std::path::PathBuf;
+use tumble::sim::{Scenario, SimConfig};
+
+/// Flags of `tumble sim`.
+#[derive(Args)]
+pub struct SimArgs {
+    /// What to simulate.
+    #[arg(value_parser = clap::builder::PossibleValuesParser::new(Scenario::NAMES).map(|s| s.parse::<Scenario>().expect("listed")))]
+    scenario: Scenario,
+    /// Output folder (gets mav0/ and truth.json).
+    #[arg(long)]
+    out: PathBuf,
+    /// YAML config: IMU model, effects, durations, camera (every key optional).
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Random seed; the same seed and config give the same bytes.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Length of static, walk, flight and corridor scenarios [s] (overrides the config).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Add a second camera this far right of cam0 [m] (EuRoC: 0.11): writes
+    /// cam1/sensor.yaml and its matches in cam0/tracks_cam1.csv, which
+    /// `tumble vio` uses to initialize (overrides the config's
+    /// camera.stereo_baseline_m).
+    #[arg(long, value_name = "METRES")]
+    stereo_baseline: Option<f64>,
+    /// Stop a walk, flight or corridor walk on the way: slow down over 1 s from START
+    /// seconds, stand still for LENGTH seconds, speed up over 1 s
+    /// (repeatable; each makes the recording LENGTH + 1 s longer; overrides
+    /// the config's pauses_s).
+    #[arg(long, value_name = "START,LENGTH", value_parser = tumble::sim::parse_pause)]
+    pause: Vec<[f64; 2]>,
+    /// Print the default config as YAML and exit (a starting point for --config).
+    #[arg(long)]
+    print_config: bool,
+    /// Hide an effect the calibration model lacks (for `tumble audit`): EFFECT or
+    /// EFFECT:STRENGTH with EFFECT one of g_sensitivity, temperature_bias,
+    /// temperature_scale, gyro_nonlinearity, accel_nonlinearity, bias_drift
+    /// (repeatable; STRENGTH multiplies the model's coefficients, default 1).
+    #[arg(long)]
+    hide: Vec<String>,
+}
+
+impl SimArgs {
+    pub fn run(self) -> CliResult {
+        let mut cfg = match &self.config {
+            Some(p) => SimConfig::read(p)?,
+            None => SimConfig::default(),
+        };
+        for h in &self.hide {
+            tumble::sim::hide_effect_spec(&mut cfg, h)?;
+        }
+        if self.print_config {
+            print!("{}", serde_saphyr::to_string(&cfg)?);
+            return Ok(());
+        }
+        if self.duration.is_some() {
+            cfg.duration_s = self.duration;
+        }
+        if !self.pause.is_empty() {
+            cfg.pauses_s = self.pause;
+        }
+        if let Some(b) = self.stereo_baseline {
+            cfg.camera.stereo_baseline_m = b;
+        }
+        let start = std::time::Instant::now();
+        let sim = tumble::sim::simulate_and_write(self.scenario, &cfg, self.seed, &self.out)?;
+        println!(
+            "simulated {:?}: {} IMU samples over {:.1} s{}, written to {} in {:.2} s",
+            self.scenario,
+            sim.imu.t.len(),
+            sim.motion.duration(),
+            sim.tracks
+                .as_ref()
+                .map(|t| format!(", {} frames, {} feature observations", t.frames.len(), t.observations.len()))
+                .unwrap_or_default(),
+            self.out.display(),
+            start.elapsed().as_secs_f64()
+        );
+        Ok(())
+    }
+}

@@ -1,0 +1,509 @@
+//! The window's landmarks: feature tracks by id, their observations in the
+//! window's states, triangulation behind two gates (rays that agree, an
+//! angle between them), the prediction gate for new observations, outlier
+//! removal after a solve, and the reprojection factors they add to a graph.
+//! A landmark is an inverse depth `L(lid)` along its anchor observation's ray.
+
+use super::geometry::{parts, triangulate};
+use super::{VioInput, VioOptions};
+use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::sync::Arc;
+use tumble_factors::camera::CameraModel;
+use tumble_factors::reprojection::StereoInverseDepth;
+use tumble_factors::InverseDepthReprojection;
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::{Factor, FactorEntry, Graph, Huber, NoiseModel, Values, L, X};
+
+/// One observation of a track in a window state.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Obs {
+    /// The state.
+    pub sid: u64,
+    /// Pixel \[px\].
+    pub uv: [f64; 2],
+    /// Normalized image point (undistorted).
+    pub xy: [f64; 2],
+    /// The second camera's match at the same time \[px\], when there is one
+    /// and [`super::WindowOptions::stereo`] puts it into the window.
+    pub uv1: Option<[f64; 2]>,
+}
+
+/// A feature track and, once triangulated, its landmark.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub(crate) struct Track {
+    /// Observations, oldest first.
+    pub obs: Vec<Obs>,
+    /// Landmark id and its anchor state.
+    pub landmark: Option<(u64, u64)>,
+}
+
+/// The tracks of the window, by track id.
+#[derive(Debug, Default)]
+pub(crate) struct Landmarks {
+    tracks: BTreeMap<u64, Track>,
+    next_lid: u64,
+}
+
+/// Per window state: a camera's rotation (world ← camera) and centre in the world.
+type CameraPoses = HashMap<u64, (Matrix3<f64>, Vector3<f64>)>;
+
+/// One camera ray of a track: the camera's rotation (world ← camera) and
+/// centre in the world, the normalized image point, and which observation
+/// (index in the track, second camera or not) it comes from.
+struct Ray {
+    rotation: Matrix3<f64>,
+    centre: Vector3<f64>,
+    xy: Vector2<f64>,
+    obs: usize,
+    stereo: bool,
+}
+
+/// The rays of a track's observations in both cameras, from the cameras'
+/// poses per state (`poses`, `poses1`).
+fn rays(tr: &Track, poses: &CameraPoses, poses1: &CameraPoses, stereo_camera: Option<&CameraModel>) -> Vec<Ray> {
+    let mut out = Vec::with_capacity(tr.obs.len());
+    for (k, o) in tr.obs.iter().enumerate() {
+        let (rotation, centre) = poses[&o.sid];
+        out.push(Ray { rotation, centre, xy: o.xy.into(), obs: k, stereo: false });
+        let xy1 = stereo_camera.zip(o.uv1).and_then(|(cam, uv1)| cam.unproject(uv1));
+        if let (Some(xy1), Some(&(rotation, centre))) = (xy1, poses1.get(&o.sid)) {
+            out.push(Ray { rotation, centre, xy: xy1.into(), obs: k, stereo: true });
+        }
+    }
+    out
+}
+
+/// A track's landmark in the world frame \[m\]: its anchor observation's ray
+/// at the estimated inverse depth, seen from the anchor state's camera.
+fn landmark_world(values: &Values, body_from_camera: &Isometry3F64, tr: &Track) -> Option<Vector3<f64>> {
+    let (lid, anchor) = tr.landmark?;
+    let a = tr.obs.iter().find(|o| o.sid == anchor)?;
+    let (ra, pa) = parts(values.get::<Isometry3F64>(X(anchor)).ok()?);
+    let rho = values.get::<Vector1<f64>>(L(lid)).ok()?[0];
+    let (r_bc, t_bc) = parts(body_from_camera);
+    let pw = ra * (r_bc * (Vector3::new(a.xy[0], a.xy[1], 1.0) / rho) + t_bc) + pa;
+    pw.iter().all(|x| x.is_finite()).then_some(pw)
+}
+
+/// The reprojection factor of observation `uv` in state `sid` of landmark `lid`
+/// anchored in state `anchor` with anchor observation `anchor_xy`.
+fn reprojection(
+    input: &VioInput,
+    anchor: u64,
+    sid: u64,
+    lid: u64,
+    anchor_xy: [f64; 2],
+    uv: [f64; 2],
+) -> InverseDepthReprojection {
+    InverseDepthReprojection::new([X(anchor), X(sid), L(lid)], anchor_xy, uv, input.camera, &input.body_from_camera)
+}
+
+/// The factors of observation `o` of landmark `lid` (anchored at state
+/// `anchor` with normalized anchor observation `anchor_xy`): the first
+/// camera's reprojection (none at the anchor itself) and the second
+/// camera's, when `o` has a stereo match — at the anchor a factor on the
+/// inverse depth alone. Each with whether it is the stereo one.
+pub(crate) fn observation_factors(
+    input: &VioInput,
+    anchor: u64,
+    lid: u64,
+    anchor_xy: [f64; 2],
+    o: &Obs,
+) -> Vec<(Box<dyn Factor>, bool)> {
+    let mut out: Vec<(Box<dyn Factor>, bool)> = Vec::new();
+    if o.sid != anchor {
+        out.push((Box::new(reprojection(input, anchor, o.sid, lid, anchor_xy, o.uv)), false));
+    }
+    if let (Some(uv1), Some(st)) = (o.uv1, &input.stereo) {
+        let f: Box<dyn Factor> = if o.sid == anchor {
+            let second = (st.camera, &st.body_from_camera);
+            Box::new(StereoInverseDepth::new(L(lid), anchor_xy, uv1, second, &input.body_from_camera))
+        } else {
+            Box::new(reprojection(input, anchor, o.sid, lid, anchor_xy, uv1).seen_by(st.camera, &st.body_from_camera))
+        };
+        out.push((f, true));
+    }
+    out
+}
+
+/// A factor's raw residual at `values` (None when a variable is missing or
+/// the factor cannot be evaluated).
+pub(crate) fn residual_at(values: &Values, f: &dyn Factor) -> Option<nalgebra::DVector<f64>> {
+    let vars: Vec<&dyn tumble_solvers::DynVariable> =
+        f.keys().iter().map(|&k| values.get_dyn(k).ok()).collect::<Option<_>>()?;
+    f.residual(tumble_solvers::Vars::new(&vars)).ok()
+}
+
+/// The reprojection noise and robust loss of the window's observations.
+pub(crate) fn pixel_noise(opts: &VioOptions) -> (NoiseModel, Arc<Huber>) {
+    (NoiseModel::isotropic(2, opts.noise.pixel_sigma).expect("positive pixel sigma"), Arc::new(Huber(opts.gates.huber)))
+}
+
+impl Landmarks {
+    /// The tracks, by id.
+    pub fn tracks(&self) -> &BTreeMap<u64, Track> {
+        &self.tracks
+    }
+
+    /// Forget every track (a restart).
+    pub fn clear(&mut self) {
+        self.tracks.clear();
+    }
+
+    /// Number of triangulated landmarks.
+    pub fn count(&self) -> usize {
+        self.tracks.values().filter(|t| t.landmark.is_some()).count()
+    }
+
+    /// The landmarks in the world frame \[m\], by track id.
+    pub fn world_points(&self, values: &Values, body_from_camera: &Isometry3F64) -> Vec<(u64, Vector3<f64>)> {
+        self.tracks
+            .iter()
+            .filter_map(|(id, tr)| landmark_world(values, body_from_camera, tr).map(|p| (*id, p)))
+            .collect()
+    }
+
+    /// Add every landmark's reprojection factors (robust) to `g`.
+    pub fn add_factors(&self, g: &mut Graph, input: &VioInput, opts: &VioOptions) {
+        let (noise, huber) = pixel_noise(opts);
+        for tr in self.tracks.values() {
+            let Some((lid, anchor)) = tr.landmark else { continue };
+            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
+            for o in &tr.obs {
+                for (factor, _) in observation_factors(input, anchor, lid, a.xy, o) {
+                    g.add_entry(FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
+                }
+            }
+        }
+    }
+
+    /// Add frame `index`'s observations (`obs`: undistorted, by track) to state
+    /// `sid`, whose predicted pose is in `values`. An observation of a
+    /// landmark the predicted pose would see behind the camera, or farther
+    /// than [`super::GateOptions::prediction_px`] from where it projects (a
+    /// gross outlier, kept out of the solve), is skipped. Tracks no longer
+    /// seen and without a landmark are forgotten.
+    pub fn add_observations(
+        &mut self,
+        input: &VioInput,
+        index: usize,
+        sid: u64,
+        obs: &HashMap<u64, [f64; 2]>,
+        values: &Values,
+        opts: &VioOptions,
+    ) {
+        // The second camera's matches in this frame that it can undistort,
+        // when they go into the window.
+        let stereo: HashMap<u64, [f64; 2]> = match (&input.stereo, opts.window.stereo) {
+            (Some(st), true) => {
+                st.features[index].iter().filter(|(_, uv)| st.camera.unproject(*uv).is_some()).copied().collect()
+            }
+            _ => HashMap::new(),
+        };
+        let (r_bc, t_bc) = parts(&input.body_from_camera);
+        let (rj, pj) = parts(values.get::<Isometry3F64>(X(sid)).expect("newest state"));
+        for (id, uv) in &input.frames[index].features {
+            let Some(&xy) = obs.get(id) else { continue };
+            let tr = self.tracks.entry(*id).or_default();
+            if tr.landmark.is_some() {
+                let Some(pw) = landmark_world(values, &input.body_from_camera, tr) else {
+                    continue;
+                };
+                let pc = r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc);
+                if pc.z < 0.05 {
+                    continue;
+                }
+                let gate = opts.gates.prediction_px;
+                match input.camera.project(&[pc.x, pc.y, pc.z]) {
+                    Some(p) if (p[0] - uv[0]).hypot(p[1] - uv[1]) <= gate => {}
+                    _ => continue,
+                }
+            }
+            let uv1 = stereo.get(id).copied();
+            tr.obs.push(Obs { sid, uv: *uv, xy, uv1 });
+        }
+        let seen: HashSet<u64> = input.frames[index].features.iter().map(|f| f.0).collect();
+        self.tracks.retain(|id, t| seen.contains(id) || t.landmark.is_some());
+    }
+
+    /// Triangulate tracks seen from two or more of the window's `states`
+    /// (their poses in `values`), inserting each new landmark's inverse depth
+    /// into `values`.
+    pub fn triangulate(&mut self, input: &VioInput, states: &[u64], values: &mut Values, opts: &VioOptions) {
+        let (r_bc, t_bc) = parts(&input.body_from_camera);
+        let min_angle = opts.gates.min_triangulation_deg.to_radians();
+        let stereo = input.stereo.as_ref().map(|st| (st, parts(&st.body_from_camera)));
+        // Per state: the first camera's pose in the world, and the second's.
+        let mut poses: CameraPoses = HashMap::new();
+        let mut poses1: CameraPoses = HashMap::new();
+        for &sid in states {
+            let (r, p) = parts(values.get::<Isometry3F64>(X(sid)).expect("window state"));
+            poses.insert(sid, (r * r_bc, r * t_bc + p));
+            if let Some((_, (r_bc1, t_bc1))) = &stereo {
+                poses1.insert(sid, (r * r_bc1, r * t_bc1 + p));
+            }
+        }
+        // The gate in normalized image coordinates.
+        let limit = opts.gates.triangulation_px / input.camera.fx;
+        for tr in self.tracks.values_mut() {
+            if tr.landmark.is_some() {
+                continue;
+            }
+            // An observation that does not agree with the others (a gross
+            // outlier) leaves the track before it is triangulated, so that it
+            // never pulls the solve: the worst one while more than two rays
+            // remain (a ray the point lies behind disagrees too). Two rays
+            // that disagree cannot say which is wrong: the track waits for its
+            // next observation.
+            let agreed = loop {
+                let rays = rays(tr, &poses, &poses1, stereo.as_ref().map(|(st, _)| &st.camera));
+                if rays.len() < 2 {
+                    break None;
+                }
+                let c: Vec<_> = rays.iter().map(|r| r.centre).collect();
+                let d: Vec<_> = rays.iter().map(|r| (r.rotation * r.xy.push(1.0)).normalize()).collect();
+                let Some((pw, angle)) = triangulate(&c, &d) else { break None };
+                let error = |r: &Ray| {
+                    let q = r.rotation.transpose() * (pw - r.centre);
+                    if q.z <= 0.0 {
+                        f64::INFINITY
+                    } else {
+                        (q.xy() / q.z - r.xy).norm()
+                    }
+                };
+                let (worst, e) = rays.iter().map(error).enumerate().max_by(|a, b| a.1.total_cmp(&b.1)).expect("rays");
+                if e <= limit {
+                    break Some((pw, angle));
+                }
+                if rays.len() == 2 {
+                    break None;
+                }
+                let (k, second) = (rays[worst].obs, rays[worst].stereo);
+                if second {
+                    tr.obs[k].uv1 = None;
+                } else {
+                    tr.obs.remove(k);
+                }
+            };
+            let Some((pw, angle)) = agreed else { continue };
+            if angle < min_angle {
+                continue;
+            }
+            // The landmark as the window will hold it: on the anchor's ray at
+            // the triangulated depth (not the rays' midpoint `pw`, which can
+            // lie on the other side of a camera when the rays nearly agree).
+            let anchor = tr.obs[0].sid;
+            let (rc, pc) = poses[&anchor];
+            let z = (rc.transpose() * (pw - pc)).z;
+            let on_ray = pc + rc * Vector3::new(tr.obs[0].xy[0], tr.obs[0].xy[1], 1.0) * z;
+            // In front of every camera that sees it, and not absurdly far.
+            let in_front = |(rc, pc): &(Matrix3<f64>, Vector3<f64>)| {
+                let depth = (rc.transpose() * (on_ray - pc)).z;
+                depth > 0.1 && depth < 200.0
+            };
+            let ok = tr
+                .obs
+                .iter()
+                .all(|o| in_front(&poses[&o.sid]) && (o.uv1.is_none() || poses1.get(&o.sid).is_none_or(in_front)));
+            if !ok {
+                continue;
+            }
+            let lid = self.next_lid;
+            self.next_lid += 1;
+            values.insert(L(lid), Vector1::new(1.0 / z));
+            tr.landmark = Some((lid, anchor));
+        }
+    }
+
+    /// After a solve: drop observations whose error exceeds
+    /// [`super::GateOptions::outlier_sigmas`] σ (a second camera's match alone
+    /// when it is the one), and landmarks with an implausible depth (their
+    /// track keeps its newest observation and may be triangulated again).
+    pub fn reject_outliers(&mut self, input: &VioInput, values: &mut Values, opts: &VioOptions) {
+        let limit = opts.gates.outlier_sigmas * opts.noise.pixel_sigma;
+        let mut drop_landmarks = Vec::new();
+        let mut drop_obs: Vec<(u64, u64, bool)> = Vec::new();
+        for (&id, tr) in &self.tracks {
+            let Some((lid, anchor)) = tr.landmark else { continue };
+            let rho = values.get::<Vector1<f64>>(L(lid)).map(|v| v[0]).unwrap_or(f64::NAN);
+            if !(rho > 1.0 / 200.0 && rho < 10.0) {
+                drop_landmarks.push(id);
+                continue;
+            }
+            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor).map(|o| o.xy) else { continue };
+            for o in &tr.obs {
+                for (f, stereo) in observation_factors(input, anchor, lid, a, o) {
+                    if residual_at(values, f.as_ref()).is_none_or(|r| r.norm() > limit) {
+                        drop_obs.push((id, o.sid, stereo));
+                    }
+                }
+            }
+        }
+        for (id, sid, stereo) in drop_obs {
+            if let Some(tr) = self.tracks.get_mut(&id) {
+                if stereo {
+                    // Only the second camera's match goes.
+                    tr.obs.iter_mut().filter(|o| o.sid == sid).for_each(|o| o.uv1 = None);
+                } else {
+                    tr.obs.retain(|o| o.sid != sid);
+                }
+            }
+        }
+        for id in drop_landmarks {
+            if let Some(tr) = self.tracks.get_mut(&id) {
+                if let Some((lid, _)) = tr.landmark.take() {
+                    values.remove(L(lid));
+                }
+                // Keep only the newest observation: the track may be triangulated again.
+                let last = tr.obs.pop();
+                tr.obs.clear();
+                tr.obs.extend(last);
+            }
+        }
+    }
+
+    /// Remove state `sid`'s observations from every track.
+    pub fn remove_state(&mut self, sid: u64) {
+        for tr in self.tracks.values_mut() {
+            tr.obs.retain(|o| o.sid != sid);
+        }
+    }
+
+    /// The tracks whose landmark is anchored in state `sid`, with the landmark ids.
+    pub fn anchored_in(&self, sid: u64) -> Vec<(u64, u64)> {
+        self.tracks
+            .iter()
+            .filter_map(|(&id, t)| match t.landmark {
+                Some((lid, a)) if a == sid => Some((id, lid)),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Forget the landmarks of `tracks` (marginalized: every observation went
+    /// into the prior, only new ones may be used again).
+    pub fn forget(&mut self, tracks: &[u64]) {
+        for id in tracks {
+            let tr = self.tracks.get_mut(id).expect("track");
+            tr.landmark = None;
+            tr.obs.clear();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vio::geometry::pose;
+    use crate::vio::{Frame, ImuData};
+
+    fn input(frames: Vec<Frame>) -> VioInput {
+        VioInput::for_tests(ImuData::default(), frames)
+    }
+
+    /// Pixels of world point `p` seen from a camera at `c` (identity rotation).
+    fn pixel(p: Vector3<f64>, c: Vector3<f64>) -> [f64; 2] {
+        let q = p - c;
+        [320.0 + 500.0 * q.x / q.z, 240.0 + 500.0 * q.y / q.z]
+    }
+
+    /// Five states 0.25 m apart along x looking at point (0.3, −0.2, 5); the
+    /// middle one's observation `outlier_px` off across the epipolar line.
+    fn five_views(outlier_px: f64) -> (VioInput, Values, Landmarks) {
+        let point = Vector3::new(0.3, -0.2, 5.0);
+        let centres = [0.0, 0.25, 0.5, 0.75, 1.0].map(|x| Vector3::new(x, 0.0, 0.0));
+        let frames: Vec<Frame> = centres
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let mut uv = pixel(point, *c);
+                if k == 2 {
+                    uv[1] += outlier_px;
+                }
+                Frame { t: k as f64, features: vec![(7, uv)] }
+            })
+            .collect();
+        let inp = input(frames);
+        let mut values = Values::new();
+        let mut lm = Landmarks::default();
+        let opts = VioOptions::default();
+        for (k, c) in centres.iter().enumerate() {
+            values.insert(X(k as u64), pose(&Matrix3::identity(), c));
+            let obs: HashMap<u64, [f64; 2]> =
+                inp.frames[k].features.iter().map(|(id, uv)| (*id, inp.camera.unproject(*uv).unwrap())).collect();
+            lm.add_observations(&inp, k, k as u64, &obs, &values, &opts);
+        }
+        (inp, values, lm)
+    }
+
+    #[test]
+    fn triangulates_agreeing_rays_on_the_anchor_ray() {
+        let (inp, mut values, mut lm) = five_views(0.0);
+        lm.triangulate(&inp, &[0, 1, 2, 3, 4], &mut values, &VioOptions::default());
+        assert_eq!(lm.count(), 1);
+        let points = lm.world_points(&values, &inp.body_from_camera);
+        assert!((points[0].1 - Vector3::new(0.3, -0.2, 5.0)).norm() < 1e-9, "{:?}", points);
+        assert_eq!(lm.anchored_in(0), vec![(7, 0)]);
+    }
+
+    #[test]
+    fn a_gross_outlier_leaves_the_track_before_triangulation() {
+        let (inp, mut values, mut lm) = five_views(40.0);
+        lm.triangulate(&inp, &[0, 1, 2, 3, 4], &mut values, &VioOptions::default());
+        assert_eq!(lm.count(), 1);
+        let tr = &lm.tracks()[&7];
+        assert_eq!(tr.obs.iter().map(|o| o.sid).collect::<Vec<_>>(), vec![0, 1, 3, 4], "the outlier in state 2 left");
+        let p = lm.world_points(&values, &inp.body_from_camera)[0].1;
+        assert!((p - Vector3::new(0.3, -0.2, 5.0)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn two_disagreeing_rays_wait() {
+        let (inp, mut values, mut lm) = five_views(40.0);
+        for sid in [1, 3, 4] {
+            lm.remove_state(sid);
+        }
+        lm.triangulate(&inp, &[0, 2], &mut values, &VioOptions::default());
+        assert_eq!(lm.count(), 0);
+        assert_eq!(lm.tracks()[&7].obs.len(), 2);
+    }
+
+    #[test]
+    fn outliers_after_a_solve_are_dropped_and_implausible_depths_forgotten() {
+        let (inp, mut values, mut lm) = five_views(0.0);
+        let opts = VioOptions::default();
+        lm.triangulate(&inp, &[0, 1, 2, 3, 4], &mut values, &opts);
+        // State 4 moved 0.2 m sideways: its observation is now 20 px off (> 8 σ).
+        values.insert(X(4), pose(&Matrix3::identity(), &Vector3::new(1.2, 0.0, 0.0)));
+        lm.reject_outliers(&inp, &mut values, &opts);
+        assert_eq!(lm.tracks()[&7].obs.iter().map(|o| o.sid).collect::<Vec<_>>(), vec![0, 1, 2, 3]);
+        // A landmark 1000 m away (inverse depth 1e-3) is forgotten; its newest observation stays.
+        values.insert(L(0), Vector1::new(1e-3));
+        lm.reject_outliers(&inp, &mut values, &opts);
+        assert_eq!(lm.count(), 0);
+        assert!(!values.contains(L(0)));
+        assert_eq!(lm.tracks()[&7].obs.len(), 1);
+    }
+
+    #[test]
+    fn the_prediction_gate_skips_far_observations_of_landmarks() {
+        let (inp, mut values, mut lm) = five_views(0.0);
+        let opts = VioOptions::default();
+        lm.triangulate(&inp, &[0, 1, 2, 3, 4], &mut values, &opts);
+        let c = Vector3::new(1.5, 0.0, 0.0);
+        values.insert(X(5), pose(&Matrix3::identity(), &c));
+        let seen = pixel(Vector3::new(0.3, -0.2, 5.0), c);
+        let far = [seen[0] + 35.0, seen[1]];
+        let inp = input(vec![Frame { t: 5.0, features: vec![(7, far)] }; 6]);
+        let obs = HashMap::from([(7, inp.camera.unproject(far).unwrap())]);
+        lm.add_observations(&inp, 5, 5, &obs, &values, &opts);
+        assert!(lm.tracks()[&7].obs.iter().all(|o| o.sid != 5), "35 px off the prediction: skipped");
+        // Within the gate it is added.
+        let near = [seen[0] + 5.0, seen[1]];
+        let inp = input(vec![Frame { t: 5.0, features: vec![(7, near)] }; 6]);
+        let obs = HashMap::from([(7, inp.camera.unproject(near).unwrap())]);
+        lm.add_observations(&inp, 5, 5, &obs, &values, &opts);
+        assert!(lm.tracks()[&7].obs.iter().any(|o| o.sid == 5));
+    }
+}

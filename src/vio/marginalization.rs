@@ -1,0 +1,149 @@
+//! Sliding the window: the oldest state and the landmarks anchored in it
+//! leave through the Schur complement into a prior on what stays (VINS-Mono's
+//! marginalization), and their measurement residuals are counted once, at the
+//! estimate they had when they left ([`ResidualTally`], for the audit).
+
+use super::landmarks::{observation_factors, residual_at, Landmarks};
+use super::window::Window;
+use super::{VioInput, VioOptions};
+use tumble_solvers::{marginalize, Graph, SolveError, B, L, V, X};
+
+/// Whitened measurement residuals of a run, each factor counted once: at the
+/// estimate it had when its oldest state was marginalized (reprojections of
+/// the landmarks anchored in that state, the IMU and bias random-walk factors
+/// to the next state). Priors are not measurements and are left out. The
+/// model-discrepancy audit of a VIO run compares them with what the noise explains.
+///
+/// A reprojection residual is whitened by `σ_px √2`: the landmark's ray is
+/// fixed by its anchor observation, whose pixel noise therefore enters every
+/// other residual of the landmark about as much as the observation's own (the
+/// solver's factor weighs by `σ_px` alone, as VINS-Mono's does).
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
+pub struct ResidualTally {
+    /// Σ ‖r/(σ_px √2)‖² of the reprojections (no robust loss).
+    pub reprojection_chi2: f64,
+    /// Number of reprojection residual rows (2 per observation).
+    pub reprojection_rows: usize,
+    /// Landmarks whose observations were counted (one inverse depth each).
+    pub landmarks: usize,
+    /// Σ of squared whitened IMU-factor and bias random-walk residuals.
+    pub imu_chi2: f64,
+    /// Their rows (15 per link: 9 IMU, 6 bias random walk).
+    pub imu_rows: usize,
+    /// Marginalized states (15 parameters each: pose, velocity, biases).
+    pub states: usize,
+}
+
+impl ResidualTally {
+    /// χ² of every counted residual.
+    pub fn chi2(&self) -> f64 {
+        self.reprojection_chi2 + self.imu_chi2
+    }
+
+    /// Degrees of freedom: residual rows minus the parameters estimated from them.
+    pub fn dof(&self) -> usize {
+        (self.reprojection_rows + self.imu_rows).saturating_sub(self.landmarks + 15 * self.states)
+    }
+
+    /// The gap χ²/dof − 1, floored at 0 (0 when the noise explains the residuals;
+    /// NaN without degrees of freedom).
+    pub fn gap(&self) -> f64 {
+        match self.dof() {
+            0 => f64::NAN,
+            d => (self.chi2() / d as f64 - 1.0).max(0.0),
+        }
+    }
+}
+
+/// The whole window's graph: priors, IMU links, rest pseudo-measurements,
+/// then the landmarks' reprojections.
+pub(crate) fn window_graph(window: &Window, landmarks: &Landmarks, input: &VioInput, opts: &VioOptions) -> Graph {
+    let mut g = Graph::new();
+    window.add_factors(&mut g, opts);
+    landmarks.add_factors(&mut g, input, opts);
+    g
+}
+
+/// Marginalize the window's oldest state and the landmarks anchored in it,
+/// counting their residuals into `tally` first. On failure the window is
+/// left as it was (the caller restarts it).
+pub(crate) fn marginalize_oldest(
+    window: &mut Window,
+    landmarks: &mut Landmarks,
+    input: &VioInput,
+    opts: &VioOptions,
+    tally: &mut ResidualTally,
+) -> Result<(), SolveError> {
+    let old = window.states[0].sid;
+    let anchored = landmarks.anchored_in(old);
+    let mut keys = vec![X(old), V(old), B(old)];
+    keys.extend(anchored.iter().map(|&(_, lid)| L(lid)));
+    count_leaving(window, landmarks, input, opts, old, tally);
+    let graph = window_graph(window, landmarks, input, opts);
+    let m = marginalize(&graph, &window.values, &keys)?;
+    window.remove_oldest(m.prior, &keys);
+    landmarks.forget(&anchored.iter().map(|&(id, _)| id).collect::<Vec<_>>());
+    landmarks.remove_state(old);
+    Ok(())
+}
+
+/// Add the residuals of the factors leaving with state `old` (the oldest) to `tally`.
+fn count_leaving(
+    window: &Window,
+    landmarks: &Landmarks,
+    input: &VioInput,
+    opts: &VioOptions,
+    old: u64,
+    tally: &mut ResidualTally,
+) {
+    let mut t = *tally;
+    for tr in landmarks.tracks().values() {
+        let Some((lid, anchor)) = tr.landmark else { continue };
+        if anchor != old {
+            continue;
+        }
+        let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
+        let mut counted = false;
+        for o in &tr.obs {
+            for (f, _) in observation_factors(input, anchor, lid, a.xy, o) {
+                if let Some(r) = residual_at(&window.values, f.as_ref()) {
+                    // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
+                    t.reprojection_chi2 += r.norm_squared() / (2.0 * opts.noise.pixel_sigma.powi(2));
+                    t.reprojection_rows += 2;
+                    counted = true;
+                }
+            }
+        }
+        t.landmarks += usize::from(counted);
+    }
+    if !window.links.is_empty() {
+        let mut g = Graph::new();
+        window.add_link(&mut g, 0, opts);
+        if let Ok(c) = g.chi2(&window.values) {
+            t.imu_chi2 += c;
+            t.imu_rows += g.entries().iter().map(|e| e.factor.residual_dim()).sum::<usize>();
+            t.states += 1;
+        }
+    }
+    *tally = t;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tally_degrees_of_freedom_and_gap() {
+        let t = ResidualTally {
+            reprojection_chi2: 90.0,
+            reprojection_rows: 100,
+            landmarks: 10,
+            imu_chi2: 30.0,
+            imu_rows: 30,
+            states: 2,
+        };
+        assert_eq!(t.dof(), 130 - 10 - 30);
+        assert!((t.gap() - (120.0 / 90.0 - 1.0)).abs() < 1e-12);
+        assert!(ResidualTally::default().gap().is_nan());
+    }
+}

@@ -1,0 +1,318 @@
+//! The sliding window's states and what links them: a pose `X`, velocity
+//! `V` and bias `B` per state, the IMU preintegration between consecutive
+//! states, the first state's prior (or, once it is gone, the marginalization
+//! prior), and the zero-velocity pseudo-measurements of states at rest.
+
+use super::geometry::parts;
+use super::VioOptions;
+use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector3, Vector6};
+use std::sync::Arc;
+use tumble_factors::imu_preint::Preintegrated;
+use tumble_factors::{bias_random_walk_axes, BetweenFactor, ImuFactor, PriorFactor};
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::{Graph, MarginalPrior, NoiseModel, Values, B, V, X};
+
+/// A state of the window.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct State {
+    /// Its id (keys `X(sid)`, `V(sid)`, `B(sid)`).
+    pub sid: u64,
+    /// Frame time \[s\].
+    pub t: f64,
+    /// At rest (zero-velocity pseudo-measurement), continuously since this
+    /// time \[s\]; None while moving.
+    pub rest_since: Option<f64>,
+}
+
+/// A state's pose, velocity and bias `[b_a, b_g]`.
+pub(crate) type StateValues = (Isometry3F64, Vector3<f64>, Vector6<f64>);
+
+/// Velocity prior σ of a start at rest or from a given state \[m/s\].
+pub(crate) const STATIC_V_SIGMA: f64 = 0.01;
+
+/// Gyro-bias prior σ of a start \[rad/s\].
+const START_GYRO_BIAS_SIGMA: f64 = 5e-3;
+
+/// Standard deviation of the zero-velocity pseudo-measurement of a frame at
+/// rest \[m/s\] (and of its position change since a previous frame at rest,
+/// times the time between them).
+const REST_SPEED_SIGMA: f64 = 0.01;
+
+/// The first state of a window and how sure it is.
+#[derive(Debug, Clone)]
+pub(crate) struct InitState {
+    /// Pose.
+    pub x: Isometry3F64,
+    /// Velocity \[m/s\].
+    pub v: Vector3<f64>,
+    /// Bias `[b_a, b_g]`.
+    pub b: Vector6<f64>,
+    /// Velocity prior σ \[m/s\].
+    pub v_sigma: f64,
+    /// Roll/pitch prior σ \[rad\]; default: what the accelerometer-bias prior allows.
+    pub tilt_sigma: Option<f64>,
+}
+
+impl InitState {
+    /// A start at rest (or from a given state): velocity known to [`STATIC_V_SIGMA`].
+    pub fn at_rest(x: Isometry3F64, v: Vector3<f64>, b: Vector6<f64>) -> Self {
+        InitState { x, v, b, v_sigma: STATIC_V_SIGMA, tilt_sigma: None }
+    }
+}
+
+/// The prior on the window's first state until it is marginalized.
+#[derive(Debug, Clone)]
+pub(crate) struct InitPrior {
+    sid: u64,
+    pose: Isometry3F64,
+    pose_cov: DMatrix<f64>,
+    v: Vector3<f64>,
+    v_sigma: f64,
+    b: Vector6<f64>,
+    /// Bias prior σ `[b_a (m/s²), b_g (rad/s)]`.
+    pub b_sigma: [f64; 6],
+}
+
+/// The window: states, values, IMU links and priors.
+#[derive(Default)]
+pub(crate) struct Window {
+    /// The states' (and the landmarks') values.
+    pub values: Values,
+    /// The states, oldest first.
+    pub states: Vec<State>,
+    /// Preintegration from state `i` to `i + 1`, with its covariance scale (weakened over IMU gaps).
+    pub links: Vec<(Arc<Preintegrated>, f64)>,
+    /// The marginalization prior of what left the window.
+    pub marginal: Option<MarginalPrior>,
+    /// The first state's prior, until that state is marginalized.
+    pub init_prior: Option<InitPrior>,
+    next_sid: u64,
+    /// Gravity in the world \[m/s²\] (`[0, 0, −g]`).
+    pub gravity: Vector3<f64>,
+}
+
+impl Window {
+    /// An empty window under gravity `g` \[m/s²\].
+    pub fn new(g: f64) -> Window {
+        Window { gravity: Vector3::new(0.0, 0.0, -g), ..Default::default() }
+    }
+
+    /// A new state id.
+    pub fn next_id(&mut self) -> u64 {
+        let sid = self.next_sid;
+        self.next_sid += 1;
+        sid
+    }
+
+    /// Start the window afresh at time `t` from `init`: one state with a
+    /// prior. Roll and pitch are as uncertain as an accelerometer bias makes
+    /// them (or `init.tilt_sigma`); yaw and position are fixed (the gauge of VIO).
+    pub fn start(&mut self, t: f64, init: InitState, opts: &VioOptions) {
+        let InitState { x, v, b, v_sigma, tilt_sigma } = init;
+        let sid = self.next_id();
+        self.values = Values::new();
+        self.values.insert(X(sid), x);
+        self.values.insert(V(sid), v);
+        self.values.insert(B(sid), b);
+        self.states = vec![State { sid, t, rest_since: None }];
+        self.links.clear();
+        self.marginal = None;
+        let (r, _) = parts(&x);
+        let tilt = tilt_sigma.unwrap_or((opts.init.bias_accel_sigma / opts.noise.gravity).max(1e-3));
+        let u = r.transpose() * Vector3::z();
+        let rot_cov = Matrix3::identity() * tilt * tilt + u * u.transpose() * (1e-6 - tilt * tilt);
+        let mut pose_cov = DMatrix::identity(6, 6) * 1e-6;
+        pose_cov.view_mut((0, 0), (3, 3)).copy_from(&rot_cov);
+        let sa = opts.init.bias_accel_sigma;
+        let sg = START_GYRO_BIAS_SIGMA;
+        self.init_prior = Some(InitPrior { sid, pose: x, pose_cov, v, v_sigma, b, b_sigma: [sa, sa, sa, sg, sg, sg] });
+    }
+
+    /// State `sid`'s values.
+    pub fn state_values(&self, sid: u64) -> StateValues {
+        (
+            *self.values.get::<Isometry3F64>(X(sid)).expect("window state"),
+            *self.values.get::<Vector3<f64>>(V(sid)).expect("window state"),
+            *self.values.get::<Vector6<f64>>(B(sid)).expect("window state"),
+        )
+    }
+
+    /// The ids of the states, oldest first.
+    pub fn ids(&self) -> Vec<u64> {
+        self.states.iter().map(|s| s.sid).collect()
+    }
+
+    /// Append state `sid` at `t` with its predicted values and the IMU link
+    /// from the newest state (covariance scaled by `scale`).
+    pub fn push(&mut self, state: State, x: StateValues, link: (Preintegrated, f64)) {
+        self.values.insert(X(state.sid), x.0);
+        self.values.insert(V(state.sid), x.1);
+        self.values.insert(B(state.sid), x.2);
+        self.states.push(state);
+        self.links.push((Arc::new(link.0), link.1));
+    }
+
+    /// Remove the newest state (a frame that is not a keyframe) and its link;
+    /// returns its id.
+    pub fn drop_newest(&mut self) -> u64 {
+        let s = self.states.pop().expect("a newest state");
+        self.links.pop();
+        for k in [X(s.sid), V(s.sid), B(s.sid)] {
+            self.values.remove(k);
+        }
+        s.sid
+    }
+
+    /// Add the priors, the IMU links and the rest pseudo-measurements to `g`.
+    pub fn add_factors(&self, g: &mut Graph, opts: &VioOptions) {
+        if let Some(p) = &self.init_prior {
+            if let Ok(n) = NoiseModel::from_covariance(&p.pose_cov) {
+                g.add(PriorFactor::new(X(p.sid), p.pose), n);
+            }
+            g.add(PriorFactor::new(V(p.sid), p.v), NoiseModel::isotropic(3, p.v_sigma).expect("positive"));
+            g.add(PriorFactor::new(B(p.sid), p.b), NoiseModel::diagonal(&p.b_sigma).expect("positive"));
+        }
+        if let Some(m) = &self.marginal {
+            g.add(m.clone(), NoiseModel::Unit);
+        }
+        for i in 0..self.links.len() {
+            self.add_link(g, i, opts);
+        }
+        for (i, s) in self.states.iter().enumerate() {
+            let Some(rest_since) = s.rest_since else { continue };
+            add_rest_prior(g, s.sid);
+            // At rest ever since the previous state: the position stays (the
+            // IMU factor alone lets it wander by the accelerometer's noise,
+            // centimetres per second for a MEMS part).
+            if let Some(prev) = i.checked_sub(1).map(|k| &self.states[k]).filter(|p| p.t >= rest_since) {
+                let sp = (REST_SPEED_SIGMA * (s.t - prev.t)).max(1e-4);
+                let noise = NoiseModel::diagonal(&[10.0, 10.0, 10.0, sp, sp, sp]).expect("positive");
+                g.add(BetweenFactor::new(X(prev.sid), X(s.sid), Isometry3F64::identity()), noise);
+            }
+        }
+    }
+
+    /// Add link `i`'s IMU factor and bias random walk (state `i` to `i + 1`) to `g`.
+    pub fn add_link(&self, g: &mut Graph, i: usize, opts: &VioOptions) {
+        let (pim, scale) = &self.links[i];
+        let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
+        let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
+        if let Ok(n) = f.noise_model_scaled(*scale) {
+            g.add(f, n);
+        }
+        let dt = pim.delta_t().max(1e-3);
+        let imu = &opts.noise.imu;
+        if let Ok((rw, n)) = bias_random_walk_axes(B(a), B(b), imu.accel_walk().into(), imu.gyro_walk().into(), dt) {
+            g.add(rw, n);
+        }
+    }
+
+    /// Preintegrate a link again where its state's bias moved away from the
+    /// one it was integrated with (by 0.05 m/s² or 0.005 rad/s).
+    pub fn reintegrate_if_needed(&mut self) {
+        for i in 0..self.links.len() {
+            let sid = self.states[i].sid;
+            let b = *self.values.get::<Vector6<f64>>(B(sid)).expect("state");
+            let (ba, bg) = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
+            let (la, lg) = self.links[i].0.bias();
+            if (ba - la).norm() > 0.05 || (bg - lg).norm() > 0.005 {
+                let mut p = (*self.links[i].0).clone();
+                p.reintegrate(ba, bg);
+                self.links[i].0 = Arc::new(p);
+            }
+        }
+    }
+
+    /// Remove the oldest state, its link and its keys `keys` (with the
+    /// landmarks marginalized with it), after `prior` took their information.
+    pub fn remove_oldest(&mut self, prior: MarginalPrior, keys: &[tumble_solvers::Key]) {
+        let old = self.states[0].sid;
+        self.marginal = Some(prior);
+        if self.init_prior.as_ref().is_some_and(|p| p.sid == old) {
+            self.init_prior = None;
+        }
+        for &k in keys {
+            self.values.remove(k);
+        }
+        self.states.remove(0);
+        self.links.remove(0);
+    }
+
+    /// Each state's time, position \[m\] and rotation world←body `[w, x, y, z]`.
+    pub fn poses(&self) -> Vec<(f64, [f64; 3], [f64; 4])> {
+        self.states
+            .iter()
+            .filter_map(|s| {
+                let x = self.values.get::<Isometry3F64>(X(s.sid)).ok()?;
+                let (r, p) = parts(x);
+                let q = UnitQuaternion::from_matrix(&r);
+                Some((s.t, [p.x, p.y, p.z], [q.w, q.i, q.j, q.k]))
+            })
+            .collect()
+    }
+}
+
+/// The zero-velocity pseudo-measurement of state `sid`, at rest.
+pub(crate) fn add_rest_prior(g: &mut Graph, sid: u64) {
+    g.add(PriorFactor::new(V(sid), Vector3::zeros()), NoiseModel::isotropic(3, REST_SPEED_SIGMA).expect("positive"));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vio::geometry::pose;
+    use tumble_factors::imu_preint::PreintegrationParams;
+    use tumble_solvers::{LmOptions, Optimizer};
+
+    /// A window of `n` states 0.1 s apart, at rest, IMU reading gravity.
+    fn at_rest(n: usize, rest: bool) -> (Window, VioOptions) {
+        let opts = VioOptions::default();
+        let mut w = Window::new(opts.noise.gravity);
+        w.start(
+            0.0,
+            InitState::at_rest(pose(&Matrix3::identity(), &Vector3::zeros()), Vector3::zeros(), Vector6::zeros()),
+            &opts,
+        );
+        for k in 1..n {
+            let mut pim = Preintegrated::new(PreintegrationParams::default(), Vector3::zeros(), Vector3::zeros());
+            for _ in 0..20 {
+                pim.integrate(Vector3::new(0.0, 0.0, opts.noise.gravity), Vector3::zeros(), 0.005);
+            }
+            let sid = w.next_id();
+            let rest_since = rest.then_some(0.0);
+            let x = w.state_values(w.states.last().unwrap().sid);
+            w.push(State { sid, t: 0.1 * k as f64, rest_since }, x, (pim, 1.0));
+        }
+        (w, opts)
+    }
+
+    #[test]
+    fn a_window_at_rest_stays_at_rest() {
+        let (mut w, opts) = at_rest(5, true);
+        // Disturb the newest state; the IMU links and rest priors pull it back.
+        let newest = w.states.last().unwrap().sid;
+        w.values.insert(V(newest), Vector3::new(0.3, 0.0, 0.0));
+        let mut g = Graph::new();
+        w.add_factors(&mut g, &opts);
+        let (solved, _) = Optimizer::new(LmOptions::default()).optimize(&g, &w.values).unwrap();
+        let v = solved.get::<Vector3<f64>>(V(newest)).unwrap();
+        let (_, p) = parts(solved.get::<Isometry3F64>(X(newest)).unwrap());
+        assert!(v.norm() < 1e-3 && p.norm() < 1e-3, "v {v:?}, p {p:?}");
+    }
+
+    #[test]
+    fn dropping_and_removing_states_keeps_links_in_step() {
+        let (mut w, _) = at_rest(4, false);
+        assert_eq!((w.states.len(), w.links.len()), (4, 3));
+        let dropped = w.drop_newest();
+        assert_eq!(dropped, 3);
+        assert!(!w.values.contains(X(3)));
+        let mut g = Graph::new();
+        w.add_link(&mut g, 0, &VioOptions::default());
+        let m = tumble_solvers::marginalize(&g, &w.values, &[X(0), V(0), B(0)]).unwrap();
+        w.remove_oldest(m.prior, &[X(0), V(0), B(0)]);
+        assert_eq!(w.ids(), vec![1, 2]);
+        assert_eq!(w.links.len(), 1);
+        assert!(w.init_prior.is_none() && w.marginal.is_some());
+    }
+}
