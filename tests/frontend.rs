@@ -94,16 +94,20 @@ fn bad_images_are_refused_with_the_file_named() {
     // Not an image.
     let junk = dir.join("junk.png");
     std::fs::write(&junk, b"\x89PNG\r\n\x1a\n truncated").unwrap();
-    let err = track_camera(&[(0, junk.clone())], cam, None, &FrontendOptions::default(), &mut |_, _| {}).unwrap_err();
+    let err = track_camera(&[(0, junk.clone())], cam, None, &FrontendOptions::default(), &mut |_, _| {})
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("junk.png") && err.contains("not a readable image"), "{err}");
     // Missing.
-    let err = read_gray(&dir.join("missing.png")).unwrap_err();
+    let err = read_gray(&dir.join("missing.png")).unwrap_err().to_string();
     assert!(err.contains("missing.png"), "{err}");
     // Wrong size for the sensor.yaml resolution.
     let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
     let ds = read_asl(&micro, &Default::default()).unwrap();
     let frames = &ds.cameras[0].frames[..2];
-    let err = track_camera(frames, cam, Some([640, 480]), &FrontendOptions::default(), &mut |_, _| {}).unwrap_err();
+    let err = track_camera(frames, cam, Some([640, 480]), &FrontendOptions::default(), &mut |_, _| {})
+        .unwrap_err()
+        .to_string();
     assert!(err.contains("752×480") && err.contains("640×480"), "{err}");
     // An empty image handed to the tracker.
     let mut t = KltTracker::new(cam, FrontendOptions::default());
@@ -137,6 +141,6 @@ fn euroc_micro_stereo_matches_obey_the_epipolar_geometry() {
     // A folder with one camera cannot do stereo.
     let mut mono = ds.clone();
     mono.cameras.truncate(1);
-    let e = track_asl_stereo(&mono, &FrontendOptions::default(), &mut |_, _| {}).unwrap_err();
+    let e = track_asl_stereo(&mono, &FrontendOptions::default(), &mut |_, _| {}).unwrap_err().to_string();
     assert!(e.contains("cam0 and cam1"), "{e}");
 }

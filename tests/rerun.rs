@@ -97,9 +97,9 @@ mod recording {
         let dir = temp_dir("bad");
         let bad = dir.join("not.rrd");
         std::fs::write(&bad, b"this is not a rerun file").unwrap();
-        let err = read_rrd(&bad).unwrap_err();
+        let err = read_rrd(&bad).unwrap_err().to_string();
         assert!(err.contains("not.rrd"), "{err}");
-        let err = read_rrd(&dir.join("missing.rrd")).unwrap_err();
+        let err = read_rrd(&dir.join("missing.rrd")).unwrap_err().to_string();
         assert!(err.contains("missing.rrd"), "{err}");
         // A missing image file: the run goes on, with a warning naming it.
         let (cfg, mut input) = walk(11.0);
@@ -113,8 +113,9 @@ mod recording {
         run_recorded(&input, &VioOptions::for_simulation(&cfg), None, Some(&nested)).unwrap();
         assert!(nested.is_file());
         std::fs::write(dir.join("afile"), b"").unwrap();
-        let err =
-            run_recorded(&input, &VioOptions::for_simulation(&cfg), None, Some(&dir.join("afile/x.rrd"))).unwrap_err();
+        let err = run_recorded(&input, &VioOptions::for_simulation(&cfg), None, Some(&dir.join("afile/x.rrd")))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("afile"), "{err}");
         std::fs::remove_dir_all(&dir).ok();
     }

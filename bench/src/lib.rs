@@ -104,14 +104,14 @@ pub struct TumbleProblem {
 }
 
 /// Load a g2o or BAL file with tumble's readers; 3-D g2o edges get `edge_error`.
-pub fn load(path: &Path, edge_error: g2o::EdgeError) -> Result<TumbleProblem, String> {
+pub fn load(path: &Path, edge_error: g2o::EdgeError) -> Result<TumbleProblem, tumble::InputError> {
     let options = LmOptions { log_iterations: false, ..LmOptions::default() };
     if path.extension().is_some_and(|e| e == "g2o") {
         let opts = g2o::G2oOptions { edge_error, ..Default::default() };
-        let pg = g2o::read_g2o(path, &opts).map_err(|e| e.to_string())?;
+        let pg = g2o::read_g2o(path, &opts)?;
         Ok(TumbleProblem { graph: pg.graph, values: pg.values, options, is_bal: false })
     } else {
-        let p = bal::read_bal(path).map_err(|e| e.to_string())?;
+        let p = bal::read_bal(path)?;
         Ok(TumbleProblem {
             graph: p.graph,
             values: p.values,
@@ -133,12 +133,12 @@ pub fn run_tumble(path: &Path, repeat: usize, solver: &str) -> Record {
     let edge_error = if log_error { g2o::EdgeError::Log } else { g2o::EdgeError::CeresQuaternion };
     let p = match load(path, edge_error) {
         Ok(p) => p,
-        Err(e) => return skipped(&name, solver, &e),
+        Err(e) => return skipped(&name, solver, &e.to_string()),
     };
     let second = if solver == "tumble-two-stage" {
         match load(path, g2o::EdgeError::Log) {
             Ok(l) => Some(l),
-            Err(e) => return skipped(&name, solver, &e),
+            Err(e) => return skipped(&name, solver, &e.to_string()),
         }
     } else {
         None

@@ -53,8 +53,12 @@ pub struct G2oData {
 
 /// Minimal g2o parse for building peers' problems (tumble's reader has
 /// already validated the file by the time this runs).
-pub fn parse_g2o_data(path: &Path) -> Result<G2oData, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
+pub fn parse_g2o_data(path: &Path) -> Result<G2oData, tumble::InputError> {
+    let text = std::fs::read_to_string(path).map_err(|e| tumble::InputError::file(path, e))?;
+    parse_g2o_text(&text).map_err(|e| tumble::InputError::file(path, e))
+}
+
+fn parse_g2o_text(text: &str) -> Result<G2oData, String> {
     let mut vertices = Vec::new();
     let mut edges = Vec::new();
     for line in text.lines() {
@@ -266,7 +270,7 @@ pub fn run_tiny(path: &Path, repeat: usize) -> Record {
     }
     let data = match parse_g2o_data(path) {
         Ok(d) => d,
-        Err(e) => return skipped(&name, "tiny-solver", &e),
+        Err(e) => return skipped(&name, "tiny-solver", &e.to_string()),
     };
     let mut problem = tiny_solver::Problem::new();
     let mut init = std::collections::HashMap::new();

@@ -1,7 +1,7 @@
 //! `tumble audit`: the model-discrepancy audit of a calibration, or (`--vio`)
 //! of a VIO run's time offsets.
 
-use super::common::{print_frontend, progress_bar, track_bar, CalibInput, FrontendArgs};
+use super::common::{open_vio, progress_bar, CalibInput, FrontendArgs};
 use super::CliResult;
 use clap::Args;
 use std::path::PathBuf;
@@ -110,22 +110,7 @@ impl AuditArgs {
             frontend_dir: self.out.clone(),
             ..Default::default()
         };
-        let bar = track_bar(0);
-        let opened = tumble::inputs::open_vio(path, &source, &mut |d, n| {
-            bar.set_length(n as u64);
-            bar.set_position(d as u64)
-        })?;
-        bar.finish_and_clear();
-        for n in &opened.notes {
-            println!("{n}");
-        }
-        for w in &opened.warnings {
-            eprintln!("warning: {w}");
-        }
-        if let Some(f) = &opened.frontend {
-            print_frontend(f);
-        }
-        let vin = opened.input;
+        let vin = open_vio(path, &source)?;
         vin.apply_noise(noise, &mut vopts.noise.imu);
         let opts = audit_options(vopts);
         if let Some(o) = cal.and_then(|c| c.time_offsets) {

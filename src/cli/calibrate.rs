@@ -33,8 +33,8 @@ pub struct CalibrateArgs {
     #[arg(long, default_value_t = 0.5)]
     min_interval: f64,
     /// Threshold multipliers to sweep: FIRST:LAST (integers) or a comma list.
-    #[arg(long, default_value = "2:10", value_parser = parse_multipliers)]
-    multipliers: Vec<f64>,
+    #[arg(long, default_value = "2:10")]
+    multipliers: String,
     /// Estimate the gyro bias with the other gyro parameters (default: mean of the initial static period).
     #[arg(long)]
     estimate_gyro_bias: bool,
@@ -64,7 +64,7 @@ impl CalibrateArgs {
             init_static_s: self.init_static,
             window_s: self.window,
             min_interval_s: self.min_interval,
-            multipliers: self.multipliers,
+            multipliers: parse_multipliers(&self.multipliers)?,
             estimate_gyro_bias: self.estimate_gyro_bias,
             min_intervals: self.min_intervals.max(10),
             detect_with_gyro: !self.accel_only_detection,

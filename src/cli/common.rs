@@ -173,3 +173,26 @@ pub fn print_frontend(report: &tumble::vio::frontend::FrontendReport) {
     }
     println!("wrote {}", paths(&report.files));
 }
+
+/// Open a VIO input with a bar for the frontend, printing what opening it did.
+pub fn open_vio(
+    path: &std::path::Path,
+    source: &tumble::inputs::VioSource,
+) -> Result<tumble::vio::VioInput, tumble::inputs::OpenError> {
+    let bar = track_bar(0);
+    let opened = tumble::inputs::open_vio(path, source, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64)
+    })?;
+    bar.finish_and_clear();
+    for n in &opened.notes {
+        println!("{n}");
+    }
+    for w in &opened.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(f) = &opened.frontend {
+        print_frontend(f);
+    }
+    Ok(opened.input)
+}

@@ -124,3 +124,65 @@ pub fn main() -> ExitCode {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+
+    /// Every command parses its flags into their types (a value parser whose
+    /// type does not match its field panics here, not in a user's hands).
+    #[test]
+    fn every_command_parses_its_flags() {
+        let cases: &[&[&str]] = &[
+            &["sim", "walk", "--out", "o", "--pause", "10,2", "--hide", "g_sensitivity:2", "--stereo-baseline", "0.1"],
+            &["inspect", "r.csv", "--columns", "t,gx,gy,gz,ax,ay,az", "--time-unit", "s", "--gyro-unit", "deg/s"],
+            &[
+                "allan",
+                "r.csv",
+                "--out",
+                "o",
+                "--kind",
+                "adev",
+                "--taus",
+                "octave",
+                "--axis-stat",
+                "mean",
+                "--span",
+                "0:10",
+            ],
+            &["calibrate", "r.csv", "--out", "o", "--multipliers", "2,3.5", "--latitude", "45", "--height", "100"],
+            &["calibrate", "--accel", "a", "--gyro", "g", "--format", "imu-tk", "--out", "o"],
+            &["apply", "r.csv", "--calibration", "c.json", "--out", "o"],
+            &["audit", "r.csv", "--calibration", "c.json", "--out", "o", "--candidates", "temperature_bias,bias_drift"],
+            &["audit", "--vio", "v", "--out", "o", "--offset-step-ms", "2"],
+            &["vio", "v", "--out", "o", "--init", "motion", "--window", "8", "--keyframe-parallax", "20", "--midpoint"],
+            &["vio", "--print-config"],
+            &["track", "v", "--out", "o", "--stereo"],
+            &["eval", "--estimate", "e", "--groundtruth", "g", "--align", "sim3", "--rpe-distances", "1,2"],
+            &["run", "--vio", "v", "--out", "o", "--skip", "calibrate,allan", "--pixel-sigma", "2"],
+            &["demo", "--walk", "room", "--seed", "3"],
+            &["solve", "f.g2o", "--method", "gn", "--edge-error", "ceres-then-log"],
+        ];
+        for args in cases {
+            let argv = std::iter::once("tumble").chain(args.iter().copied());
+            if let Err(e) = Cli::try_parse_from(argv) {
+                panic!("{args:?}: {e}");
+            }
+        }
+        // Values the library refuses are refused while parsing.
+        for bad in [
+            &["calibrate", "r.csv", "--out", "o", "--gyro-unit", "furlongs"][..],
+            &["run", "--vio", "v", "--out", "o", "--skip", "nothing"],
+            &["allan", "r.csv", "--out", "o", "--span", "5:1"],
+        ] {
+            let argv = std::iter::once("tumble").chain(bad.iter().copied());
+            assert!(Cli::try_parse_from(argv).is_err(), "{bad:?}");
+        }
+    }
+}

@@ -1,6 +1,6 @@
 //! `tumble run`: the whole chain on the user's recordings.
 
-use super::common::{print_frontend, progress_bar, CalibInput, FrontendArgs, InputFormat, RecordingArgs};
+use super::common::{open_vio, progress_bar, CalibInput, FrontendArgs, InputFormat, RecordingArgs};
 use super::vio::EstimatorArgs;
 use super::CliResult;
 use clap::Args;
@@ -123,17 +123,7 @@ impl RunArgs {
             };
             inputs.vio = Some(Box::new(move |cal| {
                 source.calibration = cal.cloned();
-                let opened = tumble::inputs::open_vio(&p, &source, &mut |_, _| {})?;
-                for n in &opened.notes {
-                    println!("{n}");
-                }
-                for w in &opened.warnings {
-                    eprintln!("warning: {w}");
-                }
-                if let Some(f) = &opened.frontend {
-                    print_frontend(f);
-                }
-                Ok(opened.input)
+                Ok(open_vio(&p, &source)?)
             }));
         }
         let bar = progress_bar(0, "{prefix} [{bar:40}] {pos}/{len} {msg} {elapsed_precise} (eta {eta})");

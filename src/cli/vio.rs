@@ -1,6 +1,6 @@
 //! `tumble vio`: visual-inertial bias estimation over a recording.
 
-use super::common::{paths, print_frontend, progress_bar, track_bar, FrontendArgs};
+use super::common::{open_vio, paths, progress_bar, FrontendArgs};
 use super::CliResult;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -195,22 +195,7 @@ impl VioArgs {
             frontend: self.frontend.options(),
             frontend_dir: out.clone(),
         };
-        let bar = track_bar(0);
-        let opened = tumble::inputs::open_vio(&input, &source, &mut |d, n| {
-            bar.set_length(n as u64);
-            bar.set_position(d as u64)
-        })?;
-        bar.finish_and_clear();
-        for n in &opened.notes {
-            println!("{n}");
-        }
-        for w in &opened.warnings {
-            eprintln!("warning: {w}");
-        }
-        if let Some(f) = &opened.frontend {
-            print_frontend(f);
-        }
-        let vin = opened.input;
+        let vin = open_vio(&input, &source)?;
         if let (Some(st), Some(baseline)) = (&vin.stereo, vin.stereo_baseline_m()) {
             let matches: usize = st.features.iter().map(Vec::len).sum();
             println!("stereo: {matches} matches in cam1 ({baseline:.3} m from cam0) for the initialization (--mono to ignore)");

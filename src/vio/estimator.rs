@@ -1,8 +1,8 @@
 //! The sliding-window estimator: a thin orchestrator over its parts — the
-//! window of states ([`super::window`]), the landmarks
-//! ([`super::landmarks`]), the keyframe policy ([`super::keyframe`]), rest
-//! detection ([`super::rest`]), the initialization ([`super::startup`]) and
-//! marginalization ([`super::marginalization`]) — that predicts each frame
+//! window of states (`vio/window.rs`), the landmarks (`vio/landmarks.rs`),
+//! the keyframe policy (`vio/keyframe.rs`), rest detection (`vio/rest.rs`),
+//! the initialization (`vio/startup.rs`) and marginalization
+//! (`vio/marginalization.rs`) — that predicts each frame
 //! with the IMU, decides what it is, solves, and recovers from failures.
 
 use super::geometry::{parts, pose, preintegrate};

@@ -12,7 +12,7 @@
 //! - The window is solved when a frame becomes a keyframe (parallax, time);
 //!   a frame in between is tracked against the fixed window (its own pose,
 //!   velocity and bias only) and dropped, its IMU measured again from the last
-//!   keyframe by the next frame ([`VioOptions::solve_window_every_frame`]
+//!   keyframe by the next frame ([`WindowOptions::solve_every_frame`]
 //!   solves the whole window at every frame instead); when the window holds
 //!   more than N keyframes the oldest is marginalized.
 //! - Initialization without ground truth from a static start (gyro bias,
