@@ -9,9 +9,7 @@
 //! ```
 
 use nalgebra::Vector3;
-use tumble::solvers::{
-    check_jacobians, AutoDiff, AutoDiffResidual, Graph, Huber, Key, LmOptions, NoiseModel, Optimizer, Real, Values, X,
-};
+use tumble::solvers::prelude::*;
 
 /// Signed distance of one point from the circle: ‖p − c‖ − r \[m\].
 struct PointOnCircle {

@@ -60,3 +60,17 @@ pub use variable::{se2, se3_from_quaternion, DynVariable, DynVector, Variable};
 
 pub use nalgebra;
 pub use sophus_lie;
+
+/// What a custom factor and its solve need, in one import:
+/// `use tumble_solvers::prelude::*;`.
+///
+/// A factor is [`AutoDiffResidual`] (keys, residual dimension, the residual
+/// written generically over [`Real`]) wrapped in [`AutoDiff`], or [`Factor`]
+/// (the residual on [`Vars`]; Jacobians by central differences unless you
+/// write them); [`check_jacobians`] compares yours with numeric ones.
+pub mod prelude {
+    pub use crate::{
+        check_jacobians, AutoDiff, AutoDiffResidual, Factor, FactorError, Graph, Huber, Key, LmOptions, NoiseModel,
+        Optimizer, Real, Values, Variable, Vars, X,
+    };
+}

@@ -49,6 +49,10 @@ pub struct LmOptions {
     /// Smallest factor λ is multiplied by after a successful step (Nielsen's
     /// update `max(this, 1 − (2ρ − 1)³)`; Ceres uses 1/3, tumble 1/10).
     pub min_lambda_decrease: f64,
+    /// A step is accepted when it lowers the cost and its gain ratio (actual
+    /// over predicted decrease) exceeds this (Ceres' `min_relative_decrease`
+    /// is 1e-3).
+    pub min_gain_ratio: f64,
     /// Linear solver for the (reduced) normal equations.
     pub linear_solver: LinearSolver,
     /// Key tags (e.g. `['l']`) of variables to eliminate first by the Schur
@@ -57,6 +61,13 @@ pub struct LmOptions {
     pub eliminate: Vec<char>,
     /// Record one [`IterationLog`] per iteration.
     pub log_iterations: bool,
+    /// Before stopping on [`LmOptions::function_tolerance`], check with one
+    /// undamped (Gauss–Newton) solve that the model predicts no larger
+    /// relative decrease either, and go on if it does: the damped steps may
+    /// have been small because the damping was large (a slow stretch far from
+    /// the minimum), not because the minimum is near. Off for anytime solves
+    /// with a fixed budget (the VIO window, re-solved at the next frame).
+    pub check_stationarity: bool,
 }
 
 impl Default for LmOptions {
@@ -72,9 +83,11 @@ impl Default for LmOptions {
             max_diagonal: 1e32,
             max_lambda: 1e16,
             min_lambda_decrease: 0.1,
+            min_gain_ratio: 0.0,
             linear_solver: LinearSolver::Auto,
             eliminate: Vec::new(),
             log_iterations: true,
+            check_stationarity: false,
         }
     }
 }
@@ -92,6 +105,11 @@ pub enum Termination {
     MaxIterations,
     /// Damping grew past `max_lambda` without finding a decrease.
     NoProgress,
+    /// The steps became too small ([`LmOptions::parameter_tolerance`]) while
+    /// the scaled gradient ([`Summary::scaled_gradient`]) still promised a
+    /// decrease larger than [`LmOptions::function_tolerance`] allows: not a
+    /// minimum, the solver stalled.
+    Stalled,
     /// The graph has no free variable.
     NothingToOptimize,
 }
@@ -148,6 +166,23 @@ pub struct Summary {
     pub time_total: f64,
     /// Per-iteration log (when enabled).
     pub log: Vec<IterationLog>,
+    /// The scaled gradient at the last assembled linearization (the final
+    /// point's, or the one before it when a step ends the solve): the largest cosine of
+    /// the angle between the (whitened) residual and a Jacobian column,
+    /// `max_j |(Jᵀr)_j| / (‖J_j‖ ‖r‖)` — 0 at a minimum whatever the problem's
+    /// scale, and its square estimates the relative decrease still to come.
+    pub scaled_gradient: f64,
+}
+
+impl Summary {
+    /// Whether the solve ended at a minimum (a tolerance test passed with a
+    /// small scaled gradient), not at a limit or a stall.
+    pub fn converged(&self) -> bool {
+        matches!(
+            self.termination,
+            Termination::FunctionTolerance | Termination::GradientTolerance | Termination::ParameterTolerance
+        )
+    }
 }
 
 impl fmt::Display for Summary {
@@ -163,14 +198,40 @@ impl fmt::Display for Summary {
         writeln!(f, "  final cost   {:.6e}", self.final_cost)?;
         writeln!(
             f,
-            "  iterations {} ({} linear solves), termination: {:?}",
-            self.iterations, self.linear_solves, self.termination
+            "  iterations {} ({} linear solves), termination: {:?} (scaled gradient {:.1e})",
+            self.iterations, self.linear_solves, self.termination, self.scaled_gradient
         )?;
         writeln!(
             f,
             "  time [s]: linearize {:.4}  build {:.4}  factorize {:.4}  solve {:.4}  total {:.4}",
             self.time_linearize, self.time_build, self.time_factorize, self.time_solve, self.time_total
         )
+    }
+}
+
+/// Damping (relative to diag H) of the Gauss–Newton step that checks a
+/// small decrease: small enough to leave the step undamped, large enough to
+/// keep a semi-definite H factorizable.
+const GAUSS_NEWTON_CHECK_DAMPING: f64 = 1e-12;
+
+/// The largest cosine of the angle between the whitened residual (cost
+/// `cost` = ½‖r‖²) and a Jacobian column: `|g_j| / sqrt(H_jj · 2 cost)`, with
+/// `g = Jᵀr` and `H_jj = ‖J_j‖²` (0 where a column or the residual vanishes).
+fn scaled_gradient(g: &[f64], diag: &[f64], cost: f64) -> f64 {
+    let r2 = 2.0 * cost;
+    g.iter()
+        .zip(diag)
+        .map(|(gj, hj)| if *hj > 0.0 && r2 > 0.0 { gj.abs() / (hj * r2).sqrt() } else { 0.0 })
+        .fold(0.0, f64::max)
+}
+
+/// `termination`, or [`Termination::Stalled`] when the scaled gradient of the
+/// last linearization still promises more than the function tolerance.
+fn stalled_or(termination: Termination, summary: &Summary, o: &LmOptions) -> Termination {
+    if summary.scaled_gradient.powi(2) > o.function_tolerance {
+        Termination::Stalled
+    } else {
+        termination
     }
 }
 
@@ -350,6 +411,7 @@ impl Optimizer {
             time_solve: 0.0,
             time_total: 0.0,
             log: Vec::new(),
+            scaled_gradient: f64::NAN,
         };
         let t = Instant::now();
         let (mut lins, mut cost) = linearize_all(entries, &layout, &vars)?;
@@ -367,6 +429,9 @@ impl Optimizer {
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
         // The trial point, overwritten by each step's retraction.
         let mut trial: Vec<Box<dyn DynVariable>> = vars.clone();
+        // The cost decrease fell below the function tolerance: stop at the
+        // next linearization if the scaled gradient agrees.
+        let mut small_decrease = false;
 
         'outer: while summary.termination != Termination::NothingToOptimize {
             if summary.iterations >= o.max_iterations {
@@ -378,12 +443,48 @@ impl Optimizer {
             summary.time_build += t.elapsed().as_secs_f64();
             let g_all: Vec<f64> = sys.g.iter().copied().chain(sys.gl.iter().copied()).collect();
             let gmax = g_all.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let raw_diag = structure.diagonal(&sys);
+            summary.scaled_gradient = scaled_gradient(&g_all, &raw_diag, cost);
             if gmax <= o.gradient_tolerance {
                 summary.termination = Termination::GradientTolerance;
                 break;
             }
-            let diag: Vec<f64> =
-                structure.diagonal(&sys).iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
+            // A small decrease ends the solve only where the gradient agrees
+            // that little is left: the relative decrease the model still
+            // predicts, about the squared scaled gradient, is below the
+            // tolerance too (a slow stretch far from the minimum goes on).
+            let diag: Vec<f64> = raw_diag.iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
+            if std::mem::take(&mut small_decrease) {
+                // The damped steps may have been small because λ was large,
+                // not because the minimum is near: the undamped (Gauss–Newton)
+                // model must predict no larger relative decrease either.
+                let t = Instant::now();
+                let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
+                let step = structure.solve(&sys, Some(&tiny));
+                summary.time_build += t.elapsed().as_secs_f64();
+                summary.linear_solves += 1;
+                let left = step.map(|(delta, ..)| {
+                    let hd = structure.h_times(&sys, &delta);
+                    -delta.iter().zip(&g_all).map(|(a, b)| a * b).sum::<f64>()
+                        - 0.5 * delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>()
+                });
+                // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
+                let left = left.ok().filter(|d| d.is_finite() && *d >= 0.0).ok_or(());
+                match left {
+                    // The scaled gradient must agree: a direction whose column
+                    // vanished (a parameter the model lost) hides from the solve.
+                    Ok(d) if d <= o.function_tolerance * cost => {
+                        summary.termination = stalled_or(Termination::FunctionTolerance, &summary, o);
+                        break;
+                    }
+                    Ok(_) => {}
+                    // No undamped step (H singular there): the scaled gradient decides.
+                    Err(_) => {
+                        summary.termination = stalled_or(Termination::FunctionTolerance, &summary, o);
+                        break;
+                    }
+                }
+            }
             summary.iterations += 1;
             let x_norm =
                 free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
@@ -439,7 +540,7 @@ impl Optimizer {
                 let (new_cost, accepted, rho) = match new_cost {
                     Ok(c) => {
                         let rho = if predicted > 0.0 { (cost - c) / predicted } else { -1.0 };
-                        (c, gn || (c < cost && rho > 0.0), rho)
+                        (c, gn || (c < cost && rho > o.min_gain_ratio), rho)
                     }
                     Err(_) => (f64::INFINITY, false, -1.0),
                 };
@@ -464,17 +565,24 @@ impl Optimizer {
                         nu = 2.0;
                     }
                     if small_step {
-                        summary.termination = Termination::ParameterTolerance;
+                        summary.termination = stalled_or(Termination::ParameterTolerance, &summary, o);
                         break 'outer;
                     }
-                    if decrease.abs() <= o.function_tolerance * cost.max(f64::MIN_POSITIVE) || cost == 0.0 {
+                    if cost == 0.0 {
                         summary.termination = Termination::FunctionTolerance;
                         break 'outer;
+                    }
+                    if decrease.abs() <= o.function_tolerance * cost.max(f64::MIN_POSITIVE) {
+                        if !o.check_stationarity || gn {
+                            summary.termination = Termination::FunctionTolerance;
+                            break 'outer;
+                        }
+                        small_decrease = true;
                     }
                     break;
                 }
                 if small_step {
-                    summary.termination = Termination::ParameterTolerance;
+                    summary.termination = stalled_or(Termination::ParameterTolerance, &summary, o);
                     break 'outer;
                 }
                 lambda *= nu;
