@@ -42,22 +42,29 @@ pub trait Variable: Clone + Debug + Send + Sync + 'static {
     /// Derivative of `params(self ⊞ δ)` with respect to δ at δ = 0
     /// (`params().len()` × `DIM`).
     fn params_jacobian(&self) -> DMatrix<f64> {
-        let p0 = self.params();
-        let h = 1e-6;
-        let mut j = DMatrix::zeros(p0.len(), Self::DIM);
-        let mut d = vec![0.0; Self::DIM];
-        for c in 0..Self::DIM {
-            d[c] = h;
-            let pp = self.retract(&d).params();
-            d[c] = -h;
-            let pm = self.retract(&d).params();
-            d[c] = 0.0;
-            for r in 0..p0.len() {
-                j[(r, c)] = (pp[r] - pm[r]) / (2.0 * h);
-            }
-        }
-        j
+        numeric_params_jacobian(self)
     }
+}
+
+/// Central differences (step 1e-6) of `params(x ⊞ δ)` at δ = 0: the default
+/// [`Variable::params_jacobian`], and what [`crate::testing::check_variable`]
+/// compares an analytic one with.
+pub fn numeric_params_jacobian<V: Variable>(x: &V) -> DMatrix<f64> {
+    let p0 = x.params();
+    let h = 1e-6;
+    let mut j = DMatrix::zeros(p0.len(), V::DIM);
+    let mut d = vec![0.0; V::DIM];
+    for c in 0..V::DIM {
+        d[c] = h;
+        let pp = x.retract(&d).params();
+        d[c] = -h;
+        let pm = x.retract(&d).params();
+        d[c] = 0.0;
+        for r in 0..p0.len() {
+            j[(r, c)] = (pp[r] - pm[r]) / (2.0 * h);
+        }
+    }
+    j
 }
 
 /// Object-safe view of any [`Variable`], used by the value store and solver.

@@ -49,17 +49,11 @@ pub fn read_imu_tk_calib(path: &Path) -> Result<ImuTkTriad, InputError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::calibration::{imu_tk_calib_text, Triad};
+    use crate::model::calibration::{imu_tk_calib_text, sample_triad};
 
     #[test]
     fn imu_tk_calib_round_trip() {
-        let tr = Triad {
-            t: Matrix3::new(1.0, -0.01, 0.02, 0.003, 1.0, 0.01, -0.02, 0.005, 1.0),
-            k: Vector3::new(1.01, 0.99, 1.002),
-            b: Vector3::new(0.1, -0.2, 0.3),
-            ..Triad::identity()
-        };
-        let (t, k, b) = tr.to_imu_tk().unwrap();
+        let (t, k, b) = sample_triad().to_imu_tk().unwrap();
         let dir = std::env::temp_dir().join(format!("tumble-calib-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join("x.calib");

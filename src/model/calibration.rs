@@ -542,18 +542,24 @@ pub fn imu_tk_calib_text(t: &Matrix3<f64>, k: &Vector3<f64>, b: &Vector3<f64>) -
     s
 }
 
+/// A triad with misalignment, scale and bias, for tests.
+#[cfg(test)]
+pub(crate) fn sample_triad() -> Triad {
+    Triad {
+        t: Matrix3::new(1.0, -0.01, 0.02, 0.003, 1.0, 0.01, -0.02, 0.005, 1.0),
+        k: Vector3::new(1.01, 0.99, 1.002),
+        b: Vector3::new(0.1, -0.2, 0.3),
+        ..Triad::identity()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn conventions_round_trip() {
-        let tr = Triad {
-            t: Matrix3::new(1.0, -0.01, 0.02, 0.003, 1.0, 0.01, -0.02, 0.005, 1.0),
-            k: Vector3::new(1.01, 0.99, 1.002),
-            b: Vector3::new(0.1, -0.2, 0.3),
-            ..Triad::identity()
-        };
+        let tr = sample_triad();
         let (t, k, b) = tr.to_imu_tk().unwrap();
         let back = Triad::from_imu_tk(&t, &k, &b).unwrap();
         assert!((back.t - tr.t).amax() < 1e-14 && (back.k - tr.k).amax() < 1e-14);
