@@ -73,8 +73,15 @@ impl CalibOptions {
                 format!("must be positive numbers, got {:?}", self.multipliers),
             ));
         }
-        if self.min_intervals == 0 {
-            return Err(OptionError::new("--min-intervals", "must be at least 1"));
+        if self.min_intervals < MIN_STATIC_INTERVALS {
+            return Err(OptionError::new(
+                "--min-intervals",
+                format!(
+                    "must be at least {MIN_STATIC_INTERVALS} (the accelerometer model has 9 parameters, one gravity-norm \
+                     residual per interval), got {}",
+                    self.min_intervals
+                ),
+            ));
         }
         Ok(())
     }
@@ -97,6 +104,11 @@ pub fn parse_multipliers(s: &str) -> Result<Vec<f64>, OptionError> {
     }
     Ok(v)
 }
+
+/// Fewest static intervals [`CalibOptions::min_intervals`] may ask for: one
+/// more than the accelerometer model's 9 parameters, so that its fit has a
+/// residual to judge it by.
+pub const MIN_STATIC_INTERVALS: usize = 10;
 
 /// Why a recording cannot be calibrated.
 #[derive(Debug, Clone, PartialEq)]

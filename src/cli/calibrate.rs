@@ -49,12 +49,6 @@ pub struct CalibrateArgs {
 
 impl CalibrateArgs {
     pub fn run(self) -> CliResult {
-        let start = std::time::Instant::now();
-        let source = self.input.source()?;
-        let rec = source.open()?;
-        for w in &rec.warnings {
-            eprintln!("warning: {w}");
-        }
         let gravity = local_gravity(self.gravity, self.latitude, self.height)?;
         if let Some(note) = gravity.note {
             eprintln!("note: {note}");
@@ -66,10 +60,16 @@ impl CalibrateArgs {
             min_interval_s: self.min_interval,
             multipliers: parse_multipliers(&self.multipliers)?,
             estimate_gyro_bias: self.estimate_gyro_bias,
-            min_intervals: self.min_intervals.max(10),
+            min_intervals: self.min_intervals,
             detect_with_gyro: !self.accel_only_detection,
         };
         opts.validate()?;
+        let start = std::time::Instant::now();
+        let source = self.input.source()?;
+        let rec = source.open()?;
+        for w in &rec.warnings {
+            eprintln!("warning: {w}");
+        }
         eprintln!("read {} samples ({:.1} s) in {:.2} s", rec.len(), rec.duration(), start.elapsed().as_secs_f64());
         let t = std::time::Instant::now();
         let result = tumble::calib::calibrate(&rec, &opts)?;

@@ -23,6 +23,8 @@ pub struct RecordingOptions {
 /// Open a recording: a folder is read as ASL, `.bag` / `.mcap` as ROS, any
 /// other file as text (`.gz` allowed).
 pub fn open_recording(path: &Path, opts: &RecordingOptions) -> Result<ImuRecording, InputError> {
+    // A bad option is the command line's fault, reported with the file it was meant for.
+    opts.format.validate.check().map_err(|e| InputError::file(path, e))?;
     if path.is_dir() {
         let fmt = ImuTextFormat { validate: opts.format.validate.clone(), ..ImuTextFormat::default() };
         return Ok(read_asl(path, &fmt)?.imu);

@@ -46,6 +46,20 @@ impl Default for ValidateOptions {
     }
 }
 
+impl ValidateOptions {
+    /// Check the options themselves: a nominal rate, when given, is a
+    /// positive number of Hz; the gap factor is above 1.
+    pub fn check(&self) -> Result<(), crate::OptionError> {
+        if let Some(r) = self.nominal_rate {
+            crate::OptionError::positive("--rate", r, "Hz")?;
+        }
+        if !(self.gap_factor.is_finite() && self.gap_factor > 1.0) {
+            return Err(crate::OptionError::new("gap_factor", format!("must be above 1, got {}", self.gap_factor)));
+        }
+        Ok(())
+    }
+}
+
 fn source(rec: &ImuRecording) -> PathBuf {
     rec.sources.first().cloned().unwrap_or_else(|| PathBuf::from("<memory>"))
 }

@@ -167,6 +167,16 @@ impl SimConfig {
             if !(d.is_finite() && d > 10.0) {
                 return Err(format!("duration_s must be more than 10 s, found {d}").into());
             }
+            let samples = d * self.imu.rate_hz;
+            if samples > MAX_SIMULATED_SAMPLES {
+                return Err(format!(
+                    "duration_s {d} s at {} Hz is {samples:.2e} IMU samples, more than the {MAX_SIMULATED_SAMPLES:.0e} \
+                     the simulator holds in memory (about {:.0} GB): simulate shorter recordings",
+                    self.imu.rate_hz,
+                    samples * BYTES_PER_SIMULATED_SAMPLE / 1e9
+                )
+                .into());
+            }
         }
         if let Some(r) = self.groundtruth_rate_hz {
             if !(r.is_finite() && r > 0.0) {
@@ -181,6 +191,13 @@ impl SimConfig {
         self.camera.check()
     }
 }
+
+/// Most IMU samples one simulation holds (a 200 Hz IMU for 29 days): the
+/// samples, their true biases and the writer's buffers stay in memory.
+pub const MAX_SIMULATED_SAMPLES: f64 = 5e8;
+
+/// Memory one simulated sample takes, roughly \[bytes\] (time, six axes, biases, temperature).
+const BYTES_PER_SIMULATED_SAMPLE: f64 = 80.0;
 
 /// Camera–IMU time offset `hide_effect` sets at strength 1 \[s\] (a frame stamped
 /// `t` shows the motion at `t + offset`).

@@ -1,0 +1,60 @@
+//! Options are validated once, in the library, before any work: a bad value
+//! is refused with the option named, never silently changed.
+
+use tumble::calib::{calibrate, CalibOptions};
+use tumble::io::{open_recording, RecordingOptions};
+use tumble::sim::{simulate, Scenario, SimConfig};
+use tumble::vio::VioOptions;
+
+#[test]
+fn min_intervals_means_what_it_says() {
+    let sim = simulate(Scenario::Tumble, &SimConfig::default(), 1).unwrap();
+    let rec = sim.imu.to_recording();
+    let e = calibrate(&rec, &CalibOptions { gravity: 9.81, min_intervals: 6, ..Default::default() }).unwrap_err();
+    assert!(e.to_string().contains("--min-intervals must be at least 10"), "{e}");
+    assert!(CalibOptions { min_intervals: 10, ..Default::default() }.validate().is_ok());
+}
+
+#[test]
+fn a_nominal_rate_must_be_a_positive_number() {
+    let dir = std::env::temp_dir().join(format!("tumble_options_rate_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("imu.csv");
+    std::fs::write(&f, "0,0,0,0,0,0,9.81\n5000000,0,0,0,0,0,9.81\n10000000,0,0,0,0,0,9.81\n").unwrap();
+    for rate in [0.0, -200.0, f64::NAN, f64::INFINITY] {
+        let mut o = RecordingOptions::default();
+        o.format.validate.nominal_rate = Some(rate);
+        let e = open_recording(&f, &o).unwrap_err().to_string();
+        assert!(e.contains("--rate must be a positive number of Hz") && e.contains("imu.csv"), "{rate}: {e}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_simulation_too_large_to_hold_is_refused_before_any_work() {
+    let cfg = SimConfig { duration_s: Some(1e12), ..SimConfig::default() };
+    let e = simulate(Scenario::Static, &cfg, 1).err().unwrap().to_string();
+    assert!(e.contains("samples") && e.contains("simulate shorter"), "{e}");
+}
+
+#[test]
+fn estimator_options_name_what_is_wrong() {
+    let mut o = VioOptions::default();
+    o.noise.pixel_sigma = 0.0;
+    assert!(o.validate().unwrap_err().to_string().contains("--pixel-sigma must be positive"));
+    let mut o = VioOptions::default();
+    o.window.size = 0;
+    assert!(o.validate().unwrap_err().to_string().contains("--window"));
+    // The YAML of the defaults reads back to the defaults.
+    let dir = std::env::temp_dir().join(format!("tumble_options_vio_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("vio.yaml");
+    std::fs::write(&p, VioOptions::default().to_yaml().unwrap()).unwrap();
+    assert_eq!(VioOptions::read(&p).unwrap(), VioOptions::default());
+    std::fs::write(&p, "window:\n  size: 1\n").unwrap();
+    let e = VioOptions::read(&p).unwrap_err().to_string();
+    assert!(e.contains("vio.yaml") && e.contains("--window"), "{e}");
+    std::fs::write(&p, "windw: {}\n").unwrap();
+    assert!(VioOptions::read(&p).is_err(), "unknown keys are refused");
+    std::fs::remove_dir_all(&dir).ok();
+}
