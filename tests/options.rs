@@ -58,3 +58,42 @@ fn estimator_options_name_what_is_wrong() {
     assert!(VioOptions::read(&p).is_err(), "unknown keys are refused");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn gravity_must_be_earths() {
+    for g in [0.0, -9.81, 1.0, 98.1, f64::NAN] {
+        let e = CalibOptions { gravity: g, ..Default::default() }.validate().unwrap_err().to_string();
+        assert!(e.contains("--gravity must be the local gravity"), "{g}: {e}");
+    }
+    assert!(tumble::calib::local_gravity(None, Some(45.0), 1e6).unwrap_err().to_string().contains("--height"));
+    let g = tumble::calib::local_gravity(None, Some(45.0), 3000.0).unwrap();
+    assert!((9.79..9.81).contains(&g.value) && g.note.is_none());
+}
+
+#[test]
+fn a_pose_graph_without_edges_is_refused() {
+    let dir = std::env::temp_dir().join(format!("tumble_options_g2o_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join("lonely.g2o");
+    std::fs::write(&p, "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n").unwrap();
+    let e = tumble::io::g2o::read_g2o(&p, &Default::default()).err().unwrap().to_string();
+    assert!(e.contains("lonely.g2o") && e.contains("no edges"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn apply_never_overwrites_its_input() {
+    let dir = std::env::temp_dir().join(format!("tumble_options_apply_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("imu.csv");
+    let text = "0,0,0,0,0,0,9.81\n5000000,0,0,0,0,0,9.81\n10000000,0,0,0,0,0,9.81\n";
+    std::fs::write(&f, text).unwrap();
+    let o = RecordingOptions::default();
+    let rec = open_recording(&f, &o).unwrap();
+    let e = tumble::calib::write_like_input(&rec, &f, &o, &dir).unwrap_err().to_string();
+    assert!(e.contains("is the input"), "{e}");
+    assert_eq!(std::fs::read_to_string(&f).unwrap(), text, "the input is untouched");
+    let out = dir.join("out");
+    assert!(tumble::calib::write_like_input(&rec, &f, &o, &out).is_ok());
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -22,8 +22,21 @@ pub fn write_like_input(
         Ok(out.join(f))
     };
     let err = |e: crate::InputError| e.to_string();
+    // Never overwrite what was read: the raw recording is the user's only copy.
+    let read: Vec<PathBuf> =
+        rec.sources.iter().chain([&input.to_path_buf()]).filter_map(|p| p.canonicalize().ok()).collect();
+    let guard = |p: &Path| -> Result<(), OutputError> {
+        match p.canonicalize() {
+            Ok(c) if read.contains(&c) => Err(OutputError::Failed(format!(
+                "{}: is the input; write the corrected recording into another folder (--out)",
+                p.display()
+            ))),
+            _ => Ok(()),
+        }
+    };
     if input.is_dir() {
         let p = out.join("mav0").join("imu0").join("data.csv");
+        guard(&p)?;
         write_asl_imu(&p, rec).map_err(err)?;
         return Ok(vec![p]);
     }
@@ -37,6 +50,8 @@ pub fn write_like_input(
     }
     if let Some(g) = &opts.gyro_file {
         let (a, g) = (name(input)?, name(g)?);
+        guard(&a)?;
+        guard(&g)?;
         write_imu_tk_pair(&a, &g, rec, opts.format.time_unit).map_err(err)?;
         return Ok(vec![a, g]);
     }
@@ -44,6 +59,7 @@ pub fn write_like_input(
     if ext.as_deref() == Some("gz") {
         p.set_extension("");
     }
+    guard(&p)?;
     write_imu_columns(&p, rec, &opts.format.columns, opts.format.time_unit).map_err(err)?;
     Ok(vec![p])
 }

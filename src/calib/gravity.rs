@@ -21,6 +21,10 @@ pub fn normal_gravity(latitude_deg: f64, height_m: f64) -> f64 {
     g0 * (1.0 - 2.0 / A * (1.0 + F + M - 2.0 * F * s2) * height_m + 3.0 * height_m * height_m / (A * A))
 }
 
+/// Largest ellipsoidal height [`local_gravity`] takes \[m\]: above Everest and
+/// airliners, where the second-order free-air formula is still accurate.
+pub const MAX_HEIGHT_M: f64 = 20_000.0;
+
 /// Local gravity and how it was found (see [`local_gravity`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LocalGravity {
@@ -41,10 +45,15 @@ pub fn local_gravity(
     let value = match (gravity, latitude_deg) {
         (Some(g), _) => g,
         (None, Some(lat)) => {
-            if !(-90.0..=90.0).contains(&lat) || !height_m.is_finite() {
+            if !(-90.0..=90.0).contains(&lat) {
+                return Err(crate::OptionError::new("--latitude", format!("must be within ±90°, got {lat}")));
+            }
+            if height_m.is_nan() || height_m.abs() > MAX_HEIGHT_M {
                 return Err(crate::OptionError::new(
-                    "--latitude",
-                    format!("must be within ±90° and --height finite, got {lat}, {height_m}"),
+                    "--height",
+                    format!(
+                        "must be within ±{MAX_HEIGHT_M} m (the normal-gravity formula holds near the surface), got {height_m}"
+                    ),
                 ));
             }
             normal_gravity(lat, height_m)

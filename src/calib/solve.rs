@@ -63,7 +63,15 @@ impl CalibOptions {
     /// gravity, periods and windows positive, multipliers positive, at least
     /// one interval asked for.
     pub fn validate(&self) -> Result<(), OptionError> {
-        OptionError::positive("--gravity", self.gravity, "m/s²")?;
+        if !EARTH_GRAVITY_M_S2.contains(&self.gravity) {
+            return Err(OptionError::new(
+                "--gravity",
+                format!(
+                    "must be the local gravity on Earth in m/s² ({}–{}), got {}: every scale is calibrated against it",
+                    EARTH_GRAVITY_M_S2.start, EARTH_GRAVITY_M_S2.end, self.gravity
+                ),
+            ));
+        }
         OptionError::positive("--init-static", self.init_static_s, "seconds")?;
         OptionError::positive("--window", self.window_s, "seconds")?;
         OptionError::positive("--min-interval", self.min_interval_s, "seconds")?;
@@ -104,6 +112,10 @@ pub fn parse_multipliers(s: &str) -> Result<Vec<f64>, OptionError> {
     }
     Ok(v)
 }
+
+/// Gravity anywhere a person can tumble an IMU \[m/s²\]: normal gravity runs
+/// from 9.780 (equator) to 9.832 (poles) at sea level and falls 3.1e-6 per metre up.
+pub const EARTH_GRAVITY_M_S2: std::ops::Range<f64> = 9.7..9.9;
 
 /// Fewest static intervals [`CalibOptions::min_intervals`] may ask for: one
 /// more than the accelerometer model's 9 parameters, so that its fit has a
@@ -266,9 +278,6 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         return Err(err(format!("sample {} (line {}) is not finite", i, rec.lines.line(i)), None));
     }
     let mut warnings = Vec::new();
-    if !(9.7..9.9).contains(&opts.gravity) {
-        warnings.push(format!("gravity {} m/s² is outside 9.7–9.9: is it right?", opts.gravity));
-    }
     let n = rec.len();
     if n < 100 || rec.duration() <= opts.init_static_s {
         return Err(err(

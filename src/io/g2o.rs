@@ -233,6 +233,9 @@ pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph
     }
     let mut graph = Graph::new();
     let n_edges = edges.len();
+    if n_edges == 0 {
+        return Err(InputError::file(path, "has no edges: a pose graph without measurements has nothing to solve"));
+    }
     for (ln, a, b, meas, noise) in edges {
         for id in [a, b] {
             if !vertex_lines.contains_key(&id) {

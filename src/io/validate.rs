@@ -250,7 +250,8 @@ fn norm(v: [f64; 3]) -> f64 {
 
 fn check_units(rec: &mut ImuRecording, file: &Path) -> Result<(), InputError> {
     let period = median_period(&rec.t).max(1e-6);
-    let w = ((1.0 / period).round() as usize).clamp(10, rec.len());
+    // A second of samples, at least 10, at most the recording (a shorter one is checked whole).
+    let w = ((1.0 / period).round() as usize).max(10).min(rec.len());
     let Some(win) = (if rec.accel.is_empty() { Some(0..w) } else { quietest_window(&rec.accel, w) }) else {
         return Ok(());
     };
