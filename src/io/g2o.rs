@@ -233,9 +233,6 @@ pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph
     }
     let mut graph = Graph::new();
     let n_edges = edges.len();
-    if n_edges == 0 {
-        return Err(InputError::file(path, "has no edges: a pose graph without measurements has nothing to solve"));
-    }
     for (ln, a, b, meas, noise) in edges {
         for id in [a, b] {
             if !vertex_lines.contains_key(&id) {
@@ -263,6 +260,9 @@ pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph
             return Err(InputError::at(path, ln, format!("FIX names vertex {id}, which is not defined")));
         }
         values.set_constant(X(id), true);
+    }
+    if n_edges == 0 {
+        return Err(InputError::file(path, "has no edges: a pose graph without measurements has nothing to solve"));
     }
     Ok(PoseGraph { graph, values, kind, vertices: vertex_lines.len(), edges: n_edges, warnings })
 }
