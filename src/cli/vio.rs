@@ -201,10 +201,15 @@ impl VioArgs {
             println!("stereo: {matches} matches in cam1 ({baseline:.3} m from cam0) for the initialization (--mono to ignore)");
         }
         let given = self.noise.as_deref().map(ImuNoise::read).transpose()?;
-        match vin.apply_noise(given, &mut opts.noise.imu) {
-            NoiseSource::Given => {}
-            NoiseSource::Input => println!("noise: the figures of the dataset's imu0/sensor.yaml"),
-            NoiseSource::Default => println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)"),
+        // --noise, else a --config file's noise.imu, else the dataset's, else the defaults.
+        if given.is_none() && self.estimator.config.is_some() {
+            println!("noise: the --config file's noise.imu");
+        } else {
+            match vin.apply_noise(given, &mut opts.noise.imu) {
+                NoiseSource::Given => {}
+                NoiseSource::Input => println!("noise: the figures of the dataset's imu0/sensor.yaml"),
+                NoiseSource::Default => println!("noise: EuRoC's ADIS16448 figures (give --noise imu.yaml for yours)"),
+            }
         }
         if self.init_from_groundtruth {
             opts.init.mode = Init::from_groundtruth(&vin)?;
