@@ -97,3 +97,16 @@ fn apply_never_overwrites_its_input() {
     assert!(tumble::calib::write_like_input(&rec, &f, &o, &out).is_ok());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn allan_on_constant_data_is_refused_with_the_axis_named() {
+    let dir = std::env::temp_dir().join(format!("tumble_options_allan_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let f = dir.join("const.csv");
+    let text: String = (0..2000i64).map(|i| format!("{},0.01,0.02,0.03,0.1,0.2,9.81\n", i * 5_000_000)).collect();
+    std::fs::write(&f, text).unwrap();
+    let rec = open_recording(&f, &RecordingOptions::default()).unwrap();
+    let e = tumble::allan::run_allan(&rec, &Default::default()).unwrap_err().to_string();
+    assert!(e.contains("gyro x axis reads 0.01 in every sample"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -167,6 +167,18 @@ pub fn run_allan_with_progress(
     }
     let columns: Vec<Vec<f64>> =
         (0..6).map(|k| if k < 3 { &rec.gyro } else { &rec.accel }.iter().map(|s| s[k % 3]).collect()).collect();
+    for (k, c) in columns.iter().enumerate() {
+        let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
+        if lo == hi {
+            return Err(AllanError(format!(
+                "{}: the {} {} axis reads {lo} in every sample: there is no noise to analyse \
+                 (a stuck sensor, a quantization coarser than the noise, or a column of constants)",
+                rec.source_name(),
+                if k < 3 { "gyro" } else { "accelerometer" },
+                ["x", "y", "z"][k % 3]
+            )));
+        }
+    }
     let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
     let curves = super::allan_deviation_axes(&refs, tau0, &opts.allan, &tick)
         .map_err(|e| AllanError(format!("{}: {e}", rec.source_name())))?;
@@ -584,9 +596,13 @@ impl AllanReport {
     }
 
     /// Write `allan.json`, `imu.yaml` (when SI) and the plots into `dir`
-    /// (created if needed); returns the files written.
+    /// (created if needed), all or nothing ([`crate::io::staging`]); returns
+    /// the files written.
     pub fn write_all(&self, dir: &Path) -> Result<Vec<PathBuf>, AllanError> {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: cannot create: {e}", dir.display()))?;
+        crate::io::staging::write_staged(dir, |stage| self.write_unstaged(stage))
+    }
+
+    fn write_unstaged(&self, dir: &Path) -> Result<Vec<PathBuf>, AllanError> {
         let mut files = Vec::new();
         let json_path = dir.join("allan.json");
         let text = serde_json::to_string_pretty(&self.to_json()).map_err(|e| e.to_string())?;

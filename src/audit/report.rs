@@ -115,6 +115,13 @@ pub(super) fn put_file(dir: &Path, name: &str, text: String) -> Result<String, A
 
 /// Write `audit.json`, `calibration.json` (with the effects), `audit.md` and the figures into `dir`.
 pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
+    let paths = crate::io::staging::write_staged(dir, |stage| {
+        write_unstaged(a, stage).map(|names| names.iter().map(|n| stage.join(n)).collect::<Vec<_>>())
+    })?;
+    Ok(paths.iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned())).collect())
+}
+
+fn write_unstaged(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
     let put = |name: &str, text: String| put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     let file = crate::calib::model::CalibrationFile::from(&a.calibration);

@@ -504,6 +504,13 @@ pub fn with_offsets(cal: &ImuCalibration, a: &VioAudit) -> ImuCalibration {
 /// run against the offset tried) and, when a calibration was given,
 /// `calibration.json` with the offsets, into `dir`.
 pub fn write(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> Result<Vec<String>, AuditError> {
+    let paths = crate::io::staging::write_staged(dir, |stage| {
+        write_unstaged(a, calibration, stage).map(|names| names.iter().map(|n| stage.join(n)).collect::<Vec<_>>())
+    })?;
+    Ok(paths.iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned())).collect())
+}
+
+fn write_unstaged(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path) -> Result<Vec<String>, AuditError> {
     let put = |name: &str, text: String| super::report::put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     if let Some(c) = calibration {

@@ -141,7 +141,10 @@ impl CalibrationResult {
 
     /// Write every output into `dir` (created); returns the files written.
     pub fn write_all(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, OutputError> {
-        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        crate::io::staging::write_staged(dir, |stage| self.write_unstaged(rec, opts, stage))
+    }
+
+    fn write_unstaged(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, OutputError> {
         let mut files = Vec::new();
         let mut write = |name: &str, text: String| -> Result<(), String> {
             let p = dir.join(name);

@@ -128,7 +128,10 @@ fn rpe_chart(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> 
 /// with a bias track, `bias_gyro.png` and `bias_accel.png` into `dir`;
 /// returns the paths written.
 pub fn write_report(dir: &Path, e: &Evaluation) -> Result<Vec<PathBuf>, EvalError> {
-    std::fs::create_dir_all(dir).map_err(|err| format!("{}: {err}", dir.display()))?;
+    crate::io::staging::write_staged(dir, |stage| write_unstaged(stage, e))
+}
+
+fn write_unstaged(dir: &Path, e: &Evaluation) -> Result<Vec<PathBuf>, EvalError> {
     let mut out = Vec::new();
     let metrics = dir.join("metrics.json");
     let text = serde_json::to_string_pretty(&e.metrics).map_err(|err| err.to_string())?;

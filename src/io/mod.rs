@@ -12,6 +12,7 @@ pub(crate) mod mem;
 pub mod noise;
 pub mod recording;
 pub mod rosbag;
+pub mod staging;
 pub mod table;
 pub(crate) mod tokens;
 pub mod trajectory;

@@ -274,7 +274,15 @@ pub fn write_outputs(
     result: &VioResult,
     summary: &Summary,
 ) -> Result<Vec<PathBuf>, VioError> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    crate::io::staging::write_staged(dir, |stage| write_unstaged(stage, input, result, summary))
+}
+
+fn write_unstaged(
+    dir: &Path,
+    input: &VioInput,
+    result: &VioResult,
+    summary: &Summary,
+) -> Result<Vec<PathBuf>, VioError> {
     let traj = dir.join("trajectory.txt");
     write_tum(&traj, &trajectory(input, result)).map_err(|e| e.to_string())?;
     let biases = dir.join("biases.csv");
