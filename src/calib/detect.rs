@@ -28,17 +28,7 @@ pub fn variance_norm(x: &[[f64; 3]]) -> f64 {
     var3(x).iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
-/// Per-axis mean of `x`.
-pub fn mean3(x: &[[f64; 3]]) -> [f64; 3] {
-    let n = x.len().max(1) as f64;
-    let mut m = [0.0; 3];
-    for v in x {
-        for k in 0..3 {
-            m[k] += v[k];
-        }
-    }
-    m.map(|s| s / n)
-}
+pub use crate::io::validate::mean3;
 
 /// Per-axis (population) variance of `x`.
 pub fn var3(x: &[[f64; 3]]) -> [f64; 3] {

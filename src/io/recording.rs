@@ -134,8 +134,7 @@ impl RecordingSource {
         let mut rec = open_recording(&self.path, &self.options)?;
         if self.auto_units {
             let n = rec.len().min(((rec.mean_rate() * 5.0) as usize).max(10));
-            let m = rec.accel[..n].iter().fold([0.0; 3], |s, a| [s[0] + a[0], s[1] + a[1], s[2] + a[2]]);
-            let g = m.iter().map(|x| (x / n as f64).powi(2)).sum::<f64>().sqrt();
+            let g = super::validate::norm(super::validate::mean3(&rec.accel[..n]));
             if (7.0..13.0).contains(&g) {
                 rec.accel_units = super::Stored::Si;
                 rec.gyro_units = super::Stored::Si;

@@ -234,7 +234,8 @@ pub fn quietest_window(accel: &[[f64; 3]], w: usize) -> Option<std::ops::Range<u
         .map(|(_, j)| j * b..j * b + 4 * b)
 }
 
-fn mean3(v: &[[f64; 3]]) -> [f64; 3] {
+/// Per-axis mean of `v` (zeros when empty).
+pub fn mean3(v: &[[f64; 3]]) -> [f64; 3] {
     let mut m = [0.0; 3];
     for x in v {
         for k in 0..3 {
@@ -244,7 +245,8 @@ fn mean3(v: &[[f64; 3]]) -> [f64; 3] {
     m.map(|s| s / v.len().max(1) as f64)
 }
 
-fn norm(v: [f64; 3]) -> f64 {
+/// Euclidean norm of a triad.
+pub(crate) fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
