@@ -32,6 +32,6 @@ pub use bal::SnavelyReprojection;
 pub use between::BetweenFactor;
 pub use imu_calib::{GravityNormFactor, IntegratedRotationFactor};
 pub use imu_factor::{bias_random_walk, bias_random_walk_axes, ImuFactor};
-pub use prior::PriorFactor;
+pub use prior::{PartialPriorFactor, PriorFactor};
 pub use reprojection::InverseDepthReprojection;
 pub use tumble_solvers::LieGroup;

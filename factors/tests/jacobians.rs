@@ -2,7 +2,7 @@
 
 use nalgebra::{Vector3, Vector6};
 use tumble_factors::pose_graph_3d::QuaternionPoseError;
-use tumble_factors::{BetweenFactor, PriorFactor, SnavelyReprojection};
+use tumble_factors::{BetweenFactor, PartialPriorFactor, PriorFactor, SnavelyReprojection};
 use tumble_solvers::sophus_lie::{Isometry3F64, Rotation3F64};
 use tumble_solvers::{check_jacobians, se2, AutoDiff, DynVariable, Factor, Linearization, Vars, C, L, X};
 
@@ -17,6 +17,7 @@ fn prior_and_between_on_every_group() {
     let b3 = Isometry3F64::exp(Vector6::new(-0.2, 0.5, 2.0, -1.0, 0.5, 2.0));
     let z3 = Isometry3F64::exp(Vector6::new(0.1, 0.2, 0.3, 0.3, 0.2, 0.1));
     assert_ok(&PriorFactor::new(X(0), z3), &[&a3]);
+    assert_ok(&PartialPriorFactor::new(X(0), z3, vec![0, 4, 5]), &[&a3]);
     assert_ok(&BetweenFactor::new(X(0), X(1), z3), &[&a3, &b3]);
     assert_ok(&QuaternionPoseError::new(X(0), X(1), &z3), &[&a3, &b3]);
 
@@ -37,6 +38,7 @@ fn prior_and_between_on_every_group() {
     let v1 = Vector3::new(1.0, 2.0, 3.0);
     let v2 = Vector3::new(-1.0, 0.0, 4.0);
     assert_ok(&BetweenFactor::new(X(0), X(1), Vector3::new(0.1, 0.2, 0.3)), &[&v1, &v2]);
+    assert_ok(&PartialPriorFactor::new(X(0), v2, vec![2, 0]), &[&v1]);
 }
 
 #[test]
