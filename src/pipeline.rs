@@ -271,7 +271,15 @@ pub fn run_chain(
     if let (true, Some(rec)) = (wanted(Stage::Calibrate), &tumble) {
         progress(Progress::Stage(Stage::Calibrate, "calibrating the hand tumble (paper eq. 1)"));
         let t = Instant::now();
-        let r = calibrate(rec, &opts.calib).map_err(|e| format!("calibrate: {}", e.message))?;
+        let r = match calibrate(rec, &opts.calib) {
+            Ok(r) => r,
+            Err(e) => {
+                // A failed calibration stops the chain; its diagnosis is kept for the user.
+                let kept = e.diagnosis.as_ref().and_then(|d| d.write_diagnosis(rec, &opts.calib, &dir).ok());
+                let note = kept.map_or(String::new(), |f| format!(" (diagnosis: {})", f[0].display()));
+                return Err(format!("calibrate: {}{note}", e.message).into());
+            }
+        };
         let files = r.write_all(rec, &opts.calib, &dir).map_err(|e| format!("calibrate: {e}"))?;
         let secs = t.elapsed().as_secs_f64();
         warnings.extend(r.warnings.iter().map(|w| format!("calibrate: {w}")));

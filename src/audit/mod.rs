@@ -203,7 +203,15 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
     opts.validate().map_err(|e| fail(e.to_string()))?;
     let (accel, gyro, gyro_bias) = calibration.inverse_params().map_err(|e| fail(e.to_string()))?;
     let detection = CalibOptions { gravity: calibration.gravity, ..opts.detection.clone() };
-    let detected = calibrate(rec, &detection).map_err(|e| fail(format!("static intervals: {}", e.message)))?;
+    // Only the detection is used: a calibration of this recording that fails its
+    // verdict still found the static intervals.
+    let detected = match calibrate(rec, &detection) {
+        Ok(r) => r,
+        Err(e) => match e.diagnosis {
+            Some(d) => *d,
+            None => return Err(fail(format!("static intervals: {}", e.message))),
+        },
+    };
     let mut notes = Vec::new();
     let intervals = still_intervals(rec, &detected.intervals, &gyro, &gyro_bias, 0.5 * detection.window_s, &mut notes);
     let data = AuditData::new(rec, &intervals, calibration.gravity).map_err(|e| fail(e.to_string()))?;

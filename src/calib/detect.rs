@@ -83,6 +83,27 @@ pub fn sliding_variance_norm(x: &[[f64; 3]], w: usize) -> Vec<f64> {
     out
 }
 
+/// Per-axis mean over a window of `w` samples (odd) centred on each sample;
+/// NaN where the window does not fit.
+pub fn sliding_mean(x: &[[f64; 3]], w: usize) -> Vec<[f64; 3]> {
+    let h = w / 2;
+    let n = x.len();
+    let mut out = vec![[f64::NAN; 3]; n];
+    if n < 2 * h + 1 {
+        return out;
+    }
+    let o = x[0];
+    let mut prefix = vec![[0.0; 3]; n + 1];
+    for (i, v) in x.iter().enumerate() {
+        prefix[i + 1] = std::array::from_fn(|k| prefix[i][k] + (v[k] - o[k]));
+    }
+    let wf = (2 * h + 1) as f64;
+    for c in h..n - h {
+        out[c] = std::array::from_fn(|k| o[k] + (prefix[c + h + 1][k] - prefix[c - h][k]) / wf);
+    }
+    out
+}
+
 /// Runs of consecutive samples with `score < threshold` at least `min_len` long.
 pub fn intervals_below(score: &[f64], threshold: f64, min_len: usize) -> Vec<Interval> {
     let mut out = Vec::new();
@@ -102,6 +123,127 @@ pub fn intervals_below(score: &[f64], threshold: f64, min_len: usize) -> Vec<Int
     out
 }
 
+/// The initial rest: the samples whose mean gives the gyro bias and whose
+/// variance is the detector's reference. Several parts when a knock that did
+/// not move the IMU was cut out of it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InitialRest {
+    /// The still runs, in time order (sample indices).
+    pub parts: Vec<Interval>,
+    /// True when found from the data, false when given (`--init-static`).
+    pub detected: bool,
+}
+
+impl InitialRest {
+    /// The first `n` samples, as given by the user.
+    pub fn given(n: usize) -> InitialRest {
+        InitialRest { parts: vec![Interval { start: 0, end: n }], detected: false }
+    }
+    /// Samples in the rest.
+    pub fn samples(&self) -> usize {
+        self.parts.iter().map(Interval::len).sum()
+    }
+    /// First sample and one past the last (the knocks cut out included).
+    pub fn span(&self) -> Interval {
+        Interval { start: self.parts[0].start, end: self.parts[self.parts.len() - 1].end }
+    }
+    /// The rest's samples of `x` (gyro or accelerometer), the cut-out knocks excluded.
+    pub fn collect(&self, x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        self.parts.iter().flat_map(|p| x[p.start..p.end].iter().copied()).collect()
+    }
+}
+
+/// A window counts as still in [`find_initial_rest`] when both its
+/// accelerometer and its gyro variance are below this many times the
+/// recording's quietest windows (5th percentile). Windowed variances of white
+/// noise scatter by less than ±50 % over 50 samples, and a hand turn raises
+/// them by orders of magnitude.
+pub const REST_FACTOR: f64 = 10.0;
+
+/// Largest tilt across a short disturbance for the rests on both sides of it
+/// to count as one \[deg\]: a knock that leaves the IMU where it was (0.05°)
+/// does not end the initial rest; a new pose does.
+pub const MAX_KNOCK_TILT_DEG: f64 = 0.5;
+
+/// Fraction of the recording in which the initial rest must start.
+pub const EARLY_FRACTION: f64 = 0.25;
+
+/// Find the initial static period from the data: windows are still when
+/// both sliding variances (`accel_score`, `gyro_score`, windows of `w`
+/// samples) are below [`REST_FACTOR`] × their quietest 5 % and the mean rate
+/// is near that of the quiet windows; still runs separated by a knock (at
+/// most half a window of shaking; a turn by hand takes longer, even one about
+/// the vertical that leaves gravity where it was) and tilted by less than
+/// [`MAX_KNOCK_TILT_DEG`] are one rest with the disturbance cut out; each run
+/// loses half a window at both ends (where a turn starts and ends slowly); the
+/// longest rest of at least `min_samples` that starts in the first
+/// [`EARLY_FRACTION`] of the recording is returned.
+pub fn find_initial_rest(
+    accel: &[[f64; 3]],
+    gyro: &[[f64; 3]],
+    accel_score: &[f64],
+    gyro_score: &[f64],
+    w: usize,
+    min_samples: usize,
+) -> Option<InitialRest> {
+    let quiet = |s: &[f64]| {
+        let mut v: Vec<f64> = s.iter().copied().filter(|x| x.is_finite()).collect();
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 20).copied().map(|q| q.max(1e-300))
+    };
+    let (qa, qg) = (quiet(accel_score)?, quiet(gyro_score)?);
+    let mut ratio: Vec<f64> = accel_score.iter().zip(gyro_score).map(|(a, g)| (a / qa).max(g / qg)).collect();
+    // Mid-turn the rate is high but flat, its variance low: a still window's mean
+    // rate must also be near the rate of the quiet windows (the bias).
+    let mean = sliding_mean(gyro, w);
+    let quiet_means: Vec<[f64; 3]> =
+        mean.iter().zip(&ratio).filter(|(_, r)| **r < REST_FACTOR).map(|(m, _)| *m).collect();
+    if quiet_means.is_empty() {
+        return None;
+    }
+    let bias: [f64; 3] = std::array::from_fn(|k| {
+        let mut v: Vec<f64> = quiet_means.iter().map(|m| m[k]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    });
+    for (r, m) in ratio.iter_mut().zip(&mean) {
+        let d2: f64 = (0..3).map(|k| (m[k] - bias[k]).powi(2)).sum();
+        *r = r.max(d2 / qg);
+    }
+    let h = w / 2;
+    let n = accel.len();
+    // Runs of still window centres; runs separated by a knock (a gap of at most one
+    // window plus half a window of shaking) are one rest if gravity did not move.
+    let direction = |iv: &Interval| nalgebra::Vector3::from(mean3(&accel[iv.start..iv.end])).normalize();
+    let mut rests: Vec<Vec<Interval>> = Vec::new();
+    for run in intervals_below(&ratio, REST_FACTOR, 1) {
+        if let Some(last) = rests.last_mut() {
+            let prev = last[last.len() - 1];
+            let tilt = direction(&prev).angle(&direction(&run)).to_degrees();
+            if run.start <= prev.end + w + h && tilt < MAX_KNOCK_TILT_DEG {
+                last.push(run);
+                continue;
+            }
+        }
+        rests.push(vec![run]);
+    }
+    // The samples: each run of centres less half a window at both ends (the slow
+    // start and end of a turn stay below the variance threshold for a while, and
+    // their rate would bias the mean), except at the start of the recording.
+    let rests = rests.into_iter().map(|runs| {
+        runs.into_iter()
+            .map(|r| Interval { start: if r.start <= h { 0 } else { r.start + h }, end: r.end.saturating_sub(h) })
+            .filter(|r| !r.is_empty())
+            .collect::<Vec<_>>()
+    });
+    let early = (n as f64 * EARLY_FRACTION) as usize;
+    rests
+        .filter(|parts| !parts.is_empty())
+        .map(|parts| InitialRest { parts, detected: true })
+        .filter(|r| r.span().start <= early && r.samples() >= min_samples)
+        .max_by_key(InitialRest::samples)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -116,6 +258,32 @@ mod tests {
             assert!((s[c] - d).abs() < 1e-6 * d.max(1.0), "{c}: {} vs {d}", s[c]);
         }
         assert!(s[4].is_infinite() && s[195].is_infinite());
+    }
+
+    fn still(n: usize, level: f64, seed: u64) -> Vec<[f64; 3]> {
+        let mut state = seed;
+        let mut r = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * level
+        };
+        (0..n).map(|_| [r(), r(), 9.81 + r()]).collect()
+    }
+
+    #[test]
+    fn initial_rest_is_found_and_bridges_a_knock() {
+        // 1.5 s still, a knock (spike, no tilt), 1.5 s still, then 21 s of turning.
+        let mut a = still(300, 0.01, 1);
+        a[150] = [0.5, -0.4, 10.5];
+        a.extend((0..2100).map(|i| [9.81 * (i as f64 / 30.0).sin(), 0.0, 9.81]));
+        let g: Vec<[f64; 3]> = (0..a.len()).map(|i| [if i < 300 { 0.0 } else { (i as f64 / 7.0).cos() }; 3]).collect();
+        let (sa, sg) = (sliding_variance_norm(&a, 11), sliding_variance_norm(&g, 11));
+        let rest = find_initial_rest(&a, &g, &sa, &sg, 11, 100).unwrap();
+        assert!(rest.detected);
+        assert_eq!(rest.parts.len(), 2, "{rest:?}");
+        assert_eq!(rest.span().start, 0);
+        assert!((290..=300).contains(&rest.span().end), "{rest:?}");
+        // Nothing still and long enough early on.
+        assert!(find_initial_rest(&a, &g, &sa, &sg, 11, 400).is_none());
     }
 
     #[test]

@@ -6,20 +6,52 @@
 
 use super::detect::{mean3, Interval};
 use super::model::{split_unit_diagonal, Triad};
+use super::observability::{prior_sigma, undetermined, OffDiagonal, ACCEL_OFF_DIAGONAL, GYRO_OFF_DIAGONAL};
 use super::solve::{CalibOptions, FitStats, RotationResidual, KEY_ACCEL, KEY_GYRO, KEY_GYRO_BIAS};
-use crate::io::ImuRecording;
+use crate::io::{ImuRecording, Stored};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use rayon::prelude::*;
 use tumble_factors::imu_calib::{
     accel_matrix, gyro_matrix, AccelParams, GravityNormFactor, GyroMatrix, IntegratedRotationFactor, UPPER,
 };
-use tumble_solvers::{covariances, Factor, Graph, Key, LmOptions, NoiseModel, Optimizer, Values, Vars};
+use tumble_factors::PartialPriorFactor;
+use tumble_solvers::{covariances, Factor, Graph, Key, LmOptions, NoiseModel, Optimizer, Termination, Values, Vars};
 
 /// The accelerometer estimate of one detection.
 pub(super) struct AccelFit {
     pub params: AccelParams,
+    /// Covariance (not inflated).
     pub cov: DMatrix<f64>,
     pub stats: FitStats,
+    /// Misalignments the poses do not determine (their estimate is mostly the prior's).
+    pub held: Vec<OffDiagonal>,
+}
+
+/// Mean raw accelerometer sample of each interval.
+pub(super) fn interval_means(rec: &ImuRecording, intervals: &[Interval]) -> Vec<Vector3<f64>> {
+    intervals.iter().map(|iv| Vector3::from(mean3(&rec.accel[iv.start..iv.end]))).collect()
+}
+
+/// ln det of a covariance (∞ when not positive definite).
+fn ln_det(cov: &DMatrix<f64>) -> f64 {
+    match cov.clone().cholesky() {
+        Some(c) => 2.0 * c.l().diagonal().iter().map(|d| d.ln()).sum::<f64>(),
+        None => f64::INFINITY,
+    }
+}
+
+impl AccelFit {
+    /// ln det of the inflated covariance (D-optimality; see the threshold sweep in [`super::calibrate`]).
+    pub(super) fn uncertainty(&self) -> f64 {
+        ln_det(&self.cov) + self.cov.nrows() as f64 * self.stats.covariance_inflation.ln()
+    }
+}
+
+impl GyroFit {
+    /// ln det of the inflated covariance of the gyro matrix.
+    pub(super) fn uncertainty(&self) -> f64 {
+        ln_det(&self.cov.view((0, 0), (9, 9)).into_owned())
+    }
 }
 
 /// Axis-aligned ellipsoid through the interval means (linear least squares):
@@ -64,10 +96,11 @@ pub(super) fn range_guess(means: &[Vector3<f64>], g: f64) -> AccelParams {
     p
 }
 
+/// Fit the accelerometer to the static intervals (misalignments with their prior).
 pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_a: &[f64; 3]) -> Option<AccelFit> {
-    let means: Vec<Vector3<f64>> =
-        intervals.iter().map(|iv| Vector3::from(mean3(&rec.accel[iv.start..iv.end]))).collect();
+    let means = interval_means(rec, intervals);
     let x0 = ellipsoid_guess(&means, g).unwrap_or_else(|| range_guess(&means, g));
+    let prior = MisalignmentPrior::new(KEY_ACCEL, &x0, &ACCEL_OFF_DIAGONAL);
     let m0 = accel_matrix(&x0);
     let b0 = Vector3::new(x0[6], x0[7], x0[8]);
     let mut factors = Vec::new();
@@ -81,10 +114,11 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
     }
     let mut values = Values::new();
     values.insert(KEY_ACCEL, x0);
-    let fit = solve_with_floor(&factors, &base, &values, 9).ok()?;
+    let fit = solve_with_floor(&factors, &base, &values, 9, &prior).ok()?;
     let (sol, graph) = (&fit.values, &fit.graph);
     let params = *sol.get::<AccelParams>(KEY_ACCEL).ok()?;
     let cov = covariances(graph, sol, &[KEY_ACCEL]).ok()?.get(KEY_ACCEL)?;
+    let held = undetermined(&params, &(&cov * fit.chi2_final.max(1.0)), &ACCEL_OFF_DIAGONAL);
     let chi2 = fit.chi2_white;
     let ma = accel_matrix(&params);
     let ba = Vector3::new(params[6], params[7], params[8]);
@@ -110,8 +144,37 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
             rms,
             imu_tk_cost,
             iterations: fit.iterations,
+            converged: !fit.capped,
         },
+        held,
     })
+}
+
+/// The Gaussian prior on the misalignments of a 9-vector model matrix (see
+/// [`super::observability`]): zero, σ = [`MISALIGNMENT_PRIOR_SIGMA`] × the
+/// row's scale at the start.
+#[derive(Clone, Debug)]
+pub(super) struct MisalignmentPrior {
+    pub key: Key,
+    /// The start with the misalignments at zero.
+    pub at: nalgebra::SVector<f64, 9>,
+    pub indices: Vec<usize>,
+    pub sigmas: Vec<f64>,
+}
+
+impl MisalignmentPrior {
+    pub(super) fn new(key: Key, start: &nalgebra::SVector<f64, 9>, offs: &[OffDiagonal]) -> MisalignmentPrior {
+        let mut at = *start;
+        for o in offs {
+            at[o.index] = 0.0;
+        }
+        MisalignmentPrior {
+            key,
+            at,
+            indices: offs.iter().map(|o| o.index).collect(),
+            sigmas: offs.iter().map(|o| prior_sigma(start, o)).collect(),
+        }
+    }
 }
 
 /// A solve whose noise model may have been widened by an unmodelled-error floor.
@@ -125,6 +188,8 @@ pub(super) struct FloorFit {
     /// The floor, in residual units.
     pub floor: f64,
     pub iterations: usize,
+    /// A solve stopped at the iteration cap ([`LmOptions::max_iterations`]).
+    pub capped: bool,
 }
 
 /// Solve factors with per-factor noise covariances `base`; when the residuals
@@ -136,8 +201,11 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
     base: &[DMatrix<f64>],
     values: &Values,
     n_params: usize,
+    prior: &MisalignmentPrior,
 ) -> Result<FloorFit, String> {
     let dim = factors.first().map(|f| f.residual_dim()).unwrap_or(1);
+    // The prior's residuals count as observations of the misalignments.
+    let n_params = n_params.saturating_sub(prior.indices.len());
     let dof = (dim * factors.len()).saturating_sub(n_params).max(1) as f64;
     let lm = Optimizer::new(LmOptions { function_tolerance: 1e-10, ..LmOptions::default() });
     let widen = |c: &DMatrix<f64>, s2: f64| c + DMatrix::identity(dim, dim) * s2;
@@ -146,12 +214,14 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
         for (f, c) in factors.iter().zip(base) {
             g.add(f.clone(), NoiseModel::from_covariance(&widen(c, s2)).map_err(|e| e.to_string())?);
         }
+        add_prior(&mut g, prior)?;
         Ok(g)
     };
     let graph = build(0.0)?;
     let (mut sol, summary) = lm.optimize(&graph, values).map_err(|e| e.to_string())?;
     let chi2_white = 2.0 * summary.final_cost / dof;
     let mut iterations = summary.iterations;
+    let mut capped = summary.termination == Termination::MaxIterations;
     let (mut graph, mut s2, mut chi2_final) = (graph, 0.0, chi2_white);
     for _ in 0..3 {
         if chi2_final <= 1.0 + 1e-3 {
@@ -187,9 +257,17 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
         let (next, summary) = lm.optimize(&graph, &sol).map_err(|e| e.to_string())?;
         sol = next;
         iterations += summary.iterations;
+        capped |= summary.termination == Termination::MaxIterations;
         chi2_final = 2.0 * summary.final_cost / dof;
     }
-    Ok(FloorFit { values: sol, graph, chi2_white, chi2_final, floor: s2.sqrt(), iterations })
+    Ok(FloorFit { values: sol, graph, chi2_white, chi2_final, floor: s2.sqrt(), iterations, capped })
+}
+
+/// Add the misalignment prior's [`PartialPriorFactor`] to a graph.
+pub(super) fn add_prior(g: &mut Graph, prior: &MisalignmentPrior) -> Result<(), String> {
+    let noise = NoiseModel::diagonal(&prior.sigmas).map_err(|e| e.to_string())?;
+    g.add(PartialPriorFactor::new(prior.key, prior.at, prior.indices.clone()), noise);
+    Ok(())
 }
 
 pub(super) struct GyroFit {
@@ -199,31 +277,49 @@ pub(super) struct GyroFit {
     pub cov: DMatrix<f64>,
     pub stats: FitStats,
     pub rotations: Vec<RotationResidual>,
-    pub warnings: Vec<String>,
+    /// Misalignments the turns do not determine (their estimate is mostly the prior's).
+    pub held: Vec<OffDiagonal>,
+    /// Another start explained the data nearly as well at another scale:
+    /// `(kept scale, other scale, χ² ratio)`.
+    pub ambiguity: Option<(f64, f64, f64)>,
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Another start whose χ² is within this factor of the best one's makes the
+/// gyro scale ambiguous.
+const AMBIGUOUS_CHI2_RATIO: f64 = 2.0;
+
+/// What the gyro fit takes from the initial rest and the detector.
+pub(super) struct GyroInputs<'a> {
+    /// Per-axis variance of the initial rest (accelerometer, gyro) \[raw units²\].
+    pub var_a: &'a [f64; 3],
+    pub var_g: &'a [f64; 3],
+    /// The gyro bias (mean of the initial rest) and the samples it was averaged over.
+    pub bias: &'a Vector3<f64>,
+    pub n_init: usize,
+    /// Half the detector's window \[samples\] (see [`turn_span`]).
+    pub edge: usize,
+}
+
 pub(super) fn fit_gyro(
     rec: &ImuRecording,
     intervals: &[Interval],
     means: &[Vector3<f64>],
     accel: &AccelFit,
-    var_a: &[f64; 3],
-    var_g: &[f64; 3],
-    n_init: usize,
+    inputs: &GyroInputs,
     opts: &CalibOptions,
+    final_fit: bool,
 ) -> Result<GyroFit, String> {
+    let GyroInputs { var_a, var_g, bias: b0, n_init, edge } = *inputs;
     let directions = |pa: &AccelParams| -> Vec<Vector3<f64>> {
         let (ma, ba) = (accel_matrix(pa), Vector3::new(pa[6], pa[7], pa[8]));
         means.iter().map(|m| ma * (m - ba)).collect()
     };
     let dirs = directions(&accel.params);
     let ma = &accel_matrix(&accel.params);
-    let b0 = Vector3::from(mean3(&rec.gyro[..n_init]));
     let mut factors = Vec::new();
     let mut pairs = Vec::new();
     for k in 1..intervals.len() {
-        let (a, b) = (intervals[k - 1].end - 1, intervals[k].start);
+        let (a, b) = turn_span(&intervals[k - 1], &intervals[k], edge);
         let raw = rec.gyro[a..=b].to_vec();
         let dt = rec.t[a..=b].windows(2).map(|w| w[1] - w[0]).collect();
         let f = IntegratedRotationFactor::new([KEY_GYRO, KEY_GYRO_BIAS], raw, dt, dirs[k - 1], dirs[k])
@@ -231,52 +327,44 @@ pub(super) fn fit_gyro(
         factors.push(f);
         pairs.push((k - 1, k));
     }
-    // Initial isotropic scale: every turn's gravity angle θ ≤ s ∫|ω̃ − b| dt gives a lower
-    // bound on s; then a golden-section search of the isotropic cost above it.
-    let mut s_lo = 0.0f64;
-    for &(i, j) in &pairs {
-        let theta = dirs[i].normalize().dot(&dirs[j].normalize()).clamp(-1.0, 1.0).acos();
-        let len: f64 = integrated_raw_angle(rec, intervals[i].end - 1, intervals[j].start, &b0);
-        if len > 0.0 && theta > 0.2 {
-            s_lo = s_lo.max(theta / len);
-        }
-    }
-    if !(s_lo > 0.0 && s_lo.is_finite()) {
+    // Starts: isotropic scales s·I at the local minima of the isotropic cost on a log grid.
+    // Every turn's gravity angle θ ≤ s ∫|ω̃ − b| dt, so the ratios θ/∫ locate s; the grid
+    // spans well beyond them because the cost is not convex in s: a quarter turn taken
+    // as three quarters explains gravity's direction nearly as well (aliases at 3s, 5s).
+    let ratios: Vec<f64> = pairs
+        .iter()
+        .filter_map(|&(i, j)| {
+            let theta = dirs[i].normalize().dot(&dirs[j].normalize()).clamp(-1.0, 1.0).acos();
+            let (a, b) = turn_span(&intervals[i], &intervals[j], edge);
+            let len = integrated_raw_angle(rec, a, b, b0);
+            (len > 0.0 && theta > 0.2).then_some(theta / len)
+        })
+        .filter(|r| r.is_finite())
+        .collect();
+    if ratios.is_empty() {
         return Err("no turn between static intervals rotates gravity by more than 11°: nothing to calibrate the \
                     gyroscope with"
             .into());
     }
+    let s_max = ratios.iter().copied().fold(0.0, f64::max);
+    let mut sorted = ratios.clone();
+    sorted.sort_by(f64::total_cmp);
+    let s_med = sorted[sorted.len() / 2];
     let iso_cost = |s: f64| -> f64 {
         let m = Matrix3::identity() * s;
         factors
             .par_iter()
             .map(|f| {
-                let vars: [&dyn tumble_solvers::DynVariable; 2] = [&gyro_vec(&m), &b0];
+                let vars: [&dyn tumble_solvers::DynVariable; 2] = [&gyro_vec(&m), b0];
                 f.residual(Vars::new(&vars)).map(|r| r.norm_squared()).unwrap_or(f64::MAX)
             })
             .sum()
     };
-    let (mut lo, mut hi) = ((0.8 * s_lo).ln(), (4.0 * s_lo).ln());
-    let phi = 0.5 * (5f64.sqrt() - 1.0);
-    let (mut x1, mut x2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
-    let (mut f1, mut f2) = (iso_cost(x1.exp()), iso_cost(x2.exp()));
-    for _ in 0..20 {
-        if f1 < f2 {
-            hi = x2;
-            x2 = x1;
-            f2 = f1;
-            x1 = hi - phi * (hi - lo);
-            f1 = iso_cost(x1.exp());
-        } else {
-            lo = x1;
-            x1 = x2;
-            f1 = f2;
-            x2 = lo + phi * (hi - lo);
-            f2 = iso_cost(x2.exp());
-        }
-    }
-    let s0 = (0.5 * (lo + hi)).exp();
-
+    // A gyro that reports rad/s is within a factor of 2 of it; beyond that the units are
+    // wrong (deg/s is 57×), which no calibration should paper over.
+    let (lo, hi) = if rec.gyro_units == Stored::RawCounts { (0.25 * s_med, 4.0 * s_max) } else { (0.5, 2.0) };
+    let starts = isotropic_starts(&iso_cost, lo, hi, if final_fit { GYRO_STARTS } else { 1 });
+    let s0 = starts[0];
     // Noise: the gyro's white noise integrated over each turn (per axis, through the
     // steps' Jacobians) plus the two gravity directions' noise.
     let m0 = Matrix3::identity() * s0;
@@ -288,16 +376,41 @@ pub(super) fn fit_gyro(
         .zip(&pairs)
         .map(|(f, &(i, j))| {
             let dir = var_acc / g2 * (1.0 / intervals[i].len() as f64 + 1.0 / intervals[j].len() as f64);
-            let c = f.noise_covariance(&m0, &b0, &raw_var) + nalgebra::Matrix2::identity() * dir.max(1e-24);
+            let c = f.noise_covariance(&m0, b0, &raw_var) + nalgebra::Matrix2::identity() * dir.max(1e-24);
             DMatrix::from_column_slice(2, 2, c.as_slice())
         })
         .collect();
-    let mut values = Values::new();
-    values.insert(KEY_GYRO, gyro_vec(&(Matrix3::identity() * s0)));
-    values.insert(KEY_GYRO_BIAS, b0);
-    values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
     let n_params = 9 + 3 * opts.estimate_gyro_bias as usize;
-    let fit = solve_with_floor(&factors, &base, &values, n_params).map_err(|e| format!("gyroscope fit failed: {e}"))?;
+    // One solve per start; the one that explains the data best (lowest χ² with the
+    // predicted noise) is kept.
+    let mut fits: Vec<(MisalignmentPrior, FloorFit)> = starts
+        .par_iter()
+        .filter_map(|&s| {
+            let start = gyro_vec(&(Matrix3::identity() * s));
+            let prior = MisalignmentPrior::new(KEY_GYRO, &start, &GYRO_OFF_DIAGONAL);
+            let mut values = Values::new();
+            values.insert(KEY_GYRO, start);
+            values.insert(KEY_GYRO_BIAS, *b0);
+            values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
+            solve_with_floor(&factors, &base, &values, n_params, &prior).ok().map(|f| (prior, f))
+        })
+        .collect();
+    fits.sort_by(|a, b| a.1.chi2_white.total_cmp(&b.1.chi2_white));
+    // Another start that explains the data nearly as well at a clearly different scale:
+    // the turns cannot tell the scales apart (single-axis turns alias at 1, 5, 9, … × a quarter turn).
+    let scale_of =
+        |f: &FloorFit| f.values.get::<GyroMatrix>(KEY_GYRO).map(|p| gyro_matrix(p).determinant().abs().cbrt());
+    let mut ambiguity = None;
+    if let (Some((_, best)), Some((_, other))) = (fits.first(), fits.get(1)) {
+        if let (Ok(a), Ok(b)) = (scale_of(best), scale_of(other)) {
+            if other.chi2_white < AMBIGUOUS_CHI2_RATIO * best.chi2_white && (a / b).ln().abs() > 1.5f64.ln() {
+                ambiguity = Some((a, b, other.chi2_white / best.chi2_white));
+            }
+        }
+    }
+    let Some((prior, fit)) = fits.into_iter().next() else {
+        return Err("gyroscope fit failed from every start".into());
+    };
     let (sol, graph) = (&fit.values, &fit.graph);
     let p = *sol.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
     let b = *sol.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
@@ -320,7 +433,8 @@ pub(super) fn fit_gyro(
     }
     // The gravity directions come from the accelerometer fit: carry its uncertainty
     // into the gyro parameters, ∂x_g/∂x_a by re-solving with each accelerometer
-    // parameter moved by ±1σ (central differences).
+    // parameter moved by ±1σ (central differences). Skipped (18 solves) when only
+    // ranking detections (not `final_fit`, which also tries one start instead of several).
     let acc_cov = &accel.cov * accel.stats.covariance_inflation;
     let resolve = |pa: &AccelParams| -> Option<[f64; 12]> {
         let d = directions(pa);
@@ -329,6 +443,7 @@ pub(super) fn fit_gyro(
             let c = c + DMatrix::identity(2, 2) * fit.floor.powi(2);
             g.add(f.with_directions(d[i], d[j]), NoiseModel::from_covariance(&c).ok()?);
         }
+        add_prior(&mut g, &prior).ok()?;
         let (s, _) =
             Optimizer::new(LmOptions { function_tolerance: 1e-12, ..LmOptions::default() }).optimize(&g, sol).ok()?;
         let mut x = [0.0; 12];
@@ -336,7 +451,7 @@ pub(super) fn fit_gyro(
         x[9..].copy_from_slice(s.get::<Vector3<f64>>(KEY_GYRO_BIAS).ok()?.as_slice());
         Some(x)
     };
-    let columns: Vec<Option<Vec<f64>>> = (0..9)
+    let columns: Vec<Option<Vec<f64>>> = (0..9 * final_fit as usize)
         .into_par_iter()
         .map(|k| {
             let h = acc_cov[(k, k)].max(0.0).sqrt();
@@ -351,11 +466,14 @@ pub(super) fn fit_gyro(
         })
         .collect();
     if let Some(cols) = columns.into_iter().collect::<Option<Vec<_>>>() {
-        let j = DMatrix::from_fn(12, 9, |r, c| cols[c][r]);
-        cov += &j * acc_cov * j.transpose();
+        if final_fit {
+            let j = DMatrix::from_fn(12, 9, |r, c| cols[c][r]);
+            cov += &j * acc_cov * j.transpose();
+        }
     } else {
         return Err("gyroscope fit does not converge when the accelerometer parameters move by 1σ".into());
     }
+    let held = undetermined(&p, &cov, &GYRO_OFF_DIAGONAL);
     let mut rotations = Vec::new();
     let (mut sq, mut tk) = (0.0, 0.0);
     for (f, &(i, j)) in factors.iter().zip(&pairs) {
@@ -371,11 +489,6 @@ pub(super) fn fit_gyro(
     let mut x = [0.0; 12];
     x[..9].copy_from_slice(p.as_slice());
     x[9..].copy_from_slice(b.as_slice());
-    let mut warnings = Vec::new();
-    let sv = m.svd(false, false).singular_values;
-    if sv.min() <= 0.0 || sv.max() / sv.min() > 1.5 {
-        warnings.push(format!("gyro matrix is far from a rotation-free scale (singular values {sv:?}): check the fit"));
-    }
     Ok(GyroFit {
         x,
         cov,
@@ -388,10 +501,60 @@ pub(super) fn fit_gyro(
             rms: (sq / factors.len() as f64).sqrt(),
             imu_tk_cost: tk,
             iterations: fit.iterations,
+            converged: !fit.capped,
         },
         rotations,
-        warnings,
+        held,
+        ambiguity,
     })
+}
+
+/// Starts of the gyro fit (see [`isotropic_starts`]).
+const GYRO_STARTS: usize = 3;
+
+/// Up to `count` isotropic scales in `[lo, hi]` at the deepest local minima of
+/// `cost` on a log grid (64 points), each refined by golden-section search
+/// between its grid neighbours; the lowest cost first.
+pub(super) fn isotropic_starts(cost: &(dyn Fn(f64) -> f64 + Sync), lo: f64, hi: f64, count: usize) -> Vec<f64> {
+    const N: usize = 64;
+    let (l0, l1) = (lo.ln(), hi.max(lo * 1.01).ln());
+    let grid: Vec<f64> = (0..N).map(|i| l0 + (l1 - l0) * i as f64 / (N - 1) as f64).collect();
+    let values: Vec<f64> = grid.par_iter().map(|x| cost(x.exp())).collect();
+    let mut minima: Vec<(f64, f64)> = (0..N)
+        .filter(|&i| (i == 0 || values[i] <= values[i - 1]) && (i == N - 1 || values[i] <= values[i + 1]))
+        .map(|i| {
+            let (mut a, mut b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(N - 1)]);
+            let phi = 0.5 * (5f64.sqrt() - 1.0);
+            let (mut x1, mut x2) = (b - phi * (b - a), a + phi * (b - a));
+            let (mut f1, mut f2) = (cost(x1.exp()), cost(x2.exp()));
+            for _ in 0..20 {
+                if f1 < f2 {
+                    (b, x2, f2) = (x2, x1, f1);
+                    x1 = b - phi * (b - a);
+                    f1 = cost(x1.exp());
+                } else {
+                    (a, x1, f1) = (x1, x2, f2);
+                    x2 = a + phi * (b - a);
+                    f2 = cost(x2.exp());
+                }
+            }
+            let x = 0.5 * (a + b);
+            (x.exp(), cost(x.exp()))
+        })
+        .collect();
+    minima.sort_by(|a, b| a.1.total_cmp(&b.1));
+    minima.into_iter().take(count.max(1)).map(|(s, _)| s).collect()
+}
+
+/// The samples a turn between two poses is integrated over: from `edge`
+/// samples before the end of the first to `edge` after the start of the next
+/// (at most to their middles). The detector's window is `2·edge + 1` samples
+/// wide, so the slow start and end of a turn can hide that far inside a
+/// detected pose; left out, they bias the gyro scales low.
+fn turn_span(before: &Interval, after: &Interval, edge: usize) -> (usize, usize) {
+    let a = (before.end - 1).saturating_sub(edge).max(before.start + before.len() / 2);
+    let b = (after.start + edge).min(after.start + after.len() / 2);
+    (a, b)
 }
 
 /// `Σ |ū_i − b| Δt_i` over samples `a..=b` (raw units · s).

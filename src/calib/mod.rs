@@ -28,9 +28,11 @@ pub mod apply;
 pub mod detect;
 mod fit;
 pub mod gravity;
+pub mod observability;
 pub use crate::model::calibration as model;
 pub mod report;
 pub mod solve;
+pub mod verdict;
 
 pub use crate::io::calibration::read_imu_tk_calib;
 pub use apply::write_like_input;
@@ -38,3 +40,4 @@ pub(crate) use fit::{accel_triad, gyro_triad};
 pub use gravity::{local_gravity, normal_gravity, LocalGravity};
 pub use model::{Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
 pub use solve::{calibrate, parse_multipliers, CalibError, CalibOptions, CalibrationResult, RECORDING_ADVICE};
+pub use verdict::{Assessment, Verdict};

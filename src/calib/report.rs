@@ -3,7 +3,10 @@
 //! `imu_tk_gyro.calib`, and `static_detection.png`.
 
 use super::model::{imu_tk_calib_text, CalibrationFile, Triad};
-use super::solve::{CalibOptions, CalibrationResult, FitStats, RotationResidual, StaticInterval, SweepEntry};
+use super::solve::{
+    CalibOptions, CalibrationResult, FitStats, InitialRestReport, RotationResidual, StaticInterval, SweepEntry,
+};
+use super::verdict::{Assessment, Verdict};
 use crate::error::OutputError;
 use crate::io::ImuRecording;
 use crate::plot::{ensure_font, AXIS_COLORS};
@@ -22,7 +25,7 @@ struct Residuals<'a> {
 struct Detection<'a> {
     multiplier: f64,
     threshold: f64,
-    init_static_s: f64,
+    initial_rest: &'a InitialRestReport,
     window_s: f64,
     min_interval_s: f64,
     with_gyro: bool,
@@ -53,6 +56,8 @@ struct Output<'a> {
     detection: Detection<'a>,
     /// The same calibration in imu_tk's convention `calibrated = T·K·(raw − b)`.
     imu_tk: ImuTkOut,
+    /// The verdict (`ok` / `weak` / `failed`) with its reasons.
+    assessment: &'a Assessment,
     warnings: &'a [String],
 }
 
@@ -64,19 +69,23 @@ fn imu_tk_triad(t: &Triad) -> Option<ImuTkTriad> {
 impl CalibrationResult {
     fn output<'a>(&'a self, opts: &CalibOptions) -> Output<'a> {
         Output {
-            calibration: CalibrationFile::from(&self.calibration),
+            calibration: CalibrationFile {
+                verdict: Some(self.assessment.verdict.to_string()),
+                ..CalibrationFile::from(&self.calibration)
+            },
             static_intervals: &self.static_intervals,
             residuals: Residuals { accel: &self.accel_fit, gyro: &self.gyro_fit, rotations: &self.rotations },
             detection: Detection {
                 multiplier: self.multiplier,
                 threshold: self.threshold,
-                init_static_s: opts.init_static_s,
+                initial_rest: &self.initial_rest,
                 window_s: opts.window_s,
                 min_interval_s: opts.min_interval_s,
                 with_gyro: opts.detect_with_gyro,
                 sweep: &self.sweep,
             },
             imu_tk: ImuTkOut { acc: imu_tk_triad(&self.calibration.accel), gyro: imu_tk_triad(&self.calibration.gyro) },
+            assessment: &self.assessment,
             warnings: &self.warnings,
         }
     }
@@ -96,6 +105,14 @@ impl CalibrationResult {
         let c = &self.calibration;
         let mut s = String::new();
         let u = &c.units;
+        let r = &self.initial_rest;
+        s.push_str(&format!(
+            "initial rest: {:.2}–{:.2} s ({} samples, {})\n",
+            r.start_s,
+            r.end_s,
+            r.samples,
+            if r.detected { "found in the data" } else { "--init-static" }
+        ));
         s.push_str(&format!(
             "static intervals: {} (threshold multiplier {}), gravity {} m/s²\n",
             self.intervals.len(),
@@ -136,12 +153,39 @@ impl CalibrationResult {
             "imu_tk-style costs: accel {:.6}, gyro {:.6}\n",
             self.accel_fit.imu_tk_cost, self.gyro_fit.imu_tk_cost
         ));
+        s.push_str(&format!("verdict: {}\n", self.assessment.verdict));
+        for r in &self.assessment.reasons {
+            s.push_str(&format!("  - {r}\n"));
+        }
         s
     }
 
     /// Write every output into `dir` (created); returns the files written.
+    /// A [`Verdict::Failed`] result gets [`Self::write_diagnosis`]'s files only.
     pub fn write_all(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, OutputError> {
+        if self.assessment.verdict == Verdict::Failed {
+            return self.write_diagnosis(rec, opts, dir);
+        }
         crate::io::staging::write_staged(dir, |stage| self.write_unstaged(rec, opts, stage))
+    }
+
+    /// For a failed calibration: `diagnosis.json` (what `calibration.json`
+    /// would hold, marked `verdict: failed`, which readers refuse) and the
+    /// detection figure; no `calibration.json`/`.yaml` or `.calib` a user
+    /// could load by mistake.
+    pub fn write_diagnosis(
+        &self,
+        rec: &ImuRecording,
+        opts: &CalibOptions,
+        dir: &Path,
+    ) -> Result<Vec<PathBuf>, OutputError> {
+        crate::io::staging::write_staged(dir, |stage| {
+            let p = stage.join("diagnosis.json");
+            std::fs::write(&p, self.to_json(opts)).map_err(|e| format!("{}: {e}", p.display()))?;
+            let png = stage.join("static_detection.png");
+            self.plot_detection(rec, &png)?;
+            Ok(vec![p, png])
+        })
     }
 
     fn write_unstaged(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, OutputError> {

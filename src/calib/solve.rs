@@ -3,9 +3,11 @@
 //! gyroscope with integrated-rotation factors, both on the solver, and turn
 //! the estimates and their covariances into the paper's convention.
 
-use super::detect::{intervals_below, mean3, sliding_variance_norm, var3, Interval};
+use super::detect::{find_initial_rest, intervals_below, mean3, sliding_variance_norm, var3, InitialRest, Interval};
 use super::fit::*;
 use super::model::{ImuCalibration, Units};
+use super::observability::names;
+use super::verdict::{Assessment, Verdict};
 use crate::io::{ImuRecording, Stored};
 use crate::OptionError;
 use nalgebra::{Matrix3, Vector3};
@@ -24,8 +26,10 @@ pub(super) const KEY_GYRO_BIAS: Key = Key::new('g', 1);
 pub struct CalibOptions {
     /// Local gravity magnitude \[m/s²\] (see [`super::normal_gravity`]).
     pub gravity: f64,
-    /// Length of the initial static period \[s\] (its variance sets the threshold; its mean the gyro bias).
-    pub init_static_s: f64,
+    /// Length of the initial static period \[s\] (its variance sets the threshold; its mean the gyro bias);
+    /// `None`: found from the data ([`find_initial_rest`]: the longest early rest of at least
+    /// [`MIN_INITIAL_REST_S`]).
+    pub init_static_s: Option<f64>,
     /// Window of the sliding accelerometer variance \[s\] (imu_tk: 101 samples).
     pub window_s: f64,
     /// Shortest usable static interval \[s\] (imu_tk: 100 samples).
@@ -47,7 +51,7 @@ impl Default for CalibOptions {
     fn default() -> Self {
         CalibOptions {
             gravity: crate::io::STANDARD_GRAVITY,
-            init_static_s: 50.0,
+            init_static_s: None,
             window_s: 0.5,
             min_interval_s: 0.5,
             multipliers: (2..=10).map(f64::from).collect(),
@@ -72,7 +76,9 @@ impl CalibOptions {
                 ),
             ));
         }
-        OptionError::positive("--init-static", self.init_static_s, "seconds")?;
+        if let Some(t) = self.init_static_s {
+            OptionError::positive("--init-static", t, "seconds")?;
+        }
         OptionError::positive("--window", self.window_s, "seconds")?;
         OptionError::positive("--min-interval", self.min_interval_s, "seconds")?;
         if self.multipliers.is_empty() || self.multipliers.iter().any(|k| !(k.is_finite() && *k > 0.0)) {
@@ -117,13 +123,38 @@ pub fn parse_multipliers(s: &str) -> Result<Vec<f64>, OptionError> {
 /// from 9.780 (equator) to 9.832 (poles) at sea level and falls 3.1e-6 per metre up.
 pub const EARTH_GRAVITY_M_S2: std::ops::Range<f64> = 9.7..9.9;
 
+/// Shortest initial rest [`find_initial_rest`] accepts \[s\]: a second of samples
+/// gives the noise level to a few per cent and the gyro bias to σ/√rate.
+pub const MIN_INITIAL_REST_S: f64 = 1.0;
+
+/// The shortest hold the paper asks for \[s\]; shorter holds (down to
+/// [`CalibOptions::min_interval_s`]) are used with a warning.
+pub const PAPER_MIN_HOLD_S: f64 = 1.0;
+
+/// The initial static period the paper asks for \[s\]; shorter rests are used
+/// with a warning.
+pub const PAPER_INITIAL_REST_S: f64 = 10.0;
+
+/// The initial static period used.
+#[derive(Debug, Clone, Serialize)]
+pub struct InitialRestReport {
+    /// First and last sample, seconds from the first sample of the recording.
+    pub start_s: f64,
+    /// See `start_s`.
+    pub end_s: f64,
+    /// Samples averaged (knocks cut out).
+    pub samples: usize,
+    /// Found from the data (false: `--init-static` given).
+    pub detected: bool,
+}
+
 /// Fewest static intervals [`CalibOptions::min_intervals`] may ask for: one
 /// more than the accelerometer model's 9 parameters, so that its fit has a
 /// residual to judge it by.
 pub const MIN_STATIC_INTERVALS: usize = 10;
 
 /// Why a recording cannot be calibrated.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct CalibError {
     /// The recording (file name).
     pub source: String,
@@ -131,6 +162,10 @@ pub struct CalibError {
     pub message: String,
     /// What to do about it.
     pub hint: Option<String>,
+    /// The calibration that was computed but failed its verdict
+    /// ([`Verdict::Failed`]), for diagnosis only: its figures and residuals
+    /// show what went wrong; its parameters must not be used.
+    pub diagnosis: Option<Box<CalibrationResult>>,
 }
 
 impl fmt::Display for CalibError {
@@ -180,6 +215,8 @@ pub struct SweepEntry {
     pub chi2_per_dof: Option<f64>,
     /// RMS of `|a| − g` \[m/s²\].
     pub rms_norm_error: Option<f64>,
+    /// ln det of the inflated accelerometer and gyro covariances (the sweep keeps the smallest).
+    pub uncertainty: Option<f64>,
 }
 
 /// Fit statistics of one stage.
@@ -204,6 +241,8 @@ pub struct FitStats {
     pub imu_tk_cost: f64,
     /// Solver iterations.
     pub iterations: usize,
+    /// False when a solve stopped at the iteration cap instead of converging.
+    pub converged: bool,
 }
 
 /// Residual of one integrated-rotation factor.
@@ -224,6 +263,8 @@ pub struct RotationResidual {
 pub struct CalibrationResult {
     /// The calibration with 1-σ uncertainties.
     pub calibration: ImuCalibration,
+    /// The initial static period used.
+    pub initial_rest: InitialRestReport,
     /// The multiplier `k` kept and the variance threshold it gives \[raw units²\].
     pub multiplier: f64,
     /// See `multiplier`.
@@ -248,6 +289,8 @@ pub struct CalibrationResult {
     pub ratio: Vec<f64>,
     /// Problems that did not stop the calibration.
     pub warnings: Vec<String>,
+    /// The verdict: `ok`, `weak` (with reasons) or `failed` (only in [`CalibError::diagnosis`]).
+    pub assessment: Assessment,
 }
 
 /// Calibrate accelerometer and gyroscope from one hand-tumbled recording.
@@ -264,6 +307,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         source: rec.source_name(),
         message,
         hint: hint.map(str::to_string),
+        diagnosis: None,
     };
     if !(opts.gravity.is_finite() && opts.gravity > 0.0) {
         return Err(err(format!("gravity must be positive, got {}", opts.gravity), None));
@@ -279,9 +323,12 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     }
     let mut warnings = Vec::new();
     let n = rec.len();
-    if n < 100 || rec.duration() <= opts.init_static_s {
+    if n < 100 || opts.init_static_s.is_some_and(|t| rec.duration() <= t) {
         return Err(err(
-            format!("{:.1} s of data: less than the {} s initial static period", rec.duration(), opts.init_static_s),
+            match opts.init_static_s {
+                Some(t) => format!("{:.1} s of data: less than the {t} s initial static period", rec.duration()),
+                None => format!("{:.1} s of data ({n} samples): too short for a calibration", rec.duration()),
+            },
             Some(RECORDING_ADVICE),
         ));
     }
@@ -291,22 +338,56 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     if period.is_nan() || period <= 0.0 {
         return Err(err("timestamps do not increase".into(), None));
     }
-    let n_init = rec.t.partition_point(|&t| t < opts.init_static_s);
     let half = ((opts.window_s / period / 2.0).round() as usize).max(2);
     let w = 2 * half + 1;
     let min_len = ((opts.min_interval_s / period).round() as usize).max(3);
-    if n_init < 2 * w {
-        return Err(err(format!("initial static period has only {n_init} samples; need ≥ {}", 2 * w), None));
-    }
 
     let score = sliding_variance_norm(&rec.accel, w);
     let gyro_score = sliding_variance_norm(&rec.gyro, w);
-    let var_a = var3(&rec.accel[..n_init]);
-    let var_g = var3(&rec.gyro[..n_init]);
+    let min_rest = ((MIN_INITIAL_REST_S / period).round() as usize).max(2 * w);
+    let rest = match opts.init_static_s {
+        Some(t) => InitialRest::given(rec.t.partition_point(|&x| x < t)),
+        None => find_initial_rest(&rec.accel, &rec.gyro, &score, &gyro_score, w, min_rest).ok_or_else(|| {
+            err(
+                format!(
+                    "no rest of ≥ {:.1} s in the first {:.0} % of the recording to take the noise and gyro bias from",
+                    min_rest as f64 * period,
+                    100.0 * super::detect::EARLY_FRACTION
+                ),
+                Some(
+                    "start the recording with the IMU lying still for a few seconds (better 50 s), or give its \
+                      length with --init-static",
+                ),
+            )
+        })?,
+    };
+    let n_init = rest.samples();
+    if n_init < 2 * w {
+        return Err(err(format!("initial static period has only {n_init} samples; need ≥ {}", 2 * w), None));
+    }
+    let (init_accel, init_gyro) = (rest.collect(&rec.accel), rest.collect(&rec.gyro));
+    let var_a = var3(&init_accel);
+    let var_g = var3(&init_gyro);
     let norm = |v: &[f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
     let var_init = norm(&var_a);
-    check_initial_static(rec, &score, &gyro_score, n_init, half, var_init, &mut warnings)
-        .map_err(|(m, h)| err(m, Some(h)))?;
+    if !rest.detected {
+        check_initial_static(rec, &score, &gyro_score, n_init, half, var_init, &mut warnings)
+            .map_err(|(m, h)| err(m, Some(h)))?;
+    }
+    let span = rest.span();
+    let initial_rest = InitialRestReport {
+        start_s: rec.t[span.start],
+        end_s: rec.t[span.end - 1],
+        samples: n_init,
+        detected: rest.detected,
+    };
+    if initial_rest.end_s - initial_rest.start_s < PAPER_INITIAL_REST_S {
+        warnings.push(format!(
+            "the initial rest lasts {:.1} s (the paper asks ≥ {PAPER_INITIAL_REST_S} s): the gyro bias taken from it \
+             is less certain (its σ says how much)",
+            initial_rest.end_s - initial_rest.start_s
+        ));
+    }
     let base = var_init.max(1e-300);
     // Detection score: windowed variance relative to the initial period's, the larger of
     // accelerometer and gyro (the gyro catches slow turns the accelerometer hardly sees).
@@ -320,33 +401,59 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
 
     // A steady turn about gravity keeps both windowed variances low: an interval whose
     // mean rate is far above the initial period's noise is a turn, not a pose.
-    let b_init = Vector3::from(mean3(&rec.gyro[..n_init]));
+    let b_init = Vector3::from(mean3(&init_gyro));
     let floor = if rec.gyro_units == Stored::RawCounts { 0.0 } else { MIN_TURN_RATE };
     let turn_limit = Vector3::from(var_g.map(|v| (TURN_SIGMAS * v.sqrt()).max(floor)));
-    // Threshold sweep: one accelerometer fit per multiplier.
-    let candidates: Vec<(f64, Vec<Interval>, Option<AccelFit>)> = opts
+    // Threshold sweep: one calibration per multiplier; the most certain one is kept
+    // (smallest ln det of the inflated accelerometer and gyro covariances): a strict
+    // threshold drops poses and widens σ, a loose one lets the slow start and end of
+    // turns into the poses, which the fits' χ²/dof and so the inflated σ show.
+    let gyro_inputs = GyroInputs { var_a: &var_a, var_g: &var_g, bias: &b_init, n_init, edge: half };
+    type Candidate = (f64, Vec<Interval>, Option<AccelFit>, Option<Result<GyroFit, String>>);
+    let candidates: Vec<Candidate> = opts
         .multipliers
         .par_iter()
         .map(|&k| {
             let iv = not_turning(rec, intervals_below(&ratio, k, min_len), &b_init, turn_limit);
             let fit = (iv.len() >= opts.min_intervals).then(|| fit_accel(rec, &iv, opts.gravity, &var_a)).flatten();
-            (k, iv, fit)
+            let gyro = fit.as_ref().map(|a| {
+                let means = interval_means(rec, &iv);
+                fit_gyro(rec, &iv, &means, a, &gyro_inputs, opts, false)
+            });
+            (k, iv, fit, gyro)
         })
         .collect();
     let sweep: Vec<SweepEntry> = candidates
         .iter()
-        .map(|(k, iv, fit)| SweepEntry {
+        .map(|(k, iv, fit, gyro)| SweepEntry {
             multiplier: *k,
             intervals: iv.len(),
             chi2_per_dof: fit.as_ref().map(|f| f.stats.chi2_per_dof),
             rms_norm_error: fit.as_ref().map(|f| f.stats.rms),
+            uncertainty: match (fit, gyro) {
+                (Some(a), Some(Ok(g))) => Some(a.uncertainty() + g.uncertainty()),
+                _ => None,
+            },
         })
         .collect();
-    let best = candidates
-        .into_iter()
-        .filter_map(|(k, iv, fit)| fit.map(|f| (k, iv, f)))
-        .min_by(|a, b| a.2.stats.chi2_per_dof.total_cmp(&b.2.stats.chi2_per_dof));
-    let Some((multiplier, intervals, accel)) = best else {
+    let mut gyro_error = None;
+    let mut best: Option<(f64, f64, Vec<Interval>, AccelFit, GyroFit)> = None;
+    for (k, iv, fit, gyro) in candidates {
+        let (Some(a), Some(g)) = (fit, gyro) else { continue };
+        match g {
+            Err(e) => gyro_error = Some(e),
+            Ok(g) => {
+                let u = a.uncertainty() + g.uncertainty();
+                if best.as_ref().is_none_or(|b| u < b.0) {
+                    best = Some((u, k, iv, a, g));
+                }
+            }
+        }
+    }
+    let Some((_, multiplier, intervals, accel, _)) = best else {
+        if let Some(e) = gyro_error {
+            return Err(err(e, None));
+        }
         let most = sweep.iter().map(|s| s.intervals).max().unwrap_or(0);
         return Err(err(
             format!(
@@ -360,15 +467,13 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         ));
     };
 
+    // The kept detection's gyro fit again, with the accelerometer's uncertainty carried into it.
+    let means = interval_means(rec, &intervals);
+    let gyro = fit_gyro(rec, &intervals, &means, &accel, &gyro_inputs, opts, true).map_err(|m| err(m, None))?;
     let ma = accel_matrix(&accel.params);
     let ba = Vector3::new(accel.params[6], accel.params[7], accel.params[8]);
-    let means: Vec<Vector3<f64>> =
-        intervals.iter().map(|iv| Vector3::from(mean3(&rec.accel[iv.start..iv.end]))).collect();
     let dirs: Vec<Vector3<f64>> = means.iter().map(|m| ma * (m - ba)).collect();
     excitation_warnings(&dirs, &mut warnings).map_err(|m| err(m, Some(RECORDING_ADVICE)))?;
-
-    let gyro = fit_gyro(rec, &intervals, &means, &accel, &var_a, &var_g, n_init, opts).map_err(|m| err(m, None))?;
-    warnings.extend(gyro.warnings.iter().cloned());
 
     // Paper convention with propagated uncertainties.
     let accel_triad = accel_triad(&accel.params, &accel.cov, accel.stats.covariance_inflation);
@@ -378,7 +483,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         gyro_input: if rec.gyro_units == Stored::RawCounts { "counts" } else { "rad/s" }.into(),
         ..Units::default()
     };
-    let static_intervals = intervals
+    let static_intervals: Vec<StaticInterval> = intervals
         .iter()
         .zip(&dirs)
         .map(|(iv, a)| StaticInterval {
@@ -391,7 +496,17 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
             norm_error: a.norm() - opts.gravity,
         })
         .collect();
-    Ok(CalibrationResult {
+    let mut holds: Vec<f64> = static_intervals.iter().map(|s| s.end_s - s.start_s).collect();
+    holds.sort_by(f64::total_cmp);
+    if holds[holds.len() / 2] < PAPER_MIN_HOLD_S {
+        warnings.push(format!(
+            "the poses were held {:.2} s (median; the paper asks ≥ {PAPER_MIN_HOLD_S} s): short holds leave less \
+             still data per pose and blur poses into turns",
+            holds[holds.len() / 2]
+        ));
+    }
+    let not_determined = [names("accelerometer", &accel.held), names("gyroscope", &gyro.held)].concat();
+    let mut result = CalibrationResult {
         calibration: ImuCalibration {
             accel: accel_triad,
             gyro: gyro_triad,
@@ -400,6 +515,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
             effects: None,
             time_offsets: None,
         },
+        initial_rest,
         multiplier,
         threshold: multiplier * base,
         ratio,
@@ -411,7 +527,18 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         rotations: gyro.rotations,
         score,
         warnings,
-    })
+        assessment: Assessment { verdict: Verdict::Ok, reasons: Vec::new(), not_determined: Vec::new() },
+    };
+    result.assessment = Assessment::of(&result, not_determined, gyro.ambiguity);
+    if result.assessment.verdict == Verdict::Failed {
+        return Err(CalibError {
+            message: format!("calibration failed: {}", result.assessment.reasons.join("; ")),
+            hint: Some(RECORDING_ADVICE.to_string()),
+            diagnosis: Some(Box::new(result)),
+            ..err(String::new(), None)
+        });
+    }
+    Ok(result)
 }
 
 /// An interval whose mean gyro reading differs from the initial period's on some

@@ -49,9 +49,9 @@ pub struct AuditArgs {
     /// Candidates to test, comma separated (default: all the sensor model holds).
     #[arg(long, value_delimiter = ',', value_parser = |s: &str| s.parse::<Effect>())]
     candidates: Vec<Effect>,
-    /// Length of the initial static period [s] (for the static-interval detection).
-    #[arg(long, default_value_t = 50.0)]
-    init_static: f64,
+    /// Length of the initial static period [s] (for the static-interval detection) (default: found in the data).
+    #[arg(long)]
+    init_static: Option<f64>,
 }
 
 impl AuditArgs {

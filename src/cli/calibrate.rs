@@ -23,9 +23,10 @@ pub struct CalibrateArgs {
     /// Ellipsoidal height [m] for WGS-84 normal gravity (with --latitude).
     #[arg(long, default_value_t = 0.0, requires = "latitude")]
     height: f64,
-    /// Length of the initial static period [s].
-    #[arg(long, default_value_t = 50.0)]
-    init_static: f64,
+    /// Length of the initial static period [s] (default: found in the data, the
+    /// longest rest of ≥ 1 s in the first quarter of the recording).
+    #[arg(long)]
+    init_static: Option<f64>,
     /// Window of the sliding accelerometer variance [s] (imu_tk: 101 samples).
     #[arg(long, default_value_t = 0.5)]
     window: f64,
@@ -72,7 +73,24 @@ impl CalibrateArgs {
         }
         eprintln!("read {} samples ({:.1} s) in {:.2} s", rec.len(), rec.duration(), start.elapsed().as_secs_f64());
         let t = std::time::Instant::now();
-        let result = tumble::calib::calibrate(&rec, &opts)?;
+        let result = match tumble::calib::calibrate(&rec, &opts) {
+            Ok(r) => r,
+            Err(mut e) => {
+                if let Some(d) = e.diagnosis.take() {
+                    print!("{}", d.summary_table());
+                    let files = d.write_diagnosis(&rec, &opts, &self.out)?;
+                    eprintln!("wrote the diagnosis (not a calibration): {}", paths(&files));
+                    let stale = self.out.join("calibration.json");
+                    if stale.exists() {
+                        eprintln!(
+                            "note: {} is from an earlier run; this run failed and did not replace it",
+                            stale.display()
+                        );
+                    }
+                }
+                return Err(e.into());
+            }
+        };
         let elapsed = t.elapsed().as_secs_f64();
         print!("{}", result.summary_table());
         for w in &result.warnings {

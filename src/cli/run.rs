@@ -40,9 +40,9 @@ pub struct RunArgs {
     /// Geodetic latitude [deg] for WGS-84 normal gravity (at sea level).
     #[arg(long)]
     latitude: Option<f64>,
-    /// Length of the tumble's initial static period [s].
-    #[arg(long, default_value_t = 50.0)]
-    init_static: f64,
+    /// Length of the tumble's initial static period [s] (default: found in the data).
+    #[arg(long)]
+    init_static: Option<f64>,
     /// Ground truth (ASL CSV) for the vio stage; an ASL folder's own is used when present.
     #[arg(long)]
     groundtruth: Option<PathBuf>,

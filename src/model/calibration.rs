@@ -258,6 +258,10 @@ pub struct CalibrationFile {
     /// Time offsets found by `tumble audit --vio`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub time_offsets: Option<TimeOffsets>,
+    /// The calibration's verdict (`ok`, `weak`, `failed`; see `tumble::calib::verdict`):
+    /// a file marked `failed` is refused when read.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verdict: Option<String>,
 }
 
 fn default_gravity() -> f64 {
@@ -293,6 +297,7 @@ impl From<&ImuCalibration> for CalibrationFile {
             units: c.units.clone(),
             effects: c.effects.clone(),
             time_offsets: c.time_offsets,
+            verdict: None,
         }
     }
 }
@@ -300,6 +305,12 @@ impl From<&ImuCalibration> for CalibrationFile {
 impl CalibrationFile {
     /// Check and convert to the in-memory model.
     pub fn to_calibration(&self) -> Result<ImuCalibration, ModelError> {
+        if self.verdict.as_deref() == Some("failed") {
+            return Err(ModelError::from(
+                "this calibration failed its verdict (`verdict: failed`; the reasons are in the file): its \
+                 parameters do not explain the recording and must not be used",
+            ));
+        }
         let triad = |t: &[[f64; 3]; 3], ts, k: &[f64; 3], ks, b: &[f64; 3], bs, name: &str| -> Result<Triad, String> {
             let all: Vec<f64> = t.as_flattened().iter().chain(k).chain(b).copied().collect();
             if all.iter().any(|x| !x.is_finite()) {

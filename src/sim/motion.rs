@@ -120,11 +120,23 @@ pub struct TumbleSettings {
     pub turn_rate: f64,
     /// Largest translation between poses \[m\].
     pub max_shift_m: f64,
+    /// Hold only axis-aligned poses (each turn is a quarter turn about a body
+    /// axis, as when an IMU in a box is laid on each of its faces in turn; the
+    /// Ferraris et al. protocol). Such poses cannot separate the accelerometer's
+    /// misalignments from its scales (see docs/calibration.md).
+    pub axis_aligned: bool,
 }
 
 impl Default for TumbleSettings {
     fn default() -> Self {
-        TumbleSettings { initial_static_s: 50.0, poses: 50, hold_s: [1.5, 3.0], turn_rate: 1.2, max_shift_m: 0.05 }
+        TumbleSettings {
+            initial_static_s: 50.0,
+            poses: 50,
+            hold_s: [1.5, 3.0],
+            turn_rate: 1.2,
+            max_shift_m: 0.05,
+            axis_aligned: false,
+        }
     }
 }
 
@@ -160,7 +172,13 @@ impl Tumble {
                 }
             };
             let angle = rng.random_range(40f64.to_radians()..140f64.to_radians());
-            let phi = axis * angle;
+            let (phi, angle) = if s.axis_aligned {
+                let axis = Vector3::ith(rng.random_range(0..3), 1.0);
+                let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+                (axis * sign * PI / 2.0, PI / 2.0)
+            } else {
+                (axis * angle, angle)
+            };
             let dp =
                 Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
                     * s.max_shift_m
