@@ -456,3 +456,47 @@ fn allan_stage_writes_documented_outputs() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A static record with a long gap, and a record that moves: the Allan stage
+/// analyses the gap-free stretch (saying so) or refuses; it never averages a
+/// rate over the gap or reads motion as noise.
+#[test]
+fn gaps_and_motion_are_not_read_as_noise() {
+    use tumble::allan::{run_allan, AllanRunOptions};
+    let mut cfg = tumble::sim::SimConfig { duration_s: Some(300.0), ..tumble::sim::SimConfig::default() };
+    cfg.imu.rate_hz = 100.0;
+    let sim = tumble::sim::simulate(tumble::sim::Scenario::Static, &cfg, 5).unwrap();
+    let rec = tumble::io::ImuRecording {
+        t: sim.imu.t.clone(),
+        gyro: sim.imu.gyro.clone(),
+        accel: sim.imu.accel.clone(),
+        ..Default::default()
+    };
+    // One hour missing after the first 100 s: the remaining 200 s are analysed at 100 Hz.
+    let mut gap = rec.clone();
+    for t in gap.t.iter_mut().skip(10_000) {
+        *t += 3600.0;
+    }
+    let report = run_allan(&gap, &AllanRunOptions::default()).unwrap();
+    assert!((report.rate_hz - 100.0).abs() < 1e-6, "{}", report.rate_hz);
+    assert_eq!(report.samples, rec.len() - 10_000);
+    assert!(
+        report.warnings.iter().any(|w| w.contains("gap") && w.contains("longest gap-free stretch")),
+        "{:?}",
+        report.warnings
+    );
+    // Gaps everywhere: refused.
+    let mut holes = rec.clone();
+    for (i, t) in holes.t.iter_mut().enumerate() {
+        *t += (i / 5000) as f64 * 60.0;
+    }
+    let e = run_allan(&holes, &AllanRunOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("no gap-free stretch holds half"), "{e}");
+    // Turned on its side half way: refused, naming when.
+    let mut moved = rec.clone();
+    for a in moved.accel.iter_mut().skip(20_000) {
+        *a = [a[2], a[1], -a[0]];
+    }
+    let e = run_allan(&moved, &AllanRunOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("not a static log") && e.contains("t = 20"), "{e}");
+}

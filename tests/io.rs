@@ -298,6 +298,12 @@ fn trajectories_round_trip_in_both_formats() {
     for (a, b) in back.t_ns.iter().zip(&tr.t_ns) {
         assert!((a - b).abs() < 1000, "{a} {b}");
     }
+    // TUM with nanosecond stamps (as some tools write it): TUM's column order, not ASL's.
+    let ns = tmp("tum_ns.txt", "1403715273262142976 1 2 3 0.5 0.5 -0.5 0.5\n1403715273312143104 1 2 3 0 0 0 1\n");
+    let back = read_trajectory(&ns).unwrap();
+    assert_eq!(back.t_ns[0], 1_403_715_273_262_142_976);
+    assert_eq!(back.q[0], [0.5, 0.5, 0.5, -0.5]);
+    assert_eq!(back.q[1], [1.0, 0.0, 0.0, 0.0]);
     let e = read_trajectory(&tmp("badq.txt", "0 0 0 0 0 0 0 2\n")).unwrap_err().to_string();
     assert!(e.contains("badq.txt:1:") && e.contains("quaternion norm"), "{e}");
     let e = read_trajectory(&tmp("dupt.txt", "0 0 0 0 0 0 0 1\n0 0 0 0 0 0 0 1\n")).unwrap_err().to_string();
@@ -405,9 +411,13 @@ fn ros1_bag_imu_topic_reads_and_bad_bags_are_refused() {
     let wrong = tumble::io::RecordingOptions { topic: Some("/imu1".into()), ..Default::default() };
     let e = tumble::io::open_recording(&p, &wrong).unwrap_err().to_string();
     assert!(e.contains("no sensor_msgs/Imu topic '/imu1'") && e.contains("/imu0"), "{e}");
-    std::fs::write(&p, ros1_bag(10, Some(1 << 40))).unwrap();
-    let e = tumble::io::open_recording(&p, &opts).unwrap_err().to_string();
-    assert!(e.contains("index_pos points outside the file"), "{e}");
+    // index_pos beyond the file, inside the header record, or too close to the end for a record.
+    let len = ros1_bag(10, None).len() as u64;
+    for at in [1 << 40, 20, 40, len - 3] {
+        std::fs::write(&p, ros1_bag(10, Some(at))).unwrap();
+        let e = tumble::io::open_recording(&p, &opts).unwrap_err().to_string();
+        assert!(e.contains("index_pos") && e.contains("does not point past the header record"), "{at}: {e}");
+    }
     let good = ros1_bag(400, None);
     std::fs::write(&p, &good[..good.len() / 2]).unwrap();
     assert!(tumble::io::open_recording(&p, &opts).is_err());

@@ -128,6 +128,92 @@ pub struct AllanReport {
     pub warnings: Vec<String>,
 }
 
+/// A step that skips more than this many samples splits the record: Allan
+/// deviations need evenly spaced samples, and a few lost samples shift the
+/// time base by less than the τ resolution, a long gap does not.
+pub const MAX_BRIDGED_GAP_SAMPLES: f64 = 10.0;
+
+/// The longest gap-free stretch is analysed alone when it holds at least this
+/// share of the samples; otherwise the record is refused.
+pub const MIN_SEGMENT_SHARE: f64 = 0.5;
+
+/// Largest angle between a static log's gravity direction over 10 s and over
+/// its first 10 s \[deg\]: a table settling or the accelerometer's bias
+/// drifting tilts it by tenths of a degree; more means the IMU moved, and
+/// motion would be read as noise.
+pub const MAX_STATIC_TILT_DEG: f64 = 2.0;
+
+/// The samples `[start, end)` to analyse and the sample period τ0 (median step).
+fn gap_free_segment(
+    rec: &ImuRecording,
+    warnings: &mut Vec<String>,
+) -> Result<(std::ops::Range<usize>, f64), AllanError> {
+    let tau0 = crate::io::validate::median_period(&rec.t);
+    if !(tau0.is_finite() && tau0 > 0.0) {
+        return Err(AllanError(format!("{}: cannot tell the sample rate from the timestamps", rec.source_name())));
+    }
+    let splits: Vec<usize> =
+        (1..rec.len()).filter(|&i| rec.t[i] - rec.t[i - 1] > (MAX_BRIDGED_GAP_SAMPLES + 1.0) * tau0).collect();
+    if splits.is_empty() {
+        return Ok((0..rec.len(), tau0));
+    }
+    let bounds: Vec<usize> = std::iter::once(0).chain(splits.iter().copied()).chain([rec.len()]).collect();
+    let longest = bounds.windows(2).map(|w| w[0]..w[1]).max_by_key(|r| r.len()).unwrap_or(0..rec.len());
+    let (gap_at, gap) =
+        splits.iter().map(|&i| (i, rec.t[i] - rec.t[i - 1])).max_by(|a, b| a.1.total_cmp(&b.1)).unwrap_or((0, 0.0));
+    let describe = format!(
+        "{} gap(s) in the timestamps, the longest {gap:.3} s before line {} (t = {:.1} s)",
+        splits.len(),
+        rec.lines.line(gap_at),
+        rec.t[gap_at]
+    );
+    if (longest.len() as f64) < MIN_SEGMENT_SHARE * rec.len() as f64 {
+        return Err(AllanError(format!(
+            "{}: {describe}; no gap-free stretch holds half the samples (longest: {} of {}). Allan deviations need \
+             evenly spaced samples: analyse the stretches separately",
+            rec.source_name(),
+            longest.len(),
+            rec.len()
+        )));
+    }
+    warnings.push(format!(
+        "{describe}: analysing the longest gap-free stretch, t = {:.1}–{:.1} s ({} of {} samples)",
+        rec.t[longest.start],
+        rec.t[longest.end - 1],
+        longest.len(),
+        rec.len()
+    ));
+    Ok((longest, tau0))
+}
+
+/// Refuse a log whose gravity direction turns by more than [`MAX_STATIC_TILT_DEG`]
+/// (accelerometer in m/s² only: raw counts have unknown offsets).
+fn check_static(rec: &ImuRecording) -> Result<(), AllanError> {
+    if rec.accel_units != Stored::Si || rec.len() < 20 {
+        return Ok(());
+    }
+    let per = ((10.0 / rec.duration().max(1e-9)) * rec.len() as f64).clamp(10.0, rec.len() as f64 / 2.0) as usize;
+    let direction = |c: &[[f64; 3]]| nalgebra::Vector3::from(crate::io::validate::mean3(c));
+    let first = direction(&rec.accel[..per]);
+    if first.norm() < 1.0 {
+        return Ok(());
+    }
+    let moved = rec.accel.chunks(per).enumerate().skip(1).find_map(|(k, c)| {
+        let tilt = direction(c).angle(&first).to_degrees();
+        (tilt > MAX_STATIC_TILT_DEG).then_some((k * per, tilt))
+    });
+    match moved {
+        Some((i, tilt)) => Err(AllanError(format!(
+            "{}: not a static log: gravity has turned {tilt:.1}° from its direction at the start by t = {:.1} s \
+             (line {}); an Allan analysis reads motion as noise. Record the IMU lying still",
+            rec.source_name(),
+            rec.t[i],
+            rec.lines.line(i)
+        ))),
+        None => Ok(()),
+    }
+}
+
 /// Compute curves and coefficients of all six axes of a static recording.
 pub fn run_allan(rec: &ImuRecording, opts: &AllanRunOptions) -> Result<AllanReport, AllanError> {
     run_allan_with_progress(rec, opts, &|_, _| {})
@@ -148,17 +234,18 @@ pub fn run_allan_with_progress(
             rec.len()
         )));
     }
-    let rate = rec.mean_rate();
-    if !(rate.is_finite() && rate > 0.0) {
-        return Err(AllanError(format!("{}: cannot tell the sample rate from the timestamps", rec.source_name())));
-    }
+    let mut warnings = rec.warnings.clone();
+    let (segment, tau0) = gap_free_segment(rec, &mut warnings)?;
+    let whole = rec;
+    let rec = &whole.slice_time(whole.t[segment.start], whole.t[segment.end - 1] + 0.5 * tau0);
+    check_static(rec)?;
+    let rate = 1.0 / tau0;
     let tau0 = 1.0 / rate;
     let n_tau =
         super::cluster_sizes(&opts.allan.taus, rec.len(), tau0, opts.allan.kind, opts.allan.max_tau_fraction).len();
     let total = 6 * n_tau;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let tick = || progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
-    let mut warnings = rec.warnings.clone();
     if rec.duration() < 3600.0 {
         warnings.push(format!(
             "the record is {:.0} s long; rate random walk (K) and bias instability (B) are usually resolved only by hours of static data",

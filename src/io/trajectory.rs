@@ -94,10 +94,14 @@ pub fn read_asl_groundtruth(path: &Path) -> Result<Trajectory, InputError> {
     Ok(tr)
 }
 
-/// Read a TUM trajectory: `t[s] x y z qx qy qz qw` per line.
+/// Read a TUM trajectory: `t x y z qx qy qz qw` per line, whitespace
+/// separated, `t` in seconds (or in nanoseconds when the stamps are integers
+/// of more than 12 digits, as some tools write them).
 pub fn read_tum(path: &Path) -> Result<Trajectory, InputError> {
+    let text = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
+    let unit = if first_field(&text).is_some_and(is_ns_stamp) { TimeUnit::Ns } else { TimeUnit::S };
     let spec = TableSpec {
-        time: Some((0, TimeUnit::S)),
+        time: Some((0, unit)),
         values: (1..8).collect(),
         names: ["x", "y", "z", "qx", "qy", "qz", "qw"].map(String::from).to_vec(),
         ..TableSpec::default()
@@ -114,22 +118,35 @@ pub fn read_tum(path: &Path) -> Result<Trajectory, InputError> {
     Ok(tr)
 }
 
-/// Read a trajectory in either format: ASL when the first data field is an
-/// integer of more than 12 digits (nanoseconds), TUM otherwise.
-pub fn read_trajectory(path: &Path) -> Result<Trajectory, InputError> {
-    let text = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
-    let first = text
+/// The first data line's first field and whether the line is comma separated.
+fn first_line(text: &[u8]) -> Option<(&[u8], bool)> {
+    let line = text
         .split(|&c| c == b'\n')
         .map(|l| l.trim_ascii())
-        .find(|l| !l.is_empty() && l[0] != b'#' && l[0].is_ascii_digit());
-    let asl = first.is_some_and(|l| {
-        let f = l.split(|&c| c == b',' || c.is_ascii_whitespace()).next().unwrap_or(&[]);
-        f.len() > 12 && f.iter().all(u8::is_ascii_digit)
-    });
-    if asl {
-        read_asl_groundtruth(path)
-    } else {
-        read_tum(path)
+        .find(|l| !l.is_empty() && l[0] != b'#' && (l[0].is_ascii_digit() || l[0] == b'-' || l[0] == b'.'))?;
+    let field = line.split(|&c| c == b',' || c.is_ascii_whitespace()).next().unwrap_or(&[]);
+    Some((field, line.contains(&b',')))
+}
+
+fn first_field(text: &[u8]) -> Option<&[u8]> {
+    first_line(text).map(|(f, _)| f)
+}
+
+/// An integer of more than 12 digits: a time stamp in nanoseconds.
+fn is_ns_stamp(f: &[u8]) -> bool {
+    f.len() > 12 && f.iter().all(u8::is_ascii_digit)
+}
+
+/// Read a trajectory in either format: ASL (EuRoC ground truth: comma
+/// separated, `t[ns], x, y, z, qw, qx, qy, qz, …`) when the first data line
+/// has commas, TUM (whitespace separated, `t x y z qx qy qz qw`, `t` in s or
+/// ns) otherwise. The separator decides, not the stamp: TUM files with
+/// nanosecond stamps exist, and their quaternion order differs.
+pub fn read_trajectory(path: &Path) -> Result<Trajectory, InputError> {
+    let text = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
+    match first_line(&text) {
+        Some((_, true)) => read_asl_groundtruth(path),
+        _ => read_tum(path),
     }
 }
 

@@ -133,7 +133,7 @@ const MAPPED_BLOCK: usize = 64 << 20;
 /// Read a numeric table from `path`: memory-mapped and parsed in parallel
 /// blocks, or streamed through gzip when the name ends in `.gz`.
 pub fn read_table(path: &Path, spec: &TableSpec) -> Result<Table, InputError> {
-    let file = std::fs::File::open(path).map_err(|e| InputError::file(path, format!("cannot open: {e}")))?;
+    let file = open_file(path)?;
     let gz = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"));
     let size = file.metadata().map(|m| m.len() as usize).unwrap_or(0);
     if gz || size == 0 {
@@ -165,6 +165,33 @@ pub fn read_table(path: &Path, spec: &TableSpec) -> Result<Table, InputError> {
     p.finish()
 }
 
+/// Open a file to read, refusing a directory by name (mapping one fails with
+/// "No such device").
+pub fn open_file(path: &Path) -> Result<std::fs::File, InputError> {
+    if path.is_dir() {
+        return Err(InputError::file(path, "is a folder, not a file")
+            .with_hint("give the file inside it (or pass the folder where a command takes an ASL dataset)"));
+    }
+    std::fs::File::open(path).map_err(|e| InputError::file(path, format!("cannot open: {e}")))
+}
+
+/// Text the table readers cannot read: UTF-16 (a byte-order mark, or NUL
+/// bytes between ASCII characters) or binary data.
+fn check_text(path: &Path, head: &[u8]) -> Result<(), InputError> {
+    let head = &head[..head.len().min(4096)];
+    let utf16 = head.starts_with(&[0xFF, 0xFE]) || head.starts_with(&[0xFE, 0xFF]);
+    if utf16 || head.contains(&0) {
+        let what = if utf16 || head.iter().skip(1).step_by(2).take(64).all(|&b| b == 0) {
+            "is UTF-16 text"
+        } else {
+            "holds binary data (NUL bytes), not text"
+        };
+        return Err(InputError::file(path, what.to_string())
+            .with_hint("save it as UTF-8 (or ASCII) text, e.g. `iconv -f UTF-16 -t UTF-8 IN > OUT`"));
+    }
+    Ok(())
+}
+
 fn flate2_or_plain(file: std::fs::File, gz: bool) -> Box<dyn Read> {
     if gz {
         Box::new(flate2::read::MultiGzDecoder::new(file))
@@ -175,13 +202,14 @@ fn flate2_or_plain(file: std::fs::File, gz: bool) -> Box<dyn Read> {
 
 /// The header line of a table file (looking at its first 64 KiB only).
 pub fn peek_header(path: &Path) -> Result<Option<String>, InputError> {
-    let file = std::fs::File::open(path).map_err(|e| InputError::file(path, format!("cannot open: {e}")))?;
+    let file = open_file(path)?;
     let gz = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("gz"));
     let mut head = Vec::with_capacity(1 << 16);
     flate2_or_plain(file, gz)
         .take(1 << 16)
         .read_to_end(&mut head)
         .map_err(|e| InputError::file(path, format!("read failed: {e}")))?;
+    check_text(path, &head)?;
     let cut = memchr::memrchr(b'\n', &head).map(|q| q + 1).unwrap_or(head.len());
     Ok(detect_layout(path, &head[..cut], 0)?.2)
 }
@@ -244,6 +272,9 @@ impl<'a> Parser<'a> {
     /// Parse a block of complete lines.
     fn feed(&mut self, body: &[u8]) -> Result<(), InputError> {
         let body = if self.layout.is_none() {
+            if self.line_no == 0 {
+                check_text(self.path, body)?;
+            }
             let (skip, lay, header, lines) = detect_layout(self.path, body, self.line_no)?;
             self.line_no += lines;
             if header.is_some() {
@@ -704,6 +735,23 @@ mod tests {
         let t = parse_table_from(p, "  1 2 3\n\n2\t4 5\n".as_bytes(), &spec(2)).unwrap();
         assert_eq!(t.columns[1], vec![3.0, 5.0]);
         assert_eq!((t.lines.line(0), t.lines.line(1)), (1, 3));
+    }
+
+    #[test]
+    fn folders_utf16_and_binary_files_are_named() {
+        let dir = std::env::temp_dir().join(format!("tumble-table-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let e = read_table(&dir, &spec(3)).unwrap_err().to_string();
+        assert!(e.contains("is a folder"), "{e}");
+        let utf16: Vec<u8> = [0xFF, 0xFE].into_iter().chain("1,2,3,4\n".bytes().flat_map(|b| [b, 0])).collect();
+        let p = dir.join("utf16.csv");
+        std::fs::write(&p, utf16).unwrap();
+        let e = read_table(&p, &spec(3)).unwrap_err().to_string();
+        assert!(e.contains("UTF-16") && !e.contains('\0'), "{e}");
+        std::fs::write(&p, [1u8, 0, 7, 200, 0, 3, 0, 0, 9, b'\n']).unwrap();
+        let e = read_table(&p, &spec(3)).unwrap_err().to_string();
+        assert!(e.contains("binary") || e.contains("UTF-16"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
