@@ -102,5 +102,6 @@ pub fn open_vio(
         input.groundtruth = Some(crate::io::trajectory::read_asl_groundtruth(g)?);
     }
     input.name = path.display().to_string();
+    warnings.extend(input.limit_to_imu()?);
     Ok(OpenedVio { input, notes, warnings, frontend })
 }

@@ -26,9 +26,33 @@ pub enum PlotError {
 }
 
 impl PlotError {
+    /// A drawing failure in words: what is wrong with the path when something
+    /// is, else the backend's own message without its debug dump.
     fn draw(path: &Path, e: &dyn std::fmt::Display) -> PlotError {
-        PlotError::Draw { path: path.to_path_buf(), message: e.to_string() }
+        let message = figure_path_problem(path).unwrap_or_else(|| {
+            let text = e.to_string();
+            // plotters prints the image crate's error with {:?}: keep its io message.
+            match text.split_once("message: \"").and_then(|(_, m)| m.split_once('"')) {
+                Some((m, _)) => format!("cannot write the figure: {m}"),
+                None => format!("cannot draw the figure: {}", text.split(':').next_back().unwrap_or(&text).trim()),
+            }
+        });
+        PlotError::Draw { path: path.to_path_buf(), message }
     }
+}
+
+/// What keeps a PNG from being written at `path`, if anything visible
+/// beforehand: an extension other than `.png`, a folder that does not exist.
+pub fn figure_path_problem(path: &Path) -> Option<String> {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if ext.as_deref() != Some("png") {
+        return Some(format!(
+            "figures are PNG images: give a file name ending in .png (got {})",
+            ext.map_or("no extension".to_string(), |e| format!(".{e}"))
+        ));
+    }
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty())?;
+    (!parent.is_dir()).then(|| format!("cannot write the figure: the folder {} does not exist", parent.display()))
 }
 
 static FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
@@ -390,12 +414,31 @@ pub fn write_panels(path: &Path, charts: &[ScatterChart], width: u32, height: u3
 
 #[cfg(test)]
 mod tests {
-    use super::tick_format;
+    use super::{tick_format, PlotError};
+    use std::path::Path;
 
     #[test]
     fn tick_labels_never_read_minus_zero() {
         let f = tick_format(-0.1, 0.1);
         assert_eq!(f(&-1e-9), "0.000");
         assert_eq!(f(&-0.05), "-0.050");
+    }
+
+    #[test]
+    fn figure_errors_are_words_not_debug_dumps() {
+        for (path, want) in [
+            ("/nonexistent-tumble-dir/x.png", "does not exist"),
+            ("/tmp/x.txt", "give a file name ending in .png"),
+            ("/tmp/x", "no extension"),
+        ] {
+            let e = PlotError::draw(Path::new(path), &"Drawing backend error: ImageError(IoError(Os { code: 2 }))");
+            let m = e.to_string();
+            assert!(m.contains(want) && !m.contains("Os {"), "{path}: {m}");
+        }
+        let e = PlotError::draw(
+            Path::new("/tmp/ok.png"),
+            &"backend error: Drawing backend error: ImageError(IoError(Os { code: 13, kind: PermissionDenied, message: \"Permission denied\" }))",
+        );
+        assert_eq!(e.to_string(), "/tmp/ok.png: cannot write the figure: Permission denied");
     }
 }

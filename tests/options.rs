@@ -66,6 +66,12 @@ fn gravity_must_be_earths() {
         assert!(e.contains("--gravity must be the local gravity"), "{g}: {e}");
     }
     assert!(tumble::calib::local_gravity(None, Some(45.0), 1e6).unwrap_err().to_string().contains("--height"));
+    for g in [-9.81, 0.0, 3.71, 12.0] {
+        let mut o = tumble::vio::VioOptions::default();
+        o.noise.gravity = g;
+        let e = o.validate().unwrap_err().to_string();
+        assert!(e.contains("--gravity must be"), "{g}: {e}");
+    }
     let g = tumble::calib::local_gravity(None, Some(45.0), 3000.0).unwrap();
     assert!((9.79..9.81).contains(&g.value) && g.note.is_none());
 }

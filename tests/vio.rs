@@ -512,3 +512,70 @@ fn a_corridor_lap_closes_the_loop() {
     assert!(s.imu_only_closed_loop_error_m > 100.0 * s.closed_loop_error_m);
     assert!(s.ate_rmse_m.unwrap() < 0.3, "{:?}", s.ate_rmse_m);
 }
+
+/// A simulated walk written as an ASL folder, with one file changed by `edit`, opened as `tumble vio` does.
+fn open_edited(name: &str, edit: impl Fn(&std::path::Path)) -> Result<VioInput, String> {
+    let dir = std::env::temp_dir().join(format!("tumble-vio-input-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
+    tumble::sim::simulate_and_write(Scenario::Walk, &cfg, 2, &dir).unwrap();
+    edit(&dir.join("mav0"));
+    let opened = (|| -> Result<VioInput, Box<dyn std::error::Error>> {
+        let ds = tumble::io::asl::read_asl(&dir, &Default::default())?;
+        let mut input = VioInput::from_dataset(ds, None, None, false)?;
+        if let Some(w) = input.limit_to_imu()? {
+            return Err(w.into());
+        }
+        Ok(input)
+    })();
+    std::fs::remove_dir_all(&dir).unwrap();
+    opened.map_err(|e| e.to_string())
+}
+
+/// Rewrite every data line of a CSV with `f` (header kept).
+fn rewrite(path: &std::path::Path, f: impl Fn(&str) -> Option<String>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let out: Vec<String> =
+        text.lines().filter_map(|l| if l.starts_with('#') { Some(l.to_string()) } else { f(l) }).collect();
+    std::fs::write(path, out.join("\n") + "\n").unwrap();
+}
+
+#[test]
+fn camera_and_imu_that_do_not_fit_together_are_named() {
+    assert!(open_edited("clean", |_| {}).is_ok());
+    // The IMU stops 15 s before the camera: the frames after it are dropped, and said so.
+    let e = open_edited("short_imu", |m| {
+        rewrite(&m.join("imu0/data.csv"), |l| {
+            let t: i64 = l.split(',').next().unwrap().parse().unwrap();
+            (t < 1_700_000_025_000_000_000).then(|| l.to_string())
+        })
+    })
+    .unwrap_err();
+    assert!(e.contains("after the IMU's samples are not used"), "{e}");
+    // IMU stamps on another clock (seconds since boot, in ns): no overlap.
+    let e = open_edited("clocks", |m| {
+        rewrite(&m.join("imu0/data.csv"), |l| {
+            let (t, rest) = l.split_once(',').unwrap();
+            Some(format!("{},{rest}", t.parse::<i64>().unwrap() - 1_699_999_000_000_000_000))
+        })
+    })
+    .unwrap_err();
+    assert!(e.contains("do not overlap in time"), "{e}");
+    // Tracks stamped in microseconds.
+    let e = open_edited("track_units", |m| {
+        rewrite(&m.join("cam0/tracks.csv"), |l| {
+            let (t, rest) = l.split_once(',').unwrap();
+            Some(format!("{},{rest}", t.parse::<i64>().unwrap() / 1000))
+        })
+    })
+    .unwrap_err();
+    assert!(e.contains("tracks.csv:2:") && e.contains("matches no image"), "{e}");
+    // A 0×0 camera.
+    let e = open_edited("resolution", |m| {
+        let y = m.join("cam0/sensor.yaml");
+        let text = std::fs::read_to_string(&y).unwrap().replace("resolution: [752, 480]", "resolution: [0, 0]");
+        std::fs::write(&y, text).unwrap();
+    })
+    .unwrap_err();
+    assert!(e.contains("resolution must be"), "{e}");
+}

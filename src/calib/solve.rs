@@ -119,9 +119,7 @@ pub fn parse_multipliers(s: &str) -> Result<Vec<f64>, OptionError> {
     Ok(v)
 }
 
-/// Gravity anywhere a person can tumble an IMU \[m/s²\]: normal gravity runs
-/// from 9.780 (equator) to 9.832 (poles) at sea level and falls 3.1e-6 per metre up.
-pub const EARTH_GRAVITY_M_S2: std::ops::Range<f64> = 9.7..9.9;
+pub use crate::model::EARTH_GRAVITY_M_S2;
 
 /// Shortest initial rest [`find_initial_rest`] accepts \[s\]: a second of samples
 /// gives the noise level to a few per cent and the gyro bias to σ/√rate.

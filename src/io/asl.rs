@@ -204,6 +204,15 @@ pub fn parse_camera_sensor(path: &Path, text: &str) -> Result<CameraSensor, Inpu
                 .with_hint("use radial-tangential or equidistant"))
         }
     };
+    if let Some(r) = y.resolution.filter(|r| r[0] == 0 || r[1] == 0) {
+        return Err(InputError::file(
+            path,
+            format!("resolution must be [width, height] in pixels, both > 0, found {r:?}"),
+        ));
+    }
+    if let Some(r) = y.rate_hz.filter(|r| !(r.is_finite() && *r > 0.0)) {
+        return Err(InputError::file(path, format!("rate_hz must be a positive number of Hz, found {r}")));
+    }
     let t_bs = y.T_BS.as_ref().map(|m| m.to_transform(path, "T_BS")).transpose()?;
     let model = CameraModel { fx: k[0], fy: k[1], cx: k[2], cy: k[3], distortion };
     Ok((model, t_bs, y.resolution, y.rate_hz))

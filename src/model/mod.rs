@@ -11,6 +11,10 @@ pub mod noise;
 /// Standard gravity \[m/s²\] (the unit `g`).
 pub const STANDARD_GRAVITY: f64 = 9.80665;
 
+/// Gravity anywhere a person can record an IMU \[m/s²\]: normal gravity runs
+/// from 9.780 (equator) to 9.832 (poles) at sea level and falls 3.1e-6 per metre up.
+pub const EARTH_GRAVITY_M_S2: std::ops::Range<f64> = 9.7..9.9;
+
 /// A model value that cannot be used (the message names the key).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 #[error("{0}")]

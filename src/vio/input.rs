@@ -89,6 +89,45 @@ pub struct VioInput {
 }
 
 impl VioInput {
+    /// Keep only the frames the IMU covers: frames before the first or after
+    /// the last IMU sample cannot be propagated to. Returns a warning naming
+    /// what was dropped; refuses when camera and IMU do not overlap at all
+    /// (their clocks differ).
+    pub fn limit_to_imu(&mut self) -> Result<Option<String>, InputError> {
+        let (Some(&a), Some(&b)) = (self.imu.t.first(), self.imu.t.last()) else {
+            return Err(InputError::file(std::path::Path::new(&self.name), "no IMU samples"));
+        };
+        let (Some(f0), Some(f1)) = (self.frames.first().map(|f| f.t), self.frames.last().map(|f| f.t)) else {
+            return Ok(None);
+        };
+        let keep = |t: f64| (a..=b).contains(&t);
+        let kept = self.frames.iter().filter(|f| keep(f.t)).count();
+        if kept == self.frames.len() {
+            return Ok(None);
+        }
+        if kept < 2 {
+            return Err(InputError::file(
+                std::path::Path::new(&self.name),
+                format!(
+                    "camera and IMU do not overlap in time: frames at t = {f0:.3}…{f1:.3} s, IMU samples at \
+                     t = {a:.3}…{b:.3} s (on the IMU's clock): their stamps come from different clocks or units"
+                ),
+            )
+            .with_hint("stamp both with one clock (ns since the epoch, as EuRoC does)"));
+        }
+        let before = self.frames.iter().filter(|f| f.t < a).count();
+        let after = self.frames.len() - kept - before;
+        if let Some(s) = self.stereo.as_mut() {
+            let features = std::mem::take(&mut s.features);
+            s.features = features.into_iter().zip(&self.frames).filter(|(_, f)| keep(f.t)).map(|(x, _)| x).collect();
+        }
+        self.frames.retain(|f| keep(f.t));
+        Ok(Some(format!(
+            "the IMU covers t = {a:.1}…{b:.1} s and the camera t = {f0:.1}…{f1:.1} s: {before} frame(s) before and \
+             {after} after the IMU's samples are not used"
+        )))
+    }
+
     /// Set the IMU noise of a run: `given` (e.g. `tumble allan`'s `imu.yaml`)
     /// when there, else the input's own figures, else `p`'s defaults are kept.
     /// Returns which it was.
@@ -210,7 +249,9 @@ impl VioInput {
                     };
                     return Err(InputError::file(&tracks_path, "no feature tracks").with_hint(hint));
                 }
-                asl::read_tracks(&tracks_path)?
+                let (obs, lines) = asl::read_tracks_with_lines(&tracks_path)?;
+                check_track_stamps(&tracks_path, &obs, &lines, &cam.frames)?;
+                obs
             }
         };
         let t0 = ds.imu.t0_ns;
@@ -267,6 +308,36 @@ impl VioInput {
             },
             calibration,
         ))
+    }
+}
+
+/// Tracks read from a file must be at the stamps of the camera's images (when
+/// the folder lists them): tracks that match none are stamped in another unit
+/// or clock.
+fn check_track_stamps(
+    path: &std::path::Path,
+    obs: &[(i64, u64, [f64; 2])],
+    lines: &[usize],
+    images: &[(i64, std::path::PathBuf)],
+) -> Result<(), InputError> {
+    if images.is_empty() {
+        return Ok(());
+    }
+    let stamps: Vec<i64> = images.iter().map(|(t, _)| *t).collect();
+    let unmatched = obs.iter().position(|(t, _, _)| stamps.binary_search(t).is_err());
+    match unmatched {
+        Some(i) => Err(InputError::at(
+            path,
+            lines.get(i).copied().unwrap_or(0),
+            format!(
+                "stamp {} ns matches no image in data.csv (images at {}…{} ns): tracks must carry their image's stamp",
+                obs[i].0,
+                stamps[0],
+                stamps[stamps.len() - 1]
+            ),
+        )
+        .with_hint("check the tracks' time unit (nanoseconds) and clock")),
+        None => Ok(()),
     }
 }
 
