@@ -382,20 +382,26 @@ fn bad_input_is_an_error_not_a_panic() {
     assert!(identify(&curve).is_err());
 }
 
-/// `tumble allan`'s files: allan.json with the documented layout, Kalibr's
-/// imu.yaml, and a PNG per sensor, from a simulated static recording.
-#[test]
-fn allan_stage_writes_documented_outputs() {
-    use tumble::allan::{run_allan, AllanRunOptions};
-    let mut cfg = tumble::sim::SimConfig { duration_s: Some(600.0), ..tumble::sim::SimConfig::default() };
-    cfg.imu.rate_hz = 200.0;
-    let sim = tumble::sim::simulate(tumble::sim::Scenario::Static, &cfg, 3).unwrap();
+/// A simulated static record of `seconds` at `rate_hz`, and its config.
+fn static_record(seconds: f64, rate_hz: f64, seed: u64) -> (tumble::sim::SimConfig, tumble::io::ImuRecording) {
+    let mut cfg = tumble::sim::SimConfig { duration_s: Some(seconds), ..tumble::sim::SimConfig::default() };
+    cfg.imu.rate_hz = rate_hz;
+    let sim = tumble::sim::simulate(tumble::sim::Scenario::Static, &cfg, seed).unwrap();
     let rec = tumble::io::ImuRecording {
         t: sim.imu.t.clone(),
         gyro: sim.imu.gyro.clone(),
         accel: sim.imu.accel.clone(),
         ..Default::default()
     };
+    (cfg, rec)
+}
+
+/// `tumble allan`'s files: allan.json with the documented layout, Kalibr's
+/// imu.yaml, and a PNG per sensor, from a simulated static recording.
+#[test]
+fn allan_stage_writes_documented_outputs() {
+    use tumble::allan::{run_allan, AllanRunOptions};
+    let (cfg, rec) = static_record(600.0, 200.0, 3);
     let report = run_allan(&rec, &AllanRunOptions::default()).unwrap();
     let dir = std::env::temp_dir().join(format!("tumble_allan_test_{}", std::process::id()));
     let files = report.write_all(&dir).unwrap();
@@ -463,15 +469,7 @@ fn allan_stage_writes_documented_outputs() {
 #[test]
 fn gaps_and_motion_are_not_read_as_noise() {
     use tumble::allan::{run_allan, AllanRunOptions};
-    let mut cfg = tumble::sim::SimConfig { duration_s: Some(300.0), ..tumble::sim::SimConfig::default() };
-    cfg.imu.rate_hz = 100.0;
-    let sim = tumble::sim::simulate(tumble::sim::Scenario::Static, &cfg, 5).unwrap();
-    let rec = tumble::io::ImuRecording {
-        t: sim.imu.t.clone(),
-        gyro: sim.imu.gyro.clone(),
-        accel: sim.imu.accel.clone(),
-        ..Default::default()
-    };
+    let (_, rec) = static_record(300.0, 100.0, 5);
     // One hour missing after the first 100 s: the remaining 200 s are analysed at 100 Hz.
     let mut gap = rec.clone();
     for t in gap.t.iter_mut().skip(10_000) {
