@@ -1,18 +1,21 @@
 //! Turntable-free calibration of a MEMS IMU from one hand-tumbled recording
 //! (paper §2; the method of imu_tk, Tedaldi et al. 2014), on the solver.
 //!
-//! 1. [`detect`]: static intervals where the sliding accelerometer variance is
-//!    below `k · σ²(initial static period)`, for a sweep of `k`;
+//! 1. [`detect`]: the initial rest (found in the data unless given), then static
+//!    intervals where the sliding accelerometer and gyro variances are below
+//!    `k · σ²(initial rest)`, for a sweep of `k`;
 //! 2. accelerometer: one [`GravityNormFactor`](tumble_factors::GravityNormFactor)
-//!    per interval (9 parameters), for each `k`; the `k` with the lowest whitened
-//!    residual is kept;
-//! 3. gyroscope: bias from the initial static period (or estimated), then one
+//!    per interval (9 parameters; misalignments with a prior, see [`observability`]);
+//! 3. gyroscope: bias from the initial rest (or estimated), then one
 //!    [`IntegratedRotationFactor`](tumble_factors::IntegratedRotationFactor) per
-//!    pair of consecutive intervals (9 parameters);
+//!    pair of consecutive intervals (9 parameters, from several starts); for each
+//!    `k` both fits, the most certain calibration kept;
 //! 4. [`model`]: the paper's `T`, `K`, `b` with standard deviations from the
 //!    solver's covariance (inflated by χ²/dof when the residuals exceed the noise),
 //!    imu_tk's convention, correction of raw samples;
-//! 5. [`report`]: `calibration.json` / `.yaml`, imu_tk `.calib` files, a PNG of the detection.
+//! 5. [`verdict`]: `ok`, `weak` (with reasons) or `failed` (an error carrying the
+//!    diagnosis; nothing loadable is written);
+//! 6. [`report`]: `calibration.json` / `.yaml`, imu_tk `.calib` files, a PNG of the detection.
 //!
 //! ```
 //! use tumble::calib::{calibrate, CalibOptions};
