@@ -47,6 +47,84 @@ pub struct Coefficient {
     pub hi: f64,
 }
 
+/// The kind of a correlated term (IEEE Std 952 annex C).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ExtraKind {
+    /// Exponentially correlated (first-order Gauss–Markov) noise of standard
+    /// deviation σ_m and correlation time T_c: σ²(τ) = 2σ_m²T_c/τ ·
+    /// [1 − T_c/(2τ)(3 − 4e^(−τ/T_c) + e^(−2τ/T_c))] — rises like a rate random
+    /// walk for τ ≪ T_c, falls like white noise for τ ≫ T_c.
+    Markov,
+    /// A sinusoid of amplitude Ω₀ and period P = 1/f₀ (vibration, a fan, a
+    /// thermostat): σ²(τ) = Ω₀² (sin²(πτ/P)/(πτ/P))², a hump at τ ≈ 0.37 P,
+    /// averaged over frequencies within ±[`SINUSOID_BANDWIDTH`] of f₀
+    /// (narrow-band rather than one pure tone).
+    Sinusoid,
+}
+
+impl ExtraKind {
+    /// `Markov` or `sinusoid`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ExtraKind::Markov => "Markov",
+            ExtraKind::Sinusoid => "sinusoid",
+        }
+    }
+    /// What its time is.
+    pub fn time_name(self) -> &'static str {
+        match self {
+            ExtraKind::Markov => "correlation time",
+            ExtraKind::Sinusoid => "period",
+        }
+    }
+}
+
+/// A correlated term: its amplitude (Markov σ_m or sinusoid Ω₀, in the
+/// sensor's units) with interval, and its time (Markov T_c or sinusoid period
+/// P, \[s\]; chosen on a grid of 8 per decade).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ExtraTerm {
+    /// Markov or sinusoid.
+    pub kind: ExtraKind,
+    /// σ_m or Ω₀.
+    pub amplitude: Coefficient,
+    /// T_c or P \[s\].
+    pub time_s: f64,
+}
+
+/// Relative half-width of the frequency band a sinusoidal term spreads over.
+pub const SINUSOID_BANDWIDTH: f64 = 0.25;
+
+/// σ² per unit amplitude² of a correlated term at τ.
+pub fn extra_basis(kind: ExtraKind, time: f64, tau: f64) -> f64 {
+    match kind {
+        ExtraKind::Markov => {
+            let x = tau / time;
+            if x < 1e-3 {
+                // Series of the bracket: x²/3 − x³/12 …; avoids cancellation.
+                2.0 / 3.0 * x * (1.0 - x / 4.0)
+            } else {
+                2.0 / x * (1.0 - (3.0 - 4.0 * (-x).exp() + (-2.0 * x).exp()) / (2.0 * x))
+            }
+        }
+        ExtraKind::Sinusoid => {
+            // A pure tone's σ² averaged over ±SINUSOID_BANDWIDTH of its frequency
+            // (16 points): real vibration is never one frequency, and the average
+            // fills the tone's zeros at τ = P, 2P, … as the data do.
+            const K: usize = 16;
+            (0..K)
+                .map(|j| {
+                    let f = (1.0 + SINUSOID_BANDWIDTH * (2.0 * (j as f64 + 0.5) / K as f64 - 1.0)) / time;
+                    let u = std::f64::consts::PI * tau * f;
+                    (u.sin().powi(2) / u).powi(2)
+                })
+                .sum::<f64>()
+                / K as f64
+        }
+    }
+}
+
 /// The five coefficients; `None` where the data does not support the term.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[allow(non_snake_case)]
@@ -61,6 +139,11 @@ pub struct NoiseTerms {
     pub K: Option<Coefficient>,
     /// Rate ramp (units/s).
     pub R: Option<Coefficient>,
+    /// Correlated terms the fit added (Markov or sinusoid, at most
+    /// [`MAX_EXTRA_TERMS`]), when the five terms do not follow the curve and
+    /// each does better by BIC.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub extra: Vec<ExtraTerm>,
 }
 
 impl NoiseTerms {
@@ -82,7 +165,9 @@ impl NoiseTerms {
     /// The model σ(τ) of these terms (missing terms count as zero).
     pub fn model_dev(&self, tau: f64) -> f64 {
         let b = basis(tau);
-        (0..5).map(|k| self.get(k).map_or(0.0, |c| c.value * c.value) * b[k]).sum::<f64>().sqrt()
+        let extra: f64 =
+            self.extra.iter().map(|e| e.amplitude.value.powi(2) * extra_basis(e.kind, e.time_s, tau)).sum();
+        ((0..5).map(|k| self.get(k).map_or(0.0, |c| c.value * c.value) * b[k]).sum::<f64>() + extra).sqrt()
     }
 }
 
@@ -99,7 +184,26 @@ pub struct Identification {
     pub notes: Vec<String>,
     /// χ²/dof of the fit with the effective (octave-shared) weights.
     pub fit_chi2_dof: f64,
+    /// Whether the fitted model follows the measured curve: within the
+    /// curve's interval or within [`FOLLOW_RATIO`]× at every τ from 0.1 s to
+    /// a tenth of the largest τ.
+    pub follows_data: bool,
+    /// Where the model is furthest from the curve: `(τ [s], model / measured)`.
+    pub worst_misfit: Option<(f64, f64)>,
+    /// τ \[s\] of the point each read-off was read at (Q, N, B, K, R order).
+    pub readoff_tau: [Option<f64>; 5],
 }
+
+/// The fitted model may differ from the measured deviation by this factor
+/// (either way) where it lies outside the curve's interval.
+pub const FOLLOW_RATIO: f64 = 1.3;
+
+/// A correlated term's hump must lie this factor (half a decade) inside the
+/// curve's τ range.
+const HUMP_MARGIN: f64 = 3.16;
+
+/// Correlated terms one fit may add.
+pub const MAX_EXTRA_TERMS: usize = 2;
 
 /// σ² per unit coefficient² of each term at τ.
 pub fn basis(tau: f64) -> [f64; 5] {
@@ -122,20 +226,37 @@ pub fn identify(curve: &AllanCurve) -> Result<Identification, super::AllanError>
         return Err(super::AllanError(format!("only {} usable τ points; the record is too short", pts.len())));
     }
     let mut notes = Vec::new();
-    let (fit, supported, chi2) = fit_terms(curve, &pts, &mut notes);
-    let readoff = read_off(curve, &pts, &fit, &mut notes);
-    Ok(Identification { fit, readoff, supported, notes, fit_chi2_dof: chi2 })
+    let best = fit_best(curve, &pts, &mut notes);
+    let (readoff, readoff_tau) = read_off(curve, &pts, &best.terms, &mut notes);
+    let (follows_data, worst_misfit) = follows(curve, &pts, &best.terms);
+    if let (false, Some((tau, ratio))) = (follows_data, worst_misfit) {
+        notes.push(format!(
+            "fit: the model does not follow the measured curve: {ratio:.2}× the data at τ = {tau:.3} s, outside \
+             its interval"
+        ));
+    }
+    Ok(Identification {
+        fit: best.terms,
+        readoff,
+        supported: best.supported,
+        notes,
+        fit_chi2_dof: best.chi2_dof,
+        follows_data,
+        worst_misfit,
+        readoff_tau,
+    })
 }
 
 /// A weighted NNLS solution: θ (σ² per term, zeros for inactive terms), the
 /// covariance of the active terms (in `cols` order), and χ².
 type NnlsSolution = (Vec<f64>, DMatrix<f64>, Vec<usize>, f64);
 
-/// Solve the weighted NNLS problem over the allowed terms.
-fn nnls(a: &DMatrix<f64>, b: &DVector<f64>, w: &DVector<f64>, allowed: &[bool; 5]) -> Option<NnlsSolution> {
+/// Solve the weighted NNLS problem over the allowed terms (columns of `a`).
+fn nnls(a: &DMatrix<f64>, b: &DVector<f64>, w: &DVector<f64>, allowed: &[bool]) -> Option<NnlsSolution> {
+    let nt = a.ncols();
     let mut best: Option<NnlsSolution> = None;
-    for mask in 1u32..32 {
-        let cols: Vec<usize> = (0..5).filter(|&k| mask & (1 << k) != 0).collect();
+    for mask in 1u32..(1 << nt) {
+        let cols: Vec<usize> = (0..nt).filter(|&k| mask & (1 << k) != 0).collect();
         if cols.iter().any(|&k| !allowed[k]) || cols.len() > b.len() {
             continue;
         }
@@ -161,13 +282,13 @@ fn nnls(a: &DMatrix<f64>, b: &DVector<f64>, w: &DVector<f64>, allowed: &[bool; 5
         if sol.iter().any(|&v| v < 0.0 || !v.is_finite()) {
             continue;
         }
-        let mut theta = vec![0.0; 5];
+        let mut theta = vec![0.0; nt];
         for (r, &k) in cols.iter().enumerate() {
             theta[k] = sol[r] / scale[r];
         }
         let chi2: f64 = (0..b.len())
             .map(|i| {
-                let pred: f64 = (0..5).map(|k| a[(i, k)] * theta[k]).sum();
+                let pred: f64 = (0..nt).map(|k| a[(i, k)] * theta[k]).sum();
                 w[i] * (b[i] - pred).powi(2)
             })
             .sum();
@@ -184,9 +305,56 @@ fn nnls(a: &DMatrix<f64>, b: &DVector<f64>, w: &DVector<f64>, allowed: &[bool; 5
     best
 }
 
-fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (NoiseTerms, Vec<String>, f64) {
+/// Relative error of σ² a model of a real sensor's curve is allowed at every
+/// τ (5 % in σ), added to the estimate's own, once the five terms have failed
+/// to follow the curve: the curve then holds structure no term describes
+/// exactly, and without the floor the shortest τ, whose estimates carry a
+/// million degrees of freedom, would decide the fit by the sensor's
+/// anti-alias filter alone. The intervals stay honest for any weights (the
+/// sandwich covariance).
+const MODEL_FLOOR: f64 = 0.1;
+
+/// Weight of a σ² estimate with `edf` degrees of freedom around the model
+/// value `m` (with [`MODEL_FLOOR`] when `floor`).
+fn weight(edf: f64, m: f64, floor: bool) -> f64 {
+    let rel = 2.0 / edf + if floor { MODEL_FLOOR * MODEL_FLOOR } else { 0.0 };
+    1.0 / (m.max(1e-300).powi(2) * rel)
+}
+
+/// What one fit of the terms (the five, and possibly a correlated one) found.
+struct FitOutcome {
+    terms: NoiseTerms,
+    supported: Vec<String>,
+    notes: Vec<String>,
+    /// χ²/dof with the fit's own (robust, octave-shared) weights.
+    chi2_dof: f64,
+    /// χ² without the robust down-weighting, for comparing models (BIC).
+    chi2_plain: f64,
+    /// Effective number of points (octave-shared).
+    n_eff: f64,
+    /// Free parameters: active coefficients, plus the correlated term's time.
+    params: usize,
+}
+
+impl FitOutcome {
+    /// Bayesian information criterion (smaller is better).
+    fn bic(&self) -> f64 {
+        self.chi2_plain + self.params as f64 * self.n_eff.max(1.0).ln()
+    }
+}
+
+fn fit_terms(curve: &AllanCurve, pts: &[usize], extra: &[(ExtraKind, f64)], floor: bool) -> FitOutcome {
+    let mut notes = Vec::new();
     let n = pts.len();
-    let a = DMatrix::from_fn(n, 5, |i, k| basis(curve.tau[pts[i]])[k]);
+    let nt = 5 + extra.len();
+    let a = DMatrix::from_fn(n, nt, |i, k| {
+        let tau = curve.tau[pts[i]];
+        match extra.get(k.wrapping_sub(5)) {
+            Some(&(kind, time)) if k >= 5 => extra_basis(kind, time, tau),
+            _ => basis(tau)[k],
+        }
+    });
+    let name = |k: usize| if k < 5 { TERM_NAMES[k] } else { "a correlated term" };
     let b = DVector::from_fn(n, |i, _| curve.dev[pts[i]].powi(2));
     // Share of each point in its octave.
     let share: Vec<f64> = pts
@@ -197,10 +365,10 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
         })
         .collect();
     let effective_points: f64 = share.iter().sum();
-    let mut allowed = [true; 5];
+    let mut allowed = vec![true; nt];
     let mut model: Vec<f64> = b.iter().copied().collect();
     let mut result = None;
-    for _round in 0..5 {
+    for _round in 0..nt {
         // Reweight from the model a few times (weights from the data would bias the fit low).
         // Points far off the model by their own uncertainty (a vibration
         // hump, a temperature transient) are down-weighted (Cauchy, scale 3σ)
@@ -209,12 +377,10 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
         let mut robust = vec![1.0; n];
         let mut w = DVector::zeros(n);
         for _ in 0..6 {
-            w = DVector::from_fn(n, |i, _| {
-                curve.edf[pts[i]] / (2.0 * model[i].max(1e-300).powi(2)) * share[i] * robust[i]
-            });
+            w = DVector::from_fn(n, |i, _| weight(curve.edf[pts[i]], model[i], floor) * share[i] * robust[i]);
             let Some(s) = nnls(&a, &b, &w, &allowed) else { break };
             for (i, m) in model.iter_mut().enumerate() {
-                let pred: f64 = (0..5).map(|k| a[(i, k)] * s.0[k]).sum();
+                let pred: f64 = (0..nt).map(|k| a[(i, k)] * s.0[k]).sum();
                 *m = if pred > 0.0 { pred } else { b[i] };
                 let r = (b[i] - *m) / (*m * (2.0 / curve.edf[pts[i]]).sqrt());
                 robust[i] = 1.0 / (1.0 + (r / 3.0).powi(2));
@@ -241,7 +407,9 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
                 let (theta, _, _, _, _) = result.as_ref().unwrap();
                 notes.push(format!(
                     "fit: {} not supported (its σ² term {:.3e} is only {:.1} standard errors from zero)",
-                    TERM_NAMES[k], theta[k], z
+                    name(k),
+                    theta[k],
+                    z
                 ));
                 allowed[k] = false;
             }
@@ -251,16 +419,31 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
     let mut terms = NoiseTerms::default();
     let mut supported = Vec::new();
     let mut chi2_dof = f64::NAN;
+    let mut chi2_plain = f64::INFINITY;
+    let mut params = 0;
     if let Some((theta, cov, cols, c2, inflate)) = result {
         chi2_dof = c2;
+        params = cols.len() + cols.iter().filter(|&&k| k >= 5).count();
+        chi2_plain = (0..n)
+            .map(|i| {
+                let pred: f64 = (0..nt).map(|k| a[(i, k)] * theta[k]).sum::<f64>().max(1e-300);
+                weight(curve.edf[pts[i]], pred, floor) * share[i] * (b[i] - pred).powi(2)
+            })
+            .sum();
         for (r, &k) in cols.iter().enumerate() {
             let sd = (cov[(r, r)] * inflate).max(0.0).sqrt();
             let v = theta[k];
-            terms.set(
-                k,
-                Some(Coefficient { value: v.sqrt(), lo: (v - Z95 * sd).max(0.0).sqrt(), hi: (v + Z95 * sd).sqrt() }),
-            );
-            supported.push(TERM_NAMES[k].to_string());
+            let c = Coefficient { value: v.sqrt(), lo: (v - Z95 * sd).max(0.0).sqrt(), hi: (v + Z95 * sd).sqrt() };
+            match extra.get(k.wrapping_sub(5)) {
+                Some(&(kind, time)) if k >= 5 => {
+                    terms.extra.push(ExtraTerm { kind, amplitude: c, time_s: time });
+                    supported.push(kind.name().to_string());
+                }
+                _ => {
+                    terms.set(k, Some(c));
+                    supported.push(TERM_NAMES[k].to_string());
+                }
+            }
         }
         for (k, name) in TERM_NAMES.iter().enumerate() {
             if allowed[k] && !cols.contains(&k) {
@@ -269,11 +452,97 @@ fn fit_terms(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> (Noi
         }
         if c2 > 3.0 {
             notes.push(format!(
-                "fit: χ²/dof = {c2:.1}: the five-term model does not describe this curve fully (intervals are widened by √{c2:.1})"
+                "fit: χ²/dof = {c2:.1}: the model does not describe this curve fully (intervals are widened by √{c2:.1})"
             ));
         }
     }
-    (terms, supported, chi2_dof)
+    FitOutcome { terms, supported, notes, chi2_dof, chi2_plain, n_eff: effective_points, params }
+}
+
+/// The five-term fit, or — when it does not follow the curve ([`follows`]) —
+/// a fit with [`MODEL_FLOOR`] of the five terms plus up to [`MAX_EXTRA_TERMS`]
+/// Markov or sinusoidal terms, added one at a time (forward selection): each
+/// the kind and time (hump on a grid of 8 per decade, half a decade inside the curve's τ range)
+/// with the smallest BIC, kept only if it lowers the BIC and the fit supports it.
+fn fit_best(curve: &AllanCurve, pts: &[usize], notes: &mut Vec<String>) -> FitOutcome {
+    use rayon::prelude::*;
+    let five = fit_terms(curve, pts, &[], false);
+    if follows(curve, pts, &five.terms).0 {
+        notes.extend(five.notes.iter().cloned());
+        return five;
+    }
+    let mut current = fit_terms(curve, pts, &[], true);
+    // Humps identifiable on this curve: half a decade of data on each side (a
+    // Markov term whose hump lies below that is white noise by another name).
+    let (t0, t1) = (curve.tau[pts[0]] * HUMP_MARGIN, curve.tau[pts[pts.len() - 1]] / HUMP_MARGIN);
+    if t1 <= t0 {
+        notes.extend(current.notes.iter().cloned());
+        return current;
+    }
+    let steps = (8.0 * (t1 / t0).log10()).ceil().max(1.0) as usize;
+    let times: Vec<f64> = (0..=steps).map(|i| t0 * (t1 / t0).powf(i as f64 / steps as f64)).collect();
+    let mut chosen: Vec<(ExtraKind, f64)> = Vec::new();
+    while chosen.len() < MAX_EXTRA_TERMS && !follows(curve, pts, &current.terms).0 {
+        let candidates: Vec<(ExtraKind, f64)> = [ExtraKind::Markov, ExtraKind::Sinusoid]
+            .iter()
+            .flat_map(|&kind| {
+                // Times whose hump falls at `t`: a sinusoid's sits at ≈ 0.37 P, a
+                // Markov term's at ≈ 1.9 T_c.
+                let scale = if kind == ExtraKind::Sinusoid { 1.0 / 0.37 } else { 1.0 / 1.9 };
+                times.iter().map(move |&t| (kind, t * scale))
+            })
+            .collect();
+        let best = candidates
+            .par_iter()
+            .map(|&c| {
+                let mut with = chosen.clone();
+                with.push(c);
+                (c, fit_terms(curve, pts, &with, true))
+            })
+            .filter(|(_, f)| f.terms.extra.len() == chosen.len() + 1)
+            .min_by(|a, b| a.1.bic().total_cmp(&b.1.bic()));
+        match best {
+            Some((c, f)) if f.bic() < current.bic() => {
+                let e = f.terms.extra.iter().find(|e| e.kind == c.0 && e.time_s == c.1).copied().expect("kept");
+                notes.push(format!(
+                    "fit: the terms so far do not follow the curve; a {} term (amplitude {:.3e}, {} {:.3} s) \
+                     describes it better (BIC {:.1} against {:.1})",
+                    e.kind.name(),
+                    e.amplitude.value,
+                    e.kind.time_name(),
+                    e.time_s,
+                    f.bic(),
+                    current.bic()
+                ));
+                chosen.push(c);
+                current = f;
+            }
+            _ => break,
+        }
+    }
+    notes.extend(current.notes.iter().cloned());
+    current
+}
+
+/// Whether `fit` follows the curve from 0.1 s to a tenth of the largest τ:
+/// within the curve's interval or within [`FOLLOW_RATIO`]×; and the worst point.
+fn follows(curve: &AllanCurve, pts: &[usize], fit: &NoiseTerms) -> (bool, Option<(f64, f64)>) {
+    let t_max = curve.tau[pts[pts.len() - 1]];
+    let mut ok = true;
+    let mut worst: Option<(f64, f64)> = None;
+    for &i in pts.iter().filter(|&&i| curve.tau[i] >= 0.1 && curve.tau[i] <= t_max / 10.0) {
+        let m = fit.model_dev(curve.tau[i]);
+        let ratio = m / curve.dev[i];
+        let inside = m >= curve.dev_lo[i] && m <= curve.dev_hi[i];
+        let off = ratio.max(1.0 / ratio);
+        if !inside && off > FOLLOW_RATIO {
+            ok = false;
+        }
+        if worst.is_none_or(|(_, r)| off > r.max(1.0 / r)) {
+            worst = Some((curve.tau[i], ratio));
+        }
+    }
+    (ok, worst)
 }
 
 /// Exponent γ of the assumed correlation (τ_small/τ_large)^γ between Allan
@@ -351,9 +620,19 @@ fn local_slopes(curve: &AllanCurve, pts: &[usize]) -> Vec<Option<f64>> {
         .collect()
 }
 
-fn read_off(curve: &AllanCurve, pts: &[usize], fit: &NoiseTerms, notes: &mut Vec<String>) -> NoiseTerms {
+/// Half-width of the τ span \[decades\] over which a read-off's slope must hold:
+/// a term that dominates the curve does so for more than a wiggle.
+const READOFF_SPAN_DECADES: f64 = 0.2;
+
+fn read_off(
+    curve: &AllanCurve,
+    pts: &[usize],
+    fit: &NoiseTerms,
+    notes: &mut Vec<String>,
+) -> (NoiseTerms, [Option<f64>; 5]) {
     let slopes = local_slopes(curve, pts);
     let mut terms = NoiseTerms::default();
+    let mut at = [None; 5];
     // The value of each term's line through a point (σ, τ).
     let through = |k: usize, sigma: f64, tau: f64| -> f64 {
         match k {
@@ -364,6 +643,19 @@ fn read_off(curve: &AllanCurve, pts: &[usize], fit: &NoiseTerms, notes: &mut Vec
             _ => sigma * 2f64.sqrt() / tau,
         }
     };
+    // Points whose neighbourhood (±READOFF_SPAN_DECADES) all has a slope within ±0.1 of `slope`.
+    let on_slope = |slope: f64| -> Vec<usize> {
+        (0..pts.len())
+            .filter(|&a| {
+                let near: Vec<Option<f64>> = (0..pts.len())
+                    .filter(|&b| (curve.tau[pts[b]] / curve.tau[pts[a]]).log10().abs() <= READOFF_SPAN_DECADES)
+                    .map(|b| slopes[b])
+                    .collect();
+                near.len() >= 2 && near.iter().all(|s| s.is_some_and(|s| (s - slope).abs() <= 0.1))
+            })
+            .map(|a| pts[a])
+            .collect()
+    };
     for k in 0..5 {
         let pick = if k == 2 {
             // The floor, only when the fit finds a flicker term (otherwise
@@ -372,33 +664,29 @@ fn read_off(curve: &AllanCurve, pts: &[usize], fit: &NoiseTerms, notes: &mut Vec
                 notes.push("read-off: no bias-instability floor (the minimum is only where the white-noise and random-walk lines cross)".into());
                 continue;
             }
-            // The lowest point where the curve is flat (slope within ±0.1).
-            pts.iter()
-                .zip(&slopes)
-                .filter(|(_, s)| s.is_some_and(|s| s.abs() <= 0.1))
-                .map(|(&i, _)| i)
-                .min_by(|&i, &j| curve.dev[i].total_cmp(&curve.dev[j]))
+            // The lowest point where the curve is flat.
+            on_slope(0.0).into_iter().min_by(|&i, &j| curve.dev[i].total_cmp(&curve.dev[j]))
         } else {
             // Among the points on this term's slope, the one with most degrees of freedom.
-            pts.iter()
-                .zip(&slopes)
-                .filter(|(_, s)| s.is_some_and(|s| (s - SLOPES[k]).abs() <= 0.1))
-                .map(|(&i, _)| i)
-                .max_by(|&i, &j| curve.edf[i].total_cmp(&curve.edf[j]))
+            on_slope(SLOPES[k]).into_iter().max_by(|&i, &j| curve.edf[i].total_cmp(&curve.edf[j]))
         };
         match pick {
-            Some(i) => terms.set(
-                k,
-                Some(Coefficient {
-                    value: through(k, curve.dev[i], curve.tau[i]),
-                    lo: through(k, curve.dev_lo[i], curve.tau[i]),
-                    hi: through(k, curve.dev_hi[i], curve.tau[i]),
-                }),
-            ),
-            None => {
-                notes.push(format!("read-off: no part of the curve has the slope {:+} of {}", SLOPES[k], TERM_NAMES[k]))
+            Some(i) => {
+                terms.set(
+                    k,
+                    Some(Coefficient {
+                        value: through(k, curve.dev[i], curve.tau[i]),
+                        lo: through(k, curve.dev_lo[i], curve.tau[i]),
+                        hi: through(k, curve.dev_hi[i], curve.tau[i]),
+                    }),
+                );
+                at[k] = Some(curve.tau[i]);
             }
+            None => notes.push(format!(
+                "read-off: no part of the curve keeps the slope {:+} of {} over ±{READOFF_SPAN_DECADES} decade",
+                SLOPES[k], TERM_NAMES[k]
+            )),
         }
     }
-    terms
+    (terms, at)
 }

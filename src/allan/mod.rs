@@ -6,6 +6,7 @@
 //!   equivalent degrees of freedom, χ² intervals), as Stable32 computes them.
 //! * [`identify`](mod@identify): the noise coefficients Q, N, B, K, R by the IEEE read-offs
 //!   and by a weighted non-negative least-squares fit, each with an interval.
+//! * [`disturbance`]: knocks and steps in a static log, and the longest span free of them.
 //! * [`report`]: a whole static recording → `allan.json`, Kalibr `imu.yaml`,
 //!   plots and a terminal table (what `tumble allan` runs).
 //!
@@ -25,6 +26,7 @@
 //! ```
 
 pub mod deviation;
+pub mod disturbance;
 pub mod edf;
 pub mod identify;
 pub mod report;
@@ -173,6 +175,47 @@ pub struct AllanCurve {
     pub edf: Vec<f64>,
     /// Confidence level of `dev_lo`/`dev_hi`.
     pub confidence: f64,
+}
+
+impl AllanCurve {
+    /// The curve of several stretches of one record analysed as one, no
+    /// difference crossing from one stretch to the next: at each cluster size
+    /// the variances are averaged by their number of terms (the exact overall
+    /// estimate), the degrees of freedom add (the stretches are independent)
+    /// and the interval is recomputed. A τ is kept where any stretch has it;
+    /// the noise type is the longest stretch's. `None` when `parts` is empty.
+    pub fn joined(parts: &[AllanCurve]) -> Option<AllanCurve> {
+        let longest = parts.iter().max_by_key(|c| c.m.len())?;
+        if parts.len() == 1 {
+            return Some(longest.clone());
+        }
+        let mut out = AllanCurve {
+            dev: Vec::new(),
+            dev_lo: Vec::new(),
+            dev_hi: Vec::new(),
+            n_terms: Vec::new(),
+            edf: Vec::new(),
+            ..longest.clone()
+        };
+        for &m in &longest.m {
+            let (mut var, mut terms, mut edf) = (0.0, 0usize, 0.0);
+            for c in parts {
+                if let Some(j) = c.m.iter().position(|&x| x == m) {
+                    var += c.dev[j].powi(2) * c.n_terms[j] as f64;
+                    terms += c.n_terms[j];
+                    edf += c.edf[j];
+                }
+            }
+            let dev = (var / terms.max(1) as f64).sqrt();
+            let (lo, hi) = edf::confidence_interval(dev, edf, longest.confidence);
+            out.dev.push(dev);
+            out.dev_lo.push(lo);
+            out.dev_hi.push(hi);
+            out.n_terms.push(terms);
+            out.edf.push(edf);
+        }
+        Some(out)
+    }
 }
 
 /// Why a deviation could not be computed.

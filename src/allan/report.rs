@@ -2,7 +2,7 @@
 //! all six axes out, as `allan.json`, Kalibr's `imu.yaml`, one PNG per sensor
 //! and a terminal table.
 
-use super::identify::{basis, TERM_NAMES};
+use super::identify::{basis, extra_basis, TERM_NAMES};
 use super::{identify, AllanCurve, AllanError, AllanOptions, Coefficient, Identification};
 use crate::io::{ImuRecording, Stored};
 use crate::plot::{Layer, LogLogChart, AXIS_COLORS};
@@ -39,12 +39,22 @@ impl std::str::FromStr for AxisStat {
 }
 
 /// Options of [`run_allan`].
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct AllanRunOptions {
     /// Estimator, τ grid and confidence level.
     pub allan: AllanOptions,
     /// Combination of axes for `imu.yaml`.
     pub axis_stat: AxisStat,
+    /// Analyse only the longest span free of knocks and steps
+    /// ([`super::disturbance`]); they are reported either way. `tumble allan
+    /// --span` turns it off (the span given is analysed as it is).
+    pub cut_disturbances: bool,
+}
+
+impl Default for AllanRunOptions {
+    fn default() -> Self {
+        AllanRunOptions { allan: AllanOptions::default(), axis_stat: AxisStat::default(), cut_disturbances: true }
+    }
 }
 
 impl AllanRunOptions {
@@ -126,6 +136,8 @@ pub struct AllanReport {
     pub axis_stat: AxisStat,
     /// Reader warnings and remarks.
     pub warnings: Vec<String>,
+    /// Knocks and steps found in the (gap-free) record.
+    pub disturbances: Vec<super::disturbance::Disturbance>,
 }
 
 /// A step that skips more than this many samples splits the record: Allan
@@ -137,13 +149,11 @@ pub const MAX_BRIDGED_GAP_SAMPLES: f64 = 10.0;
 /// share of the samples; otherwise the record is refused.
 pub const MIN_SEGMENT_SHARE: f64 = 0.5;
 
-/// Largest angle between a static log's gravity direction over 10 s and over
-/// its first 10 s \[deg\]: a table settling or the accelerometer's bias
-/// drifting tilts it by tenths of a degree; more means the IMU moved, and
-/// motion would be read as noise.
-pub const MAX_STATIC_TILT_DEG: f64 = 2.0;
+/// The stretches free of disturbances must hold this share of the record to
+/// be analysed instead of the whole.
+pub const MIN_CLEAN_SHARE: f64 = 0.25;
 
-/// The samples `[start, end)` to analyse and the sample period τ0 (median step).
+/// The samples `[start, end)` to analyse and the sample period τ0 (its mean step).
 fn gap_free_segment(
     rec: &ImuRecording,
     warnings: &mut Vec<String>,
@@ -154,8 +164,11 @@ fn gap_free_segment(
     }
     let splits: Vec<usize> =
         (1..rec.len()).filter(|&i| rec.t[i] - rec.t[i - 1] > (MAX_BRIDGED_GAP_SAMPLES + 1.0) * tau0).collect();
+    // τ0 of the analysed stretch: its mean step (bridged gaps of a few samples
+    // shift it by less than their share of the samples).
+    let mean_step = |r: &std::ops::Range<usize>| (rec.t[r.end - 1] - rec.t[r.start]) / (r.len() - 1).max(1) as f64;
     if splits.is_empty() {
-        return Ok((0..rec.len(), tau0));
+        return Ok((0..rec.len(), mean_step(&(0..rec.len()))));
     }
     let bounds: Vec<usize> = std::iter::once(0).chain(splits.iter().copied()).chain([rec.len()]).collect();
     let longest = bounds.windows(2).map(|w| w[0]..w[1]).max_by_key(|r| r.len()).unwrap_or(0..rec.len());
@@ -183,35 +196,8 @@ fn gap_free_segment(
         longest.len(),
         rec.len()
     ));
+    let tau0 = mean_step(&longest);
     Ok((longest, tau0))
-}
-
-/// Refuse a log whose gravity direction turns by more than [`MAX_STATIC_TILT_DEG`]
-/// (accelerometer in m/s² only: raw counts have unknown offsets).
-fn check_static(rec: &ImuRecording) -> Result<(), AllanError> {
-    if rec.accel_units != Stored::Si || rec.len() < 20 {
-        return Ok(());
-    }
-    let per = ((10.0 / rec.duration().max(1e-9)) * rec.len() as f64).clamp(10.0, rec.len() as f64 / 2.0) as usize;
-    let direction = |c: &[[f64; 3]]| nalgebra::Vector3::from(crate::io::validate::mean3(c));
-    let first = direction(&rec.accel[..per]);
-    if first.norm() < 1.0 {
-        return Ok(());
-    }
-    let moved = rec.accel.chunks(per).enumerate().skip(1).find_map(|(k, c)| {
-        let tilt = direction(c).angle(&first).to_degrees();
-        (tilt > MAX_STATIC_TILT_DEG).then_some((k * per, tilt))
-    });
-    match moved {
-        Some((i, tilt)) => Err(AllanError(format!(
-            "{}: not a static log: gravity has turned {tilt:.1}° from its direction at the start by t = {:.1} s \
-             (line {}); an Allan analysis reads motion as noise. Record the IMU lying still",
-            rec.source_name(),
-            rec.t[i],
-            rec.lines.line(i)
-        ))),
-        None => Ok(()),
-    }
 }
 
 /// Compute curves and coefficients of all six axes of a static recording.
@@ -238,12 +224,53 @@ pub fn run_allan_with_progress(
     let (segment, tau0) = gap_free_segment(rec, &mut warnings)?;
     let whole = rec;
     let rec = &whole.slice_time(whole.t[segment.start], whole.t[segment.end - 1] + 0.5 * tau0);
-    check_static(rec)?;
+    super::disturbance::check_static(rec).map_err(|m| AllanError(format!("{}: {m}", rec.source_name())))?;
+    let disturbances = super::disturbance::find_disturbances(rec);
+    for d in &disturbances {
+        warnings.push(format!("disturbance: {d}"));
+    }
+    // Per sensor, the stretches to analyse: all of it, or the stretches free of
+    // that sensor's disturbances (10 s margins, each at least four windows long), joined.
+    let margin = (super::disturbance::STEP_WINDOW_S / tau0).round() as usize;
+    let mut sensor_spans: Vec<Vec<std::ops::Range<usize>>> = Vec::new();
+    for sensor in ["gyro", "accel"] {
+        let own: Vec<super::disturbance::Disturbance> =
+            disturbances.iter().filter(|d| d.axis.starts_with(sensor)).cloned().collect();
+        let mut spans: Vec<std::ops::Range<usize>> = std::iter::once(0..rec.len()).collect();
+        if opts.cut_disturbances && !own.is_empty() {
+            let clean = super::disturbance::clean_spans(rec.len(), &own, margin, 4 * margin);
+            let kept: usize = clean.iter().map(|r| r.len()).sum();
+            if kept as f64 >= MIN_CLEAN_SHARE * rec.len() as f64 {
+                let list: Vec<String> =
+                    clean.iter().map(|r| format!("{:.0}–{:.0} s", rec.t[r.start], rec.t[r.end - 1])).collect();
+                warnings.push(format!(
+                    "{sensor}: analysing the {} stretch(es) free of its disturbances, joined so that no difference \
+                     crosses one (10 s margins; {:.0} % of the record): t = {} (--span analyses a span as it is)",
+                    clean.len(),
+                    100.0 * kept as f64 / rec.len() as f64,
+                    list.join(", ")
+                ));
+                spans = clean;
+            } else {
+                warnings.push(format!(
+                    "{sensor}: the stretches free of its disturbances hold less than {:.0} % of the record: analysing \
+                     all of it; its random walks and bias instability may be too large",
+                    100.0 * MIN_CLEAN_SHARE
+                ));
+            }
+        }
+        sensor_spans.push(spans);
+    }
     let rate = 1.0 / tau0;
     let tau0 = 1.0 / rate;
-    let n_tau =
-        super::cluster_sizes(&opts.allan.taus, rec.len(), tau0, opts.allan.kind, opts.allan.max_tau_fraction).len();
-    let total = 6 * n_tau;
+    let n_tau: usize = sensor_spans
+        .iter()
+        .flatten()
+        .map(|r| {
+            super::cluster_sizes(&opts.allan.taus, r.len(), tau0, opts.allan.kind, opts.allan.max_tau_fraction).len()
+        })
+        .sum();
+    let total = 3 * n_tau;
     let done = std::sync::atomic::AtomicUsize::new(0);
     let tick = || progress(done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1, total);
     if rec.duration() < 3600.0 {
@@ -266,9 +293,22 @@ pub fn run_allan_with_progress(
             )));
         }
     }
-    let refs: Vec<&[f64]> = columns.iter().map(|c| c.as_slice()).collect();
-    let curves = super::allan_deviation_axes(&refs, tau0, &opts.allan, &tick)
-        .map_err(|e| AllanError(format!("{}: {e}", rec.source_name())))?;
+    // One curve per stretch and axis, joined per axis.
+    let mut curves: Vec<AllanCurve> = Vec::new();
+    for (sensor, spans) in sensor_spans.iter().enumerate() {
+        let mut per_span: Vec<Vec<AllanCurve>> = Vec::new();
+        for r in spans {
+            let refs: Vec<&[f64]> = columns[3 * sensor..3 * sensor + 3].iter().map(|c| &c[r.clone()]).collect();
+            per_span.push(
+                super::allan_deviation_axes(&refs, tau0, &opts.allan, &tick)
+                    .map_err(|e| AllanError(format!("{}: {e}", rec.source_name())))?,
+            );
+        }
+        for k in 0..3 {
+            let parts: Vec<AllanCurve> = per_span.iter().map(|c| c[k].clone()).collect();
+            curves.push(AllanCurve::joined(&parts).expect("at least one stretch"));
+        }
+    }
     drop(columns);
     let mut curves = curves.into_iter();
     let mut sensors = Vec::new();
@@ -309,6 +349,7 @@ pub fn run_allan_with_progress(
         kalibr,
         axis_stat: opts.axis_stat,
         warnings,
+        disturbances,
     })
 }
 
@@ -332,6 +373,30 @@ fn axis_n_k_b(axis: &AxisResult, label: &str, notes: &mut Vec<String>) -> (f64, 
         ));
         b
     });
+    for e in &id.fit.extra {
+        notes.push(match e.kind {
+            super::identify::ExtraKind::Markov => format!(
+                "{label}: a Markov (correlated) term, σ_m {:.3e} with correlation time {:.3} s, is not a random walk \
+                 and is left out of it; an estimator without a state for it may add its low-frequency level \
+                 √(2σ_m²T_c) = {:.3e} to the noise density",
+                e.amplitude.value,
+                e.time_s,
+                (2.0 * e.amplitude.value.powi(2) * e.time_s).sqrt()
+            ),
+            super::identify::ExtraKind::Sinusoid => format!(
+                "{label}: a sinusoid of amplitude {:.3e} at {:.3} Hz (vibration?) is neither white noise nor a random \
+                 walk and is left out of both",
+                e.amplitude.value,
+                1.0 / e.time_s
+            ),
+        });
+    }
+    if let (false, Some((tau, ratio))) = (id.follows_data, id.worst_misfit) {
+        notes.push(format!(
+            "{label}: the fitted model does not follow the measured curve ({ratio:.2}× at τ = {tau:.3} s): its \
+             random walk is uncertain"
+        ));
+    }
     (n, k, id.fit.B.or(id.readoff.B).map_or(0.0, |c| c.value))
 }
 
@@ -387,6 +452,14 @@ fn terms_json(t: &super::NoiseTerms) -> Value {
     for (k, name) in TERM_NAMES.iter().enumerate() {
         m.insert(name.to_string(), coef_json(t.get(k)));
     }
+    if !t.extra.is_empty() {
+        let extra: Vec<Value> = t
+            .extra
+            .iter()
+            .map(|e| json!({ "kind": e.kind, "amplitude": coef_json(Some(e.amplitude)), "time_s": num(e.time_s) }))
+            .collect();
+        m.insert("extra".into(), Value::Array(extra));
+    }
     Value::Object(m)
 }
 
@@ -401,6 +474,7 @@ impl AllanReport {
         let first = &self.sensors[0].axes[0].curve;
         root.insert("deviation".into(), json!(first.kind));
         root.insert("confidence".into(), json!(first.confidence));
+        root.insert("disturbances".into(), json!(self.disturbances));
         root.insert("coefficient_confidence".into(), json!(0.95));
         for s in &self.sensors {
             let mut sensor = serde_json::Map::new();
@@ -422,6 +496,11 @@ impl AllanReport {
                         o.insert("readoff".into(), terms_json(&id.readoff));
                         o.insert("supported".into(), json!(id.supported));
                         o.insert("fit_chi2_dof".into(), num(id.fit_chi2_dof));
+                        o.insert("follows_data".into(), json!(id.follows_data));
+                        o.insert(
+                            "worst_misfit".into(),
+                            id.worst_misfit.map_or(Value::Null, |(t, r)| json!({ "tau": num(t), "ratio": num(r) })),
+                        );
                         o.insert("notes".into(), json!(id.notes));
                     }
                     None => {
@@ -625,7 +704,7 @@ impl AllanReport {
                 let Some(id) = &a.id else { continue };
                 // Fitted model and its terms, over the τ range of the data.
                 let (t0, t1) = (c.tau[0], *c.tau.last().expect("non-empty curve"));
-                let grid: Vec<f64> = (0..=60).map(|i| t0 * (t1 / t0).powf(i as f64 / 60.0)).collect();
+                let grid: Vec<f64> = (0..=240).map(|i| t0 * (t1 / t0).powf(i as f64 / 240.0)).collect();
                 layers.push(Layer::Line {
                     points: grid.iter().map(|&t| (t, id.fit.model_dev(t))).collect(),
                     color: color.mix_with_black(0.55),
@@ -642,31 +721,30 @@ impl AllanReport {
                         });
                     }
                 }
-                // Read-off points: each term's line at its reading τ.
-                let read_tau = [3f64.sqrt(), 1.0, f64::NAN, 3.0, 2f64.sqrt()];
-                let mut pts = Vec::new();
-                for (term, &rt) in read_tau.iter().enumerate() {
-                    if let Some(cf) = id.readoff.get(term) {
-                        if term == 2 {
-                            // Drawn where the curve is closest to the floor.
-                            let floor = cf.value * 0.664;
-                            let i = (0..c.dev.len())
-                                .min_by(|&i, &j| (c.dev[i] - floor).abs().total_cmp(&(c.dev[j] - floor).abs()))
-                                .expect("non-empty");
-                            pts.push((c.tau[i], floor));
-                        } else {
-                            pts.push((rt, cf.value * basis(rt)[term].sqrt()));
-                        }
-                    }
+                for e in &id.fit.extra {
+                    let amp2 = e.amplitude.value.powi(2);
+                    layers.push(Layer::Line {
+                        points: grid
+                            .iter()
+                            .map(|&t| (t, (amp2 * extra_basis(e.kind, e.time_s, t)).sqrt()))
+                            .filter(|p| p.1 > 0.0)
+                            .collect(),
+                        color: color.mix_with_white(0.45),
+                        width: 1,
+                        label: String::new(),
+                    });
                 }
+                // Read-off points: on the curve, at the τ each was read.
+                let pts: Vec<(f64, f64)> = id
+                    .readoff_tau
+                    .iter()
+                    .flatten()
+                    .filter_map(|&t| c.tau.iter().position(|&x| x == t).map(|i| (t, c.dev[i])))
+                    .collect();
                 layers.push(Layer::Points {
                     points: pts,
                     color: color.mix_with_black(0.3),
-                    label: if k == 0 {
-                        "read-offs (Q at √3, N at 1, B floor, K at 3, R at √2 s)".into()
-                    } else {
-                        String::new()
-                    },
+                    label: if k == 0 { "read-offs (where each term's slope was read)".into() } else { String::new() },
                 });
             }
             let chart = LogLogChart {

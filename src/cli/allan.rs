@@ -49,6 +49,7 @@ impl AllanArgs {
                 confidence: self.confidence,
             },
             axis_stat: self.axis_stat,
+            cut_disturbances: self.span.is_none(),
         };
         opts.validate()?;
         let start = std::time::Instant::now();

@@ -39,11 +39,16 @@ impl InspectArgs {
         if let Some((lo, hi)) = stats.temperature {
             println!("  temperature {lo:.2} … {hi:.2} °C");
         }
-        if r.warnings.is_empty() {
+        // A static log (gravity does not turn) also gets its knocks and steps.
+        let disturbances = tumble::allan::disturbance::static_disturbances(&r).unwrap_or_default();
+        if r.warnings.is_empty() && disturbances.is_empty() {
             println!("  no problems found");
         }
         for w in &r.warnings {
             println!("warning: {w}");
+        }
+        for d in &disturbances {
+            println!("warning: static log disturbed: {d}");
         }
         if let Some(png) = self.plot {
             tumble::inspect::write_overview_png(&r, &png)?;
