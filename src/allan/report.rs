@@ -709,7 +709,17 @@ impl AllanReport {
                     points: grid.iter().map(|&t| (t, id.fit.model_dev(t))).collect(),
                     color: color.mix_with_black(0.55),
                     width: 1,
-                    label: if k == 0 { "fit (darker), terms (thin)".into() } else { String::new() },
+                    label: {
+                        // The fitted terms by name: the thin lines in the axis' lighter colour.
+                        let mut names: Vec<String> = TERM_NAMES
+                            .iter()
+                            .enumerate()
+                            .filter(|(t, _)| id.fit.get(*t).is_some())
+                            .map(|(_, n)| n.to_string())
+                            .collect();
+                        names.extend(id.fit.extra.iter().map(|e| format!("{} {:.3} s", e.kind.name(), e.time_s)));
+                        format!("{ax} fit (darker) = {} (thin)", names.join(" + "))
+                    },
                 });
                 for term in 0..5 {
                     if let Some(cf) = id.fit.get(term) {
