@@ -18,6 +18,7 @@ use tumble_factors::PartialPriorFactor;
 use tumble_solvers::{covariances, Factor, Graph, Key, LmOptions, NoiseModel, Optimizer, Termination, Values, Vars};
 
 /// The accelerometer estimate of one detection.
+#[derive(Clone)]
 pub(super) struct AccelFit {
     pub params: AccelParams,
     /// Covariance (not inflated).
@@ -114,7 +115,7 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
     }
     let mut values = Values::new();
     values.insert(KEY_ACCEL, x0);
-    let fit = solve_with_floor(&factors, &base, &values, 9, &prior).ok()?;
+    let fit = solve_with_floor(&factors, &base, &values, 9, &prior, LmOptions::default().max_iterations).ok()?;
     let (sol, graph) = (&fit.values, &fit.graph);
     let params = *sol.get::<AccelParams>(KEY_ACCEL).ok()?;
     let cov = covariances(graph, sol, &[KEY_ACCEL]).ok()?.get(KEY_ACCEL)?;
@@ -202,12 +203,13 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
     values: &Values,
     n_params: usize,
     prior: &MisalignmentPrior,
+    max_iterations: usize,
 ) -> Result<FloorFit, String> {
     let dim = factors.first().map(|f| f.residual_dim()).unwrap_or(1);
     // The prior's residuals count as observations of the misalignments.
     let n_params = n_params.saturating_sub(prior.indices.len());
     let dof = (dim * factors.len()).saturating_sub(n_params).max(1) as f64;
-    let lm = Optimizer::new(LmOptions { function_tolerance: 1e-10, ..LmOptions::default() });
+    let lm = Optimizer::new(LmOptions { function_tolerance: 1e-10, max_iterations, ..LmOptions::default() });
     let widen = |c: &DMatrix<f64>, s2: f64| c + DMatrix::identity(dim, dim) * s2;
     let build = |s2: f64| -> Result<Graph, String> {
         let mut g = Graph::new();
@@ -270,6 +272,7 @@ pub(super) fn add_prior(g: &mut Graph, prior: &MisalignmentPrior) -> Result<(), 
     Ok(())
 }
 
+#[derive(Clone)]
 pub(super) struct GyroFit {
     /// `[M_g row major (9), b_g (3)]`.
     pub x: [f64; 12],
@@ -283,6 +286,10 @@ pub(super) struct GyroFit {
     /// `(kept scale, other scale, χ² ratio)`.
     pub ambiguity: Option<(f64, f64, f64)>,
 }
+
+/// Iterations the other starts of the gyro fit get (the first gets the solver's
+/// default): a start that has not converged by then is wandering.
+const OTHER_START_ITERATIONS: usize = 30;
 
 /// Another start whose χ² is within this factor of the best one's makes the
 /// gyro scale ambiguous.
@@ -383,19 +390,30 @@ pub(super) fn fit_gyro(
     let n_params = 9 + 3 * opts.estimate_gyro_bias as usize;
     // One solve per start; the one that explains the data best (lowest χ² with the
     // predicted noise) is kept.
+    // The other starts get few iterations: a start that has not converged by then
+    // is wandering (an alias start can take 300); the kept one is finished below.
+    let full = LmOptions::default().max_iterations;
     let mut fits: Vec<(MisalignmentPrior, FloorFit)> = starts
         .par_iter()
-        .filter_map(|&s| {
+        .enumerate()
+        .filter_map(|(i, &s)| {
             let start = gyro_vec(&(Matrix3::identity() * s));
             let prior = MisalignmentPrior::new(KEY_GYRO, &start, &GYRO_OFF_DIAGONAL);
             let mut values = Values::new();
             values.insert(KEY_GYRO, start);
             values.insert(KEY_GYRO_BIAS, *b0);
             values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
-            solve_with_floor(&factors, &base, &values, n_params, &prior).ok().map(|f| (prior, f))
+            let cap = if i == 0 { full } else { OTHER_START_ITERATIONS };
+            solve_with_floor(&factors, &base, &values, n_params, &prior, cap).ok().map(|f| (prior, f))
         })
         .collect();
     fits.sort_by(|a, b| a.1.chi2_white.total_cmp(&b.1.chi2_white));
+    if let Some((prior, f)) = fits.first_mut().filter(|(_, f)| f.capped) {
+        let more = solve_with_floor(&factors, &base, &f.values, n_params, prior, full)?;
+        f.iterations += more.iterations;
+        (f.values, f.graph, f.chi2_final, f.floor, f.capped) =
+            (more.values, more.graph, more.chi2_final, more.floor, more.capped);
+    }
     // Another start that explains the data nearly as well at a clearly different scale:
     // the turns cannot tell the scales apart (single-axis turns alias at 1, 5, 9, … × a quarter turn).
     let scale_of =
@@ -403,7 +421,10 @@ pub(super) fn fit_gyro(
     let mut ambiguity = None;
     if let (Some((_, best)), Some((_, other))) = (fits.first(), fits.get(1)) {
         if let (Ok(a), Ok(b)) = (scale_of(best), scale_of(other)) {
-            if other.chi2_white < AMBIGUOUS_CHI2_RATIO * best.chi2_white && (a / b).ln().abs() > 1.5f64.ln() {
+            if !other.capped
+                && other.chi2_white < AMBIGUOUS_CHI2_RATIO * best.chi2_white
+                && (a / b).ln().abs() > 1.5f64.ln()
+            {
                 ambiguity = Some((a, b, other.chi2_white / best.chi2_white));
             }
         }

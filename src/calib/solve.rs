@@ -407,18 +407,35 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     // threshold drops poses and widens σ, a loose one lets the slow start and end of
     // turns into the poses, which the fits' χ²/dof and so the inflated σ show.
     let gyro_inputs = GyroInputs { var_a: &var_a, var_g: &var_g, bias: &b_init, n_init, edge: half };
+    type Fits = (Option<AccelFit>, Option<Result<GyroFit, String>>);
     type Candidate = (f64, Vec<Interval>, Option<AccelFit>, Option<Result<GyroFit, String>>);
-    let candidates: Vec<Candidate> = opts
+    let detections: Vec<(f64, Vec<Interval>)> = opts
         .multipliers
+        .iter()
+        .map(|&k| (k, not_turning(rec, intervals_below(&ratio, k, min_len), &b_init, turn_limit)))
+        .collect();
+    // Multipliers that detect the same intervals share one calibration.
+    let firsts: Vec<usize> =
+        (0..detections.len()).map(|i| (0..=i).find(|&j| detections[j].1 == detections[i].1).unwrap_or(i)).collect();
+    let unique: Vec<usize> = (0..detections.len()).filter(|&i| firsts[i] == i).collect();
+    let fitted: Vec<(usize, Fits)> = unique
         .par_iter()
-        .map(|&k| {
-            let iv = not_turning(rec, intervals_below(&ratio, k, min_len), &b_init, turn_limit);
-            let fit = (iv.len() >= opts.min_intervals).then(|| fit_accel(rec, &iv, opts.gravity, &var_a)).flatten();
+        .map(|&i| {
+            let iv = &detections[i].1;
+            let fit = (iv.len() >= opts.min_intervals).then(|| fit_accel(rec, iv, opts.gravity, &var_a)).flatten();
             let gyro = fit.as_ref().map(|a| {
-                let means = interval_means(rec, &iv);
-                fit_gyro(rec, &iv, &means, a, &gyro_inputs, opts, false)
+                let means = interval_means(rec, iv);
+                fit_gyro(rec, iv, &means, a, &gyro_inputs, opts, false)
             });
-            (k, iv, fit, gyro)
+            (i, (fit, gyro))
+        })
+        .collect();
+    let candidates: Vec<Candidate> = detections
+        .into_iter()
+        .enumerate()
+        .map(|(i, (k, iv))| {
+            let (_, (fit, gyro)) = fitted.iter().find(|f| f.0 == firsts[i]).expect("every first detection is fitted");
+            (k, iv, fit.clone(), gyro.clone())
         })
         .collect();
     let sweep: Vec<SweepEntry> = candidates
