@@ -18,6 +18,33 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x2, SMatrix, SVector, Vector3};
 use tumble_solvers::lie::{hat, so3_exp, so3_right_jacobian};
 use tumble_solvers::{Factor, FactorError, Key, Linearization, Vars};
 
+/// `Exp(w)` for one integration step: Rodrigues' `I + a·[w]× + b·[w]×²` with
+/// `[w]×² = w wᵀ − |w|² I`, and `a = sin θ/θ`, `b = (1 − cos θ)/θ²` by their
+/// series through θ⁶ below θ = 0.05 (the next term is under 10⁻¹⁶: exact to
+/// rounding, without the sine and cosine that dominated the calibration's time;
+/// a gyro step at 100 Hz turns less than 0.05 rad below 5 rad/s).
+fn step_exp(w: &Vector3<f64>) -> Matrix3<f64> {
+    let t2 = w.norm_squared();
+    if t2 >= 2.5e-3 {
+        return so3_exp(w);
+    }
+    let a = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0));
+    let b = 0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0));
+    let d = 1.0 - b * t2;
+    let (x, y, z) = (w.x, w.y, w.z);
+    Matrix3::new(
+        d + b * x * x,
+        b * x * y - a * z,
+        b * x * z + a * y,
+        b * x * y + a * z,
+        d + b * y * y,
+        b * y * z - a * x,
+        b * x * z - a * y,
+        b * y * z + a * x,
+        d + b * z * z,
+    )
+}
+
 /// Accelerometer parameters `[m00, m01, m02, m11, m12, m22, b0, b1, b2]`: the
 /// upper triangle of `M_a` (row major) and the bias `b_a` \[raw units\].
 pub type AccelParams = SVector<f64, 9>;
@@ -170,7 +197,7 @@ impl IntegratedRotationFactor {
     pub fn rotation(&self, m: &Matrix3<f64>, b: &Vector3<f64>) -> Matrix3<f64> {
         let mut r = Matrix3::identity();
         for i in 0..self.dt.len() {
-            r *= so3_exp(&(m * (self.mid(i) - b) * self.dt[i]));
+            r *= step_exp(&(m * (self.mid(i) - b) * self.dt[i]));
         }
         r
     }
@@ -188,7 +215,7 @@ impl IntegratedRotationFactor {
         let mut r = Matrix3::identity();
         for i in 0..n {
             let phi = m * (self.mid(i) - b) * self.dt[i];
-            let e = so3_exp(&phi);
+            let e = step_exp(&phi);
             r *= e;
             steps.push((e, so3_right_jacobian(&phi) * self.dt[i]));
         }
@@ -273,5 +300,19 @@ impl Factor for IntegratedRotationFactor {
                 DMatrix::from_column_slice(2, 3, jb.as_slice()),
             ],
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_exp_is_so3_exp_to_rounding() {
+        for &t in &[0.0, 1e-9, 1e-4, 0.01, 0.049, 0.0501, 0.3] {
+            let w = Vector3::new(0.6, -0.48, 0.64) * t;
+            let d = (step_exp(&w) - so3_exp(&w)).amax();
+            assert!(d < 4e-16, "θ = {t}: {d:e}");
+        }
     }
 }

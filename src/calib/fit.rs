@@ -115,7 +115,7 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
     }
     let mut values = Values::new();
     values.insert(KEY_ACCEL, x0);
-    let fit = solve_with_floor(&factors, &base, &values, 9, &prior, LmOptions::default().max_iterations).ok()?;
+    let fit = solve_with_floor(&factors, &base, &values, 9, &prior, LmOptions::default().max_iterations, true).ok()?;
     let (sol, graph) = (&fit.values, &fit.graph);
     let params = *sol.get::<AccelParams>(KEY_ACCEL).ok()?;
     let cov = covariances(graph, sol, &[KEY_ACCEL]).ok()?.get(KEY_ACCEL)?;
@@ -196,7 +196,9 @@ pub(super) struct FloorFit {
 /// Solve factors with per-factor noise covariances `base`; when the residuals
 /// exceed that noise (χ²/dof > 1), add a common isotropic floor `s²` (C_k + s² I)
 /// that makes χ²/dof = 1 — a variance-component estimate of what the model does
-/// not explain, which evens out the weights of long and short intervals — and re-solve.
+/// not explain, which evens out the weights of long and short intervals — and
+/// re-solve (when `refine`; otherwise the floor is only estimated, enough to rank
+/// detections).
 pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
     factors: &[F],
     base: &[DMatrix<f64>],
@@ -204,6 +206,7 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
     n_params: usize,
     prior: &MisalignmentPrior,
     max_iterations: usize,
+    refine: bool,
 ) -> Result<FloorFit, String> {
     let dim = factors.first().map(|f| f.residual_dim()).unwrap_or(1);
     // The prior's residuals count as observations of the misalignments.
@@ -256,6 +259,11 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
         }
         s2 = hi;
         graph = build(s2)?;
+        if !refine {
+            // Ranking only: the floor from the first solution, not solved again.
+            chi2_final = 1.0;
+            break;
+        }
         let (next, summary) = lm.optimize(&graph, &sol).map_err(|e| e.to_string())?;
         sol = next;
         iterations += summary.iterations;
@@ -370,7 +378,12 @@ pub(super) fn fit_gyro(
     // A gyro that reports rad/s is within a factor of 2 of it; beyond that the units are
     // wrong (deg/s is 57×), which no calibration should paper over.
     let (lo, hi) = if rec.gyro_units == Stored::RawCounts { (0.25 * s_med, 4.0 * s_max) } else { (0.5, 2.0) };
-    let starts = isotropic_starts(&iso_cost, lo, hi, if final_fit { GYRO_STARTS } else { 1 });
+    // Ranking a detection needs one start, found on a coarser grid.
+    let starts = if final_fit {
+        isotropic_starts(&iso_cost, lo, hi, GYRO_STARTS, 64)
+    } else {
+        isotropic_starts(&iso_cost, lo, hi, 1, 16)
+    };
     let s0 = starts[0];
     // Noise: the gyro's white noise integrated over each turn (per axis, through the
     // steps' Jacobians) plus the two gravity directions' noise.
@@ -404,12 +417,12 @@ pub(super) fn fit_gyro(
             values.insert(KEY_GYRO_BIAS, *b0);
             values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
             let cap = if i == 0 { full } else { OTHER_START_ITERATIONS };
-            solve_with_floor(&factors, &base, &values, n_params, &prior, cap).ok().map(|f| (prior, f))
+            solve_with_floor(&factors, &base, &values, n_params, &prior, cap, final_fit).ok().map(|f| (prior, f))
         })
         .collect();
     fits.sort_by(|a, b| a.1.chi2_white.total_cmp(&b.1.chi2_white));
     if let Some((prior, f)) = fits.first_mut().filter(|(_, f)| f.capped) {
-        let more = solve_with_floor(&factors, &base, &f.values, n_params, prior, full)?;
+        let more = solve_with_floor(&factors, &base, &f.values, n_params, prior, full, true)?;
         f.iterations += more.iterations;
         (f.values, f.graph, f.chi2_final, f.floor, f.capped) =
             (more.values, more.graph, more.chi2_final, more.floor, more.capped);
@@ -534,17 +547,23 @@ pub(super) fn fit_gyro(
 const GYRO_STARTS: usize = 3;
 
 /// Up to `count` isotropic scales in `[lo, hi]` at the deepest local minima of
-/// `cost` on a log grid (64 points), each refined by golden-section search
+/// `cost` on a log grid of `points`, each refined by golden-section search
 /// between its grid neighbours; the lowest cost first.
-pub(super) fn isotropic_starts(cost: &(dyn Fn(f64) -> f64 + Sync), lo: f64, hi: f64, count: usize) -> Vec<f64> {
-    const N: usize = 64;
+pub(super) fn isotropic_starts(
+    cost: &(dyn Fn(f64) -> f64 + Sync),
+    lo: f64,
+    hi: f64,
+    count: usize,
+    points: usize,
+) -> Vec<f64> {
+    let n_grid = points.max(3);
     let (l0, l1) = (lo.ln(), hi.max(lo * 1.01).ln());
-    let grid: Vec<f64> = (0..N).map(|i| l0 + (l1 - l0) * i as f64 / (N - 1) as f64).collect();
+    let grid: Vec<f64> = (0..n_grid).map(|i| l0 + (l1 - l0) * i as f64 / (n_grid - 1) as f64).collect();
     let values: Vec<f64> = grid.par_iter().map(|x| cost(x.exp())).collect();
-    let mut minima: Vec<(f64, f64)> = (0..N)
-        .filter(|&i| (i == 0 || values[i] <= values[i - 1]) && (i == N - 1 || values[i] <= values[i + 1]))
+    let mut minima: Vec<(f64, f64)> = (0..n_grid)
+        .filter(|&i| (i == 0 || values[i] <= values[i - 1]) && (i == n_grid - 1 || values[i] <= values[i + 1]))
         .map(|i| {
-            let (mut a, mut b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(N - 1)]);
+            let (mut a, mut b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(n_grid - 1)]);
             let phi = 0.5 * (5f64.sqrt() - 1.0);
             let (mut x1, mut x2) = (b - phi * (b - a), a + phi * (b - a));
             let (mut f1, mut f2) = (cost(x1.exp()), cost(x2.exp()));
