@@ -25,7 +25,7 @@ pub(super) struct AccelFit {
     pub cov: DMatrix<f64>,
     pub stats: FitStats,
     /// Misalignments the poses do not determine (their estimate is mostly the prior's).
-    pub held: Vec<OffDiagonal>,
+    pub not_determined: Vec<OffDiagonal>,
 }
 
 /// Mean raw accelerometer sample of each interval.
@@ -119,7 +119,7 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
     let (sol, graph) = (&fit.values, &fit.graph);
     let params = *sol.get::<AccelParams>(KEY_ACCEL).ok()?;
     let cov = covariances(graph, sol, &[KEY_ACCEL]).ok()?.get(KEY_ACCEL)?;
-    let held = undetermined(&params, &(&cov * fit.chi2_final.max(1.0)), &ACCEL_OFF_DIAGONAL);
+    let not_determined = undetermined(&params, &(&cov * fit.chi2_final.max(1.0)), &ACCEL_OFF_DIAGONAL);
     let chi2 = fit.chi2_white;
     let ma = accel_matrix(&params);
     let ba = Vector3::new(params[6], params[7], params[8]);
@@ -147,7 +147,7 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
             iterations: fit.iterations,
             converged: !fit.capped,
         },
-        held,
+        not_determined,
     })
 }
 
@@ -289,7 +289,7 @@ pub(super) struct GyroFit {
     pub stats: FitStats,
     pub rotations: Vec<RotationResidual>,
     /// Misalignments the turns do not determine (their estimate is mostly the prior's).
-    pub held: Vec<OffDiagonal>,
+    pub not_determined: Vec<OffDiagonal>,
     /// Another start explained the data nearly as well at another scale:
     /// `(kept scale, other scale, χ² ratio)`.
     pub ambiguity: Option<(f64, f64, f64)>,
@@ -297,7 +297,7 @@ pub(super) struct GyroFit {
 
 /// Iterations the other starts of the gyro fit get (the first gets the solver's
 /// default): a start that has not converged by then is wandering.
-const OTHER_START_ITERATIONS: usize = 30;
+const OTHER_START_ITERATIONS: usize = 20;
 
 /// Another start whose χ² is within this factor of the best one's makes the
 /// gyro scale ambiguous.
@@ -380,7 +380,7 @@ pub(super) fn fit_gyro(
     let (lo, hi) = if rec.gyro_units == Stored::RawCounts { (0.25 * s_med, 4.0 * s_max) } else { (0.5, 2.0) };
     // Ranking a detection needs one start, found on a coarser grid.
     let starts = if final_fit {
-        isotropic_starts(&iso_cost, lo, hi, GYRO_STARTS, 64)
+        isotropic_starts(&iso_cost, lo, hi, GYRO_STARTS, 32)
     } else {
         isotropic_starts(&iso_cost, lo, hi, 1, 16)
     };
@@ -406,7 +406,7 @@ pub(super) fn fit_gyro(
     // The other starts get few iterations: a start that has not converged by then
     // is wandering (an alias start can take 300); the kept one is finished below.
     let full = LmOptions::default().max_iterations;
-    let mut fits: Vec<(MisalignmentPrior, FloorFit)> = starts
+    let mut fits: Vec<(usize, MisalignmentPrior, FloorFit)> = starts
         .par_iter()
         .enumerate()
         .filter_map(|(i, &s)| {
@@ -416,12 +416,13 @@ pub(super) fn fit_gyro(
             values.insert(KEY_GYRO, start);
             values.insert(KEY_GYRO_BIAS, *b0);
             values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
-            let cap = if i == 0 { full } else { OTHER_START_ITERATIONS };
-            solve_with_floor(&factors, &base, &values, n_params, &prior, cap, final_fit).ok().map(|f| (prior, f))
+            // The other starts are compared on their first solve; the kept one is refined below.
+            let (cap, refine) = if i == 0 { (full, final_fit) } else { (OTHER_START_ITERATIONS, false) };
+            solve_with_floor(&factors, &base, &values, n_params, &prior, cap, refine).ok().map(|f| (i, prior, f))
         })
         .collect();
-    fits.sort_by(|a, b| a.1.chi2_white.total_cmp(&b.1.chi2_white));
-    if let Some((prior, f)) = fits.first_mut().filter(|(_, f)| f.capped) {
+    fits.sort_by(|a, b| a.2.chi2_white.total_cmp(&b.2.chi2_white));
+    if let Some((_, prior, f)) = fits.first_mut().filter(|(i, _, f)| f.capped || (*i != 0 && final_fit)) {
         let more = solve_with_floor(&factors, &base, &f.values, n_params, prior, full, true)?;
         f.iterations += more.iterations;
         (f.values, f.graph, f.chi2_final, f.floor, f.capped) =
@@ -432,7 +433,7 @@ pub(super) fn fit_gyro(
     let scale_of =
         |f: &FloorFit| f.values.get::<GyroMatrix>(KEY_GYRO).map(|p| gyro_matrix(p).determinant().abs().cbrt());
     let mut ambiguity = None;
-    if let (Some((_, best)), Some((_, other))) = (fits.first(), fits.get(1)) {
+    if let (Some((_, _, best)), Some((_, _, other))) = (fits.first(), fits.get(1)) {
         if let (Ok(a), Ok(b)) = (scale_of(best), scale_of(other)) {
             if !other.capped
                 && other.chi2_white < AMBIGUOUS_CHI2_RATIO * best.chi2_white
@@ -442,7 +443,7 @@ pub(super) fn fit_gyro(
             }
         }
     }
-    let Some((prior, fit)) = fits.into_iter().next() else {
+    let Some((_, prior, fit)) = fits.into_iter().next() else {
         return Err("gyroscope fit failed from every start".into());
     };
     let (sol, graph) = (&fit.values, &fit.graph);
@@ -507,7 +508,7 @@ pub(super) fn fit_gyro(
     } else {
         return Err("gyroscope fit does not converge when the accelerometer parameters move by 1σ".into());
     }
-    let held = undetermined(&p, &cov, &GYRO_OFF_DIAGONAL);
+    let not_determined = undetermined(&p, &cov, &GYRO_OFF_DIAGONAL);
     let mut rotations = Vec::new();
     let (mut sq, mut tk) = (0.0, 0.0);
     for (f, &(i, j)) in factors.iter().zip(&pairs) {
@@ -538,7 +539,7 @@ pub(super) fn fit_gyro(
             converged: !fit.capped,
         },
         rotations,
-        held,
+        not_determined,
         ambiguity,
     })
 }
@@ -547,8 +548,9 @@ pub(super) fn fit_gyro(
 const GYRO_STARTS: usize = 3;
 
 /// Up to `count` isotropic scales in `[lo, hi]` at the deepest local minima of
-/// `cost` on a log grid of `points`, each refined by golden-section search
-/// between its grid neighbours; the lowest cost first.
+/// `cost` on a log grid of `points`, each refined by 12 golden-section steps
+/// between its grid neighbours (to 0.3 % of that bracket; the solver does the
+/// rest); the lowest cost first.
 pub(super) fn isotropic_starts(
     cost: &(dyn Fn(f64) -> f64 + Sync),
     lo: f64,
@@ -567,7 +569,7 @@ pub(super) fn isotropic_starts(
             let phi = 0.5 * (5f64.sqrt() - 1.0);
             let (mut x1, mut x2) = (b - phi * (b - a), a + phi * (b - a));
             let (mut f1, mut f2) = (cost(x1.exp()), cost(x2.exp()));
-            for _ in 0..20 {
+            for _ in 0..12 {
                 if f1 < f2 {
                     (b, x2, f2) = (x2, x1, f1);
                     x1 = b - phi * (b - a);

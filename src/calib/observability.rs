@@ -72,8 +72,8 @@ pub(super) fn undetermined(p: &SVector<f64, 9>, cov: &DMatrix<f64>, offs: &[OffD
 }
 
 /// `sensor T[row][col]` for each undetermined parameter.
-pub(super) fn names(sensor: &str, held: &[OffDiagonal]) -> Vec<String> {
-    held.iter().map(|o| format!("{sensor} T[{}][{}]", o.row, o.col)).collect()
+pub(super) fn names(sensor: &str, offs: &[OffDiagonal]) -> Vec<String> {
+    offs.iter().map(|o| format!("{sensor} T[{}][{}]", o.row, o.col)).collect()
 }
 
 #[cfg(test)]
@@ -90,10 +90,10 @@ mod tests {
         // σ(m01) = 0.04 < 0.5 · 0.05 · 2: determined; σ(m12) = 0.03 > 0.5 · 0.05 · 1: not determined.
         cov[(1, 1)] = 0.04f64.powi(2);
         cov[(4, 4)] = 0.03f64.powi(2);
-        let held = undetermined(&p, &cov, &ACCEL_OFF_DIAGONAL);
-        assert_eq!(held.iter().map(|o| o.index).collect::<Vec<_>>(), vec![4]);
+        let found = undetermined(&p, &cov, &ACCEL_OFF_DIAGONAL);
+        assert_eq!(found.iter().map(|o| o.index).collect::<Vec<_>>(), vec![4]);
         cov[(1, 1)] = 0.06f64.powi(2);
         assert_eq!(undetermined(&p, &cov, &ACCEL_OFF_DIAGONAL).len(), 2);
-        assert_eq!(names("accelerometer", &held), vec!["accelerometer T[1][2]"]);
+        assert_eq!(names("accelerometer", &found), vec!["accelerometer T[1][2]"]);
     }
 }

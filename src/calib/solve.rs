@@ -520,7 +520,8 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
             holds[holds.len() / 2]
         ));
     }
-    let not_determined = [names("accelerometer", &accel.held), names("gyroscope", &gyro.held)].concat();
+    let not_determined =
+        [names("accelerometer", &accel.not_determined), names("gyroscope", &gyro.not_determined)].concat();
     let mut result = CalibrationResult {
         calibration: ImuCalibration {
             accel: accel_triad,
