@@ -17,8 +17,7 @@ fn min_intervals_means_what_it_says() {
 
 #[test]
 fn a_nominal_rate_must_be_a_positive_number() {
-    let dir = std::env::temp_dir().join(format!("tumble_options_rate_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("rate");
     let f = dir.join("imu.csv");
     std::fs::write(&f, "0,0,0,0,0,0,9.81\n5000000,0,0,0,0,0,9.81\n10000000,0,0,0,0,0,9.81\n").unwrap();
     for rate in [0.0, -200.0, f64::NAN, f64::INFINITY] {
@@ -46,8 +45,7 @@ fn estimator_options_name_what_is_wrong() {
     o.window.size = 0;
     assert!(o.validate().unwrap_err().to_string().contains("--window"));
     // The YAML of the defaults reads back to the defaults.
-    let dir = std::env::temp_dir().join(format!("tumble_options_vio_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("vio");
     let p = dir.join("vio.yaml");
     std::fs::write(&p, VioOptions::default().to_yaml().unwrap()).unwrap();
     assert_eq!(VioOptions::read(&p).unwrap(), VioOptions::default());
@@ -78,8 +76,7 @@ fn gravity_must_be_earths() {
 
 #[test]
 fn a_pose_graph_without_edges_is_refused() {
-    let dir = std::env::temp_dir().join(format!("tumble_options_g2o_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("g2o");
     let p = dir.join("lonely.g2o");
     std::fs::write(&p, "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\n").unwrap();
     let e = tumble::io::g2o::read_g2o(&p, &Default::default()).err().unwrap().to_string();
@@ -89,8 +86,7 @@ fn a_pose_graph_without_edges_is_refused() {
 
 #[test]
 fn apply_never_overwrites_its_input() {
-    let dir = std::env::temp_dir().join(format!("tumble_options_apply_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("apply");
     let f = dir.join("imu.csv");
     let text = "0,0,0,0,0,0,9.81\n5000000,0,0,0,0,0,9.81\n10000000,0,0,0,0,0,9.81\n";
     std::fs::write(&f, text).unwrap();
@@ -106,8 +102,7 @@ fn apply_never_overwrites_its_input() {
 
 #[test]
 fn allan_on_constant_data_is_refused_with_the_axis_named() {
-    let dir = std::env::temp_dir().join(format!("tumble_options_allan_{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = scratch("allan");
     let f = dir.join("const.csv");
     let text: String = (0..2000i64).map(|i| format!("{},0.01,0.02,0.03,0.1,0.2,9.81\n", i * 5_000_000)).collect();
     std::fs::write(&f, text).unwrap();
@@ -115,4 +110,11 @@ fn allan_on_constant_data_is_refused_with_the_axis_named() {
     let e = tumble::allan::run_allan(&rec, &Default::default()).unwrap_err().to_string();
     assert!(e.contains("gyro x axis reads 0.01 in every sample"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// An empty folder of this test process for test `name`.
+fn scratch(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("tumble_options_{name}_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
 }

@@ -101,11 +101,7 @@ pub fn check_static(rec: &ImuRecording) -> Result<(), String> {
     }
     // Whole chunks only; and a tilt must stand out of the chunk means' own noise
     // (5σ of the angle between two means of `per` samples).
-    let sd = {
-        let c = &rec.accel[..per];
-        let m = crate::io::validate::mean3(c);
-        (c.iter().map(|a| (0..3).map(|k| (a[k] - m[k]).powi(2)).sum::<f64>()).sum::<f64>() / per as f64).sqrt()
-    };
+    let sd = crate::io::validate::var3(&rec.accel[..per]).iter().sum::<f64>().sqrt();
     let noise_deg = (5.0 * sd * (2.0 / per as f64).sqrt() / first.norm()).to_degrees();
     let limit = MAX_STATIC_TILT_DEG.max(noise_deg);
     let moved = rec.accel.chunks_exact(per).enumerate().skip(1).find_map(|(k, c)| {

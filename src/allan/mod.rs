@@ -178,6 +178,35 @@ pub struct AllanCurve {
 }
 
 impl AllanCurve {
+    /// This curve's settings with no points.
+    fn emptied(&self) -> AllanCurve {
+        AllanCurve {
+            m: Vec::new(),
+            tau: Vec::new(),
+            dev: Vec::new(),
+            dev_lo: Vec::new(),
+            dev_hi: Vec::new(),
+            n_terms: Vec::new(),
+            alpha: Vec::new(),
+            edf: Vec::new(),
+            ..*self
+        }
+    }
+
+    /// Append one τ: its deviation, the terms averaged, the noise type and the
+    /// EDF; the interval at the curve's confidence level.
+    fn push_point(&mut self, m: usize, tau: f64, dev: f64, n_terms: usize, alpha: i32, edf: f64) {
+        let (lo, hi) = edf::confidence_interval(dev, edf, self.confidence);
+        self.m.push(m);
+        self.tau.push(tau);
+        self.dev.push(dev);
+        self.dev_lo.push(lo);
+        self.dev_hi.push(hi);
+        self.n_terms.push(n_terms);
+        self.alpha.push(alpha);
+        self.edf.push(edf);
+    }
+
     /// The curve of several stretches of one record analysed as one, no
     /// difference crossing from one stretch to the next: at each cluster size
     /// the variances are averaged by their number of terms (the exact overall
@@ -189,15 +218,8 @@ impl AllanCurve {
         if parts.len() == 1 {
             return Some(longest.clone());
         }
-        let mut out = AllanCurve {
-            dev: Vec::new(),
-            dev_lo: Vec::new(),
-            dev_hi: Vec::new(),
-            n_terms: Vec::new(),
-            edf: Vec::new(),
-            ..longest.clone()
-        };
-        for &m in &longest.m {
+        let mut out = longest.emptied();
+        for (i, &m) in longest.m.iter().enumerate() {
             let (mut var, mut terms, mut edf) = (0.0, 0usize, 0.0);
             for c in parts {
                 if let Some(j) = c.m.iter().position(|&x| x == m) {
@@ -207,12 +229,7 @@ impl AllanCurve {
                 }
             }
             let dev = (var / terms.max(1) as f64).sqrt();
-            let (lo, hi) = edf::confidence_interval(dev, edf, longest.confidence);
-            out.dev.push(dev);
-            out.dev_lo.push(lo);
-            out.dev_hi.push(hi);
-            out.n_terms.push(terms);
-            out.edf.push(edf);
+            out.push_point(m, longest.tau[i], dev, terms, longest.alpha[i], edf);
         }
         Some(out)
     }
@@ -399,15 +416,7 @@ fn curve_from_phase(
         let alpha = id.unwrap_or(last_alpha);
         last_alpha = alpha;
         let e = edf::edf_greenhall(alpha, d, m, n + 1, kind.overlapping(), kind.modified());
-        let (lo, hi) = edf::confidence_interval(dev, e, opts.confidence);
-        curve.m.push(m);
-        curve.tau.push(tau);
-        curve.dev.push(dev);
-        curve.dev_lo.push(lo);
-        curve.dev_hi.push(hi);
-        curve.n_terms.push(count);
-        curve.alpha.push(alpha);
-        curve.edf.push(e);
+        curve.push_point(m, tau, dev, count, alpha, e);
     }
     Ok(curve)
 }

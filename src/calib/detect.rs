@@ -28,19 +28,14 @@ pub fn variance_norm(x: &[[f64; 3]]) -> f64 {
     var3(x).iter().map(|v| v * v).sum::<f64>().sqrt()
 }
 
-pub use crate::io::validate::mean3;
+pub use crate::io::validate::{mean3, var3};
 
-/// Per-axis (population) variance of `x`.
-pub fn var3(x: &[[f64; 3]]) -> [f64; 3] {
-    let m = mean3(x);
-    let n = x.len().max(1) as f64;
-    let mut v = [0.0; 3];
-    for s in x {
-        for k in 0..3 {
-            v[k] += (s[k] - m[k]).powi(2);
-        }
-    }
-    v.map(|s| s / n)
+/// The level of a recording's quietest windows: the 5th percentile of the
+/// finite values of a sliding-variance score (`None` when there are none).
+pub fn quietest(score: &[f64]) -> Option<f64> {
+    let mut v: Vec<f64> = score.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 20).copied()
 }
 
 /// Norm of the per-axis variance over a window of `w` samples (odd) centred
@@ -186,12 +181,7 @@ pub fn find_initial_rest(
     w: usize,
     min_samples: usize,
 ) -> Option<InitialRest> {
-    let quiet = |s: &[f64]| {
-        let mut v: Vec<f64> = s.iter().copied().filter(|x| x.is_finite()).collect();
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 20).copied().map(|q| q.max(1e-300))
-    };
-    let (qa, qg) = (quiet(accel_score)?, quiet(gyro_score)?);
+    let (qa, qg) = (quietest(accel_score)?.max(1e-300), quietest(gyro_score)?.max(1e-300));
     let mut ratio: Vec<f64> = accel_score.iter().zip(gyro_score).map(|(a, g)| (a / qa).max(g / qg)).collect();
     // Mid-turn the rate is high but flat, its variance low: a still window's mean
     // rate must also be near the rate of the quiet windows (the bias).

@@ -3,7 +3,9 @@
 //! gyroscope with integrated-rotation factors, both on the solver, and turn
 //! the estimates and their covariances into the paper's convention.
 
-use super::detect::{find_initial_rest, intervals_below, mean3, sliding_variance_norm, var3, InitialRest, Interval};
+use super::detect::{
+    find_initial_rest, intervals_below, mean3, quietest, sliding_variance_norm, var3, InitialRest, Interval,
+};
 use super::fit::*;
 use super::model::{ImuCalibration, Units};
 use super::observability::names;
@@ -307,9 +309,6 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         hint: hint.map(str::to_string),
         diagnosis: None,
     };
-    if !(opts.gravity.is_finite() && opts.gravity > 0.0) {
-        return Err(err(format!("gravity must be positive, got {}", opts.gravity), None));
-    }
     opts.validate().map_err(|e| err(e.to_string(), None))?;
     if rec.accel.len() != rec.len() || rec.gyro.len() != rec.len() {
         return Err(err("calibration needs both accelerometer and gyro samples".into(), None));
@@ -595,22 +594,17 @@ fn check_initial_static(
     // Windows wholly inside the initial period.
     let inside = n_init.saturating_sub(half).max(1);
     let mut init: Vec<f64> = score[..inside].iter().copied().filter(|x| x.is_finite()).collect();
-    let mut all: Vec<f64> = score.iter().copied().filter(|x| x.is_finite()).collect();
-    if init.is_empty() || all.is_empty() {
+    let (false, Some(quiet)) = (init.is_empty(), quietest(score)) else {
         return Ok(());
-    }
+    };
     init.sort_by(f64::total_cmp);
-    all.sort_by(f64::total_cmp);
     let med = init[init.len() / 2];
     let worst = init[init.len() - 1];
-    let quiet = all[all.len() / 20];
     let advice = "start the recording with the IMU lying perfectly still for the whole initial period \
                   (--init-static sets its length)";
     // A rotation shows in the gyro (compared with its quietest windows anywhere in the
     // recording); a knock or vibration only in the accelerometer.
-    let mut g: Vec<f64> = gyro_score.iter().copied().filter(|x| x.is_finite()).collect();
-    g.sort_by(f64::total_cmp);
-    let g_quiet = g.get(g.len() / 20).copied().unwrap_or(0.0).max(1e-300);
+    let g_quiet = quietest(gyro_score).unwrap_or(0.0).max(1e-300);
     if let Some(i) = gyro_score[..inside].iter().position(|&x| x.is_finite() && x > 10.0 * g_quiet) {
         return Err((
             format!(

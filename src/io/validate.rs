@@ -245,6 +245,19 @@ pub fn mean3(v: &[[f64; 3]]) -> [f64; 3] {
     m.map(|s| s / v.len().max(1) as f64)
 }
 
+/// Per-axis (population) variance of `x`.
+pub fn var3(x: &[[f64; 3]]) -> [f64; 3] {
+    let m = mean3(x);
+    let n = x.len().max(1) as f64;
+    let mut v = [0.0; 3];
+    for s in x {
+        for k in 0..3 {
+            v[k] += (s[k] - m[k]).powi(2);
+        }
+    }
+    v.map(|s| s / n)
+}
+
 /// Euclidean norm of a triad.
 pub(crate) fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
