@@ -22,25 +22,37 @@ pub enum Method {
     GaussNewton,
 }
 
-/// Options of the optimizer. Tolerances follow Ceres; the damping starts
-/// smaller (λ₀ = 1e-8 relative to diag H) and may shrink 10× per good step,
-/// which on the standard pose graphs needs 2–3× fewer iterations than Ceres'
-/// λ₀ = 1e-4 with a 3× floor (e.g. M3500: 5 instead of 18) and reaches the same cost.
+/// Options of the optimizer. The damping starts small (λ₀ = 1e-8 relative to
+/// the scale D) and may shrink 10× per good step, which on the standard pose
+/// graphs needs 2–3× fewer iterations than Ceres' λ₀ = 1e-4 with a 3× floor
+/// (e.g. M3500: 5 instead of 18). Steps are kept from running away on hard
+/// small problems by MINPACK's two safeguards: each unknown's scale D is the
+/// largest curvature it has had ([`LmOptions::keep_largest_scale`]) and a step
+/// may be at most twice as long (in D) as the last good one
+/// ([`LmOptions::trust_radius`]). A solve ends as converged only when the
+/// decrease still to come is below `function_tolerance` and an undamped
+/// solve agrees ([`LmOptions::check_stationarity`]); see `docs/solver.md`.
 #[derive(Clone, Debug)]
 pub struct LmOptions {
     /// Nonlinear method.
     pub method: Method,
     /// Maximum number of iterations (linearizations).
     pub max_iterations: usize,
-    /// Stop when |Δcost| / cost < this.
+    /// Stop when the relative cost decrease still to come is below this: the
+    /// last decrease, extrapolated as a geometric series from the last two
+    /// (a fast, superlinear convergence stops without one more iteration; a
+    /// slow, linear one is not taken for a minimum).
     pub function_tolerance: f64,
     /// Stop when the largest gradient entry is below this.
     pub gradient_tolerance: f64,
-    /// Stop when ‖δ‖ < this · (‖x‖ + this).
+    /// Stop when ‖δ‖ < this · (‖x‖ + this) (a converged stop only if the
+    /// undamped step is that small too or predicts nothing more; else
+    /// [`Termination::Stalled`]).
     pub parameter_tolerance: f64,
     /// Initial damping λ (1 / trust-region radius).
     pub initial_lambda: f64,
-    /// Damping is λ · clamp(diag H, min_diagonal, max_diagonal).
+    /// Damping is λ · clamp(D, min_diagonal, max_diagonal), D = diag H (or
+    /// its running maximum, [`LmOptions::keep_largest_scale`]).
     pub min_diagonal: f64,
     /// See `min_diagonal`.
     pub max_diagonal: f64,
@@ -61,21 +73,37 @@ pub struct LmOptions {
     pub eliminate: Vec<char>,
     /// Record one [`IterationLog`] per iteration.
     pub log_iterations: bool,
-    /// Before stopping on [`LmOptions::function_tolerance`], check with one
-    /// undamped (Gauss–Newton) solve that the model predicts no larger
-    /// relative decrease either, and go on if it does: the damped steps may
-    /// have been small because the damping was large (a slow stretch far from
-    /// the minimum), not because the minimum is near. Off for anytime solves
-    /// with a fixed budget (the VIO window, re-solved at the next frame).
+    /// Before stopping on [`LmOptions::function_tolerance`] or
+    /// [`LmOptions::parameter_tolerance`], check with one undamped
+    /// (Gauss–Newton) solve that the model predicts no larger relative
+    /// decrease (or no longer step) either: the damped steps may have been
+    /// small because the damping was large, not because the minimum is near.
+    /// A cost test that fails the check goes on; a small step that fails it
+    /// ends [`Termination::Stalled`]. Without the check a tolerance that
+    /// fires ends the solve under its own name (as in Ceres). Off for anytime
+    /// solves with a fixed budget (the VIO window, re-solved at the next frame).
     pub check_stationarity: bool,
+    /// Damp each unknown by the largest curvature (diagonal of H) it has had
+    /// in this solve, not only the current one (MINPACK's scaling): an
+    /// unknown whose Jacobian column collapses — a saturated exponential, a
+    /// decay rate run off to infinity — stays damped at its earlier scale
+    /// instead of becoming free to leave the region where the data see it.
+    pub keep_largest_scale: bool,
+    /// Bound each step's length ‖δ‖_D = (Σ D_j δ_j²)^½ by a radius that is
+    /// twice the last step after a good one (gain ratio ≥ 0.75) and halves
+    /// after a poor one (< 0.25), as MINPACK does; a longer step raises λ
+    /// instead. Nielsen's λ update alone is relative: where λ is far below
+    /// the problem's curvature, doubling it leaves the step as long, and one
+    /// lucky step can throw the parameters out of the model's reach.
+    pub trust_radius: bool,
 }
 
 impl Default for LmOptions {
     fn default() -> Self {
         LmOptions {
             method: Method::LevenbergMarquardt,
-            max_iterations: 100,
-            function_tolerance: 1e-6,
+            max_iterations: 1000,
+            function_tolerance: 1e-10,
             gradient_tolerance: 1e-10,
             parameter_tolerance: 1e-8,
             initial_lambda: 1e-8,
@@ -87,7 +115,9 @@ impl Default for LmOptions {
             linear_solver: LinearSolver::Auto,
             eliminate: Vec::new(),
             log_iterations: true,
-            check_stationarity: false,
+            check_stationarity: true,
+            keep_largest_scale: true,
+            trust_radius: true,
         }
     }
 }
@@ -105,10 +135,10 @@ pub enum Termination {
     MaxIterations,
     /// Damping grew past `max_lambda` without finding a decrease.
     NoProgress,
-    /// The steps became too small ([`LmOptions::parameter_tolerance`]) while
-    /// the scaled gradient ([`Summary::scaled_gradient`]) still promised a
-    /// decrease larger than [`LmOptions::function_tolerance`] allows: not a
-    /// minimum, the solver stalled.
+    /// The damped steps became too small ([`LmOptions::parameter_tolerance`])
+    /// while the undamped step still predicted a decrease larger than
+    /// [`LmOptions::function_tolerance`] allows (see
+    /// [`Summary::gauss_newton_decrease`]): not a minimum, the solver stalled.
     Stalled,
     /// The graph has no free variable.
     NothingToOptimize,
@@ -172,6 +202,16 @@ pub struct Summary {
     /// `max_j |(Jᵀr)_j| / (‖J_j‖ ‖r‖)` — 0 at a minimum whatever the problem's
     /// scale, and its square estimates the relative decrease still to come.
     pub scaled_gradient: f64,
+    /// Largest gradient entry |(Jᵀr)_j| at the last assembled linearization
+    /// (the test of [`LmOptions::gradient_tolerance`]).
+    pub max_gradient: f64,
+    /// Relative decrease still to come, as estimated after the last
+    /// accepted step (the test of [`LmOptions::function_tolerance`]).
+    pub remaining_decrease: f64,
+    /// Relative decrease the undamped (Gauss–Newton) model predicted at the
+    /// last stationarity check ([`LmOptions::check_stationarity`]); NaN when
+    /// none ran.
+    pub gauss_newton_decrease: f64,
 }
 
 impl Summary {
@@ -203,6 +243,11 @@ impl fmt::Display for Summary {
         )?;
         writeln!(
             f,
+            "  decrease to come {:.1e} (Gauss-Newton {:.1e}), largest gradient {:.1e}",
+            self.remaining_decrease, self.gauss_newton_decrease, self.max_gradient
+        )?;
+        writeln!(
+            f,
             "  time [s]: linearize {:.4}  build {:.4}  factorize {:.4}  solve {:.4}  total {:.4}",
             self.time_linearize, self.time_build, self.time_factorize, self.time_solve, self.time_total
         )
@@ -225,13 +270,70 @@ fn scaled_gradient(g: &[f64], diag: &[f64], cost: f64) -> f64 {
         .fold(0.0, f64::max)
 }
 
-/// `termination`, or [`Termination::Stalled`] when the scaled gradient of the
-/// last linearization still promises more than the function tolerance.
-fn stalled_or(termination: Termination, summary: &Summary, o: &LmOptions) -> Termination {
-    if summary.scaled_gradient.powi(2) > o.function_tolerance {
-        Termination::Stalled
+/// The decrease still to come after an accepted step that lowered the cost
+/// by `decrease` (the one before by `previous`, NaN for the first): the
+/// geometric series of the two when they shrink, else the decrease itself.
+fn remaining_decrease(decrease: f64, previous: f64) -> f64 {
+    let q = decrease / previous;
+    if q > 0.0 && q < 1.0 {
+        decrease * q / (1.0 - q)
     } else {
-        termination
+        decrease
+    }
+}
+
+/// Predicted decrease −gᵀδ − ½ δᵀHδ of step `delta`, given `hd` = Hδ.
+fn predicted_decrease(delta: &[f64], g: &[f64], hd: &[f64]) -> f64 {
+    -delta.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() - 0.5 * delta.iter().zip(hd).map(|(a, b)| a * b).sum::<f64>()
+}
+
+/// The stationarity check ([`LmOptions::check_stationarity`]) of a stop that
+/// `test` proposes at the assembled system `sys` (cost `cost`, parameter
+/// norm `x_norm`): one undamped solve. `Some(test)` when its predicted
+/// decrease or its step is within the tolerances, `Some(Stalled)` for a
+/// small step that is not, `None` (go on) for a cost test that is not.
+#[allow(clippy::too_many_arguments)]
+fn check_stop(
+    test: Termination,
+    structure: &mut Structure,
+    sys: &System,
+    diag: &[f64],
+    g: &[f64],
+    cost: f64,
+    x_norm: f64,
+    o: &LmOptions,
+    summary: &mut Summary,
+) -> Option<Termination> {
+    let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
+    summary.linear_solves += 1;
+    let solved = structure.solve(sys, Some(&tiny)).ok().and_then(|(delta, fs, ss, bs)| {
+        summary.time_factorize += fs;
+        summary.time_solve += ss;
+        summary.time_build += bs;
+        let d = predicted_decrease(&delta, g, &structure.h_times(sys, &delta));
+        // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
+        (d.is_finite() && d >= 0.0).then(|| (d, delta.iter().map(|v| v * v).sum::<f64>().sqrt()))
+    });
+    // The squared scaled gradient bounds the relative decrease to come from
+    // below whatever the solve's accuracy: a column that has all but
+    // vanished (a saturated parameter, below the damping floor) still shows.
+    let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
+    let done = match solved {
+        Some((d, step)) => {
+            summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
+            let small =
+                d <= o.function_tolerance * cost || step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
+            // A cost at the rounding level of the start is a zero-residual
+            // fit, where the residual stays aligned with the columns.
+            (small && aligned) || cost <= f64::EPSILON * summary.initial_cost
+        }
+        // No undamped step (H singular there): the scaled gradient decides.
+        None => aligned,
+    };
+    match (done, test) {
+        (true, t) => Some(t),
+        (false, Termination::FunctionTolerance) => None,
+        (false, _) => Some(Termination::Stalled),
     }
 }
 
@@ -412,6 +514,9 @@ impl Optimizer {
             time_total: 0.0,
             log: Vec::new(),
             scaled_gradient: f64::NAN,
+            max_gradient: f64::NAN,
+            remaining_decrease: f64::NAN,
+            gauss_newton_decrease: f64::NAN,
         };
         let t = Instant::now();
         let (mut lins, mut cost) = linearize_all(entries, &layout, &vars)?;
@@ -429,9 +534,15 @@ impl Optimizer {
         let free: Vec<usize> = layout.kept_vars.iter().chain(&layout.elim_vars).copied().collect();
         // The trial point, overwritten by each step's retraction.
         let mut trial: Vec<Box<dyn DynVariable>> = vars.clone();
-        // The cost decrease fell below the function tolerance: stop at the
-        // next linearization if the scaled gradient agrees.
-        let mut small_decrease = false;
+        // A tolerance test passed after the last accepted step: the stop it
+        // proposes is checked at the next linearization.
+        let mut proposed: Option<Termination> = None;
+        // Running maximum of diag H (LmOptions::keep_largest_scale).
+        let mut largest: Vec<f64> = Vec::new();
+        // Trust radius in the scaled norm (LmOptions::trust_radius).
+        let mut radius = f64::INFINITY;
+        // The previous accepted step's cost decrease.
+        let mut previous_decrease = f64::NAN;
 
         'outer: while summary.termination != Termination::NothingToOptimize {
             if summary.iterations >= o.max_iterations {
@@ -445,49 +556,31 @@ impl Optimizer {
             let gmax = g_all.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             let raw_diag = structure.diagonal(&sys);
             summary.scaled_gradient = scaled_gradient(&g_all, &raw_diag, cost);
+            summary.max_gradient = gmax;
             if gmax <= o.gradient_tolerance {
                 summary.termination = Termination::GradientTolerance;
                 break;
             }
-            // A small decrease ends the solve only where the gradient agrees
-            // that little is left: the relative decrease the model still
-            // predicts, about the squared scaled gradient, is below the
-            // tolerance too (a slow stretch far from the minimum goes on).
-            let diag: Vec<f64> = raw_diag.iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
-            if std::mem::take(&mut small_decrease) {
-                // The damped steps may have been small because λ was large,
-                // not because the minimum is near: the undamped (Gauss–Newton)
-                // model must predict no larger relative decrease either.
-                let t = Instant::now();
-                let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
-                let step = structure.solve(&sys, Some(&tiny));
-                summary.time_build += t.elapsed().as_secs_f64();
-                summary.linear_solves += 1;
-                let left = step.map(|(delta, ..)| {
-                    let hd = structure.h_times(&sys, &delta);
-                    -delta.iter().zip(&g_all).map(|(a, b)| a * b).sum::<f64>()
-                        - 0.5 * delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>()
-                });
-                // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
-                let left = left.ok().filter(|d| d.is_finite() && *d >= 0.0).ok_or(());
-                match left {
-                    // The scaled gradient must agree: a direction whose column
-                    // vanished (a parameter the model lost) hides from the solve.
-                    Ok(d) if d <= o.function_tolerance * cost => {
-                        summary.termination = stalled_or(Termination::FunctionTolerance, &summary, o);
-                        break;
-                    }
-                    Ok(_) => {}
-                    // No undamped step (H singular there): the scaled gradient decides.
-                    Err(_) => {
-                        summary.termination = stalled_or(Termination::FunctionTolerance, &summary, o);
-                        break;
-                    }
+            if o.keep_largest_scale {
+                if largest.len() != raw_diag.len() {
+                    largest.clone_from(&raw_diag);
+                }
+                for (m, d) in largest.iter_mut().zip(&raw_diag) {
+                    *m = m.max(*d);
+                }
+            }
+            let scale = if o.keep_largest_scale { &largest } else { &raw_diag };
+            let diag: Vec<f64> = scale.iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect();
+            let x_norm =
+                free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
+            if let Some(test) = proposed.take() {
+                let checked = check_stop(test, &mut structure, &sys, &diag, &g_all, cost, x_norm, o, &mut summary);
+                if let Some(t) = checked {
+                    summary.termination = t;
+                    break;
                 }
             }
             summary.iterations += 1;
-            let x_norm =
-                free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
             loop {
                 let damping: Option<Vec<f64>> = if gn { None } else { Some(diag.iter().map(|d| d * lambda).collect()) };
                 summary.linear_solves += 1;
@@ -510,6 +603,20 @@ impl Optimizer {
                 summary.time_factorize += fs;
                 summary.time_solve += ss;
                 summary.time_build += bs;
+                let hd = structure.h_times(&sys, &delta);
+                let scaled_len = delta.iter().zip(&diag).map(|(v, d)| v * v * d).sum::<f64>().sqrt();
+                if o.trust_radius && !gn && scaled_len > 1.5 * radius {
+                    // Longer than the radius: raise λ to about the value that brings
+                    // the step to it (one dominant direction of scaled curvature μ,
+                    // along which the length goes as 1 / (μ + λ)), and solve again.
+                    let mu = delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>() / (scaled_len * scaled_len);
+                    lambda = (2.0 * lambda).max((mu + lambda) * scaled_len / radius - mu);
+                    if lambda > o.max_lambda {
+                        summary.termination = Termination::NoProgress;
+                        break 'outer;
+                    }
+                    continue;
+                }
                 let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
                 let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
                 // Retract into the trial buffers (constants stay as cloned).
@@ -533,10 +640,7 @@ impl Optimizer {
                 let new_cost = linearize_all_into(entries, &layout, &trial, &mut trial_lins);
                 let linearized = new_cost.is_ok();
                 summary.time_linearize += t.elapsed().as_secs_f64();
-                // Predicted decrease: −gᵀδ − ½ δᵀHδ.
-                let hd = structure.h_times(&sys, &delta);
-                let predicted: f64 = -delta.iter().zip(&g_all).map(|(a, b)| a * b).sum::<f64>()
-                    - 0.5 * delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>();
+                let predicted = predicted_decrease(&delta, &g_all, &hd);
                 let (new_cost, accepted, rho) = match new_cost {
                     Ok(c) => {
                         let rho = if predicted > 0.0 { (cost - c) / predicted } else { -1.0 };
@@ -554,6 +658,14 @@ impl Optimizer {
                         accepted,
                     });
                 }
+                if o.trust_radius {
+                    if accepted && rho >= 0.75 {
+                        radius = 2.0 * scaled_len;
+                    } else if rho < 0.25 {
+                        radius = 0.5 * radius.min(10.0 * scaled_len);
+                    }
+                }
+                let defer = o.check_stationarity && !gn;
                 if accepted && linearized {
                     let decrease = cost - new_cost;
                     std::mem::swap(&mut vars, &mut trial);
@@ -564,25 +676,38 @@ impl Optimizer {
                         lambda = lambda.max(1e-16);
                         nu = 2.0;
                     }
-                    if small_step {
-                        summary.termination = stalled_or(Termination::ParameterTolerance, &summary, o);
-                        break 'outer;
-                    }
-                    if cost == 0.0 {
+                    let remaining = remaining_decrease(decrease, previous_decrease);
+                    previous_decrease = decrease;
+                    summary.remaining_decrease = remaining / cost.max(f64::MIN_POSITIVE);
+                    let test = if cost == 0.0 {
                         summary.termination = Termination::FunctionTolerance;
                         break 'outer;
-                    }
-                    if decrease.abs() <= o.function_tolerance * cost.max(f64::MIN_POSITIVE) {
-                        if !o.check_stationarity || gn {
-                            summary.termination = Termination::FunctionTolerance;
+                    } else if small_step {
+                        Some(Termination::ParameterTolerance)
+                    } else if remaining.abs() <= o.function_tolerance * cost {
+                        Some(Termination::FunctionTolerance)
+                    } else {
+                        None
+                    };
+                    match test {
+                        Some(t) if !defer => {
+                            summary.termination = t;
                             break 'outer;
                         }
-                        small_decrease = true;
+                        t => proposed = t,
                     }
                     break;
                 }
                 if small_step {
-                    summary.termination = stalled_or(Termination::ParameterTolerance, &summary, o);
+                    // A rejected step this small: λ is large. The system in hand is
+                    // still this point's, so the check runs here.
+                    let t = Termination::ParameterTolerance;
+                    summary.termination = if defer {
+                        check_stop(t, &mut structure, &sys, &diag, &g_all, cost, x_norm, o, &mut summary)
+                            .unwrap_or(Termination::Stalled)
+                    } else {
+                        t
+                    };
                     break 'outer;
                 }
                 lambda *= nu;

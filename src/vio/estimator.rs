@@ -435,6 +435,9 @@ impl<'a> Estimator<'a> {
             function_tolerance: self.opts.solver.function_tolerance,
             eliminate,
             log_iterations: false,
+            // An anytime solve with a fixed budget, re-solved at the next
+            // frame: a tolerance ends it without the stationarity check.
+            check_stationarity: false,
             ..LmOptions::default()
         });
         if !self.opts.solver.covariances {
