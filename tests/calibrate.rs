@@ -253,8 +253,12 @@ fn bad_recordings_give_clear_errors() {
         }
     }
     let e = error_of(&alike);
+    // The fits are ill-posed here; the refusal names the poses, before or after fitting.
     assert!(
-        e.contains("do not excite") || e.contains("usable static intervals") || e.contains("gravity by more"),
+        e.contains("do not excite")
+            || e.contains("usable static intervals")
+            || e.contains("gravity by more")
+            || (e.contains("calibration failed") && e.contains("not determined by these poses")),
         "{e}"
     );
     // A NaN sample.
