@@ -287,11 +287,27 @@ fn predicted_decrease(delta: &[f64], g: &[f64], hd: &[f64]) -> f64 {
     -delta.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() - 0.5 * delta.iter().zip(hd).map(|(a, b)| a * b).sum::<f64>()
 }
 
-/// The stationarity check ([`LmOptions::check_stationarity`]) of a stop that
-/// `test` proposes at the assembled system `sys` (cost `cost`, parameter
-/// norm `x_norm`): one undamped solve. `Some(test)` when its predicted
-/// decrease or its step is within the tolerances, `Some(Stalled)` for a
-/// small step that is not, `None` (go on) for a cost test that is not.
+/// What the stationarity check ([`LmOptions::check_stationarity`]) makes of
+/// a proposed stop.
+enum Check {
+    /// End the solve so.
+    Stop(Termination),
+    /// Not a minimum yet: go on with damped steps.
+    GoOn,
+}
+
+/// The stationarity check of a stop that `test` proposes at the assembled
+/// system `sys` (cost `cost`, parameter norm `x_norm`, damping scale
+/// `diag`): one undamped solve.
+///
+/// - Converged when the scaled gradient agrees (its square, which bounds the
+///   relative decrease to come from below, is within `function_tolerance`)
+///   and either the undamped step predicts no more than the tolerance (or is
+///   within `parameter_tolerance`), or the proposal was a small damped step:
+///   at a first-order stationary point the undamped model can still promise
+///   a decrease along directions where the columns cancel (identical columns
+///   at a symmetric minimum), which no step delivers.
+/// - Else a cost test goes on and a small step has stalled.
 #[allow(clippy::too_many_arguments)]
 fn check_stop(
     test: Termination,
@@ -299,11 +315,10 @@ fn check_stop(
     sys: &System,
     diag: &[f64],
     g: &[f64],
-    cost: f64,
-    x_norm: f64,
+    (cost, x_norm): (f64, f64),
     o: &LmOptions,
     summary: &mut Summary,
-) -> Option<Termination> {
+) -> Check {
     let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
     summary.linear_solves += 1;
     let solved = structure.solve(sys, Some(&tiny)).ok().and_then(|(delta, fs, ss, bs)| {
@@ -318,22 +333,47 @@ fn check_stop(
     // below whatever the solve's accuracy: a column that has all but
     // vanished (a saturated parameter, below the damping floor) still shows.
     let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
-    let done = match solved {
+    // A cost at the rounding level of the start is a zero-residual fit,
+    // where the residual stays aligned with the columns.
+    if cost <= f64::EPSILON * summary.initial_cost {
+        return Check::Stop(test);
+    }
+    let small = match solved {
         Some((d, step)) => {
             summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
-            let small =
-                d <= o.function_tolerance * cost || step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
-            // A cost at the rounding level of the start is a zero-residual
-            // fit, where the residual stays aligned with the columns.
-            (small && aligned) || cost <= f64::EPSILON * summary.initial_cost
+            d <= o.function_tolerance * cost || step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance)
         }
         // No undamped step (H singular there): the scaled gradient decides.
-        None => aligned,
+        None => true,
     };
-    match (done, test) {
-        (true, t) => Some(t),
-        (false, Termination::FunctionTolerance) => None,
-        (false, _) => Some(Termination::Stalled),
+    match test {
+        _ if aligned && (small || test == Termination::ParameterTolerance) => Check::Stop(test),
+        Termination::FunctionTolerance => Check::GoOn,
+        _ => Check::Stop(Termination::Stalled),
+    }
+}
+
+/// Retract the free variables of `vars` by `delta` (kept then eliminated
+/// unknowns) into `trial`; constants stay as they are there.
+fn retract_all(
+    layout: &Layout,
+    structure: &Structure,
+    vars: &[Box<dyn DynVariable>],
+    delta: &[f64],
+    trial: &mut [Box<dyn DynVariable>],
+) {
+    for (i, (v, out)) in vars.iter().zip(trial.iter_mut()).enumerate() {
+        match layout.roles[i] {
+            Role::Const => {}
+            Role::Kept(b) => {
+                let o = structure.kept_offset(b);
+                v.retract_into(&delta[o..o + structure.kept_dim(b)], out);
+            }
+            Role::Elim(e) => {
+                let o = structure.elim_offsets[e];
+                v.retract_into(&delta[o..o + v.dim()], out);
+            }
+        }
     }
 }
 
@@ -574,8 +614,8 @@ impl Optimizer {
             let x_norm =
                 free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
             if let Some(test) = proposed.take() {
-                let checked = check_stop(test, &mut structure, &sys, &diag, &g_all, cost, x_norm, o, &mut summary);
-                if let Some(t) = checked {
+                let point = (cost, x_norm);
+                if let Check::Stop(t) = check_stop(test, &mut structure, &sys, &diag, &g_all, point, o, &mut summary) {
                     summary.termination = t;
                     break;
                 }
@@ -621,19 +661,7 @@ impl Optimizer {
                 let small_step = step_norm <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
                 // Retract into the trial buffers (constants stay as cloned).
                 let t = Instant::now();
-                for (i, (v, out)) in vars.iter().zip(trial.iter_mut()).enumerate() {
-                    match layout.roles[i] {
-                        Role::Const => {}
-                        Role::Kept(b) => {
-                            let o = structure.kept_offset(b);
-                            v.retract_into(&delta[o..o + structure.kept_dim(b)], out);
-                        }
-                        Role::Elim(e) => {
-                            let o = structure.elim_offsets[e];
-                            v.retract_into(&delta[o..o + v.dim()], out);
-                        }
-                    }
-                }
+                retract_all(&layout, &structure, &vars, &delta, &mut trial);
                 // Linearize at the trial point right away: with small damping
                 // nearly every step is accepted, and then this is the next
                 // iteration's linearization (no second pass over the residuals).
@@ -699,16 +727,14 @@ impl Optimizer {
                     break;
                 }
                 if small_step {
-                    // A rejected step this small: λ is large. The system in hand is
-                    // still this point's, so the check runs here.
-                    let t = Termination::ParameterTolerance;
-                    summary.termination = if defer {
-                        check_stop(t, &mut structure, &sys, &diag, &g_all, cost, x_norm, o, &mut summary)
-                            .unwrap_or(Termination::Stalled)
-                    } else {
-                        t
-                    };
-                    break 'outer;
+                    // A rejected step this small: λ is large. Checked at this same
+                    // point by the next pass of the outer loop.
+                    if !defer {
+                        summary.termination = Termination::ParameterTolerance;
+                        break 'outer;
+                    }
+                    proposed = Some(Termination::ParameterTolerance);
+                    break;
                 }
                 lambda *= nu;
                 nu *= 2.0;

@@ -90,3 +90,39 @@ fn a_zero_residual_fit_converges() {
     assert!(s.converged(), "{:?} (scaled gradient {})", s.termination, s.scaled_gradient);
     assert!((b - Vector2::new(200.0, 0.5)).norm() < 1e-8, "{b:?}");
 }
+
+/// Jennrich–Sampson: `2 + 2i − (e^{i x1} + e^{i x2})`, i = 1…10.
+struct JennrichSampson(Vec<Key>);
+
+impl AutoDiffResidual<2> for JennrichSampson {
+    fn keys(&self) -> &[Key] {
+        &self.0
+    }
+    fn residual_dim(&self) -> usize {
+        10
+    }
+    fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+        (1..=10)
+            .map(|i| {
+                let i = i as f64;
+                T::from(2.0 + 2.0 * i) - ((p[0][0] * i).exp() + (p[0][1] * i).exp())
+            })
+            .collect()
+    }
+}
+
+/// At its minimum x1 = x2 the two Jacobian columns are identical: the
+/// undamped model promises a decrease along x1 − x2 that no step delivers.
+/// The solve must end there as converged, not stalled.
+#[test]
+fn a_minimum_with_identical_columns_is_converged() {
+    let mut g = Graph::new();
+    g.add(AutoDiff::new(JennrichSampson(vec![X(0)])), NoiseModel::Unit);
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(0.3, 0.4));
+    let (sol, s) = Optimizer::new(LmOptions::default()).optimize(&g, &v).unwrap();
+    let x = *sol.get::<Vector2<f64>>(X(0)).unwrap();
+    assert!(s.converged(), "{:?}", s.termination);
+    assert!((2.0 * s.final_cost / 124.362 - 1.0).abs() < 1e-5, "{}", 2.0 * s.final_cost);
+    assert!((x[0] - 0.2578).abs() < 1e-3 && (x[1] - 0.2578).abs() < 1e-3, "{x:?}");
+}
