@@ -241,10 +241,15 @@ impl fmt::Display for Summary {
             "  iterations {} ({} linear solves), termination: {:?} (scaled gradient {:.1e})",
             self.iterations, self.linear_solves, self.termination, self.scaled_gradient
         )?;
+        let checked = if self.gauss_newton_decrease.is_nan() {
+            "not checked".to_string()
+        } else {
+            format!("undamped model {:.1e}", self.gauss_newton_decrease)
+        };
         writeln!(
             f,
-            "  decrease to come {:.1e} (Gauss-Newton {:.1e}), largest gradient {:.1e}",
-            self.remaining_decrease, self.gauss_newton_decrease, self.max_gradient
+            "  relative decrease to come {:.1e} ({checked}), largest gradient {:.1e}",
+            self.remaining_decrease, self.max_gradient
         )?;
         writeln!(
             f,
