@@ -45,9 +45,9 @@ pub struct LmOptions {
     pub function_tolerance: f64,
     /// Stop when the largest gradient entry is below this.
     pub gradient_tolerance: f64,
-    /// Stop when ‖δ‖ < this · (‖x‖ + this) (a converged stop only if the
-    /// undamped step is that small too or predicts nothing more; else
-    /// [`Termination::Stalled`]).
+    /// Stop when ‖δ‖ < this · (‖x‖ + this): converged where the scaled
+    /// gradient agrees ([`LmOptions::check_stationarity`]), else
+    /// [`Termination::Stalled`].
     pub parameter_tolerance: f64,
     /// Initial damping λ (1 / trust-region radius).
     pub initial_lambda: f64,
@@ -74,14 +74,18 @@ pub struct LmOptions {
     /// Record one [`IterationLog`] per iteration.
     pub log_iterations: bool,
     /// Before stopping on [`LmOptions::function_tolerance`] or
-    /// [`LmOptions::parameter_tolerance`], check with one undamped
-    /// (Gauss–Newton) solve that the model predicts no larger relative
-    /// decrease (or no longer step) either: the damped steps may have been
-    /// small because the damping was large, not because the minimum is near.
-    /// A cost test that fails the check goes on; a small step that fails it
-    /// ends [`Termination::Stalled`]. Without the check a tolerance that
-    /// fires ends the solve under its own name (as in Ceres). Off for anytime
-    /// solves with a fixed budget (the VIO window, re-solved at the next frame).
+    /// [`LmOptions::parameter_tolerance`], check that the point is a minimum:
+    /// the squared scaled gradient ([`Summary::scaled_gradient`]) is within
+    /// the function tolerance, and one undamped (Gauss–Newton) solve predicts
+    /// no larger relative decrease (or no longer step) either — the damped
+    /// steps may have been small because the damping was large, not because
+    /// the minimum is near. A small damped step needs only the scaled
+    /// gradient (the undamped model can promise a decrease along columns that
+    /// cancel, which no step delivers). A cost test that fails goes on; a
+    /// small step that fails ends [`Termination::Stalled`]. Without the check
+    /// a tolerance that fires ends the solve under its own name (as in
+    /// Ceres). Off for anytime solves with a fixed budget (the VIO window,
+    /// re-solved at the next frame).
     pub check_stationarity: bool,
     /// Damp each unknown by the largest curvature (diagonal of H) it has had
     /// in this solve, not only the current one (MINPACK's scaling): an
@@ -136,9 +140,10 @@ pub enum Termination {
     /// Damping grew past `max_lambda` without finding a decrease.
     NoProgress,
     /// The damped steps became too small ([`LmOptions::parameter_tolerance`])
-    /// while the undamped step still predicted a decrease larger than
-    /// [`LmOptions::function_tolerance`] allows (see
-    /// [`Summary::gauss_newton_decrease`]): not a minimum, the solver stalled.
+    /// while the residual was still aligned with a Jacobian column (squared
+    /// [`Summary::scaled_gradient`] above [`LmOptions::function_tolerance`]):
+    /// not a minimum, the solver stalled — e.g. a parameter ran to where the
+    /// data no longer see it.
     Stalled,
     /// The graph has no free variable.
     NothingToOptimize,
