@@ -126,6 +126,40 @@ impl Default for LmOptions {
     }
 }
 
+impl LmOptions {
+    /// Refuse options no solve can honour: tolerances and damping bounds
+    /// that are negative or not finite, `min_diagonal > max_diagonal`, an
+    /// initial damping outside `(0, max_lambda]`, or a `min_lambda_decrease`
+    /// outside `(0, 1)`. [`Optimizer::optimize`] calls it first.
+    pub fn validate(&self) -> Result<(), SolveError> {
+        let bad = |name: &str, v: f64, what: &str| Err(SolveError::Config(format!("{name} = {v}: {what}")));
+        for (name, v) in [
+            ("function_tolerance", self.function_tolerance),
+            ("gradient_tolerance", self.gradient_tolerance),
+            ("parameter_tolerance", self.parameter_tolerance),
+            ("min_gain_ratio", self.min_gain_ratio),
+            ("min_diagonal", self.min_diagonal),
+        ] {
+            if !v.is_finite() || v < 0.0 {
+                return bad(name, v, "must be a finite number ≥ 0");
+            }
+        }
+        if self.max_diagonal.is_nan() || self.max_diagonal < self.min_diagonal {
+            return bad("max_diagonal", self.max_diagonal, "must be ≥ min_diagonal");
+        }
+        if !self.max_lambda.is_finite() || self.max_lambda <= 0.0 {
+            return bad("max_lambda", self.max_lambda, "must be a finite number > 0");
+        }
+        if self.initial_lambda.is_nan() || self.initial_lambda <= 0.0 || self.initial_lambda > self.max_lambda {
+            return bad("initial_lambda", self.initial_lambda, "must be > 0 and ≤ max_lambda");
+        }
+        if self.min_lambda_decrease.is_nan() || self.min_lambda_decrease <= 0.0 || self.min_lambda_decrease >= 1.0 {
+            return bad("min_lambda_decrease", self.min_lambda_decrease, "must lie in (0, 1)");
+        }
+        Ok(())
+    }
+}
+
 /// Why the optimizer stopped.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Termination {
@@ -540,6 +574,7 @@ impl Optimizer {
         covariance_keys: Option<&[Key]>,
     ) -> Result<(Values, Summary, Option<CovarianceResult>), SolveError> {
         let o = &self.options;
+        o.validate()?;
         let t0 = Instant::now();
         let layout = Layout::new(graph, initial, &o.eliminate)?;
         let mut vars: Vec<Box<dyn DynVariable>> =

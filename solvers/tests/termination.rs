@@ -126,3 +126,22 @@ fn a_minimum_with_identical_columns_is_converged() {
     assert!((2.0 * s.final_cost / 124.362 - 1.0).abs() < 1e-5, "{}", 2.0 * s.final_cost);
     assert!((x[0] - 0.2578).abs() < 1e-3 && (x[1] - 0.2578).abs() < 1e-3, "{x:?}");
 }
+
+/// Options no solve can honour are refused before any work, naming the option.
+#[test]
+fn bad_options_are_refused_by_name() {
+    let mut g = Graph::new();
+    g.add(AutoDiff::new(BoxBod { keys: vec![X(0)], x: 1.0, y: 109.0 }), NoiseModel::Unit);
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(100.0, 0.75));
+    for (o, name) in [
+        (LmOptions { function_tolerance: -1.0, ..LmOptions::default() }, "function_tolerance"),
+        (LmOptions { initial_lambda: 0.0, ..LmOptions::default() }, "initial_lambda"),
+        (LmOptions { min_lambda_decrease: 1.5, ..LmOptions::default() }, "min_lambda_decrease"),
+        (LmOptions { parameter_tolerance: f64::NAN, ..LmOptions::default() }, "parameter_tolerance"),
+    ] {
+        let e = Optimizer::new(o).optimize(&g, &v).unwrap_err().to_string();
+        assert!(e.contains(name), "{e}");
+    }
+    assert!(LmOptions::default().validate().is_ok());
+}
