@@ -331,27 +331,24 @@ fn predicted_decrease(delta: &[f64], g: &[f64], hd: &[f64]) -> f64 {
     -delta.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() - 0.5 * delta.iter().zip(hd).map(|(a, b)| a * b).sum::<f64>()
 }
 
-/// What the stationarity check ([`LmOptions::check_stationarity`]) makes of
-/// a proposed stop.
-enum Check {
-    /// End the solve so.
-    Stop(Termination),
-    /// Not a minimum yet: go on with damped steps.
-    GoOn,
-}
-
-/// The stationarity check of a stop that `test` proposes at the assembled
-/// system `sys` (cost `cost`, parameter norm `x_norm`, damping scale
-/// `diag`): one undamped solve.
+/// The stationarity check ([`LmOptions::check_stationarity`]) of a stop that
+/// `test` proposes at the assembled system `sys` (cost `cost`, parameter
+/// norm `x_norm`, damping scale `diag`): the termination to end the solve
+/// with, or `None` to go on with damped steps.
 ///
-/// - Converged when the scaled gradient agrees (its square, which bounds the
-///   relative decrease to come from below, is within `function_tolerance`)
-///   and either the undamped step predicts no more than the tolerance (or is
-///   within `parameter_tolerance`), or the proposal was a small damped step:
-///   at a first-order stationary point the undamped model can still promise
-///   a decrease along directions where the columns cancel (identical columns
-///   at a symmetric minimum), which no step delivers.
-/// - Else a cost test goes on and a small step has stalled.
+/// - The squared scaled gradient must be within `function_tolerance`: it
+///   bounds the relative decrease to come from below whatever a solve's
+///   accuracy, and a column that has all but vanished (a saturated
+///   parameter, below the damping floor) still shows. Else a small step has
+///   stalled and a cost test goes on.
+/// - A small damped step needs no more: at a first-order stationary point the
+///   undamped model can still promise a decrease along directions where the
+///   columns cancel (identical columns at a symmetric minimum), which no step
+///   delivers.
+/// - A cost test also needs one undamped solve whose predicted decrease (or
+///   step) is within the tolerances.
+/// - A cost at the rounding level of the start is a zero-residual fit, where
+///   the residual stays aligned with the columns: converged.
 #[allow(clippy::too_many_arguments)]
 fn check_stop(
     test: Termination,
@@ -362,7 +359,17 @@ fn check_stop(
     (cost, x_norm): (f64, f64),
     o: &LmOptions,
     summary: &mut Summary,
-) -> Check {
+) -> Option<Termination> {
+    if cost <= f64::EPSILON * summary.initial_cost {
+        return Some(test);
+    }
+    let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
+    if test != Termination::FunctionTolerance {
+        return Some(if aligned { test } else { Termination::Stalled });
+    }
+    if !aligned {
+        return None;
+    }
     let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
     summary.linear_solves += 1;
     let solved = structure.solve(sys, Some(&tiny)).ok().and_then(|(delta, fs, ss, bs)| {
@@ -373,28 +380,15 @@ fn check_stop(
         // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
         (d.is_finite() && d >= 0.0).then(|| (d, delta.iter().map(|v| v * v).sum::<f64>().sqrt()))
     });
-    // The squared scaled gradient bounds the relative decrease to come from
-    // below whatever the solve's accuracy: a column that has all but
-    // vanished (a saturated parameter, below the damping floor) still shows.
-    let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
-    // A cost at the rounding level of the start is a zero-residual fit,
-    // where the residual stays aligned with the columns.
-    if cost <= f64::EPSILON * summary.initial_cost {
-        return Check::Stop(test);
-    }
     let small = match solved {
         Some((d, step)) => {
             summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
             d <= o.function_tolerance * cost || step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance)
         }
-        // No undamped step (H singular there): the scaled gradient decides.
+        // No undamped step (H singular there): the scaled gradient decided.
         None => true,
     };
-    match test {
-        _ if aligned && (small || test == Termination::ParameterTolerance) => Check::Stop(test),
-        Termination::FunctionTolerance => Check::GoOn,
-        _ => Check::Stop(Termination::Stalled),
-    }
+    small.then_some(test)
 }
 
 /// Retract the free variables of `vars` by `delta` (kept then eliminated
@@ -660,7 +654,7 @@ impl Optimizer {
                 free.iter().map(|&v| vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
             if let Some(test) = proposed.take() {
                 let point = (cost, x_norm);
-                if let Check::Stop(t) = check_stop(test, &mut structure, &sys, &diag, &g_all, point, o, &mut summary) {
+                if let Some(t) = check_stop(test, &mut structure, &sys, &diag, &g_all, point, o, &mut summary) {
                     summary.termination = t;
                     break;
                 }
