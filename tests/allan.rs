@@ -234,9 +234,8 @@ fn adis16405_matches_avar_reference() {
         ..ImuTextFormat::default()
     };
     format.validate.nominal_rate = Some(100.0);
-    let rec =
-        open_recording(&dir.join("adis_16405_imu1.csv.gz"), &RecordingOptions { format, gyro_file: None, topic: None })
-            .unwrap();
+    let rec = open_recording(&dir.join("adis_16405_imu1.csv.gz"), &RecordingOptions { format, ..Default::default() })
+        .unwrap();
     assert_eq!(rec.len(), 1_000_000);
     let text = std::fs::read_to_string(dir.join("adis_av_reference_imu1.csv")).unwrap();
     let taus: Vec<f64> = (1..=18).map(|j| 2f64.powi(j) / 100.0).collect();

@@ -232,16 +232,22 @@ fn column_maps_and_units_parse_with_clear_errors() {
 }
 
 #[test]
-fn imu_tk_pair_must_match() {
-    let a = tmp("a.txt", "0 1 2 3\n0.01 1 2 3\n0.02 1 2 3\n");
-    let g = tmp("g.txt", "0 1 2 3\n0.01 1 2 3\n");
+fn imu_tk_pair_with_other_stamps_is_merged_onto_the_gyro() {
+    let a = tmp("a.txt", "0 1 2 3\n0.01 1 4 3\n0.02 1 2 3\n");
     let c = AccelUnit::Counts { scale: None, offset: 0.0 };
     let gc = GyroUnit::Counts { scale: None, offset: 0.0 };
+    // A gyro line missing, and a gyro sample after the accelerometer's last: dropped, not extrapolated.
+    let g = tmp("g2.txt", "0 1 2 3\n0.005 1 2 3\n0.05 1 2 3\n");
+    let r = read_imu_tk(&a, &g, TimeUnit::S, c, gc, &ValidateOptions::default()).unwrap();
+    assert_eq!(r.t, vec![0.0, 0.005]);
+    assert_eq!(r.accel[1], [1.0, 3.0, 3.0]);
+    assert!(r
+        .warnings
+        .iter()
+        .any(|w| w.contains("merged onto the gyro's stamps") && w.contains("1 gyro samples outside")));
+    let g = tmp("g3.txt", "5 1 2 3\n5.01 1 2 3\n");
     let e = read_imu_tk(&a, &g, TimeUnit::S, c, gc, &ValidateOptions::default()).unwrap_err().to_string();
-    assert!(e.contains("g.txt") && e.contains("has 2 samples"), "{e}");
-    let g = tmp("g2.txt", "0 1 2 3\n0.01 1 2 3\n0.05 1 2 3\n");
-    let e = read_imu_tk(&a, &g, TimeUnit::S, c, gc, &ValidateOptions::default()).unwrap_err().to_string();
-    assert!(e.contains("g2.txt:3:") && e.contains("differs"), "{e}");
+    assert!(e.contains("g3.txt") && e.contains("do not overlap"), "{e}");
 }
 
 #[test]
@@ -408,7 +414,10 @@ fn ros1_bag_imu_topic_reads_and_bad_bags_are_refused() {
     assert!((r.mean_rate() - 200.0).abs() < 1e-6);
     assert_eq!(r.gyro[2], [0.01, -0.02, 0.002]);
     assert_eq!(r.accel[0], [0.1, 0.2, 9.8]);
-    let wrong = tumble::io::RecordingOptions { topic: Some("/imu1".into()), ..Default::default() };
+    let wrong = tumble::io::RecordingOptions {
+        topics: tumble::io::ros::ImuTopics { imu: Some("/imu1".into()), ..Default::default() },
+        ..Default::default()
+    };
     let e = tumble::io::open_recording(&p, &wrong).unwrap_err().to_string();
     assert!(e.contains("no sensor_msgs/Imu topic '/imu1'") && e.contains("/imu0"), "{e}");
     // index_pos beyond the file, inside the header record, or too close to the end for a record.
@@ -471,7 +480,10 @@ fn mcap_imu_topic_reads() {
     }
     let e = tumble::io::open_recording(&p, &Default::default()).unwrap_err().to_string();
     assert!(e.contains("several") && e.contains("/imu_raw"), "{e}");
-    let opts = tumble::io::RecordingOptions { topic: Some("/imu".into()), ..Default::default() };
+    let opts = tumble::io::RecordingOptions {
+        topics: tumble::io::ros::ImuTopics { imu: Some("/imu".into()), ..Default::default() },
+        ..Default::default()
+    };
     let r = tumble::io::open_recording(&p, &opts).unwrap();
     assert_eq!(r.len(), 300);
     assert!((r.mean_rate() - 100.0).abs() < 1e-6);

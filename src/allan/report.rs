@@ -122,6 +122,8 @@ impl KalibrNoise {
 pub struct AllanReport {
     /// Recording name.
     pub source: String,
+    /// The ROS topic(s) the samples came from (see [`crate::io::ImuRecording::topic`]).
+    pub topic: Option<String>,
     /// Samples per axis.
     pub samples: usize,
     /// Sample rate used (1/τ0) \[Hz\].
@@ -342,6 +344,7 @@ pub fn run_allan_with_progress(
     };
     Ok(AllanReport {
         source: rec.source_name(),
+        topic: rec.topic.clone(),
         samples: rec.len(),
         rate_hz: rate,
         duration_s: rec.duration(),
@@ -560,7 +563,19 @@ impl AllanReport {
         for n in &k.notes {
             let _ = writeln!(s, "# note: {n}");
         }
-        let _ = writeln!(s, "rostopic: /imu0");
+        match self.topic.as_deref().map(|t| t.split_once(" + ")) {
+            Some(Some((accel, gyro))) => {
+                let _ = writeln!(s, "# Recorded as split streams {accel} and {gyro}: Kalibr reads one sensor_msgs/Imu");
+                let _ = writeln!(s, "# topic holding both (e.g. RealSense's unite_imu_method); name it here.");
+                let _ = writeln!(s, "rostopic: {gyro}");
+            }
+            Some(None) => {
+                let _ = writeln!(s, "rostopic: {}", self.topic.as_deref().unwrap_or("/imu0"));
+            }
+            None => {
+                let _ = writeln!(s, "rostopic: /imu0  # the recording had no topic: the name Kalibr's examples use");
+            }
+        }
         let _ = writeln!(s, "accelerometer_noise_density: {:e}  # [m/s^2/sqrt(Hz)]", k.accelerometer_noise_density);
         let _ = writeln!(s, "accelerometer_random_walk: {:e}  # [m/s^3/sqrt(Hz)]", k.accelerometer_random_walk);
         let _ = writeln!(s, "gyroscope_noise_density: {:e}  # [rad/s/sqrt(Hz)]", k.gyroscope_noise_density);

@@ -9,8 +9,9 @@ use std::path::{Path, PathBuf};
 
 /// Write `rec` (already corrected) into `out` in the layout of `input`: an
 /// ASL folder gets `out/mav0/imu0/data.csv`; imu_tk's pair keeps its two file
-/// names; a text file keeps its name, column order and time unit. ROS bags
-/// and MCAP files are refused (write an ASL folder from them with `tumble sim`-style tools instead).
+/// names; a text file keeps its name, column order and time unit. A ROS
+/// recording (bag, MCAP, rosbag2 folder or `.db3`) gets the ASL layout, which
+/// `tumble convert` also writes and every estimator's ASL/EuRoC reader reads.
 pub fn write_like_input(
     rec: &ImuRecording,
     input: &Path,
@@ -34,20 +35,14 @@ pub fn write_like_input(
             _ => Ok(()),
         }
     };
-    if input.is_dir() {
+    let ros = crate::io::ros::Storage::of(input).ok().flatten().is_some();
+    if input.is_dir() || ros {
         let p = out.join("mav0").join("imu0").join("data.csv");
         guard(&p)?;
         write_asl_imu(&p, rec).map_err(err)?;
         return Ok(vec![p]);
     }
     let ext = input.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    if matches!(ext.as_deref(), Some("bag") | Some("mcap")) {
-        return Err(format!(
-            "{}: apply cannot write ROS bags or MCAP files; convert to an ASL folder or CSV first",
-            input.display()
-        )
-        .into());
-    }
     if let Some(g) = &opts.gyro_file {
         let (a, g) = (name(input)?, name(g)?);
         guard(&a)?;

@@ -24,9 +24,18 @@ pub struct RecordingArgs {
     /// imu_tk layout: the gyro file (`t x y z`); the recording argument is then the accelerometer file.
     #[arg(long)]
     pub gyro_file: Option<PathBuf>,
-    /// ROS bag / MCAP: the sensor_msgs/Imu topic (needed when the file has several).
+    /// ROS recordings (.bag, .mcap, .db3, rosbag2 folder): the sensor_msgs/Imu topic (needed when there are several).
     #[arg(long)]
     pub topic: Option<String>,
+    /// ROS recordings with split streams: the accelerometer's sensor_msgs/Imu topic (with --gyro-topic).
+    #[arg(long)]
+    pub accel_topic: Option<String>,
+    /// ROS recordings with split streams: the gyro's sensor_msgs/Imu topic (with --accel-topic).
+    #[arg(long)]
+    pub gyro_topic: Option<String>,
+    /// ROS recordings: a sensor_msgs/Temperature topic joined by time (default: the only one, if one).
+    #[arg(long)]
+    pub temperature_topic: Option<String>,
     /// Nominal sample rate [Hz] (estimated from the timestamps when absent).
     #[arg(long)]
     pub rate: Option<f64>,
@@ -52,7 +61,12 @@ impl RecordingArgs {
             o.format.validate.duplicates = Duplicates::Error;
         }
         o.gyro_file = self.gyro_file.clone();
-        o.topic = self.topic.clone();
+        o.topics = tumble::io::ros::ImuTopics {
+            imu: self.topic.clone(),
+            accel: self.accel_topic.clone(),
+            gyro: self.gyro_topic.clone(),
+            temperature: self.temperature_topic.clone(),
+        };
         o
     }
 

@@ -20,6 +20,9 @@ pub enum Stored {
 pub struct ImuRecording {
     /// The file(s) the samples came from (for messages).
     pub sources: Vec<PathBuf>,
+    /// The ROS topic(s) the samples came from (`/imu0`, or `ACCEL + GYRO` for
+    /// split streams); None for files without topics.
+    pub topic: Option<String>,
     /// Absolute time of the first sample \[ns\] (epoch or sensor clock, as in the file).
     pub t0_ns: i64,
     /// Sample times relative to `t0_ns` \[s\], strictly increasing after validation.
@@ -93,6 +96,7 @@ impl ImuRecording {
         let shift = self.t.get(a).copied().unwrap_or(0.0);
         ImuRecording {
             sources: self.sources.clone(),
+            topic: self.topic.clone(),
             t0_ns: self.t0_ns + (shift * 1e9).round() as i64,
             t: self.t[a..b].iter().map(|x| x - shift).collect(),
             gyro: self.gyro[a..b].to_vec(),

@@ -283,6 +283,7 @@ fn recording_from_table(path: &Path, table: Table, fmt: &ImuTextFormat) -> ImuRe
     }
     ImuRecording {
         sources: vec![path.to_path_buf()],
+        topic: None,
         t0_ns: t0,
         // In place: an i64 buffer becomes the f64 one.
         t: table.t_ns.into_iter().map(|x| (x - t0) as f64 * 1e-9).collect(),
@@ -296,7 +297,9 @@ fn recording_from_table(path: &Path, table: Table, fmt: &ImuTextFormat) -> ImuRe
     }
 }
 
-/// Read imu_tk's pair of files (`t x y z` each, same timestamps line by line):
+/// Read imu_tk's pair of files (`t x y z` each, same timestamps line by line,
+/// or each with its own stamps and rate: then merged onto the gyro's stamps,
+/// see [`super::split`]):
 /// the accelerometer file in `accel_unit`, the gyro file in `gyro_unit`, time in `time_unit`.
 pub fn read_imu_tk(
     accel_path: &Path,
@@ -317,26 +320,26 @@ pub fn read_imu_tk(
     };
     let acc = one(accel_path, "accel")?;
     let gyr = one(gyro_path, "gyro")?;
-    if acc.t_ns.len() != gyr.t_ns.len() {
-        return Err(InputError::file(
-            gyro_path,
-            format!("has {} samples but {} has {}", gyr.t_ns.len(), accel_path.display(), acc.t_ns.len()),
+    let paired = acc.t_ns.len() == gyr.t_ns.len() && acc.t_ns.iter().zip(&gyr.t_ns).all(|(a, g)| (a - g).abs() <= 1000);
+    let mut notes = Vec::new();
+    let one = |t: Vec<Vec<[f64; 3]>>| t.into_iter().next().unwrap_or_default();
+    // Files that do not pair line by line are two streams with their own
+    // stamps (a phone, a RealSense, a dropped line): merged onto the gyro's.
+    let (t_ns, triads, lines) = if paired {
+        (acc.t_ns, vec![one(gyr.triads), one(acc.triads)], acc.lines)
+    } else {
+        use super::split::{merge_onto_gyro, Stream};
+        let first_gyro = gyr.t_ns.clone();
+        let m = merge_onto_gyro(
+            Stream { t_ns: gyr.t_ns, v: one(gyr.triads) },
+            Stream { t_ns: acc.t_ns, v: one(acc.triads) },
         )
-        .with_hint("imu_tk's files pair samples line by line; both must hold the same samples"));
-    }
-    if let Some(i) = (0..acc.t_ns.len()).find(|&i| (acc.t_ns[i] - gyr.t_ns[i]).abs() > 1000) {
-        return Err(InputError::at(
-            gyro_path,
-            gyr.lines.line(i),
-            format!(
-                "timestamp {} s differs from {}:{} ({} s)",
-                gyr.t_ns[i] as f64 * 1e-9,
-                accel_path.display(),
-                acc.lines.line(i),
-                acc.t_ns[i] as f64 * 1e-9
-            ),
-        ));
-    }
+        .map_err(|e| InputError::file(gyro_path, format!("with {}: {e}", accel_path.display())))?;
+        notes.push(format!("{} + {}: {}", accel_path.display(), gyro_path.display(), m.note));
+        notes.extend(m.warnings.iter().map(|w| format!("{}: {w}", accel_path.display())));
+        let skip = first_gyro.partition_point(|&t| t < m.t_ns[0]);
+        (m.t_ns, vec![m.gyro, m.accel], gyr.lines.slice(skip))
+    };
     let fmt = ImuTextFormat {
         columns: ImuColumns { time: Some(0), gyro: Some([1, 2, 3]), accel: Some([4, 5, 6]), temperature: None },
         time_unit,
@@ -344,11 +347,10 @@ pub fn read_imu_tk(
         accel_unit,
         validate: checks.clone(),
     };
-    let mut triads = gyr.triads;
-    triads.extend(acc.triads);
-    let table = Table { t_ns: acc.t_ns, triads, lines: acc.lines, ..Table::default() };
+    let table = Table { t_ns, triads, lines, ..Table::default() };
     let mut rec = recording_from_table(accel_path, table, &fmt);
     rec.sources.push(gyro_path.to_path_buf());
+    rec.warnings.extend(notes);
     validate(&mut rec, checks)?;
     Ok(rec)
 }

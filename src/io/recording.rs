@@ -1,5 +1,6 @@
 //! One entry point for every IMU recording a command accepts: an ASL dataset
-//! folder (or its `mav0/`), a ROS 1 bag (`.bag`), a ROS 2 MCAP file (`.mcap`),
+//! folder (or its `mav0/`), a ROS recording (ROS 1 `.bag`, MCAP `.mcap`,
+//! rosbag2 `.db3` or a rosbag2 folder with `metadata.yaml`),
 //! a text file with a declared format, or imu_tk's pair of accelerometer and
 //! gyro files.
 
@@ -16,27 +17,25 @@ pub struct RecordingOptions {
     pub format: ImuTextFormat,
     /// With imu_tk's two-file layout: the gyro file (the main path is then the accelerometer file).
     pub gyro_file: Option<PathBuf>,
-    /// Bags and MCAP files: the `sensor_msgs/Imu` topic (needed when there are several).
-    pub topic: Option<String>,
+    /// ROS recordings: which topics make the IMU (see [`super::ros`]).
+    pub topics: super::ros::ImuTopics,
 }
 
-/// Open a recording: a folder is read as ASL, `.bag` / `.mcap` as ROS, any
-/// other file as text (`.gz` allowed).
+/// Open a recording: a ROS recording (rosbag2 folder, `.bag`, `.mcap`,
+/// `.db3`) by its topics, another folder as ASL, any other file as text
+/// (`.gz` allowed).
 pub fn open_recording(path: &Path, opts: &RecordingOptions) -> Result<ImuRecording, InputError> {
     // A bad option is the command line's fault, reported with the file it was meant for.
     opts.format.validate.check().map_err(|e| InputError::file(path, e))?;
-    if path.is_dir() {
-        let fmt = ImuTextFormat { validate: opts.format.validate.clone(), ..ImuTextFormat::default() };
-        return Ok(read_asl(path, &fmt)?.imu);
-    }
     if !path.exists() {
         return Err(InputError::file(path, "does not exist"));
     }
-    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        Some("bag") => return super::rosbag::read_ros1_bag_imu(path, opts.topic.as_deref(), &opts.format.validate),
-        Some("mcap") => return super::rosbag::read_mcap_imu(path, opts.topic.as_deref(), &opts.format.validate),
-        _ => {}
+    if let Some(storage) = super::ros::Storage::of(path)? {
+        return super::ros::read_ros_imu(&storage, &opts.topics, &opts.format.validate);
+    }
+    if path.is_dir() {
+        let fmt = ImuTextFormat { validate: opts.format.validate.clone(), ..ImuTextFormat::default() };
+        return Ok(read_asl(path, &fmt)?.imu);
     }
     match &opts.gyro_file {
         Some(g) => read_imu_tk(

@@ -1,5 +1,9 @@
 //! Helpers shared by the integration tests.
 
+#![allow(dead_code)]
+
+pub mod cdr;
+
 use std::path::{Path, PathBuf};
 
 /// A path under `../shared/data/`, or None (with a printed SKIPPED line) when
