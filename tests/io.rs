@@ -491,3 +491,52 @@ fn mcap_imu_topic_reads() {
     std::fs::write(&p, b"\x89MCAP0\r\n garbage").unwrap();
     assert!(tumble::io::open_recording(&p, &opts).unwrap_err().to_string().contains("MCAP"));
 }
+
+/// Phone logger exports: columns found by name (Sensor Logger writes z, y, x), the
+/// accelerometer merged onto the gyro's stamps, gravity-free files refused.
+#[test]
+fn phone_logger_exports_read_by_column_name() {
+    let dir = std::env::temp_dir().join(format!("tumble-io-phone-{}", std::process::id()));
+    let sl = dir.join("sensor_logger");
+    let ph = dir.join("phyphox");
+    for d in [&sl, &ph] {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    let (mut g, mut a) = (String::from("time,seconds_elapsed,z,y,x\n"), String::from("time,seconds_elapsed,z,y,x\n"));
+    let (mut pg, mut pa) = (
+        String::from("\"Time (s)\",\"Gyroscope x (rad/s)\",\"Gyroscope y (rad/s)\",\"Gyroscope z (rad/s)\"\n"),
+        String::from(
+            "\"Time (s)\",\"Acceleration x (m/s^2)\",\"Acceleration y (m/s^2)\",\"Acceleration z (m/s^2)\",\"Absolute acceleration (m/s^2)\"\n",
+        ),
+    );
+    for i in 0..1000i64 {
+        let t = 1_700_000_000_000_000_000 + i * 5_000_000;
+        let s = i as f64 * 0.005;
+        g.push_str(&format!("{t},{s},0.03,0.02,0.01\n"));
+        pg.push_str(&format!("{s},0.01,0.02,0.03\n"));
+    }
+    for i in 0..400i64 {
+        let t = 1_700_000_000_002_000_000 + i * 10_000_000;
+        let s = 0.002 + i as f64 * 0.01;
+        a.push_str(&format!("{t},{s},9.8,{},0.1\n", s));
+        pa.push_str(&format!("{s},0.1,{s},9.8,9.8\n"));
+    }
+    std::fs::write(sl.join("Gyroscope.csv"), &g).unwrap();
+    std::fs::write(sl.join("Accelerometer.csv"), &a).unwrap();
+    let e = tumble::io::open_recording(&sl, &Default::default()).unwrap_err().to_string();
+    assert!(e.contains("TotalAcceleration.csv") && e.contains("gravity removed"), "{e}");
+    std::fs::write(sl.join("TotalAcceleration.csv"), &a).unwrap();
+    std::fs::write(ph.join("Gyroscope.csv"), &pg).unwrap();
+    std::fs::write(ph.join("Accelerometer.csv"), &pa).unwrap();
+    for d in [&sl, &ph] {
+        let r = tumble::io::open_recording(d, &Default::default()).unwrap();
+        assert_eq!(r.gyro[0], [0.01, 0.02, 0.03], "{}", d.display());
+        assert!(r.warnings.iter().any(|w| w.contains("200.0 Hz") && w.contains("100.0 Hz")), "{:?}", r.warnings);
+        assert!((r.mean_rate() - 200.0).abs() < 1e-6);
+        // The accelerometer's y is its own seconds_elapsed: interpolated at the gyro's stamps.
+        for i in 0..r.len() {
+            let s = 0.005 * (i + 1) as f64; // the gyro's first stamp precedes the accelerometer's
+            assert!((r.accel[i][1] - s).abs() < 1e-9 && r.accel[i][0] == 0.1 && r.accel[i][2] == 9.8, "{i}");
+        }
+    }
+}

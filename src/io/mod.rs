@@ -10,6 +10,7 @@ pub mod imu_text;
 pub mod imu_write;
 pub(crate) mod mem;
 pub mod noise;
+pub mod phone;
 pub mod recording;
 pub mod ros;
 pub mod split;

@@ -22,7 +22,8 @@ pub struct RecordingOptions {
 }
 
 /// Open a recording: a ROS recording (rosbag2 folder, `.bag`, `.mcap`,
-/// `.db3`) by its topics, another folder as ASL, any other file as text
+/// `.db3`) by its topics, a phone logger's export folder (see
+/// [`super::phone`]), another folder as ASL, any other file as text
 /// (`.gz` allowed).
 pub fn open_recording(path: &Path, opts: &RecordingOptions) -> Result<ImuRecording, InputError> {
     // A bad option is the command line's fault, reported with the file it was meant for.
@@ -32,6 +33,9 @@ pub fn open_recording(path: &Path, opts: &RecordingOptions) -> Result<ImuRecordi
     }
     if let Some(storage) = super::ros::Storage::of(path)? {
         return super::ros::read_ros_imu(&storage, &opts.topics, &opts.format.validate);
+    }
+    if path.is_dir() && super::phone::PhoneLogger::of(path).is_some() {
+        return super::phone::read_phone_folder(path, &opts.format.validate);
     }
     if path.is_dir() {
         let fmt = ImuTextFormat { validate: opts.format.validate.clone(), ..ImuTextFormat::default() };
