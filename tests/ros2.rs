@@ -258,3 +258,58 @@ fn allan_on_a_bag_names_its_topic_in_imu_yaml() {
     let yaml = report.kalibr_yaml().unwrap();
     assert!(yaml.contains("rostopic: /bmi088/imu\n"), "{yaml}");
 }
+
+/// `tumble convert`: a rosbag2 folder with IMU, a camera with camera_info and ground truth
+/// becomes an ASL folder that reads back as the same data; a failed conversion writes nothing.
+#[test]
+fn convert_writes_an_asl_folder_that_reads_back() {
+    let d = dir("convert");
+    let mut msgs = imu_messages("/imu0");
+    let k = [458.6, 0.0, 367.2, 0.0, 457.3, 248.4, 0.0, 0.0, 1.0];
+    for f in 0..20i64 {
+        let t = 1_700_000_000_123_456_789 + f * 50_000_000;
+        let px: Vec<u8> = (0..12).map(|i| (i * 20 + f) as u8).collect();
+        msgs.push(("/cam0/image_raw".into(), "sensor_msgs/msg/Image".into(), t, cdr::image_mono8(t, 4, 3, &px)));
+        let info = cdr::camera_info(t, 4, 3, "plumb_bob", &[-0.28, 0.07, 1e-4, 2e-5, 0.0], k);
+        msgs.push(("/cam0/camera_info".into(), "sensor_msgs/msg/CameraInfo".into(), t, info));
+        let q = [(0.1 * f as f64).cos(), 0.0, 0.0, (0.1 * f as f64).sin()];
+        let pose = cdr::pose_stamped(t, [f as f64, 2.0, 3.0], q);
+        msgs.push(("/leica/pose".into(), "geometry_msgs/msg/PoseStamped".into(), t, pose));
+    }
+    msgs.sort_by_key(|m| m.2);
+    let bag = d.join("bag");
+    cdr::write_rosbag2(&bag, "sqlite3", &msgs);
+    let out = d.join("asl");
+    let opts = tumble::io::convert::ConvertOptions::default();
+    let report = tumble::io::convert::convert_to_asl(&bag, &out, &opts, &mut |_, _| {}).unwrap();
+    assert_eq!(report.cameras, vec![("cam0".to_string(), "/cam0/image_raw".to_string(), 20, true)]);
+    assert_eq!(report.groundtruth, Some(("/leica/pose".to_string(), 20)));
+    let asl = tumble::io::asl::read_asl(&out, &Default::default()).unwrap();
+    let direct = open_recording(&bag, &RecordingOptions::default()).unwrap();
+    assert_eq!(
+        (asl.imu.t0_ns, &asl.imu.t, &asl.imu.gyro, &asl.imu.accel),
+        (direct.t0_ns, &direct.t, &direct.gyro, &direct.accel)
+    );
+    let cam = &asl.cameras[0];
+    assert_eq!((cam.frames.len(), cam.resolution, cam.model.as_ref().map(|m| m.fx)), (20, Some([4, 3]), Some(458.6)));
+    let png = std::fs::read(&cam.frames[3].1).unwrap();
+    let mut dec = png::Decoder::new(std::io::Cursor::new(png)).read_info().unwrap();
+    let mut buf = vec![0; dec.output_buffer_size().unwrap()];
+    dec.next_frame(&mut buf).unwrap();
+    assert_eq!(buf, (0..12).map(|i| (i * 20 + 3) as u8).collect::<Vec<_>>());
+    let gt = asl.groundtruth.unwrap();
+    assert_eq!((gt.len(), gt.p[5], gt.q[5][3]), (20, [5.0, 2.0, 3.0], (0.5f64).sin()));
+    // Into a non-empty folder: refused. A bag whose image is cut short: nothing left behind.
+    let e = tumble::io::convert::convert_to_asl(&bag, &out, &opts, &mut |_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("not empty"), "{e}");
+    let cut = msgs.iter().position(|m| m.0 == "/cam0/image_raw").unwrap() + 7;
+    let mut bad = msgs.clone();
+    let i = bad.iter().skip(cut).position(|m| m.0 == "/cam0/image_raw").unwrap() + cut;
+    bad[i].3.truncate(60);
+    cdr::write_rosbag2(&d.join("badbag"), "sqlite3", &bad);
+    let out2 = d.join("asl2");
+    let e =
+        tumble::io::convert::convert_to_asl(&d.join("badbag"), &out2, &opts, &mut |_, _| {}).unwrap_err().to_string();
+    assert!(e.contains("/cam0/image_raw"), "{e}");
+    assert!(!out2.exists() || std::fs::read_dir(&out2).unwrap().next().is_none(), "a failed conversion left files");
+}

@@ -9,7 +9,8 @@ use tumble::io::{AxisStats, Stored};
 /// Flags of `tumble inspect`.
 #[derive(Args)]
 pub struct InspectArgs {
-    /// ASL dataset folder (or its mav0/), a ROS .bag or .mcap, a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
+    /// ASL dataset folder (or its mav0/), a ROS recording (rosbag2 folder, .db3, .mcap, .bag), a phone
+    /// logger's export folder, a text/CSV file (.gz allowed), or imu_tk's accelerometer file.
     recording: PathBuf,
     #[command(flatten)]
     read: RecordingArgs,
@@ -20,9 +21,20 @@ pub struct InspectArgs {
 
 impl InspectArgs {
     pub fn run(self) -> CliResult {
+        // A ROS recording: what it holds first (the topic to choose may be among them).
+        if let Some(storage) = tumble::io::ros::Storage::of(&self.recording)? {
+            println!("{}: topics", self.recording.display());
+            for t in storage.topics()? {
+                let n = t.count.map(|n| format!("{n} messages")).unwrap_or_else(|| "count not indexed".into());
+                println!("  {:<40} {:<36} {n}", t.name, t.msg_type);
+            }
+        }
         let start = std::time::Instant::now();
         let r = tumble::io::open_recording(&self.recording, &self.read.options())?;
         println!("{}: {} samples in {:.2} s", r.source_name(), r.len(), start.elapsed().as_secs_f64());
+        if let Some(t) = &r.topic {
+            println!("  IMU topic {t}");
+        }
         println!("  duration {:.3} s, mean rate {:.3} Hz", r.duration(), r.mean_rate());
         let stats = r.stats();
         let unit = |u: Stored, si: &'static str| if u == Stored::Si { si } else { "counts" };

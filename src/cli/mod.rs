@@ -9,6 +9,7 @@ mod apply;
 mod audit;
 mod calibrate;
 mod common;
+mod convert;
 mod demo;
 mod eval;
 mod inspect;
@@ -71,6 +72,9 @@ enum Command {
     /// tumble with a hidden effect, identify the noise (Allan), audit, and run the
     /// VIO on the 6-minute walk; prints every estimate next to the truth.
     Demo(demo::DemoArgs),
+    /// Convert a ROS recording (rosbag2 folder, .db3, .mcap, .bag) into an ASL/EuRoC
+    /// folder: IMU, camera images as PNG with data.csv, camera_info as sensor.yaml, ground truth.
+    Convert(convert::ConvertArgs),
     /// Solve a g2o pose graph (.g2o) or a Bundle Adjustment in the Large file (other extensions).
     Solve(solve::SolveArgs),
 }
@@ -103,6 +107,7 @@ pub fn main() -> ExitCode {
         Command::Eval(a) => a.run(),
         Command::Run(a) => a.run(),
         Command::Demo(a) => a.run(),
+        Command::Convert(a) => a.run(),
         Command::Solve(a) => a.run(),
     };
     match result {

@@ -4,6 +4,7 @@ pub mod asl;
 pub mod bal;
 pub mod biases;
 pub mod calibration;
+pub mod convert;
 pub mod g2o;
 pub mod imu;
 pub mod imu_text;

@@ -182,3 +182,11 @@ pub fn write_rosbag2(dir: &Path, storage: &str, msgs: &[BagMessage]) {
     );
     std::fs::write(dir.join("metadata.yaml"), meta).unwrap();
 }
+
+/// `sensor_msgs/msg/CameraInfo` (R, P, binning and ROI zero).
+pub fn camera_info(t_ns: i64, width: u32, height: u32, model: &str, d: &[f64], k: [f64; 9]) -> Vec<u8> {
+    let mut c = Cdr::new();
+    c.header(t_ns, "cam0").u32(height).u32(width).string(model).u32(d.len() as u32).f64s(d).f64s(&k);
+    c.f64s(&[0.0; 9]).f64s(&[0.0; 12]).u32(0).u32(0).u32(0).u32(0).u32(0).u32(0).u8(0);
+    c.0
+}

@@ -146,6 +146,40 @@ pub fn compressed_image(enc: Encoding, b: &[u8]) -> Option<(i64, String, &[u8])>
     Some((t, format, r.bytes()?))
 }
 
+/// The intrinsics of a `sensor_msgs/CameraInfo`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraInfo {
+    /// Columns \[px\].
+    pub width: u32,
+    /// Rows \[px\].
+    pub height: u32,
+    /// `plumb_bob`, `rational_polynomial`, `equidistant`, …
+    pub distortion_model: String,
+    /// Distortion coefficients in the model's order.
+    pub d: Vec<f64>,
+    /// Camera matrix, row-major \[px\].
+    pub k: [f64; 9],
+}
+
+/// `sensor_msgs/CameraInfo`.
+pub fn camera_info(enc: Encoding, b: &[u8]) -> Option<CameraInfo> {
+    let mut r = Reader::new(enc, b)?;
+    r.header()?;
+    let height = r.u32()?;
+    let width = r.u32()?;
+    let distortion_model = r.string()?;
+    let n = r.u32()? as usize;
+    if n > 64 {
+        return None; // no distortion model has that many coefficients: not a CameraInfo
+    }
+    let d = (0..n).map(|_| r.f64()).collect::<Option<Vec<_>>>()?;
+    let mut k = [0.0; 9];
+    for v in &mut k {
+        *v = r.f64()?;
+    }
+    Some(CameraInfo { width, height, distortion_model, d, k })
+}
+
 /// A stamped pose: stamp \[ns\], position \[m\] and orientation (w, x, y, z)
 /// of the child (body) frame in the parent frame.
 pub type StampedPose = (i64, [f64; 3], [f64; 4]);
