@@ -14,6 +14,7 @@ pub mod calib;
 pub mod demo;
 pub mod error;
 pub mod eval;
+pub mod export;
 pub mod inputs;
 pub mod inspect;
 pub mod io;

@@ -536,7 +536,6 @@ impl AllanReport {
     /// Kalibr's `imu.yaml` text (None when there are no Kalibr parameters).
     pub fn kalibr_yaml(&self) -> Option<String> {
         let k = self.kalibr.as_ref()?;
-        let dt = 1.0 / k.update_rate;
         let mut s = String::new();
         let _ = writeln!(s, "# IMU noise for Kalibr / OpenVINS / VINS-Mono, from `tumble allan` on {}", self.source);
         let _ = writeln!(
@@ -546,19 +545,6 @@ impl AllanReport {
                 AxisStat::Max => "worst",
                 AxisStat::Mean => "mean",
             }
-        );
-        let _ = writeln!(s, "# Discrete-time equivalents at {:.3} Hz (do not mix them up):", k.update_rate);
-        let _ = writeln!(
-            s,
-            "#   gyro  sigma_d = {:.4e} rad/s, sigma_bd = {:.4e} rad/s",
-            k.gyroscope_noise_density / dt.sqrt(),
-            k.gyroscope_random_walk * dt.sqrt()
-        );
-        let _ = writeln!(
-            s,
-            "#   accel sigma_d = {:.4e} m/s^2, sigma_bd = {:.4e} m/s^2",
-            k.accelerometer_noise_density / dt.sqrt(),
-            k.accelerometer_random_walk * dt.sqrt()
         );
         for n in &k.notes {
             let _ = writeln!(s, "# note: {n}");
@@ -576,11 +562,15 @@ impl AllanReport {
                 let _ = writeln!(s, "rostopic: /imu0  # the recording had no topic: the name Kalibr's examples use");
             }
         }
-        let _ = writeln!(s, "accelerometer_noise_density: {:e}  # [m/s^2/sqrt(Hz)]", k.accelerometer_noise_density);
-        let _ = writeln!(s, "accelerometer_random_walk: {:e}  # [m/s^3/sqrt(Hz)]", k.accelerometer_random_walk);
-        let _ = writeln!(s, "gyroscope_noise_density: {:e}  # [rad/s/sqrt(Hz)]", k.gyroscope_noise_density);
-        let _ = writeln!(s, "gyroscope_random_walk: {:e}  # [rad/s^2/sqrt(Hz)]", k.gyroscope_random_walk);
-        let _ = writeln!(s, "update_rate: {}  # [Hz]", k.update_rate);
+        s.push_str(&crate::model::noise::kalibr_keys(
+            [
+                k.gyroscope_noise_density,
+                k.accelerometer_noise_density,
+                k.gyroscope_random_walk,
+                k.accelerometer_random_walk,
+            ],
+            k.update_rate,
+        ));
         let a = &k.axes;
         let _ = writeln!(s, "# Per axis [x, y, z] for tumble's estimator (Kalibr ignores the key); the random");
         let _ = writeln!(

@@ -12,7 +12,9 @@ mod common;
 mod convert;
 mod demo;
 mod eval;
+mod export;
 mod inspect;
+mod noise;
 mod run;
 mod sim;
 mod solve;
@@ -75,6 +77,11 @@ enum Command {
     /// Convert a ROS recording (rosbag2 folder, .db3, .mcap, .bag) into an ASL/EuRoC
     /// folder: IMU, camera images as PNG with data.csv, camera_info as sensor.yaml, ground truth.
     Convert(convert::ConvertArgs),
+    /// Write another estimator's configuration from tumble's results: Kalibr, VINS-Mono,
+    /// VINS-Fusion, OpenVINS, ORB-SLAM3 or Basalt (noise in its convention, intrinsics where it models them).
+    Export(export::ExportArgs),
+    /// Datasheet noise figures (ARW, VRW, bias instability, random walks, with units) as Kalibr's imu.yaml.
+    Noise(noise::NoiseArgs),
     /// Solve a g2o pose graph (.g2o) or a Bundle Adjustment in the Large file (other extensions).
     Solve(solve::SolveArgs),
 }
@@ -108,6 +115,8 @@ pub fn main() -> ExitCode {
         Command::Run(a) => a.run(),
         Command::Demo(a) => a.run(),
         Command::Convert(a) => a.run(),
+        Command::Export(a) => a.run(),
+        Command::Noise(a) => a.run(),
         Command::Solve(a) => a.run(),
     };
     match result {

@@ -5,6 +5,7 @@
 //! types, `sim` samples them, the pipelines estimate them.
 
 pub mod calibration;
+pub mod datasheet;
 pub mod imu_model;
 pub mod noise;
 

@@ -92,6 +92,24 @@ pub fn estimator_random_walk(k: f64, b: f64) -> f64 {
     (k * k + 3.0 * (0.664 * b).powi(2) / BIAS_INSTABILITY_MATCH_S).sqrt()
 }
 
+/// The noise keys of Kalibr's `imu.yaml` (with their units) and
+/// `update_rate`, preceded by the discrete-time equivalents at that rate as
+/// comments. `c` = \[gyro noise, accel noise, gyro walk, accel walk\],
+/// continuous time, SI.
+pub fn kalibr_keys(c: [f64; 4], rate_hz: f64) -> String {
+    let [gn, an, gw, aw] = c;
+    let dt = 1.0 / rate_hz;
+    let mut s = format!("# Discrete-time equivalents at {rate_hz:.3} Hz (do not mix them up):\n");
+    s += &format!("#   gyro  sigma_d = {:.4e} rad/s, sigma_bd = {:.4e} rad/s\n", gn / dt.sqrt(), gw * dt.sqrt());
+    s += &format!("#   accel sigma_d = {:.4e} m/s^2, sigma_bd = {:.4e} m/s^2\n", an / dt.sqrt(), aw * dt.sqrt());
+    s += &format!("accelerometer_noise_density: {an:e}  # [m/s^2/sqrt(Hz)]\n");
+    s += &format!("accelerometer_random_walk: {aw:e}  # [m/s^3/sqrt(Hz)]\n");
+    s += &format!("gyroscope_noise_density: {gn:e}  # [rad/s/sqrt(Hz)]\n");
+    s += &format!("gyroscope_random_walk: {gw:e}  # [rad/s^2/sqrt(Hz)]\n");
+    s += &format!("update_rate: {rate_hz}  # [Hz]\n");
+    s
+}
+
 impl ImuNoise {
     /// The continuous-time noise of a simulator model (largest axis of each
     /// triad, and each axis in [`ImuNoise::axes`]): what `tumble allan` would
