@@ -18,6 +18,11 @@ pub struct RunArgs {
     /// Static recording (hours, for the bias random walk): the allan stage.
     #[arg(long = "static")]
     still: Option<PathBuf>,
+    /// A YAML file describing each recording with its own reading options
+    /// (`tumble:` and `static:` entries with path, columns, units, topic…; see
+    /// docs/formats.md): for recordings in different layouts.
+    #[arg(long, conflicts_with_all = ["tumble", "still"])]
+    inputs: Option<PathBuf>,
     /// VIO data (ASL folder with tracks or images, or an EqVIO .csv): the vio stage.
     #[arg(long)]
     vio: Option<PathBuf>,
@@ -74,11 +79,18 @@ impl RunArgs {
             return Ok(());
         }
         let out = self.out.clone().ok_or("give --out (or --print-config)")?;
-        if self.tumble.is_none() && self.still.is_none() && self.vio.is_none() && self.calibration.is_none() {
+        let described = self.inputs.as_deref().map(tumble::io::recordings::RunRecordings::read).transpose()?;
+        if self.tumble.is_none()
+            && self.still.is_none()
+            && described.is_none()
+            && self.vio.is_none()
+            && self.calibration.is_none()
+        {
             return Err("nothing to do: give --tumble, --static and/or --vio (see `tumble run --help`)".into());
         }
         let mut calib = CalibOptions { init_static_s: self.init_static, ..Default::default() };
-        if self.tumble.is_some() && !opts.skip.contains(&Stage::Calibrate) {
+        let has_tumble = self.tumble.is_some() || described.as_ref().is_some_and(|d| d.tumble.is_some());
+        if has_tumble && !opts.skip.contains(&Stage::Calibrate) {
             let gravity = local_gravity(self.gravity, self.latitude, 0.0)?;
             if let Some(note) = gravity.note {
                 eprintln!("note: {note}");
@@ -110,6 +122,20 @@ impl RunArgs {
                 eprintln!("warning: {}: {w}", p.display());
             }
             inputs.still = Some(rec);
+        }
+        if let Some(d) = &described {
+            for (spec, slot, what) in
+                [(&d.tumble, &mut inputs.tumble, "tumble"), (&d.still, &mut inputs.still, "static")]
+            {
+                if let Some(spec) = spec {
+                    println!("{what}: {}", spec.describe());
+                    let rec = spec.source()?.open()?;
+                    for w in &rec.warnings {
+                        eprintln!("warning: {}: {w}", spec.path.display());
+                    }
+                    *slot = Some(rec);
+                }
+            }
         }
         inputs.calibration = self.calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
         inputs.noise = self.noise.as_deref().map(tumble::io::ImuNoise::read).transpose()?;

@@ -13,6 +13,7 @@ pub(crate) mod mem;
 pub mod noise;
 pub mod phone;
 pub mod recording;
+pub mod recordings;
 pub mod ros;
 pub mod split;
 pub mod staging;
