@@ -21,7 +21,8 @@ use super::ModelError;
 use std::f64::consts::PI;
 
 const DEG: f64 = PI / 180.0;
-const G0: f64 = crate::io::STANDARD_GRAVITY;
+/// Standard gravity \[m/s²\] (CGPM 1901): the g of datasheets' µg and mg.
+const G0: f64 = 9.80665;
 
 /// Which figure a value is (decides the units accepted).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -242,7 +243,7 @@ mod tests {
         assert!(close(n.gyroscope_random_walk, estimator_random_walk(0.0, 2.0 * DEG / 3600.0)));
         assert!(lines.iter().any(|l| l.contains("gyro random walk not given")));
         let y = datasheet_yaml(&n, 200.0, "/imu", &lines);
-        let back: ImuNoise = crate::io::yaml::parse_yaml(std::path::Path::new("imu.yaml"), &y).unwrap();
+        let back: ImuNoise = serde_saphyr::from_str(&y).unwrap();
         assert!(close(back.gyroscope_noise_density, 0.15 * DEG / 60.0));
         assert!(Datasheet { gyro_noise: Some("1 deg/sqrt(h)".into()), ..Default::default() }.to_noise().is_err());
     }

@@ -105,7 +105,8 @@ impl Storage {
     }
 
     /// Call `f` on every message whose topic is in `topics`, in storage order
-    /// (by receive time for rosbag2 files; chunk order for bags and MCAP).
+    /// (recording order for rosbag2 files, chunk order for bags and MCAP; not
+    /// necessarily by stamp: callers sort).
     pub fn for_each(
         &self,
         topics: &[&str],
@@ -343,14 +344,21 @@ fn db3_topic_rows(path: &Path, db: &rusqlite::Connection) -> Result<Vec<(i64, St
 
 fn db3_topics(path: &Path) -> Result<Vec<TopicInfo>, InputError> {
     let db = db3_open(path)?;
-    let mut out = Vec::new();
-    for (id, name, t, _) in db3_topic_rows(path, &db)? {
-        let n: i64 = db
-            .query_row("SELECT COUNT(*) FROM messages WHERE topic_id = ?1", [id], |r| r.get(0))
-            .map_err(db3_bad(path))?;
-        out.push(TopicInfo { name, msg_type: normalize_type(&t), count: Some(n as u64) });
-    }
-    Ok(out)
+    // One pass over the table for every topic's count (no index on topic_id in rosbag2's schema).
+    let mut q = db.prepare("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id").map_err(db3_bad(path))?;
+    let counts: BTreeMap<i64, i64> = q
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+        .map_err(db3_bad(path))?
+        .collect::<Result<_, _>>()
+        .map_err(db3_bad(path))?;
+    Ok(db3_topic_rows(path, &db)?
+        .into_iter()
+        .map(|(id, name, t, _)| TopicInfo {
+            name,
+            msg_type: normalize_type(&t),
+            count: Some(counts.get(&id).copied().unwrap_or(0) as u64),
+        })
+        .collect())
 }
 
 fn db3_each(
@@ -372,7 +380,9 @@ fn db3_each(
         return Ok(());
     }
     let ids = wanted.keys().map(|i| i.to_string()).collect::<Vec<_>>().join(",");
-    let sql = format!("SELECT topic_id, data FROM messages WHERE topic_id IN ({ids}) ORDER BY timestamp, id");
+    // Rowid (recording) order: a sequential scan that skips other topics' blobs. Ordering by
+    // the timestamp index instead would visit every row in random order; readers sort by stamp.
+    let sql = format!("SELECT topic_id, data FROM messages WHERE topic_id IN ({ids})");
     let mut q = db.prepare(&sql).map_err(db3_bad(path))?;
     let mut rows = q.query([]).map_err(db3_bad(path))?;
     while let Some(row) = rows.next().map_err(db3_bad(path))? {
