@@ -130,19 +130,21 @@ pub fn read_ros_imu(storage: &Storage, want: &ImuTopics, checks: &ValidateOption
     };
     let mut topics = names.clone();
     topics.extend(temp_topic.as_deref());
-    let mut by_topic: BTreeMap<String, (Stream, Stream)> = BTreeMap::new();
+    // One (stamp, ω, a) per message: 56 bytes, the recording's own size.
+    let mut by_topic: BTreeMap<String, Vec<(i64, [f64; 3], [f64; 3])>> = BTreeMap::new();
     let mut temps: Vec<(i64, f64)> = Vec::new();
     storage.for_each(&topics, &mut |m| {
         let bad = |what: &str| InputError::file(&path, format!("a message on {} is not a {what} (too short)", m.topic));
         if Some(m.topic) == temp_topic.as_deref() {
             temps.push(msgs::temperature(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Temperature"))?);
         } else {
-            let (t, w, a) = msgs::imu(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Imu"))?;
-            let (gs, as_) = by_topic.entry(m.topic.to_string()).or_default();
-            gs.t_ns.push(t);
-            gs.v.push(w);
-            as_.t_ns.push(t);
-            as_.v.push(a);
+            let msg = msgs::imu(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Imu"))?;
+            match by_topic.get_mut(m.topic) {
+                Some(v) => v.push(msg),
+                None => {
+                    by_topic.insert(m.topic.to_string(), vec![msg]);
+                }
+            }
         }
         Ok(())
     })?;
@@ -150,19 +152,24 @@ pub fn read_ros_imu(storage: &Storage, want: &ImuTopics, checks: &ValidateOption
     let mut notes = Vec::new();
     let (t_ns, gyro, accel, topic) = match &choice {
         Choice::One(t) => {
-            let (g, a) = take(t);
-            if g.t_ns.is_empty() {
+            let mut m = take(t);
+            if m.is_empty() {
                 return Err(InputError::file(&path, format!("the IMU topic {t} has no messages")));
             }
             // Bags store messages in arrival order; the validation then judges the stamps.
-            let mut idx: Vec<usize> = (0..g.t_ns.len()).collect();
-            idx.sort_by_key(|&i| g.t_ns[i]);
-            let pick = |v: &[[f64; 3]]| idx.iter().map(|&i| v[i]).collect::<Vec<_>>();
-            (idx.iter().map(|&i| g.t_ns[i]).collect::<Vec<_>>(), pick(&g.v), pick(&a.v), t.clone())
+            m.sort_by_key(|x| x.0);
+            (
+                m.iter().map(|x| x.0).collect::<Vec<_>>(),
+                m.iter().map(|x| x.1).collect(),
+                m.iter().map(|x| x.2).collect(),
+                t.clone(),
+            )
         }
         Choice::Split { accel, gyro } => {
-            let (g, _) = take(gyro);
-            let (_, a) = take(accel);
+            let g = take(gyro);
+            let a = take(accel);
+            let g = Stream { t_ns: g.iter().map(|x| x.0).collect(), v: g.iter().map(|x| x.1).collect() };
+            let a = Stream { t_ns: a.iter().map(|x| x.0).collect(), v: a.iter().map(|x| x.2).collect() };
             let m = merge_onto_gyro(g, a).map_err(|e| InputError::file(&path, format!("{accel} + {gyro}: {e}")))?;
             notes.push(format!("{accel} + {gyro}: {}", m.note));
             notes.extend(m.warnings.iter().map(|w| format!("{accel}: {w}")));
