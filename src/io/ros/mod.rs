@@ -52,6 +52,9 @@ impl ImuTopics {
     }
 }
 
+/// One decoded `sensor_msgs/Imu`: stamp \[ns\], angular rate \[rad/s\], specific force \[m/s²\].
+type ImuMessage = (i64, [f64; 3], [f64; 3]);
+
 /// The chosen topics, resolved against what the file holds.
 enum Choice {
     One(String),
@@ -131,7 +134,7 @@ pub fn read_ros_imu(storage: &Storage, want: &ImuTopics, checks: &ValidateOption
     let mut topics = names.clone();
     topics.extend(temp_topic.as_deref());
     // One (stamp, ω, a) per message: 56 bytes, the recording's own size.
-    let mut by_topic: BTreeMap<String, Vec<(i64, [f64; 3], [f64; 3])>> = BTreeMap::new();
+    let mut by_topic: BTreeMap<String, Vec<ImuMessage>> = BTreeMap::new();
     let mut temps: Vec<(i64, f64)> = Vec::new();
     storage.for_each(&topics, &mut |m| {
         let bad = |what: &str| InputError::file(&path, format!("a message on {} is not a {what} (too short)", m.topic));
