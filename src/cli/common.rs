@@ -24,18 +24,8 @@ pub struct RecordingArgs {
     /// imu_tk layout: the gyro file (`t x y z`); the recording argument is then the accelerometer file.
     #[arg(long)]
     pub gyro_file: Option<PathBuf>,
-    /// ROS recordings (.bag, .mcap, .db3, rosbag2 folder): the sensor_msgs/Imu topic (needed when there are several).
-    #[arg(long)]
-    pub topic: Option<String>,
-    /// ROS recordings with split streams: the accelerometer's sensor_msgs/Imu topic (with --gyro-topic).
-    #[arg(long)]
-    pub accel_topic: Option<String>,
-    /// ROS recordings with split streams: the gyro's sensor_msgs/Imu topic (with --accel-topic).
-    #[arg(long)]
-    pub gyro_topic: Option<String>,
-    /// ROS recordings: a sensor_msgs/Temperature topic joined by time (default: the only one, if one).
-    #[arg(long)]
-    pub temperature_topic: Option<String>,
+    #[command(flatten)]
+    pub topics: TopicArgs,
     /// Nominal sample rate [Hz] (estimated from the timestamps when absent).
     #[arg(long)]
     pub rate: Option<f64>,
@@ -61,12 +51,7 @@ impl RecordingArgs {
             o.format.validate.duplicates = Duplicates::Error;
         }
         o.gyro_file = self.gyro_file.clone();
-        o.topics = tumble::io::ros::ImuTopics {
-            imu: self.topic.clone(),
-            accel: self.accel_topic.clone(),
-            gyro: self.gyro_topic.clone(),
-            temperature: self.temperature_topic.clone(),
-        };
+        o.topics = self.topics.topics();
         o
     }
 
@@ -75,6 +60,35 @@ impl RecordingArgs {
         tumble::io::recording::Declared {
             time_unit: self.time_unit.is_some(),
             units: self.accel_unit.is_some() || self.gyro_unit.is_some(),
+        }
+    }
+}
+
+/// Which topics of a ROS recording make the IMU.
+#[derive(Args, Clone)]
+pub struct TopicArgs {
+    /// ROS recordings (.bag, .mcap, .db3, rosbag2 folder): the sensor_msgs/Imu topic (needed when there are several).
+    #[arg(long)]
+    pub topic: Option<String>,
+    /// ROS recordings with split streams: the accelerometer's sensor_msgs/Imu topic (with --gyro-topic).
+    #[arg(long)]
+    pub accel_topic: Option<String>,
+    /// ROS recordings with split streams: the gyro's sensor_msgs/Imu topic (with --accel-topic).
+    #[arg(long)]
+    pub gyro_topic: Option<String>,
+    /// ROS recordings: a sensor_msgs/Temperature topic joined by time (default: the only one, if one).
+    #[arg(long)]
+    pub temperature_topic: Option<String>,
+}
+
+impl TopicArgs {
+    /// The library's topic choice.
+    pub fn topics(&self) -> tumble::io::ros::ImuTopics {
+        tumble::io::ros::ImuTopics {
+            imu: self.topic.clone(),
+            accel: self.accel_topic.clone(),
+            gyro: self.gyro_topic.clone(),
+            temperature: self.temperature_topic.clone(),
         }
     }
 }

@@ -1,11 +1,10 @@
 //! `tumble convert`: a ROS recording as an ASL/EuRoC folder.
 
-use super::common::{paths, progress_bar};
+use super::common::{paths, progress_bar, TopicArgs};
 use super::CliResult;
 use clap::Args;
 use std::path::PathBuf;
 use tumble::io::convert::{convert_to_asl, ConvertOptions};
-use tumble::io::ros::ImuTopics;
 
 /// Flags of `tumble convert`.
 #[derive(Args)]
@@ -15,18 +14,8 @@ pub struct ConvertArgs {
     /// New (or empty) output folder; gets mav0/imu0, mav0/camN, mav0/state_groundtruth_estimate0.
     #[arg(long)]
     out: PathBuf,
-    /// The sensor_msgs/Imu topic (default: the only one).
-    #[arg(long)]
-    topic: Option<String>,
-    /// Split streams: the accelerometer's sensor_msgs/Imu topic (with --gyro-topic).
-    #[arg(long)]
-    accel_topic: Option<String>,
-    /// Split streams: the gyro's sensor_msgs/Imu topic (with --accel-topic).
-    #[arg(long)]
-    gyro_topic: Option<String>,
-    /// A sensor_msgs/Temperature topic joined to the IMU (default: the only one, if one).
-    #[arg(long)]
-    temperature_topic: Option<String>,
+    #[command(flatten)]
+    topics: TopicArgs,
     /// Image topics in camera order, comma separated (default: all, sorted by name).
     #[arg(long, value_delimiter = ',')]
     images: Option<Vec<String>>,
@@ -38,12 +27,7 @@ pub struct ConvertArgs {
 impl ConvertArgs {
     pub fn run(self) -> CliResult {
         let opts = ConvertOptions {
-            imu: ImuTopics {
-                imu: self.topic,
-                accel: self.accel_topic,
-                gyro: self.gyro_topic,
-                temperature: self.temperature_topic,
-            },
+            imu: self.topics.topics(),
             images: self.images,
             groundtruth: self.groundtruth_topic,
             ..Default::default()
