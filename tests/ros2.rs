@@ -76,9 +76,12 @@ fn rosbag2_folders_and_db3_read_exactly_like_text() {
         assert_eq!(got.topic.as_deref(), Some("/imu0"));
         assert!(got.warnings.iter().any(|w| w.contains("temperature from /imu0/temperature")), "{:?}", got.warnings);
     }
-    // A bare .db3, without metadata.yaml.
+    // A bare .db3, and its folder without metadata.yaml (a recording cut short).
     let db3 = d.join("bag_sqlite3").join("bag_sqlite3_0.db3");
     let got = open_recording(&db3, &RecordingOptions::default()).unwrap();
+    assert_eq!((&got.t, &got.gyro), (&want.t, &want.gyro));
+    std::fs::remove_file(d.join("bag_sqlite3").join("metadata.yaml")).unwrap();
+    let got = open_recording(&d.join("bag_sqlite3"), &RecordingOptions::default()).unwrap();
     assert_eq!((got.t, got.gyro), (want.t, want.gyro));
 }
 

@@ -56,12 +56,37 @@ pub fn normalize_type(t: &str) -> String {
 
 impl Storage {
     /// Recognise a ROS recording by its path: a folder with `metadata.yaml`
-    /// (rosbag2), or a `.bag`, `.mcap` or `.db3` file. `Ok(None)` for anything
-    /// else.
+    /// (rosbag2) — or without it but holding `.db3`/`.mcap` files (a recording
+    /// cut short before rosbag2 wrote it), read in name order —, or a `.bag`,
+    /// `.mcap` or `.db3` file. `Ok(None)` for anything else.
     pub fn of(path: &Path) -> Result<Option<Storage>, InputError> {
         if path.is_dir() {
             let meta = path.join("metadata.yaml");
-            return if meta.is_file() { folder(path, &meta).map(Some) } else { Ok(None) };
+            if meta.is_file() {
+                return folder(path, &meta).map(Some);
+            }
+            let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+                .map_err(|e| InputError::file(path, format!("cannot list: {e}")))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.is_file() && matches!(p.extension().and_then(|e| e.to_str()), Some("db3" | "mcap")))
+                .collect();
+            files.sort();
+            return Ok((!files.is_empty()).then(|| {
+                Storage::Folder(
+                    files
+                        .into_iter()
+                        .map(
+                            |p| {
+                                if p.extension().is_some_and(|e| e == "db3") {
+                                    Storage::Db3(p)
+                                } else {
+                                    Storage::Mcap(p)
+                                }
+                            },
+                        )
+                        .collect(),
+                )
+            }));
         }
         let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
         Ok(match ext.as_deref() {
