@@ -316,3 +316,20 @@ fn convert_writes_an_asl_folder_that_reads_back() {
     assert!(e.contains("/cam0/image_raw"), "{e}");
     assert!(!out2.exists() || std::fs::read_dir(&out2).unwrap().next().is_none(), "a failed conversion left files");
 }
+
+/// A driver that leaves header.stamp at zero: the recorder's receive times stamp the samples, with a warning.
+#[test]
+fn unstamped_imu_messages_take_the_receive_time() {
+    let d = dir("unstamped");
+    let msgs: Vec<cdr::BagMessage> = (0..500i64)
+        .map(|i| {
+            let t = 5_000_000_000 + i * 2_500_000;
+            ("/imu".into(), "sensor_msgs/msg/Imu".into(), t, cdr::imu(0, [0.0, 0.0, 0.01], [0.0, 0.0, 9.81]))
+        })
+        .collect();
+    cdr::write_db3(&d.join("u.db3"), &msgs);
+    let r = open_recording(&d.join("u.db3"), &RecordingOptions::default()).unwrap();
+    assert_eq!((r.t0_ns, r.len()), (5_000_000_000, 500));
+    assert!((r.mean_rate() - 400.0).abs() < 1e-9);
+    assert!(r.warnings.iter().any(|w| w.contains("500 IMU messages have header.stamp = 0")), "{:?}", r.warnings);
+}

@@ -44,6 +44,8 @@ pub struct RawMessage<'a> {
     pub encoding: Encoding,
     /// The serialized message.
     pub data: &'a [u8],
+    /// When the recorder received it \[ns\] (not the message's own stamp).
+    pub log_time_ns: i64,
 }
 
 /// `sensor_msgs/msg/Imu` → `sensor_msgs/Imu` (ROS 1 names are kept).
@@ -248,7 +250,8 @@ fn ros1_each(
                     rosbag::MessageRecord::Connection(_) => {}
                     rosbag::MessageRecord::MessageData(m) => {
                         if let Some((topic, msg_type)) = conns.get(&m.conn_id) {
-                            f(&RawMessage { topic, msg_type, encoding: Encoding::Ros1, data: m.data })?;
+                            let log_time_ns = m.time as i64;
+                            f(&RawMessage { topic, msg_type, encoding: Encoding::Ros1, data: m.data, log_time_ns })?;
                         }
                     }
                 }
@@ -340,7 +343,8 @@ fn mcap_each(
             slot.insert(entry);
         }
         if let Some(Some((topic, msg_type, encoding))) = wanted.get(&id) {
-            f(&RawMessage { topic, msg_type, encoding: *encoding, data: &m.data })?;
+            let log_time_ns = m.header.log_time as i64;
+            f(&RawMessage { topic, msg_type, encoding: *encoding, data: &m.data, log_time_ns })?;
         }
     }
     Ok(())
@@ -407,14 +411,15 @@ fn db3_each(
     let ids = wanted.keys().map(|i| i.to_string()).collect::<Vec<_>>().join(",");
     // Rowid (recording) order: a sequential scan that skips other topics' blobs. Ordering by
     // the timestamp index instead would visit every row in random order; readers sort by stamp.
-    let sql = format!("SELECT topic_id, data FROM messages WHERE topic_id IN ({ids})");
+    let sql = format!("SELECT topic_id, data, timestamp FROM messages WHERE topic_id IN ({ids})");
     let mut q = db.prepare(&sql).map_err(db3_bad(path))?;
     let mut rows = q.query([]).map_err(db3_bad(path))?;
     while let Some(row) = rows.next().map_err(db3_bad(path))? {
         let id: i64 = row.get(0).map_err(db3_bad(path))?;
         let data = row.get_ref(1).map_err(db3_bad(path))?.as_blob().map_err(|e| db3_bad(path)(e.into()))?;
+        let log_time_ns: i64 = row.get(2).map_err(db3_bad(path))?;
         if let Some((topic, msg_type)) = wanted.get(&id) {
-            f(&RawMessage { topic, msg_type, encoding: Encoding::Cdr, data })?;
+            f(&RawMessage { topic, msg_type, encoding: Encoding::Cdr, data, log_time_ns })?;
         }
     }
     Ok(())

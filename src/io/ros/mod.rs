@@ -3,7 +3,8 @@
 //! serialization and CDR are fixed layouts for the messages read), into an
 //! [`ImuRecording`].
 //!
-//! Times are the messages' `header.stamp`. The IMU is one `sensor_msgs/Imu`
+//! Times are the messages' `header.stamp` (the recorder's receive time for
+//! messages a driver left unstamped, with a warning). The IMU is one `sensor_msgs/Imu`
 //! topic, or an accelerometer topic and a gyro topic merged onto the gyro's
 //! stamps ([`crate::io::split`]); a `sensor_msgs/Temperature` topic is joined
 //! by time. Topics are chosen by name, or automatically when the choice is
@@ -136,12 +137,18 @@ pub fn read_ros_imu(storage: &Storage, want: &ImuTopics, checks: &ValidateOption
     // One (stamp, ω, a) per message: 56 bytes, the recording's own size.
     let mut by_topic: BTreeMap<String, Vec<ImuMessage>> = BTreeMap::new();
     let mut temps: Vec<(i64, f64)> = Vec::new();
+    // Drivers that leave header.stamp at zero: the recorder's receive time is the only clock.
+    let mut unstamped = 0usize;
     storage.for_each(&topics, &mut |m| {
         let bad = |what: &str| InputError::file(&path, format!("a message on {} is not a {what} (too short)", m.topic));
         if Some(m.topic) == temp_topic.as_deref() {
             temps.push(msgs::temperature(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Temperature"))?);
         } else {
-            let msg = msgs::imu(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Imu"))?;
+            let mut msg = msgs::imu(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Imu"))?;
+            if msg.0 == 0 {
+                unstamped += 1;
+                msg.0 = m.log_time_ns;
+            }
             match by_topic.get_mut(m.topic) {
                 Some(v) => v.push(msg),
                 None => {
@@ -153,6 +160,12 @@ pub fn read_ros_imu(storage: &Storage, want: &ImuTopics, checks: &ValidateOption
     })?;
     let mut take = |t: &str| by_topic.remove(t).unwrap_or_default();
     let mut notes = Vec::new();
+    if unstamped > 0 {
+        notes.push(format!(
+            "{unstamped} IMU messages have header.stamp = 0: stamped with the recorder's receive time instead \
+             (transport jitter included; the checks below judge it)"
+        ));
+    }
     let (t_ns, gyro, accel, topic) = match &choice {
         Choice::One(t) => {
             let mut m = take(t);
