@@ -32,19 +32,18 @@ pub struct SolveArgs {
     /// Nonlinear method.
     #[arg(long, value_enum, default_value = "lm")]
     method: MethodArg,
-    /// Maximum iterations (default: the library's, 1000).
-    #[arg(long)]
-    max_iterations: Option<usize>,
+    /// Maximum iterations.
+    #[arg(long, default_value_t = LmOptions::default().max_iterations)]
+    max_iterations: usize,
     /// Initial Levenberg–Marquardt damping λ (relative to diag(H)).
-    #[arg(long)]
-    initial_lambda: Option<f64>,
+    #[arg(long, default_value_t = LmOptions::default().initial_lambda)]
+    initial_lambda: f64,
     /// Smallest factor λ shrinks by after a good step.
-    #[arg(long)]
-    min_lambda_decrease: Option<f64>,
-    /// Relative cost decrease still to come at which the solve ends
-    /// (default: the library's, 1e-10).
-    #[arg(long)]
-    function_tolerance: Option<f64>,
+    #[arg(long, default_value_t = LmOptions::default().min_lambda_decrease)]
+    min_lambda_decrease: f64,
+    /// Relative cost decrease still to come at which the solve ends.
+    #[arg(long, default_value_t = LmOptions::default().function_tolerance)]
+    function_tolerance: f64,
     /// g2o: replace non-positive-definite information matrices by the nearest
     /// positive-definite ones (with a warning each) instead of refusing the file.
     #[arg(long)]
@@ -78,10 +77,10 @@ impl SolveArgs {
                 MethodArg::Lm => Method::LevenbergMarquardt,
                 MethodArg::Gn => Method::GaussNewton,
             },
-            max_iterations: self.max_iterations.unwrap_or(defaults.max_iterations),
-            function_tolerance: self.function_tolerance.unwrap_or(defaults.function_tolerance),
-            initial_lambda: self.initial_lambda.unwrap_or(defaults.initial_lambda),
-            min_lambda_decrease: self.min_lambda_decrease.unwrap_or(defaults.min_lambda_decrease),
+            max_iterations: self.max_iterations,
+            function_tolerance: self.function_tolerance,
+            initial_lambda: self.initial_lambda,
+            min_lambda_decrease: self.min_lambda_decrease,
             ..defaults
         };
         let opts = SolveFileOptions {
