@@ -62,8 +62,12 @@ fn setup(name: &str) -> (PathBuf, PathBuf, [Isometry3<f64>; 2]) {
     let keys = tumble::model::noise::kalibr_keys([GN, AN, GW, AW], RATE);
     std::fs::write(res.join("allan/imu.yaml"), format!("rostopic: /bmi088/imu\n{keys}")).unwrap();
     // In motion the gyro residuals are 2.25× (variance) what the noise predicts: ×1.5 on its density.
+    // The gyro walk the audit assumed (1e-4, scale ≈ 1) with chi2/n 0.02 implies 1.4e-5 < imu.yaml's: ×1.
+    // The accelerometer's assumed 1e-3 with chi2/n 16 implies 4e-3 > imu.yaml's 3e-3: ×4/3.
     let audit = r#"{"final_groups": {"rotation": {"chi2": 225.0, "residuals": 100},
-        "accel_norm": {"chi2": 40.0, "residuals": 50}, "gyro_bias_walk": {"chi2": 3.0, "residuals": 150}}}"#;
+        "accel_norm": {"chi2": 40.0, "residuals": 50}, "gyro_bias_walk": {"chi2": 3.0, "residuals": 150},
+        "accel_bias_walk": {"chi2": 2400.0, "residuals": 150}},
+        "random_walk_raw": {"gyro": 0.0000996, "accel": 0.0009988}}"#;
     std::fs::write(res.join("audit/audit.json"), audit).unwrap();
     let asl = d.join("asl/mav0");
     let cams = [
@@ -148,6 +152,9 @@ fn kalibr_and_openvins_files_parse_back_with_tumbles_model() {
     let (res, asl, cams) = setup("ov");
     let inp = inputs(&res, &asl);
     assert!((inp.inflation.gyro_noise - 1.5).abs() < 1e-12 && inp.inflation.accel_noise == 1.0);
+    assert_eq!(inp.inflation.gyro_walk, 1.0);
+    let k_a = (0.995 + 1.002 + 0.9999) / 3.0;
+    assert!((inp.inflation.accel_walk - 0.0009988 / k_a * 4.0 / AW).abs() < 1e-12, "{:?}", inp.inflation);
     // Kalibr.
     let out = res.parent().unwrap().join("kalibr");
     let r = export(Target::Kalibr, &inp, &out).unwrap();
@@ -253,7 +260,8 @@ fn vins_and_orbslam3_files_parse_back_in_their_conventions() {
         imu_topic: String,
     }
     let v: Vins = parse(&out.join("vins_mono_config.yaml"));
-    assert!(close(v.gyr_n, 1.5 * GN * s) && close(v.acc_n, AN * s) && close(v.gyr_w, GW * s) && close(v.acc_w, AW * s));
+    let aw = AW * inp.inflation.accel_walk;
+    assert!(close(v.gyr_n, 1.5 * GN * s) && close(v.acc_n, AN * s) && close(v.gyr_w, GW * s) && close(v.acc_w, aw * s));
     assert_eq!((v.td, v.image_width, v.imu_topic.as_str()), (0.0031, 752, "/bmi088/imu"));
     let rot = Matrix3::from_row_slice(&v.extrinsicRotation.data);
     assert!((rot - cams[0].rotation.to_rotation_matrix().into_inner()).norm() < 1e-12);
@@ -310,7 +318,8 @@ fn vins_and_orbslam3_files_parse_back_in_their_conventions() {
     }
     let o: Orb = parse(&out.join("orbslam3_settings.yaml"));
     assert_eq!((o.version.as_str(), o.kind.as_str(), o.k1, o.frequency), ("1.0", "PinHole", -0.2834, RATE));
-    assert!(close(o.noise_gyro, 1.5 * GN) && close(o.acc_walk, AW) && same_pose(&o.t_b_c1.iso(), &cams[0]));
+    let aw = AW * inp.inflation.accel_walk;
+    assert!(close(o.noise_gyro, 1.5 * GN) && close(o.acc_walk, aw) && same_pose(&o.t_b_c1.iso(), &cams[0]));
 }
 
 #[test]
@@ -358,7 +367,8 @@ fn basalt_calibration_reproduces_tumbles_correction_in_its_frame() {
         assert!((wb - q * w).norm() < 1e-10, "gyro");
     }
     assert_eq!(v["cam_time_offset_ns"].as_i64(), Some(3_100_000));
-    assert!(close(f(&v["gyro_noise_std"][2]), 1.5 * GN) && close(f(&v["accel_bias_std"][0]), AW));
+    let aw = AW * inp.inflation.accel_walk;
+    assert!(close(f(&v["gyro_noise_std"][2]), 1.5 * GN) && close(f(&v["accel_bias_std"][0]), aw));
     assert_eq!(v["intrinsics"][0]["camera_type"], "pinhole-radtan8");
 }
 

@@ -110,33 +110,59 @@ impl Inflation {
         Inflation { gyro_noise: 1.0, accel_noise: 1.0, gyro_walk: 1.0, accel_walk: 1.0, reasons: vec![reason.into()] }
     }
 
-    /// From the audit of the same recording: each residual group's χ² per
-    /// residual says how much larger the in-motion errors are than the noise
-    /// model predicts; the matching figure is multiplied by √(χ²/n) when that
-    /// exceeds 1 (never deflated). Groups: `rotation` (gyro white noise over
-    /// the motions), `accel_norm` (accelerometer white noise at the poses),
-    /// `gyro_bias_walk` and `accel_bias_walk`.
-    pub fn from_audit(audit: &AuditSummary) -> Inflation {
+    /// From the audit of the same recording. White noise: each residual
+    /// group's χ² per residual says how much larger the errors in motion are
+    /// than the white noise the audit measured at rest on the same recording;
+    /// the figure is multiplied by √(χ²/n) when that exceeds 1 (`rotation` →
+    /// gyro, `accel_norm` → accelerometer). Random walks: the bias-walk groups
+    /// were whitened with the walk the audit assumed (`random_walk_raw`, over
+    /// the mean scale `k`); the walk they imply, assumed·√(χ²/n), multiplies
+    /// `noise`'s walk when it is the larger. Never deflated.
+    pub fn from_audit(audit: &AuditSummary, noise: &ImuNoise, mean_k: (f64, f64)) -> Inflation {
         let mut inf = Inflation::none("");
         inf.reasons.clear();
+        let ratio =
+            |group: &str| audit.groups.get(group).filter(|g| g.residuals > 0).map(|g| g.chi2 / g.residuals as f64);
         for (group, slot, what) in [
             ("rotation", &mut inf.gyro_noise, "gyro white noise"),
             ("accel_norm", &mut inf.accel_noise, "accelerometer white noise"),
-            ("gyro_bias_walk", &mut inf.gyro_walk, "gyro random walk"),
-            ("accel_bias_walk", &mut inf.accel_walk, "accelerometer random walk"),
         ] {
-            match audit.groups.get(group) {
-                Some(g) if g.residuals > 0 => {
-                    let r = g.chi2 / g.residuals as f64;
+            inf.reasons.push(match ratio(group) {
+                Some(r) => {
                     *slot = r.max(1.0).sqrt();
-                    inf.reasons.push(if r > 1.0 {
-                        format!("{what} x{:.2}: the audit's {group} residuals have chi2/n = {r:.2}", *slot)
-                    } else {
-                        format!("{what} x1: the audit's {group} residuals have chi2/n = {r:.2} <= 1")
-                    });
+                    format!("{what} x{:.2}: the audit's {group} residuals have chi2/n = {r:.2}", *slot)
                 }
-                _ => inf.reasons.push(format!("{what} x1: the audit has no {group} residuals")),
-            }
+                None => format!("{what} x1: the audit has no {group} residuals"),
+            });
+        }
+        let raw = audit.random_walk_raw.as_ref();
+        for (group, slot, what, assumed, own) in [
+            (
+                "gyro_bias_walk",
+                &mut inf.gyro_walk,
+                "gyro random walk",
+                raw.map(|w| w.gyro / mean_k.0),
+                noise.gyroscope_random_walk,
+            ),
+            (
+                "accel_bias_walk",
+                &mut inf.accel_walk,
+                "accelerometer random walk",
+                raw.map(|w| w.accel / mean_k.1),
+                noise.accelerometer_random_walk,
+            ),
+        ] {
+            inf.reasons.push(match (ratio(group), assumed) {
+                (Some(r), Some(w)) if w.is_finite() && w > 0.0 => {
+                    let implied = w * r.sqrt();
+                    *slot = (implied / own).max(1.0);
+                    format!(
+                        "{what} x{:.2}: the audit's {group} residuals (chi2/n = {r:.2} with {w:.3e}) imply {implied:.3e}; imu.yaml has {own:.3e}",
+                        *slot
+                    )
+                }
+                _ => format!("{what} x1: the audit records no {group} residuals or the walk it assumed"),
+            });
         }
         inf
     }
@@ -148,6 +174,18 @@ pub struct AuditSummary {
     /// χ² and residual count per residual group of the final model.
     #[serde(rename = "final_groups")]
     pub groups: std::collections::BTreeMap<String, AuditGroup>,
+    /// The bias random walks the audit assumed, in raw units per √Hz (physical × mean scale).
+    #[serde(default)]
+    pub random_walk_raw: Option<AuditWalks>,
+}
+
+/// The audit's assumed random walks (`random_walk_raw` in `audit.json`).
+#[derive(Debug, Clone, Copy, Default, serde::Deserialize)]
+pub struct AuditWalks {
+    /// Gyro \[raw/s/√Hz\].
+    pub gyro: f64,
+    /// Accelerometer \[raw/s/√Hz\].
+    pub accel: f64,
 }
 
 /// One residual group of the audit.
@@ -258,7 +296,9 @@ impl ExportInputs {
                 let a: AuditSummary =
                     serde_json::from_str(&text).map_err(|e| InputError::at(p, e.line(), e.to_string()))?;
                 sources.push(format!("audit: {}", p.display()));
-                Inflation::from_audit(&a)
+                let mean_k = |k: &nalgebra::Vector3<f64>| k.iter().map(|x| x.abs()).sum::<f64>() / 3.0;
+                let k = calibration.as_ref().map(|c| (mean_k(&c.gyro.k), mean_k(&c.accel.k))).unwrap_or((1.0, 1.0));
+                Inflation::from_audit(&a, &noise, k)
             }
             None => Inflation::none(
                 "no audit of this recording: the noise is as identified at rest, not inflated (run `tumble audit` \
