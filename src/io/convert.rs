@@ -283,7 +283,11 @@ pub fn convert_to_asl(
             let before = f.len();
             f.dedup_by_key(|x| x.0);
             if f.len() < before {
-                report.notes.push(format!("{}: {} frames repeat a stamp: the first kept", images[c], before - f.len()));
+                report.notes.push(format!(
+                    "{}: {} frames repeat a stamp: one image kept per stamp",
+                    images[c],
+                    before - f.len()
+                ));
             }
             let dir = mav0.join(format!("cam{c}"));
             let mut csv = String::from("#timestamp [ns],filename\n");
