@@ -227,8 +227,7 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
             DEFAULT_RANDOM_WALK
         }
     };
-    let mean_k = |k: &Vector3<f64>| k.iter().map(|x| x.abs()).sum::<f64>() / 3.0;
-    let random_walk = (rw_g * mean_k(&calibration.gyro.k), rw_a * mean_k(&calibration.accel.k));
+    let random_walk = (rw_g * calibration.gyro.mean_scale(), rw_a * calibration.accel.mean_scale());
     let mut candidates: Vec<Effect> = opts.candidates.iter().copied().filter(|e| e.in_sensor_model()).collect();
     let span = data
         .statics

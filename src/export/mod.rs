@@ -116,7 +116,7 @@ impl Inflation {
     /// the figure is multiplied by √(χ²/n) when that exceeds 1 (`rotation` →
     /// gyro, `accel_norm` → accelerometer). Random walks: the bias-walk groups
     /// were whitened with the walk the audit assumed (`random_walk_raw`, over
-    /// the mean scale `k`); the walk they imply, assumed·√(χ²/n), multiplies
+    /// the mean scale `k` of [`crate::model::calibration::Triad::mean_scale`]); the walk they imply, assumed·√(χ²/n), multiplies
     /// `noise`'s walk when it is the larger. Never deflated.
     pub fn from_audit(audit: &AuditSummary, noise: &ImuNoise, mean_k: (f64, f64)) -> Inflation {
         let mut inf = Inflation::none("");
@@ -296,8 +296,7 @@ impl ExportInputs {
                 let a: AuditSummary =
                     serde_json::from_str(&text).map_err(|e| InputError::at(p, e.line(), e.to_string()))?;
                 sources.push(format!("audit: {}", p.display()));
-                let mean_k = |k: &nalgebra::Vector3<f64>| k.iter().map(|x| x.abs()).sum::<f64>() / 3.0;
-                let k = calibration.as_ref().map(|c| (mean_k(&c.gyro.k), mean_k(&c.accel.k))).unwrap_or((1.0, 1.0));
+                let k = calibration.as_ref().map(|c| (c.gyro.mean_scale(), c.accel.mean_scale())).unwrap_or((1.0, 1.0));
                 Inflation::from_audit(&a, &noise, k)
             }
             None => Inflation::none(

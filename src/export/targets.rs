@@ -79,10 +79,7 @@ fn si_calibration(inp: &ExportInputs, notes: &mut Vec<String>) -> Option<SiModel
         ));
         return None;
     }
-    let ma = Matrix3::from_diagonal(&c.accel.k);
-    let ma = c.accel.t * ma;
-    let mg = c.gyro.t * Matrix3::from_diagonal(&c.gyro.k);
-    Some((ma, mg, c.accel.b, c.gyro.b))
+    Some((c.accel.matrix(), c.gyro.matrix(), c.accel.b, c.gyro.b))
 }
 
 /// The gyro g-sensitivity `G` of the calibration (rad/s per m/s², in the corrected frame), if found.

@@ -329,7 +329,6 @@ pub fn read_imu_tk(
         (acc.t_ns, vec![one(gyr.triads), one(acc.triads)], acc.lines)
     } else {
         use super::split::{merge_onto_gyro, Stream};
-        let first_gyro = gyr.t_ns.clone();
         let m = merge_onto_gyro(
             Stream { t_ns: gyr.t_ns, v: one(gyr.triads) },
             Stream { t_ns: acc.t_ns, v: one(acc.triads) },
@@ -337,8 +336,7 @@ pub fn read_imu_tk(
         .map_err(|e| InputError::file(gyro_path, format!("with {}: {e}", accel_path.display())))?;
         notes.push(format!("{} + {}: {}", accel_path.display(), gyro_path.display(), m.note));
         notes.extend(m.warnings.iter().map(|w| format!("{}: {w}", accel_path.display())));
-        let skip = first_gyro.partition_point(|&t| t < m.t_ns[0]);
-        (m.t_ns, vec![m.gyro, m.accel], gyr.lines.slice(skip))
+        (m.t_ns, vec![m.gyro, m.accel], gyr.lines.slice(m.first_kept))
     };
     let fmt = ImuTextFormat {
         columns: ImuColumns { time: Some(0), gyro: Some([1, 2, 3]), accel: Some([4, 5, 6]), temperature: None },

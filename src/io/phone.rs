@@ -130,10 +130,8 @@ pub fn read_phone_folder(dir: &Path, checks: &ValidateOptions) -> Result<ImuReco
     };
     let (g, lines) = stream(&gyro_path, logger)?;
     let (a, _) = stream(&accel_path, logger)?;
-    let gyro_stamps = g.t_ns.clone();
     let m = merge_onto_gyro(g, a).map_err(|e| InputError::file(dir, e))?;
     // Messages point at the gyro file's lines (the merged samples are its rows).
-    let skip = gyro_stamps.partition_point(|&t| t < m.t_ns.first().copied().unwrap_or(i64::MAX));
     let t0 = m.t_ns.first().copied().unwrap_or(0);
     let mut warnings = vec![format!("{} export: {}", logger.name(), m.note)];
     warnings.extend(m.warnings.iter().map(|w| format!("{}: {w}", accel_path.display())));
@@ -147,7 +145,7 @@ pub fn read_phone_folder(dir: &Path, checks: &ValidateOptions) -> Result<ImuReco
         temperature: None,
         gyro_units: Stored::Si,
         accel_units: Stored::Si,
-        lines: lines.slice(skip),
+        lines: lines.slice(m.first_kept),
         warnings,
     };
     validate(&mut rec, checks)?;

@@ -48,6 +48,9 @@ pub struct Merged {
     pub gyro: Vec<[f64; 3]>,
     /// Accelerometer read at the gyro's stamps.
     pub accel: Vec<[f64; 3]>,
+    /// Gyro samples (in stamp order) dropped before the accelerometer's first
+    /// stamp: the first merged sample is the gyro's sample of this index.
+    pub first_kept: usize,
     /// One line on the rates and what was merged.
     pub note: String,
     /// Gaps in the accelerometer stream that were interpolated across, and dropped duplicates.
@@ -102,6 +105,9 @@ pub fn merge_onto_gyro(gyro: Stream, accel: Stream) -> Result<Merged, String> {
     for (&t, &w) in gyro.t_ns.iter().zip(&gyro.v) {
         if t < a0 || t > a1 {
             dropped += 1;
+            if t < a0 {
+                out.first_kept += 1;
+            }
             continue;
         }
         while j + 2 < accel.t_ns.len() && accel.t_ns[j + 1] <= t {
@@ -182,7 +188,7 @@ mod tests {
         let at: Vec<i64> = (0..200).map(|i| 1_000_000 + i * 4_000_000).collect();
         let accel = Stream { v: at.iter().map(|&t| [t as f64 * 1e-9, 0.0, 9.8]).collect(), t_ns: at.clone() };
         let m = merge_onto_gyro(gyro, accel).unwrap();
-        assert_eq!(m.t_ns[0], 2_500_000); // the gyro's 0 precedes the first accelerometer sample
+        assert_eq!((m.t_ns[0], m.first_kept), (2_500_000, 1)); // the gyro's 0 precedes the first accelerometer sample
         assert_eq!(*m.t_ns.last().unwrap(), 795_000_000);
         for (t, a) in m.t_ns.iter().zip(&m.accel) {
             assert!((a[0] - *t as f64 * 1e-9).abs() < 1e-12);

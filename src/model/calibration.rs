@@ -55,6 +55,12 @@ pub struct Triad {
 }
 
 impl Triad {
+    /// Mean absolute scale `mean |K|` \[raw units per SI unit\]: converts a
+    /// physical noise figure into the triad's raw units (the audit's
+    /// `random_walk_raw` and its reading by `tumble export`).
+    pub fn mean_scale(&self) -> f64 {
+        self.k.iter().map(|x| x.abs()).sum::<f64>() / 3.0
+    }
     /// The identity model (no error).
     pub fn identity() -> Triad {
         Triad {
@@ -66,9 +72,13 @@ impl Triad {
             b_std: Vector3::zeros(),
         }
     }
+    /// `T K`: maps SI to unbiased raw readings (`raw = T K x + b`).
+    pub fn matrix(&self) -> Matrix3<f64> {
+        self.t * Matrix3::from_diagonal(&self.k)
+    }
     /// `(T K)⁻¹`: maps unbiased raw readings to SI; `None` when singular.
     pub fn inverse_matrix(&self) -> Option<Matrix3<f64>> {
-        (self.t * Matrix3::from_diagonal(&self.k)).try_inverse()
+        self.matrix().try_inverse()
     }
     /// imu_tk's `(T', K', b)` with `T' K' = (T K)⁻¹`.
     pub fn to_imu_tk(&self) -> Option<ImuTkTriad> {
