@@ -35,8 +35,8 @@ pub fn write_like_input(
             _ => Ok(()),
         }
     };
-    let ros = crate::io::ros::Storage::of(input).ok().flatten().is_some();
-    if input.is_dir() || ros {
+    // A folder (ASL, rosbag2) or a ROS file: the ASL layout.
+    if input.is_dir() || crate::io::ros::Storage::of(input).ok().flatten().is_some() {
         let p = out.join("mav0").join("imu0").join("data.csv");
         guard(&p)?;
         write_asl_imu(&p, rec).map_err(err)?;

@@ -76,16 +76,28 @@ fn pick_images(path: &Path, all: &[TopicInfo], want: &Option<Vec<String>>) -> Re
     }
 }
 
-fn pick_groundtruth(path: &Path, all: &[TopicInfo], want: &Option<String>) -> Result<Option<String>, InputError> {
+/// The ground-truth topic, and a note when several pose topics leave it unchosen.
+fn pick_groundtruth(
+    path: &Path,
+    all: &[TopicInfo],
+    want: &Option<String>,
+) -> Result<(Option<String>, Option<String>), InputError> {
     let poses: Vec<&TopicInfo> = all.iter().filter(|t| msgs::POSE_TYPES.contains(&t.msg_type.as_str())).collect();
     match want {
-        Some(name) if poses.iter().any(|t| &t.name == name) => Ok(Some(name.clone())),
+        Some(name) if poses.iter().any(|t| &t.name == name) => Ok((Some(name.clone()), None)),
         Some(name) => Err(InputError::file(path, format!("no pose topic '{name}'")).with_hint(format!(
             "pose topics here: {}",
             poses.iter().map(|t| format!("{} ({})", t.name, t.msg_type)).collect::<Vec<_>>().join(", ")
         ))),
-        None if poses.len() == 1 => Ok(Some(poses[0].name.clone())),
-        None => Ok(None),
+        None if poses.len() == 1 => Ok((Some(poses[0].name.clone()), None)),
+        None if poses.len() > 1 => Ok((
+            None,
+            Some(format!(
+                "several pose topics ({}): no ground truth written; choose one with --groundtruth-topic",
+                poses.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
+            )),
+        )),
+        None => Ok((None, None)),
     }
 }
 
@@ -192,17 +204,11 @@ pub fn convert_to_asl(
     let all = storage.topics()?;
     let imu = read_ros_imu(&storage, &opts.imu, &opts.validate)?;
     let images = pick_images(input, &all, &opts.images)?;
-    let gt_topic = pick_groundtruth(input, &all, &opts.groundtruth)?;
+    let (gt_topic, gt_note) = pick_groundtruth(input, &all, &opts.groundtruth)?;
     let infos: Vec<Option<String>> = images.iter().map(|t| info_topic(t, &all)).collect();
     let mut report = ConvertReport { imu: (imu.len(), imu.topic.clone().unwrap_or_default()), ..Default::default() };
     report.notes.extend(imu.warnings.iter().cloned());
-    let poses: Vec<&TopicInfo> = all.iter().filter(|t| msgs::POSE_TYPES.contains(&t.msg_type.as_str())).collect();
-    if gt_topic.is_none() && poses.len() > 1 {
-        report.notes.push(format!(
-            "several pose topics ({}): no ground truth written; choose one with --groundtruth-topic",
-            poses.iter().map(|t| t.name.as_str()).collect::<Vec<_>>().join(", ")
-        ));
-    }
+    report.notes.extend(gt_note);
     let total: usize = all
         .iter()
         .filter(|t| images.contains(&t.name) || Some(&t.name) == gt_topic.as_ref())

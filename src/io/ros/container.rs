@@ -111,8 +111,19 @@ impl Storage {
         }
     }
 
-    /// The topics stored, with types (from the files' indexes where they have one).
+    /// The topics stored, with types and message counts (from the files'
+    /// indexes where they have one; a `.db3` is scanned once to count).
     pub fn topics(&self) -> Result<Vec<TopicInfo>, InputError> {
+        self.list(true)
+    }
+
+    /// The topics stored and their types, without counting a `.db3`'s messages
+    /// (what choosing topics needs).
+    pub fn topic_types(&self) -> Result<Vec<TopicInfo>, InputError> {
+        self.list(false)
+    }
+
+    fn list(&self, counts: bool) -> Result<Vec<TopicInfo>, InputError> {
         let mut all: BTreeMap<String, TopicInfo> = BTreeMap::new();
         let mut add = |t: TopicInfo| {
             let e = all.entry(t.name.clone()).or_insert(TopicInfo { count: Some(0), ..t.clone() });
@@ -121,10 +132,10 @@ impl Storage {
         match self {
             Storage::Ros1(p) => ros1_topics(p)?.into_iter().for_each(&mut add),
             Storage::Mcap(p) => mcap_topics(p)?.into_iter().for_each(&mut add),
-            Storage::Db3(p) => db3_topics(p)?.into_iter().for_each(&mut add),
+            Storage::Db3(p) => db3_topics(p, counts)?.into_iter().for_each(&mut add),
             Storage::Folder(files) => {
                 for f in files {
-                    f.topics()?.into_iter().for_each(&mut add);
+                    f.list(counts)?.into_iter().for_each(&mut add);
                 }
             }
         }
@@ -371,21 +382,22 @@ fn db3_topic_rows(path: &Path, db: &rusqlite::Connection) -> Result<Vec<(i64, St
     rows.collect::<Result<Vec<_>, _>>().map_err(db3_bad(path))
 }
 
-fn db3_topics(path: &Path) -> Result<Vec<TopicInfo>, InputError> {
+fn db3_topics(path: &Path, count: bool) -> Result<Vec<TopicInfo>, InputError> {
     let db = db3_open(path)?;
     // One pass over the table for every topic's count (no index on topic_id in rosbag2's schema).
-    let mut q = db.prepare("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id").map_err(db3_bad(path))?;
-    let counts: BTreeMap<i64, i64> = q
-        .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
-        .map_err(db3_bad(path))?
-        .collect::<Result<_, _>>()
-        .map_err(db3_bad(path))?;
+    let counts: Option<BTreeMap<i64, i64>> = if count {
+        let mut q = db.prepare("SELECT topic_id, COUNT(*) FROM messages GROUP BY topic_id").map_err(db3_bad(path))?;
+        let rows = q.query_map([], |r| Ok((r.get(0)?, r.get(1)?))).map_err(db3_bad(path))?;
+        Some(rows.collect::<Result<_, _>>().map_err(db3_bad(path))?)
+    } else {
+        None
+    };
     Ok(db3_topic_rows(path, &db)?
         .into_iter()
         .map(|(id, name, t, _)| TopicInfo {
             name,
             msg_type: normalize_type(&t),
-            count: Some(counts.get(&id).copied().unwrap_or(0) as u64),
+            count: counts.as_ref().map(|c| c.get(&id).copied().unwrap_or(0) as u64),
         })
         .collect())
 }

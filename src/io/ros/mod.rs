@@ -126,13 +126,12 @@ fn choose(path: &Path, all: &[TopicInfo], want: &ImuTopics) -> Result<(Choice, O
 pub fn read_ros_imu(storage: &Storage, want: &ImuTopics, checks: &ValidateOptions) -> Result<ImuRecording, InputError> {
     let path = storage.path().to_path_buf();
     want.check().map_err(|e| InputError::file(&path, e))?;
-    let all = storage.topics()?;
+    let all = storage.topic_types()?;
     let (choice, temp_topic) = choose(&path, &all, want)?;
-    let names: Vec<&str> = match &choice {
+    let mut topics: Vec<&str> = match &choice {
         Choice::One(t) => vec![t.as_str()],
         Choice::Split { accel, gyro } => vec![accel.as_str(), gyro.as_str()],
     };
-    let mut topics = names.clone();
     topics.extend(temp_topic.as_deref());
     // One (stamp, ω, a) per message: 56 bytes, the recording's own size.
     let mut by_topic: BTreeMap<String, Vec<ImuMessage>> = BTreeMap::new();
