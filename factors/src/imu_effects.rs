@@ -7,9 +7,15 @@
 //! [`Effect`] subtracts one more term, in the calibrated frame:
 //!
 //! ```text
-//! a = v − c_a ΔT − d_a t − n_a ⊙ v² − s_a ⊙ v ΔT
-//! ω = u − G a − c_g ΔT − d_g t − n_g ⊙ u² − s_g ⊙ u ΔT
+//! a = v − c_a ΔT [− q_a ΔT²] − d_a t − n_a ⊙ f(v) − s_a ⊙ v ΔT [− r_a ⊙ v ΔT²]
+//! ω = u − G a − c_g ΔT [− q_g ΔT²] − d_g t − n_g ⊙ f(u) − s_g ⊙ u ΔT [− r_g ⊙ u ΔT²]
 //! ```
+//!
+//! The scale nonlinearity has four forms ([`NonlinearityForm`]), one effect
+//! each: `f(x) = x²` (even), `x|x|` (odd: a scale that grows with the rate,
+//! the datasheet's "scale-factor nonlinearity"), `x³` (odd, cubic) and `|x|`
+//! (a different scale for positive and negative inputs). The temperature
+//! effects are linear in `ΔT` or, in their quadratic forms, linear plus quadratic.
 //!
 //! `ΔT` is the temperature minus the reference \[°C\], `t` the time since the
 //! reference instant \[s\]. The parameters are sensor properties (what the
@@ -27,6 +33,8 @@ use tumble_solvers::lie::{hat, so3_exp, so3_right_jacobian};
 use tumble_solvers::{Factor, FactorError, Key, Linearization, Vars};
 
 /// A named extension of the error model (the audit's fixed vocabulary).
+/// Effects of one [`Effect::family`] are alternative forms of one physical
+/// effect; the audit chooses the form by BIC.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Effect {
     /// Gyro output caused by specific force, `G a` (3×3, row major) \[rad/s per m/s²\].
@@ -35,9 +43,9 @@ pub enum Effect {
     TemperatureBias,
     /// Scale change proportional to the temperature change: accel `s_a`, gyro `s_g` \[1/°C\].
     TemperatureScale,
-    /// Quadratic gyro scale error `n_g ⊙ ω²` \[1/(rad/s)\].
+    /// Even gyro scale nonlinearity `n_g ⊙ ω²` \[1/(rad/s)\].
     GyroScaleNonlinearity,
-    /// Quadratic accelerometer scale error `n_a ⊙ a²` \[1/(m/s²)\].
+    /// Even accelerometer scale nonlinearity `n_a ⊙ a²` \[1/(m/s²)\].
     AccelScaleNonlinearity,
     /// Time offset between accelerometer and gyro samples \[s\] (invisible to the
     /// calibration audit; fitted by the VIO audit, `tumble audit --vio`).
@@ -46,6 +54,48 @@ pub enum Effect {
     CameraImuTimeOffset,
     /// Linear bias drift within the recording: accel `d_a` \[m/s³\], gyro `d_g` \[rad/s²\].
     BiasDrift,
+    /// Odd gyro scale nonlinearity `n_g ⊙ ω|ω|` (a scale growing with the rate) \[1/(rad/s)\].
+    GyroScaleNonlinearityOdd,
+    /// Cubic gyro scale nonlinearity `n_g ⊙ ω³` \[1/(rad/s)²\].
+    GyroScaleNonlinearityCubic,
+    /// Gyro scale asymmetry `n_g ⊙ |ω|`: scale `1 + n` for positive rates, `1 − n` for negative \[1\].
+    GyroScaleAsymmetry,
+    /// Odd accelerometer scale nonlinearity `n_a ⊙ a|a|` \[1/(m/s²)\].
+    AccelScaleNonlinearityOdd,
+    /// Cubic accelerometer scale nonlinearity `n_a ⊙ a³` \[1/(m/s²)²\].
+    AccelScaleNonlinearityCubic,
+    /// Accelerometer scale asymmetry `n_a ⊙ |a|` \[1\].
+    AccelScaleAsymmetry,
+    /// Bias quadratic in the temperature change: `c ΔT + q ΔT²`, accel then gyro,
+    /// linear terms then quadratic \[unit per °C, unit per °C²\].
+    TemperatureBiasQuadratic,
+    /// Scale change quadratic in the temperature change: `s ΔT + r ΔT²` \[1/°C, 1/°C²\].
+    TemperatureScaleQuadratic,
+}
+
+/// The shape `f` of a scale nonlinearity term `n ⊙ f(x)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NonlinearityForm {
+    /// `x²`.
+    Even,
+    /// `x|x|`.
+    Odd,
+    /// `x³`.
+    Cubic,
+    /// `|x|`.
+    Asymmetric,
+}
+
+impl NonlinearityForm {
+    /// `f(x)` and `f'(x)` (`f'(0)` of `|x|` taken as 0).
+    pub fn eval(self, x: f64) -> (f64, f64) {
+        match self {
+            NonlinearityForm::Even => (x * x, 2.0 * x),
+            NonlinearityForm::Odd => (x * x.abs(), 2.0 * x.abs()),
+            NonlinearityForm::Cubic => (x * x * x, 3.0 * x * x),
+            NonlinearityForm::Asymmetric => (x.abs(), if x == 0.0 { 0.0 } else { x.signum() }),
+        }
+    }
 }
 
 /// An effect name [`Effect`]'s `FromStr` does not know (the message lists those it does).
@@ -69,14 +119,31 @@ impl std::str::FromStr for Effect {
     }
 }
 
+/// Which triad a term acts on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Triad {
+    /// The accelerometer.
+    Accel,
+    /// The gyro.
+    Gyro,
+}
+
 impl Effect {
     /// Every effect, in vocabulary order.
-    pub const ALL: [Effect; 8] = [
+    pub const ALL: [Effect; 16] = [
         Effect::GyroGSensitivity,
         Effect::TemperatureBias,
+        Effect::TemperatureBiasQuadratic,
         Effect::TemperatureScale,
+        Effect::TemperatureScaleQuadratic,
         Effect::GyroScaleNonlinearity,
+        Effect::GyroScaleNonlinearityOdd,
+        Effect::GyroScaleNonlinearityCubic,
+        Effect::GyroScaleAsymmetry,
         Effect::AccelScaleNonlinearity,
+        Effect::AccelScaleNonlinearityOdd,
+        Effect::AccelScaleNonlinearityCubic,
+        Effect::AccelScaleAsymmetry,
         Effect::AccelGyroTimeOffset,
         Effect::CameraImuTimeOffset,
         Effect::BiasDrift,
@@ -93,6 +160,14 @@ impl Effect {
             Effect::AccelGyroTimeOffset => "accel_gyro_time_offset",
             Effect::CameraImuTimeOffset => "camera_imu_time_offset",
             Effect::BiasDrift => "bias_drift",
+            Effect::GyroScaleNonlinearityOdd => "gyro_scale_nonlinearity_odd",
+            Effect::GyroScaleNonlinearityCubic => "gyro_scale_nonlinearity_cubic",
+            Effect::GyroScaleAsymmetry => "gyro_scale_asymmetry",
+            Effect::AccelScaleNonlinearityOdd => "accel_scale_nonlinearity_odd",
+            Effect::AccelScaleNonlinearityCubic => "accel_scale_nonlinearity_cubic",
+            Effect::AccelScaleAsymmetry => "accel_scale_asymmetry",
+            Effect::TemperatureBiasQuadratic => "temperature_bias_quadratic",
+            Effect::TemperatureScaleQuadratic => "temperature_scale_quadratic",
         }
     }
 
@@ -101,15 +176,83 @@ impl Effect {
         Effect::ALL.into_iter().find(|e| e.id() == id)
     }
 
+    /// The physical effect this is one form of (`gyro_scale_nonlinearity` for
+    /// its four forms, `temperature_bias` for the linear and quadratic ones, …).
+    pub fn family(self) -> &'static str {
+        match self {
+            Effect::GyroScaleNonlinearityOdd | Effect::GyroScaleNonlinearityCubic | Effect::GyroScaleAsymmetry => {
+                Effect::GyroScaleNonlinearity.id()
+            }
+            Effect::AccelScaleNonlinearityOdd | Effect::AccelScaleNonlinearityCubic | Effect::AccelScaleAsymmetry => {
+                Effect::AccelScaleNonlinearity.id()
+            }
+            Effect::TemperatureBiasQuadratic => Effect::TemperatureBias.id(),
+            Effect::TemperatureScaleQuadratic => Effect::TemperatureScale.id(),
+            e => e.id(),
+        }
+    }
+
+    /// The form within the family, for reports (`even: n ⊙ ω²`, `linear in ΔT`, …).
+    pub fn form(self) -> &'static str {
+        match self {
+            Effect::GyroScaleNonlinearity => "even, n ⊙ ω²",
+            Effect::GyroScaleNonlinearityOdd => "odd, n ⊙ ω|ω|",
+            Effect::GyroScaleNonlinearityCubic => "odd cubic, n ⊙ ω³",
+            Effect::GyroScaleAsymmetry => "sign-asymmetric, n ⊙ |ω|",
+            Effect::AccelScaleNonlinearity => "even, n ⊙ a²",
+            Effect::AccelScaleNonlinearityOdd => "odd, n ⊙ a|a|",
+            Effect::AccelScaleNonlinearityCubic => "odd cubic, n ⊙ a³",
+            Effect::AccelScaleAsymmetry => "sign-asymmetric, n ⊙ |a|",
+            Effect::TemperatureBias | Effect::TemperatureScale => "linear in ΔT",
+            Effect::TemperatureBiasQuadratic | Effect::TemperatureScaleQuadratic => "quadratic in ΔT",
+            Effect::BiasDrift => "linear in time",
+            Effect::GyroGSensitivity => "linear in specific force",
+            Effect::AccelGyroTimeOffset | Effect::CameraImuTimeOffset => "constant offset",
+        }
+    }
+
+    /// The triad and shape of a scale nonlinearity form.
+    pub fn nonlinearity(self) -> Option<(Triad, NonlinearityForm)> {
+        use NonlinearityForm::*;
+        Some(match self {
+            Effect::GyroScaleNonlinearity => (Triad::Gyro, Even),
+            Effect::GyroScaleNonlinearityOdd => (Triad::Gyro, Odd),
+            Effect::GyroScaleNonlinearityCubic => (Triad::Gyro, Cubic),
+            Effect::GyroScaleAsymmetry => (Triad::Gyro, Asymmetric),
+            Effect::AccelScaleNonlinearity => (Triad::Accel, Even),
+            Effect::AccelScaleNonlinearityOdd => (Triad::Accel, Odd),
+            Effect::AccelScaleNonlinearityCubic => (Triad::Accel, Cubic),
+            Effect::AccelScaleAsymmetry => (Triad::Accel, Asymmetric),
+            _ => return None,
+        })
+    }
+
     /// Names of the parameters, in order (their count is the effect's degrees of freedom).
     pub fn param_names(self) -> &'static [&'static str] {
         const AG: [&str; 6] = ["accel_x", "accel_y", "accel_z", "gyro_x", "gyro_y", "gyro_z"];
+        const AG2: [&str; 12] = [
+            "accel_x",
+            "accel_y",
+            "accel_z",
+            "gyro_x",
+            "gyro_y",
+            "gyro_z",
+            "accel_x_2",
+            "accel_y_2",
+            "accel_z_2",
+            "gyro_x_2",
+            "gyro_y_2",
+            "gyro_z_2",
+        ];
         match self {
             Effect::GyroGSensitivity => &["G_xx", "G_xy", "G_xz", "G_yx", "G_yy", "G_yz", "G_zx", "G_zy", "G_zz"],
             Effect::TemperatureBias | Effect::TemperatureScale | Effect::BiasDrift => &AG,
-            Effect::GyroScaleNonlinearity => &["gyro_x", "gyro_y", "gyro_z"],
-            Effect::AccelScaleNonlinearity => &["accel_x", "accel_y", "accel_z"],
+            Effect::TemperatureBiasQuadratic | Effect::TemperatureScaleQuadratic => &AG2,
             Effect::AccelGyroTimeOffset | Effect::CameraImuTimeOffset => &["offset_s"],
+            e => match e.nonlinearity() {
+                Some((Triad::Gyro, _)) => &["gyro_x", "gyro_y", "gyro_z"],
+                _ => &["accel_x", "accel_y", "accel_z"],
+            },
         }
     }
 
@@ -120,7 +263,7 @@ impl Effect {
 
     /// Whether the effect needs a temperature column.
     pub fn needs_temperature(self) -> bool {
-        matches!(self, Effect::TemperatureBias | Effect::TemperatureScale)
+        self.family() == "temperature_bias" || self.family() == "temperature_scale"
     }
 
     /// Whether [`correct`] models it (the calibration audit can fit it).
@@ -237,17 +380,13 @@ pub fn correct(
     // Accelerometer terms.
     for ((e, th), &o) in layout.effects.iter().zip(p.effects).zip(&offsets) {
         for c in 0..3 {
-            let (delta, d_th, d_v) = match e {
-                Effect::TemperatureBias => (th[c] * ctx.dtemp, ctx.dtemp, 0.0),
-                Effect::BiasDrift => (th[c] * ctx.time, ctx.time, 0.0),
-                Effect::AccelScaleNonlinearity => (th[c] * v[c] * v[c], v[c] * v[c], 2.0 * th[c] * v[c]),
-                Effect::TemperatureScale => (th[c] * v[c] * ctx.dtemp, v[c] * ctx.dtemp, th[c] * ctx.dtemp),
-                _ => continue,
-            };
-            a[c] -= delta;
-            da_dv[(c, c)] -= d_v;
+            let Some(t) = term(*e, th, Triad::Accel, c, v[c], ctx) else { break };
+            a[c] -= t.delta;
+            da_dv[(c, c)] -= t.d_input;
             if jacobians {
-                ja[(c, o + c)] -= d_th;
+                for &(col, d) in &t.d_params[..t.n] {
+                    ja[(c, o + col)] -= d;
+                }
             }
         }
     }
@@ -267,19 +406,13 @@ pub fn correct(
             continue;
         }
         for c in 0..3 {
-            let (delta, d_th, d_u, col) = match e {
-                Effect::TemperatureBias => (th[3 + c] * ctx.dtemp, ctx.dtemp, 0.0, 3 + c),
-                Effect::BiasDrift => (th[3 + c] * ctx.time, ctx.time, 0.0, 3 + c),
-                Effect::GyroScaleNonlinearity => (th[c] * u[c] * u[c], u[c] * u[c], 2.0 * th[c] * u[c], c),
-                Effect::TemperatureScale => {
-                    (th[3 + c] * u[c] * ctx.dtemp, u[c] * ctx.dtemp, th[3 + c] * ctx.dtemp, 3 + c)
-                }
-                _ => break,
-            };
-            w[c] -= delta;
-            dw_du[(c, c)] -= d_u;
+            let Some(t) = term(*e, th, Triad::Gyro, c, u[c], ctx) else { break };
+            w[c] -= t.delta;
+            dw_du[(c, c)] -= t.d_input;
             if jacobians {
-                jw[(c, o + col)] -= d_th;
+                for &(col, d) in &t.d_params[..t.n] {
+                    jw[(c, o + col)] -= d;
+                }
             }
         }
     }
@@ -309,6 +442,45 @@ pub fn correct(
         }
     }
     Corrected { accel: a, gyro: w, d_accel: ja, d_gyro: jw }
+}
+
+/// One axis's term of an effect: its value, its derivative with respect to
+/// the axis's input, and its derivatives with respect to the effect's
+/// parameters (`n` of them, as `(parameter index, ∂term/∂parameter)`).
+struct Term {
+    delta: f64,
+    d_input: f64,
+    d_params: [(usize, f64); 2],
+    n: usize,
+}
+
+/// Axis `c` of `triad`'s term of effect `e` with parameters `th` at input `x`
+/// (`v[c]` or `u[c]`); `None` when the effect has no term on that triad.
+fn term(e: Effect, th: &[f64], triad: Triad, c: usize, x: f64, ctx: Context) -> Option<Term> {
+    // Effects with accelerometer and gyro parameters: the gyro's follow the accelerometer's 3.
+    let k = if triad == Triad::Gyro { 3 + c } else { c };
+    let (dt, dt2) = (ctx.dtemp, ctx.dtemp * ctx.dtemp);
+    let one =
+        |delta: f64, d_input: f64, col: usize, d: f64| Term { delta, d_input, d_params: [(col, d), (0, 0.0)], n: 1 };
+    Some(match e {
+        Effect::TemperatureBias => one(th[k] * dt, 0.0, k, dt),
+        Effect::BiasDrift => one(th[k] * ctx.time, 0.0, k, ctx.time),
+        Effect::TemperatureScale => one(th[k] * x * dt, th[k] * dt, k, x * dt),
+        Effect::TemperatureBiasQuadratic => {
+            Term { delta: th[k] * dt + th[6 + k] * dt2, d_input: 0.0, d_params: [(k, dt), (6 + k, dt2)], n: 2 }
+        }
+        Effect::TemperatureScaleQuadratic => {
+            let s = th[k] * dt + th[6 + k] * dt2;
+            Term { delta: s * x, d_input: s, d_params: [(k, x * dt), (6 + k, x * dt2)], n: 2 }
+        }
+        e => match e.nonlinearity() {
+            Some((t, form)) if t == triad => {
+                let (f, df) = form.eval(x);
+                one(th[c] * f, th[c] * df, c, f)
+            }
+            _ => return None,
+        },
+    })
 }
 
 /// Read the variables of a factor whose keys are `[M_a/b_a, M_g, then `extra`

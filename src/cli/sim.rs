@@ -41,8 +41,11 @@ pub struct SimArgs {
     print_config: bool,
     /// Hide an effect the calibration model lacks (for `tumble audit`): EFFECT or
     /// EFFECT:STRENGTH with EFFECT one of g_sensitivity, temperature_bias,
-    /// temperature_scale, gyro_nonlinearity, accel_nonlinearity, bias_drift
-    /// (repeatable; STRENGTH multiplies the model's coefficients, default 1).
+    /// temperature_bias_quadratic, temperature_scale, temperature_scale_quadratic,
+    /// gyro_nonlinearity, accel_nonlinearity, bias_drift (STRENGTH multiplies the model's
+    /// coefficients, default 1), or gyro_nonlinearity_FORM / accel_nonlinearity_FORM with
+    /// FORM one of even, odd, cubic, asymmetric (STRENGTH: deviation at full scale in % of
+    /// full scale) (repeatable).
     #[arg(long)]
     hide: Vec<String>,
 }

@@ -5,10 +5,11 @@
 //! ã = T_a K_a(1 + s_T,a ΔT) f_a(a) + b_a(t) + η_a(ΔT)       + n_a
 //! ```
 //!
-//! with `f(x) = x + c ⊙ x²` (quadratic scale nonlinearity), `b(t)` = turn-on
+//! with `f(x) = x + c ⊙ h(x)` (scale nonlinearity of shape `h` =
+//! [`TriadModel::nonlinearity_form`]: `x²`, `x|x|`, `x³` or `|x|`), `b(t)` = turn-on
 //! bias + random walk + bias instability (flicker, approximated by a sum of
-//! Gauss–Markov processes), `η = c_T ΔT` the temperature-driven bias with
-//! `ΔT = T(t) − T_ref`, `G` the gyro g-sensitivity \[rad/s per m/s²\], white
+//! Gauss–Markov processes), `η = c_T ΔT + q_T ΔT²` the temperature-driven bias with
+//! `ΔT = T(t) − T_ref` (and a scale `1 + s_T ΔT + r_T ΔT²`), `G` the gyro g-sensitivity \[rad/s per m/s²\], white
 //! noise `n`, then saturation at ±range and quantization to the LSB. Sample
 //! instants jitter around their stamps. `ω` \[rad/s\] and `a` \[m/s²\] are the
 //! true angular rate and specific force in the body (accelerometer) frame.
@@ -28,8 +29,11 @@ pub struct TriadModel {
     pub misalignment: [[f64; 3]; 3],
     /// Scale factors: the diagonal of `K`.
     pub scale: [f64; 3],
-    /// Quadratic nonlinearity `c` in `f(x) = x + c ⊙ x²` \[1/unit\].
+    /// Nonlinearity coefficient `c` in `f(x) = x + c ⊙ h(x)` \[unit^(1−p) for `h`
+    /// of degree p: 1/unit for `x²` and `x|x|`, 1/unit² for `x³`, 1 for `|x|`\].
     pub nonlinearity: [f64; 3],
+    /// Shape `h` of the nonlinearity.
+    pub nonlinearity_form: NonlinearityShape,
     /// Turn-on bias \[unit\].
     pub bias: [f64; 3],
     /// White-noise density N \[unit/√Hz\].
@@ -42,8 +46,12 @@ pub struct TriadModel {
     pub bias_instability_band: [f64; 2],
     /// Temperature bias coefficient \[unit/°C\].
     pub temperature_bias: [f64; 3],
+    /// Quadratic temperature bias coefficient \[unit/°C²\].
+    pub temperature_bias_quadratic: [f64; 3],
     /// Temperature scale coefficient \[1/°C\] (relative change of K).
     pub temperature_scale: [f64; 3],
+    /// Quadratic temperature scale coefficient \[1/°C²\].
+    pub temperature_scale_quadratic: [f64; 3],
     /// Deterministic bias drift: the bias grows linearly from power-on \[unit/s\]
     /// (gyro rad/s², accelerometer m/s³); applied when `effects.bias_drift` is on.
     pub bias_drift: [f64; 3],
@@ -51,6 +59,33 @@ pub struct TriadModel {
     pub lsb: f64,
     /// Measurement range ±range \[unit\]; values beyond are clipped.
     pub range: f64,
+}
+
+/// Shape `h` of a triad's scale nonlinearity `c ⊙ h(x)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NonlinearityShape {
+    /// `x²` (even).
+    #[default]
+    Even,
+    /// `x|x|` (odd: the scale grows with the input's size).
+    Odd,
+    /// `x³`.
+    Cubic,
+    /// `|x|` (a different scale for positive and negative inputs).
+    Asymmetric,
+}
+
+impl NonlinearityShape {
+    /// `h(x)`.
+    pub fn eval(self, x: f64) -> f64 {
+        match self {
+            NonlinearityShape::Even => x * x,
+            NonlinearityShape::Odd => x * x.abs(),
+            NonlinearityShape::Cubic => x * x * x,
+            NonlinearityShape::Asymmetric => x.abs(),
+        }
+    }
 }
 
 /// Which terms of the model are applied. Each can be switched on its own.
@@ -213,13 +248,16 @@ impl Default for TriadModel {
             misalignment: I3,
             scale: [1.0; 3],
             nonlinearity: [0.0; 3],
+            nonlinearity_form: NonlinearityShape::Even,
             bias: [0.0; 3],
             noise_density: [0.0; 3],
             random_walk: [0.0; 3],
             bias_instability: [0.0; 3],
             bias_instability_band: [1.0, 1000.0],
             temperature_bias: [0.0; 3],
+            temperature_bias_quadratic: [0.0; 3],
             temperature_scale: [0.0; 3],
+            temperature_scale_quadratic: [0.0; 3],
             bias_drift: [0.0; 3],
             lsb: 0.0,
             range: f64::MAX,
@@ -248,13 +286,16 @@ impl ImuModel {
             misalignment: [[1.0, -0.00867285, -0.0144341], [0.00635068, 1.0, 0.00333975], [0.0160995, 0.0067665, 1.0]],
             scale: [0.994162, 0.999354, 0.99726],
             nonlinearity: [2e-3, -1.5e-3, 1e-3],
+            nonlinearity_form: NonlinearityShape::Even,
             bias: [-2.39227e-5, -2.03875e-5, 1.73784e-6],
             noise_density: [1.05e-3, 1.06e-3, 5.25e-3],
             random_walk: [2e-5; 3],
             bias_instability: [1.18e-5, 9.1e-6, 3.74e-4],
             bias_instability_band: [1.0, 1000.0],
             temperature_bias: [2e-4, -1.5e-4, 1e-4],
+            temperature_bias_quadratic: [4e-5, -3e-5, 2.5e-5],
             temperature_scale: [3e-4, -2e-4, 2.5e-4],
+            temperature_scale_quadratic: [6e-5, -4e-5, 5e-5],
             bias_drift: [1e-5, -8e-6, 6e-6],
             lsb: 2000f64.to_radians() / 32768.0,
             range: 2000f64.to_radians(),
@@ -263,13 +304,16 @@ impl ImuModel {
             misalignment: [[1.0, -0.0107435, -0.00719295], [0.0, 1.0, 0.0141747], [0.0, 0.0, 1.0]],
             scale: [0.994721, 1.00251, 0.999592],
             nonlinearity: [1e-3, -8e-4, 6e-4],
+            nonlinearity_form: NonlinearityShape::Even,
             bias: [0.0148413, 0.120341, -0.0155797],
             noise_density: [0.0191, 0.0177, 0.0428],
             random_walk: [3e-4; 3],
             bias_instability: [1.14e-3, 9.5e-4, 3.03e-3],
             bias_instability_band: [1.0, 1000.0],
             temperature_bias: [1.5e-3, -1e-3, 2e-3],
+            temperature_bias_quadratic: [3e-4, -2e-4, 4e-4],
             temperature_scale: [2e-4, 1.5e-4, -1e-4],
+            temperature_scale_quadratic: [4e-5, 3e-5, -2.5e-5],
             bias_drift: [1e-4, -8e-5, 6e-5],
             lsb: 8.0 * 9.80665 / 4096.0,
             range: 4.0 * 9.80665,
@@ -297,6 +341,8 @@ impl ImuModel {
             if !finite(t.misalignment.as_flattened())
                 || !finite(&t.bias)
                 || !finite(&t.nonlinearity)
+                || !finite(&t.temperature_bias_quadratic)
+                || !finite(&t.temperature_scale_quadratic)
                 || !finite(&t.bias_drift)
             {
                 return Err(format!("{name}: misalignment, bias, bias_drift and nonlinearity must be finite").into());

@@ -112,13 +112,13 @@ fn deterministic(t: &TriadModel, m: &ImuModel, x: [f64; 3], dtemp: f64) -> [f64;
     let mut y = x;
     if e.nonlinearity {
         for k in 0..3 {
-            y[k] += t.nonlinearity[k] * x[k] * x[k];
+            y[k] += t.nonlinearity[k] * t.nonlinearity_form.eval(x[k]);
         }
     }
     for (k, yk) in y.iter_mut().enumerate() {
         let mut s = if e.scale { t.scale[k] } else { 1.0 };
         if e.temperature {
-            s *= 1.0 + t.temperature_scale[k] * dtemp;
+            s *= 1.0 + t.temperature_scale[k] * dtemp + t.temperature_scale_quadratic[k] * dtemp * dtemp;
         }
         *yk *= s;
     }
@@ -238,8 +238,11 @@ pub fn simulate_imu_streaming(
 fn total_bias(model: &ImuModel, bias: &[Vec<f64>], k: usize, j: usize, dtemp: f64) -> (f64, f64) {
     let (mut bg, mut ba) = (bias[k][j], bias[3 + k][j]);
     if model.effects.temperature {
-        bg += model.gyro.temperature_bias[k] * dtemp;
-        ba += model.accel.temperature_bias[k] * dtemp;
+        let poly = |t: &super::model::TriadModel| {
+            t.temperature_bias[k] * dtemp + t.temperature_bias_quadratic[k] * dtemp * dtemp
+        };
+        bg += poly(&model.gyro);
+        ba += poly(&model.accel);
     }
     (bg, ba)
 }

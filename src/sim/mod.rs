@@ -208,13 +208,23 @@ pub const ACCEL_GYRO_TIME_OFFSET_S: f64 = 0.005;
 
 /// Switch on one effect the calibration model lacks, as the audit's tests and
 /// `tumble demo` hide it: `g_sensitivity`, `temperature_bias`,
-/// `temperature_scale`, `gyro_nonlinearity`, `accel_nonlinearity`,
+/// `temperature_bias_quadratic`, `temperature_scale`,
+/// `temperature_scale_quadratic`, `gyro_nonlinearity`, `accel_nonlinearity`,
 /// `bias_drift`, `camera_imu_time_offset`, `accel_gyro_time_offset`, or
 /// `none`, with the model's coefficients of that effect multiplied by
 /// `strength` (the time offsets: [`CAMERA_IMU_TIME_OFFSET_S`] and
-/// [`ACCEL_GYRO_TIME_OFFSET_S`] times `strength`). Temperature effects also get a warm-up from 10 °C
-/// to 50 °C (time constant 150 s) so the temperature changes during a tumble
-/// recording; the nonlinearity of the other triad stays zero.
+/// [`ACCEL_GYRO_TIME_OFFSET_S`] times `strength`).
+///
+/// `gyro_nonlinearity_FORM` and `accel_nonlinearity_FORM`, FORM one of `even`,
+/// `odd`, `cubic`, `asymmetric`, hide a scale nonlinearity of that shape sized
+/// as datasheets give it: `strength` is the deviation at full scale in **% of
+/// full scale** (the triad's `range`), with the signs of the model's
+/// coefficients (`gyro_nonlinearity` and `accel_nonlinearity` are the even
+/// form with the model's coefficients times `strength`).
+///
+/// Temperature effects also get a warm-up of [`HIDDEN_WARMUP_C`] from 10 °C
+/// (time constant 150 s) so the temperature changes during a tumble recording;
+/// the nonlinearity of the other triad stays zero.
 pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Result<(), SimError> {
     if !(strength.is_finite() && strength >= 0.0) {
         return Err(format!("effect strength must be ≥ 0, found {strength}").into());
@@ -224,51 +234,98 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
     for t in [&mut m.gyro, &mut m.accel] {
         scale3(&mut t.nonlinearity);
         scale3(&mut t.temperature_bias);
+        scale3(&mut t.temperature_bias_quadratic);
         scale3(&mut t.temperature_scale);
+        scale3(&mut t.temperature_scale_quadratic);
         scale3(&mut t.bias_drift);
     }
     m.g_sensitivity.iter_mut().for_each(scale3);
-    let e = &mut config.imu.effects;
     let warm = |c: &mut SimConfig| {
-        c.imu.temperature =
-            TemperatureTrace { start: 10.0, end: 50.0, warmup_s: 150.0, reference: 10.0, ..Default::default() };
+        c.imu.temperature = TemperatureTrace {
+            start: 10.0,
+            end: 10.0 + HIDDEN_WARMUP_C,
+            warmup_s: 150.0,
+            reference: 10.0,
+            ..Default::default()
+        };
     };
+    let zero = |v: &mut [f64; 3]| *v = [0.0; 3];
+    if let Some((triad, form)) = effect.split_once("_nonlinearity_") {
+        let shape = match form {
+            "even" => model::NonlinearityShape::Even,
+            "odd" => model::NonlinearityShape::Odd,
+            "cubic" => model::NonlinearityShape::Cubic,
+            "asymmetric" => model::NonlinearityShape::Asymmetric,
+            other => {
+                return Err(format!("unknown nonlinearity form `{other}`: use even, odd, cubic or asymmetric").into())
+            }
+        };
+        let (on, off) = match triad {
+            "gyro" => (&mut config.imu.gyro, &mut config.imu.accel),
+            "accel" => (&mut config.imu.accel, &mut config.imu.gyro),
+            other => return Err(format!("unknown triad `{other}`: use gyro or accel").into()),
+        };
+        zero(&mut off.nonlinearity);
+        // Deviation at full scale: c·h(range) = strength % · range (the model's
+        // coefficients, already times `strength`, give the signs).
+        let size = 0.01 * strength * on.range / shape.eval(on.range).abs();
+        for c in on.nonlinearity.iter_mut() {
+            *c = if *c == 0.0 { 0.0 } else { c.signum() * size };
+        }
+        on.nonlinearity_form = shape;
+        config.imu.effects.nonlinearity = true;
+        return Ok(());
+    }
+    let e = &mut config.imu.effects;
+    // Which temperature terms stay: bias or scale, linear or linear + quadratic.
+    let scale_only = effect.starts_with("temperature_scale");
+    let linear_only = !effect.ends_with("_quadratic");
     match effect {
         "none" => {}
         "g_sensitivity" => e.g_sensitivity = true,
         "gyro_nonlinearity" => {
             e.nonlinearity = true;
-            config.imu.accel.nonlinearity = [0.0; 3];
+            zero(&mut config.imu.accel.nonlinearity);
         }
         "accel_nonlinearity" => {
             e.nonlinearity = true;
-            config.imu.gyro.nonlinearity = [0.0; 3];
+            zero(&mut config.imu.gyro.nonlinearity);
         }
         "bias_drift" => e.bias_drift = true,
         "camera_imu_time_offset" => config.camera.time_offset_s = CAMERA_IMU_TIME_OFFSET_S * strength,
         "accel_gyro_time_offset" => config.imu.accel_time_offset_s = ACCEL_GYRO_TIME_OFFSET_S * strength,
-        "temperature_bias" => {
+        "temperature_bias" | "temperature_bias_quadratic" | "temperature_scale" | "temperature_scale_quadratic" => {
             e.temperature = true;
-            config.imu.accel.temperature_scale = [0.0; 3];
-            config.imu.gyro.temperature_scale = [0.0; 3];
-            warm(config);
-        }
-        "temperature_scale" => {
-            e.temperature = true;
-            config.imu.accel.temperature_bias = [0.0; 3];
-            config.imu.gyro.temperature_bias = [0.0; 3];
+            for t in [&mut config.imu.accel, &mut config.imu.gyro] {
+                if scale_only {
+                    zero(&mut t.temperature_bias);
+                    zero(&mut t.temperature_bias_quadratic);
+                } else {
+                    zero(&mut t.temperature_scale);
+                    zero(&mut t.temperature_scale_quadratic);
+                }
+                if linear_only {
+                    zero(&mut t.temperature_bias_quadratic);
+                    zero(&mut t.temperature_scale_quadratic);
+                }
+            }
             warm(config);
         }
         other => {
             return Err(format!(
-                "unknown effect `{other}`: use g_sensitivity, temperature_bias, temperature_scale, gyro_nonlinearity, \
-                 accel_nonlinearity, bias_drift, camera_imu_time_offset, accel_gyro_time_offset or none"
+                "unknown effect `{other}`: use g_sensitivity, temperature_bias, temperature_bias_quadratic, \
+                 temperature_scale, temperature_scale_quadratic, gyro_nonlinearity, accel_nonlinearity, \
+                 gyro_nonlinearity_FORM or accel_nonlinearity_FORM (FORM: even, odd, cubic, asymmetric), \
+                 bias_drift, camera_imu_time_offset, accel_gyro_time_offset or none"
             )
             .into())
         }
     }
     Ok(())
 }
+
+/// Temperature rise of the warm-up [`hide_effect`] gives the temperature effects \[°C\].
+pub const HIDDEN_WARMUP_C: f64 = 10.0;
 
 /// Rate of the written ground truth \[Hz\] (IMU rate when moving, 10 Hz for static logs).
 pub fn groundtruth_rate(scenario: Scenario, config: &SimConfig) -> f64 {
