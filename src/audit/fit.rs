@@ -31,17 +31,28 @@ pub const GROUPS: [&str; 5] = ["accel_norm", "gyro_static", "rotation", "gyro_bi
 
 /// The noise of every factor, fixed for the whole audit (computed once at the
 /// starting calibration so that χ² values of different models compare).
+#[derive(Clone)]
 pub struct Noise {
     statics: Vec<NoiseModel>,
     motions: Vec<NoiseModel>,
-    gyro_walk: Vec<NoiseModel>,
-    accel_walk: Vec<NoiseModel>,
+    /// Time between consecutive static intervals \[s\].
+    walk_dt: Vec<f64>,
+    /// Bias random walks per axis \[raw units/√s\]: gyro, accelerometer.
+    pub walks: Walks,
+}
+
+/// Bias random walks per axis \[raw units/√s\]: gyro, accelerometer.
+pub type Walks = ([f64; 3], [f64; 3]);
+
+/// Root mean square of the three axes' walks.
+pub fn pooled(w: &[f64; 3]) -> f64 {
+    (w.iter().map(|x| x * x).sum::<f64>() / 3.0).sqrt()
 }
 
 impl Noise {
     /// Noise models at `values` (the base calibration) with bias random walks
-    /// `gyro_rw`, `accel_rw` \[raw units/√s\].
-    pub fn new(data: &AuditData, values: &Values, gyro_rw: f64, accel_rw: f64) -> Result<Noise, AuditError> {
+    /// `walks` per axis \[raw units/√s\].
+    pub fn new(data: &AuditData, values: &Values, walks: Walks) -> Result<Noise, AuditError> {
         let a = *values.get::<AccelParams>(KEY_ACCEL).map_err(|e| e.to_string())?;
         let g = *values.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
         let base = Layout { effects: Vec::new() };
@@ -65,16 +76,19 @@ impl Noise {
                 floor(DMatrix::from_iterator(2, 2, c.iter().copied()))
             })
             .collect::<Result<_, _>>()?;
-        let walk = |rw: f64| -> Result<Vec<NoiseModel>, String> {
-            data.statics
-                .windows(2)
-                .map(|w| {
-                    let dt = (w[1].context.time - w[0].context.time).abs().max(1e-3);
-                    NoiseModel::isotropic(3, (rw * dt.sqrt()).max(1e-12)).map_err(|e| e.to_string())
-                })
-                .collect()
-        };
-        Ok(Noise { statics, motions, gyro_walk: walk(gyro_rw)?, accel_walk: walk(accel_rw)? })
+        let walk_dt =
+            data.statics.windows(2).map(|w| (w[1].context.time - w[0].context.time).abs().max(1e-3)).collect();
+        Ok(Noise { statics, motions, walk_dt, walks })
+    }
+
+    /// The same noise with other bias random walks \[raw units/√s\].
+    pub fn with_walks(&self, walks: Walks) -> Noise {
+        Noise { walks, ..self.clone() }
+    }
+
+    /// Standard deviation of the bias change over the gap after static interval `k` with walk `rw`.
+    fn walk_sigma(&self, rw: f64, k: usize) -> f64 {
+        (rw * self.walk_dt[k].sqrt()).max(1e-12)
     }
 }
 
@@ -136,6 +150,8 @@ pub struct Fit {
     pub parameters: usize,
     /// Per-parameter standard deviation of each effect (from the marginal covariance, scaled by max(1, χ²/dof)).
     pub effect_std: Vec<Vec<f64>>,
+    /// Bias random walks the fit was whitened with \[raw units/√s\].
+    pub walks: Walks,
 }
 
 impl Fit {
@@ -147,9 +163,19 @@ impl Fit {
     pub fn residuals(&self) -> usize {
         self.dims.iter().sum()
     }
+    /// Measurements: the static and motion residuals (the walk residuals are
+    /// priors on the biases, not data) — BIC's `n`.
+    pub fn measurements(&self) -> usize {
+        self.dims[..3].iter().sum()
+    }
     /// Degrees of freedom (residuals − parameters, ≥ 1).
     pub fn dof(&self) -> usize {
         self.residuals().saturating_sub(self.parameters).max(1)
+    }
+    /// Probability of a χ² at least this large if the noise explained everything (χ²(dof)).
+    pub fn p_value(&self) -> f64 {
+        use statrs::distribution::{ChiSquared, ContinuousCDF};
+        ChiSquared::new(self.dof() as f64).map(|c| c.sf(self.chi2())).unwrap_or(1.0)
     }
     /// The gap: χ²/dof − 1, floored at 0.
     pub fn gap(&self) -> f64 {
@@ -208,7 +234,15 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
         .filter(|k| !values.is_constant(*k))
         .map(|k| values.get_dyn(k).map(|v| v.dim()).unwrap_or(0))
         .sum();
-    let mut fit = Fit { layout: layout.clone(), values, chi2_groups, dims, parameters, effect_std: Vec::new() };
+    let mut fit = Fit {
+        layout: layout.clone(),
+        values,
+        chi2_groups,
+        dims,
+        parameters,
+        effect_std: Vec::new(),
+        walks: noise.walks,
+    };
     let inflation = (fit.chi2() / fit.dof() as f64).max(1.0);
     let keys: Vec<Key> = (0..layout.effects.len()).map(key_effect).collect();
     if !keys.is_empty() {
@@ -223,6 +257,97 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
             .collect();
     }
     Ok(fit)
+}
+
+/// Smallest bias random walks an estimate may take \[physical units/√s\]: gyro
+/// 10⁻⁷ rad/s²/√Hz and accelerometer 10⁻⁶ m/s³/√Hz, below navigation-grade
+/// sensors, so a recording that shows no walk keeps a finite weight.
+pub const MIN_RANDOM_WALK: (f64, f64) = (1e-7, 1e-6);
+
+/// Iterations of the walk estimate at most.
+const WALK_ITERATIONS: usize = 60;
+
+/// [`solve`], estimating the bias random walks of every axis from the
+/// recording with the model of `layout` (when `estimate`; otherwise `noise`'s
+/// are kept): variance-component estimation (Helmert/Förstner, which
+/// converges to REML) alternates a solve with `σ² ← σ² · χ²_axis / r_axis`,
+/// `r_axis` the redundancy of that axis's walk residuals (their count minus
+/// the trace of their part of the hat matrix), so the walk is what the bias
+/// changes left by this model imply. `floor` is the smallest walk \[raw
+/// units/√s\] (gyro, accelerometer).
+pub fn solve_walks(
+    data: &AuditData,
+    noise: &Noise,
+    layout: &Layout,
+    start: &Values,
+    estimate: bool,
+    floor: (f64, f64),
+) -> Result<(Fit, Noise), AuditError> {
+    let mut noise = noise.clone();
+    let mut fit = solve(data, &noise, layout, start)?;
+    if !estimate {
+        return Ok((fit, noise));
+    }
+    for _ in 0..WALK_ITERATIONS {
+        let (chi2, r) = walk_components(data, &noise, &fit)?;
+        let mut change: f64 = 0.0;
+        let mut update = |w: &mut [f64; 3], chi2: &[f64; 3], r: &[f64; 3], lo: f64| {
+            for a in 0..3 {
+                // An axis whose walk residuals carry less than one independent residual: nothing to estimate from.
+                if r[a] >= 0.5 {
+                    let new = (w[a] * (chi2[a] / r[a]).sqrt()).max(lo);
+                    change = change.max((new / w[a]).ln().abs());
+                    w[a] = new;
+                }
+            }
+        };
+        let mut walks = noise.walks;
+        update(&mut walks.0, &chi2.0, &r.0, floor.0);
+        update(&mut walks.1, &chi2.1, &r.1, floor.1);
+        noise = noise.with_walks(walks);
+        fit = solve(data, &noise, layout, &fit.values)?;
+        if change < 0.01 {
+            break;
+        }
+    }
+    Ok((fit, noise))
+}
+
+/// Per axis, the χ² of the gyro and accelerometer walk residuals at `fit` and
+/// their redundancy: the residual count minus `Σ_k (Σ_kk + Σ_k+1,k+1 −
+/// 2 Σ_k,k+1)_aa / σ_a,k²` (the hat matrix's diagonal for the between factor
+/// of biases `k`, `k+1`; `Σ` their joint covariance).
+fn walk_components(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<(Walks, Walks), AuditError> {
+    let graph = build(data, noise, &fit.layout)?;
+    let n = data.statics.len();
+    let free = |k: &Key| !fit.values.is_constant(*k);
+    let keys: Vec<Key> = (0..n).map(key_bias).chain((0..n).map(key_wander)).filter(free).collect();
+    let cov = covariances(&graph, &fit.values, &keys).map_err(|e| e.to_string())?;
+    let entry = |x: Key, y: Key, a: usize| -> f64 {
+        if free(&x) && free(&y) {
+            cov.block(x, y).map(|m| m[(a, a)]).unwrap_or(0.0)
+        } else {
+            0.0
+        }
+    };
+    let value = |k: Key| fit.values.get::<Vector3<f64>>(k).copied().unwrap_or_else(|_| Vector3::zeros());
+    let group = |key: fn(usize) -> Key, rw: &[f64; 3]| -> Result<([f64; 3], [f64; 3]), AuditError> {
+        let (mut chi2, mut r) = ([0.0; 3], [0.0; 3]);
+        for k in 0..n - 1 {
+            let d = value(key(k + 1)) - value(key(k));
+            for a in 0..3 {
+                let s2 = noise.walk_sigma(rw[a], k).powi(2);
+                chi2[a] += d[a] * d[a] / s2;
+                let t =
+                    entry(key(k), key(k), a) + entry(key(k + 1), key(k + 1), a) - 2.0 * entry(key(k), key(k + 1), a);
+                r[a] += 1.0 - t / s2;
+            }
+        }
+        Ok((chi2, r))
+    };
+    let (cg, rg) = group(key_bias, &noise.walks.0)?;
+    let (ca, ra) = group(key_wander, &noise.walks.1)?;
+    Ok(((cg, ca), (rg, ra)))
 }
 
 /// Marginal covariance of the calibration blocks (`M_a/b_a`, `M_g`, `b_g` of the first interval).
@@ -243,11 +368,16 @@ fn build(data: &AuditData, noise: &Noise, layout: &Layout) -> Result<Graph, Audi
     for (f, n) in motion_factors(data, layout)?.into_iter().zip(&noise.motions) {
         graph.add(f, n.clone());
     }
-    for (k, n) in noise.gyro_walk.iter().enumerate() {
-        graph.add(BetweenFactor::new(key_bias(k), key_bias(k + 1), Vector3::<f64>::zeros()), n.clone());
+    let walk =
+        |rw: &[f64; 3], k: usize| NoiseModel::diagonal(&rw.map(|w| noise.walk_sigma(w, k))).map_err(|e| e.to_string());
+    for k in 0..noise.walk_dt.len() {
+        graph.add(BetweenFactor::new(key_bias(k), key_bias(k + 1), Vector3::<f64>::zeros()), walk(&noise.walks.0, k)?);
     }
-    for (k, n) in noise.accel_walk.iter().enumerate() {
-        graph.add(BetweenFactor::new(key_wander(k), key_wander(k + 1), Vector3::<f64>::zeros()), n.clone());
+    for k in 0..noise.walk_dt.len() {
+        graph.add(
+            BetweenFactor::new(key_wander(k), key_wander(k + 1), Vector3::<f64>::zeros()),
+            walk(&noise.walks.1, k)?,
+        );
     }
     Ok(graph)
 }
@@ -286,5 +416,29 @@ pub fn residuals(data: &AuditData, layout: &Layout, values: &Values) -> Result<R
         .iter()
         .map(|f| eval(f, values).map(|r| [r[0], r[1]]))
         .collect::<Result<_, _>>()?;
+    Ok((statics, motions))
+}
+
+/// Whitened residuals of `fit` under `noise`: per static interval the 4 rows
+/// `[‖a‖ − g, ω]`, per motion the 2 direction rows (unit variance when the
+/// noise explains them).
+pub fn whitened(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Residuals, AuditError> {
+    let graph = build(data, noise, &fit.layout)?;
+    let mut statics = Vec::with_capacity(data.statics.len());
+    let mut motions = Vec::with_capacity(data.motions.len());
+    for entry in graph.entries().iter().take(data.statics.len() + data.motions.len()) {
+        let vars: Vec<&dyn tumble_solvers::DynVariable> = entry
+            .factor
+            .keys()
+            .iter()
+            .map(|k| fit.values.get_dyn(*k))
+            .collect::<Result<_, _>>()
+            .map_err(|e| e.to_string())?;
+        let (w, _) = entry.evaluate(Vars::new(&vars)).map_err(|e| e.to_string())?;
+        match w.len() {
+            4 => statics.push([w[0], w[1], w[2], w[3]]),
+            _ => motions.push([w[0], w[1]]),
+        }
+    }
     Ok((statics, motions))
 }

@@ -11,11 +11,24 @@
 //!
 //! Each candidate [`Effect`] is a parametric extension of the sensor model
 //! ([`tumble_factors::imu_effects`]); it is fitted jointly with the
-//! calibration by the solver and scored by an F-test (the χ² drop per added
-//! parameter against the remaining χ²/dof) and by ΔBIC. The most significant
-//! candidate (largest ΔBIC) is added when its p-value is below
+//! calibration by the solver and scored by an F-test (the drop of −2 ln L
+//! per added parameter against the remaining χ²/dof) and by ΔBIC. The most
+//! significant candidate (largest ΔBIC) is added when its p-value is below
 //! `alpha / candidates` (Bonferroni) and its ΔBIC is positive; then the search
-//! repeats until nothing passes.
+//! repeats until nothing passes. Effects come in families of alternative
+//! forms (scale nonlinearity even, odd, cubic or sign-asymmetric; temperature
+//! linear or quadratic): the form is the one with the largest ΔBIC, and once
+//! one form is added the family's other forms leave the search.
+//!
+//! Without a noise file the bias random walks are estimated from the
+//! recording ([`fit::solve_walks`]) with every candidate family in the model,
+//! so that a drift, a temperature effect or an orientation-dependent bias is
+//! not absorbed by the walk; the search then runs at these walks.
+//!
+//! After the search the whitened residuals left are tested for structure
+//! against their regressors ([`structure`]); what no effect explains is
+//! reported with its share of the gap, and two effects that explain the same
+//! residual are reported as confounded.
 //!
 //! The two time offsets of the vocabulary do not show in a calibration
 //! recording; [`vio`] audits a VIO run for them.
@@ -33,10 +46,13 @@
 pub mod data;
 pub mod fit;
 pub mod report;
+pub mod structure;
+pub mod trials;
 pub mod vio;
 
 pub use data::AuditData;
 pub use tumble_factors::imu_effects::Effect;
+use tumble_factors::imu_effects::NonlinearityForm;
 
 use crate::calib::{calibrate, CalibOptions, ImuCalibration};
 use crate::io::ImuNoise;
@@ -48,10 +64,14 @@ use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
 use tumble_factors::imu_effects::Layout;
 
-/// Bias random walks assumed without a noise file: gyro \[rad/s²/√Hz\] and
-/// accelerometer \[m/s³/√Hz\] — generous for consumer MEMS, so slow bias wander
-/// is not mistaken for drift.
-pub const DEFAULT_RANDOM_WALK: (f64, f64) = (1e-4, 1e-3);
+/// Where the estimate of the bias random walks starts without a noise file:
+/// gyro \[rad/s²/√Hz\] and accelerometer \[m/s³/√Hz\], typical of consumer
+/// MEMS (the estimate moves from there; see [`fit::solve_walks`]).
+pub const INITIAL_RANDOM_WALK: (f64, f64) = (1e-3, 1e-2);
+
+/// ΔBIC below which two explanations are not told apart (2 ln of a Bayes
+/// factor of 20, "strong evidence" on Kass and Raftery's scale).
+pub const DISTINGUISHABLE_BIC: f64 = 6.0;
 
 /// Smallest temperature span over the static intervals for testing temperature effects \[°C\].
 pub const MIN_TEMPERATURE_SPAN: f64 = 1.0;
@@ -60,7 +80,8 @@ pub const MIN_TEMPERATURE_SPAN: f64 = 1.0;
 #[derive(Clone, Debug)]
 pub struct AuditOptions {
     /// Noise of the IMU (only the random walks are used; the white noise is
-    /// measured in the static intervals). `None`: [`DEFAULT_RANDOM_WALK`].
+    /// measured in the static intervals). `None`: the walks are estimated from
+    /// the recording with each model.
     pub noise: Option<ImuNoise>,
     /// Family-wise significance level; each candidate is tested at `alpha / candidates`.
     pub alpha: f64,
@@ -113,7 +134,7 @@ pub struct CandidateScore {
     pub f: f64,
     /// Its p-value.
     pub p_value: f64,
-    /// BIC improvement `Δχ² − p ln(residuals)` (positive favours the effect).
+    /// BIC improvement `Δχ² − p ln(n)`, n the static and motion residuals (positive favours the effect).
     pub delta_bic: f64,
     /// Gap with the effect.
     pub gap: f64,
@@ -134,8 +155,56 @@ pub struct AuditIteration {
     pub gap_after: f64,
     /// Every candidate's score in this round.
     pub candidates: Vec<CandidateScore>,
+    /// The family's other forms with their ΔBIC, best first.
+    pub other_forms: Vec<(Effect, f64)>,
+    /// Effects of other families that explain the same residual about as well
+    /// (significant this round, ΔBIC within [`DISTINGUISHABLE_BIC`], and no
+    /// longer significant once this effect is in): the recording cannot tell
+    /// them apart.
+    pub confounded_with: Vec<Effect>,
     /// The fit after adding it.
     pub fit: Fit,
+}
+
+impl AuditIteration {
+    /// Whether the form within the family is determined (the next form's ΔBIC
+    /// is at least [`DISTINGUISHABLE_BIC`] lower).
+    pub fn form_determined(&self) -> bool {
+        self.other_forms.first().is_none_or(|(_, b)| self.score.delta_bic - b >= DISTINGUISHABLE_BIC)
+    }
+
+    /// The effect with its form and what could not be decided, for reports.
+    pub fn describe(&self) -> String {
+        let e = self.effect;
+        let mut s = format!("{} ({})", e.family(), e.form());
+        if !self.form_determined() {
+            let (o, b) = self.other_forms[0];
+            s += &format!(
+                " [form not determined: {} fits about as well, ΔBIC {:.1} vs {:.1}]",
+                o.form(),
+                b,
+                self.score.delta_bic
+            );
+        }
+        for c in &self.confounded_with {
+            s += &format!(" [confounded with {c}: {}]", confounding_advice(e, *c));
+        }
+        s
+    }
+}
+
+/// What recording would tell `a` and `b` apart.
+pub fn confounding_advice(a: Effect, b: Effect) -> &'static str {
+    let fam = |e: Effect| e.family();
+    let pair = |x: &str, y: &str| (fam(a) == x && fam(b) == y) || (fam(a) == y && fam(b) == x);
+    if pair("temperature_bias", "bias_drift") || pair("temperature_scale", "bias_drift") {
+        "the temperature changes monotonically with time here; a recording whose temperature goes up and down \
+         (or stays constant for as long) would tell them apart"
+    } else if pair("temperature_bias", "temperature_scale") {
+        "a recording with the same temperatures at more varied orientations and rates would tell them apart"
+    } else {
+        "this recording cannot tell them apart; a longer one with more varied orientations and rates could"
+    }
 }
 
 /// The audit's result.
@@ -150,8 +219,16 @@ pub struct Audit {
     pub last_round: Vec<CandidateScore>,
     /// The calibration with the effects (re-solved jointly).
     pub calibration: ImuCalibration,
-    /// Random walks used \[raw units/√s\]: gyro, accel.
+    /// Random walks used \[raw units/√s\]: gyro, accel (root mean square of the axes).
     pub random_walk: (f64, f64),
+    /// Per axis.
+    pub random_walk_axes: fit::Walks,
+    /// Whether the walks were estimated from the recording (no noise file).
+    pub walks_estimated: bool,
+    /// Structure left in the final model's residuals.
+    pub structure: Vec<structure::Structure>,
+    /// The family-wise significance level used.
+    pub alpha: f64,
     /// Things the user should know.
     pub notes: Vec<String>,
 }
@@ -168,13 +245,53 @@ impl Audit {
     /// One line for the terminal.
     pub fn verdict(&self) -> String {
         let (g0, g1) = (self.base.gap(), self.final_fit().gap());
-        if self.iterations.is_empty() {
+        let unexplained = structure::summary(&self.structure);
+        let p_left = self.final_fit().p_value();
+        let mut v = if self.iterations.is_empty() && p_left >= self.alpha && unexplained.is_empty() {
             format!("no missing effect found: the model explains the data (gap {g0:.3})")
+        } else if self.iterations.is_empty() {
+            format!("no effect of the vocabulary explains the gap ({g0:.3}, p {p_left:.1e})")
         } else {
-            let names: Vec<&str> = self.iterations.iter().map(|i| i.effect.id()).collect();
+            let names: Vec<String> = self.iterations.iter().map(|i| i.describe()).collect();
             let shrink = if g0 > 0.0 { 100.0 * (1.0 - g1 / g0) } else { 0.0 };
-            format!("missing effect(s): {} — gap {g0:.3} → {g1:.3} ({shrink:.0} % smaller)", names.join(", "))
+            let left = if g0 > 0.0 { 100.0 * g1 / g0 } else { 0.0 };
+            let mut v = format!(
+                "missing effect(s): {} — gap {g0:.3} → {g1:.3} ({shrink:.0} % smaller, {left:.0} % of it left",
+                names.join(", ")
+            );
+            v += &if p_left < self.alpha {
+                format!(", unexplained: p {p_left:.1e})")
+            } else {
+                ", within the noise)".into()
+            };
+            v
+        };
+        if !unexplained.is_empty() {
+            v += &format!("; {unexplained}");
+        } else if p_left < self.alpha {
+            v += &format!("; {}", self.where_the_gap_is());
         }
+        v
+    }
+
+    /// Which residual group carries most of the final fit's excess χ², for a
+    /// gap without structure against any regressor.
+    fn where_the_gap_is(&self) -> String {
+        let f = self.final_fit();
+        let names = ["|a| − g at rest", "gyro at rest", "motion direction", "gyro bias walk", "accel bias walk"];
+        let worst = (0..5)
+            .filter(|&g| f.dims[g] > 0)
+            .max_by(|&a, &b| {
+                let excess = |g: usize| f.chi2_groups[g] - f.dims[g] as f64;
+                excess(a).total_cmp(&excess(b))
+            })
+            .unwrap_or(0);
+        format!(
+            "it lies mostly in the {} residuals (χ²/n {:.2}) without structure against time, temperature, orientation \
+             or rate: noise above what the static intervals show (vibration, timing), or an effect outside the vocabulary",
+            names[worst],
+            f.chi2_groups[worst] / f.dims[worst].max(1) as f64
+        )
     }
 }
 
@@ -216,18 +333,17 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
     let intervals = still_intervals(rec, &detected.intervals, &gyro, &gyro_bias, 0.5 * detection.window_s, &mut notes);
     let data = AuditData::new(rec, &intervals, calibration.gravity).map_err(|e| fail(e.to_string()))?;
     // Random walks in raw units: physical ones times the sensor scale (raw per physical unit).
+    let estimate = opts.noise.is_none();
+    // Per axis when the noise file has them (tumble's `axes` block), else its one figure.
     let (rw_g, rw_a) = match &opts.noise {
-        Some(n) => (n.gyroscope_random_walk, n.accelerometer_random_walk),
-        None => {
-            notes.push(format!(
-                "no noise file: bias random walks assumed {:.0e} rad/s²/√Hz (gyro) and {:.0e} m/s³/√Hz (accel); \
-                 pass --noise imu.yaml from `tumble allan` for a sharper test of bias drift",
-                DEFAULT_RANDOM_WALK.0, DEFAULT_RANDOM_WALK.1
-            ));
-            DEFAULT_RANDOM_WALK
-        }
+        Some(n) => match &n.axes {
+            Some(x) => (x.gyroscope_random_walk, x.accelerometer_random_walk),
+            None => ([n.gyroscope_random_walk; 3], [n.accelerometer_random_walk; 3]),
+        },
+        None => ([INITIAL_RANDOM_WALK.0; 3], [INITIAL_RANDOM_WALK.1; 3]),
     };
-    let random_walk = (rw_g * calibration.gyro.mean_scale(), rw_a * calibration.accel.mean_scale());
+    let (kg, ka) = (calibration.gyro.mean_scale(), calibration.accel.mean_scale());
+    let floor = (fit::MIN_RANDOM_WALK.0 * kg, fit::MIN_RANDOM_WALK.1 * ka);
     let mut candidates: Vec<Effect> = opts.candidates.iter().copied().filter(|e| e.in_sensor_model()).collect();
     let span = data
         .statics
@@ -253,14 +369,47 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
         }
     }
     let start = fit::start_values(&data, accel, gyro, gyro_bias);
-    let noise = Noise::new(&data, &start, random_walk.0, random_walk.1).map_err(|e| fail(e.to_string()))?;
+    let noise =
+        Noise::new(&data, &start, (rw_g.map(|w| w * kg), rw_a.map(|w| w * ka))).map_err(|e| fail(e.to_string()))?;
+    let noise = if estimate {
+        // The walks from the recording, with every candidate family in the
+        // model so that none of them can hide in the walk.
+        // Richest first; a model the recording cannot support (a singular
+        // information matrix) gives way to a smaller one.
+        let mut tried = Vec::new();
+        let mut result = None;
+        for layout in saturated(&candidates) {
+            match fit::solve_walks(&data, &noise, &layout, &start, true, floor) {
+                Ok(r) => {
+                    result = Some(r);
+                    break;
+                }
+                Err(e) => tried.push(format!("with {} effects: {e}", layout.effects.len())),
+            }
+        }
+        let Some((sat, n)) = result else {
+            return Err(fail(format!("the bias random walks could not be estimated ({})", tried.join("; "))));
+        };
+        let axes = |w: &[f64; 3], k: f64| w.iter().map(|x| format!("{:.2e}", x / k)).collect::<Vec<_>>().join(", ");
+        notes.push(format!(
+            "no noise file: bias random walks estimated from the recording (with {} candidate effects in the model), \
+             x, y, z: gyro {} rad/s²/√Hz, accel {} m/s³/√Hz",
+            sat.layout.effects.len(),
+            axes(&n.walks.0, kg),
+            axes(&n.walks.1, ka)
+        ));
+        n
+    } else {
+        noise
+    };
     let base = fit::solve(&data, &noise, &Layout { effects: Vec::new() }, &start).map_err(|e| fail(e.to_string()))?;
     let mut current = base.clone();
-    let mut iterations = Vec::new();
+    let mut iterations: Vec<AuditIteration> = Vec::new();
     let mut last_round = Vec::new();
+    let mut rounds: Vec<Vec<CandidateScore>> = Vec::new();
     while iterations.len() < opts.max_effects {
-        let remaining: Vec<Effect> =
-            candidates.iter().copied().filter(|e| !current.layout.effects.contains(e)).collect();
+        let families: Vec<&str> = current.layout.effects.iter().map(|e| e.family()).collect();
+        let remaining: Vec<Effect> = candidates.iter().copied().filter(|e| !families.contains(&e.family())).collect();
         if remaining.is_empty() {
             break;
         }
@@ -290,23 +439,84 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
             scores.push(s);
         }
         scores.sort_by(|a, b| b.delta_bic.total_cmp(&a.delta_bic));
+        rounds.push(scores.clone());
         let Some((s, f)) = best else {
             last_round = scores;
             break;
         };
         let effect = Effect::from_id(&s.effect).expect("scored effects come from the vocabulary");
+        let other_forms = scores
+            .iter()
+            .filter_map(|c| Effect::from_id(&c.effect).map(|e| (e, c.delta_bic)))
+            .filter(|(e, _)| *e != effect && e.family() == effect.family())
+            .collect();
         iterations.push(AuditIteration {
             effect,
             gap_before: current.gap(),
             gap_after: f.gap(),
             score: s,
             candidates: scores,
+            other_forms,
+            confounded_with: Vec::new(),
             fit: f.clone(),
         });
         current = f;
     }
+    mark_confounded(&mut iterations, &rounds);
+    let structure = structure::test(&data, &noise, &current).map_err(|e| fail(e.to_string()))?;
     let calibration = calibrated(calibration, &data, &noise, &current).map_err(|e| fail(e.to_string()))?;
-    Ok(Audit { data, base, iterations, last_round, calibration, random_walk, notes })
+    Ok(Audit {
+        data,
+        base,
+        iterations,
+        last_round,
+        calibration,
+        random_walk: (fit::pooled(&noise.walks.0), fit::pooled(&noise.walks.1)),
+        random_walk_axes: noise.walks,
+        walks_estimated: estimate,
+        structure,
+        alpha: opts.alpha,
+        notes,
+    })
+}
+
+/// The models the walks are estimated with, richest first: of every candidate
+/// family the richest form — temperature effects quadratic, scale
+/// nonlinearity even and odd (the other two forms are close to these) — so a
+/// drift, a temperature effect or an orientation-dependent bias is fitted, not
+/// taken for walk; then without the nonlinearities; then without any effect.
+fn saturated(candidates: &[Effect]) -> Vec<Layout> {
+    let keep = |e: &Effect| match e.family() {
+        "temperature_bias" | "temperature_scale" => e.id().ends_with("_quadratic"),
+        "gyro_scale_nonlinearity" | "accel_scale_nonlinearity" => {
+            matches!(e.nonlinearity(), Some((_, NonlinearityForm::Even | NonlinearityForm::Odd)))
+        }
+        _ => true,
+    };
+    let all: Vec<Effect> = candidates.iter().copied().filter(keep).collect();
+    let linear: Vec<Effect> = all.iter().copied().filter(|e| e.nonlinearity().is_none()).collect();
+    vec![Layout { effects: all }, Layout { effects: linear }, Layout { effects: Vec::new() }]
+}
+
+/// Mark, for each added effect, the significant effects of other families
+/// with a ΔBIC within [`DISTINGUISHABLE_BIC`] of it whose drop mostly
+/// vanished in the next round (less than a quarter left): they explained the
+/// same residual. `rounds[i]` are the scores of round `i`.
+fn mark_confounded(iterations: &mut [AuditIteration], rounds: &[Vec<CandidateScore>]) {
+    for (i, it) in iterations.iter_mut().enumerate() {
+        let Some(next) = rounds.get(i + 1) else { continue };
+        it.confounded_with = it
+            .candidates
+            .iter()
+            .filter(|c| c.significant && it.score.delta_bic - c.delta_bic < DISTINGUISHABLE_BIC)
+            .filter_map(|c| Effect::from_id(&c.effect).map(|e| (e, c.delta_chi2)))
+            .filter(|(e, _)| e.family() != it.effect.family())
+            .filter(|(e, drop)| {
+                next.iter().find(|n| n.effect == e.id()).is_some_and(|n| n.delta_chi2 < 0.25 * drop && !n.significant)
+            })
+            .map(|(e, _)| e)
+            .collect();
+    }
 }
 
 /// Largest mean rate of a static interval \[rad/s\] (3 °/s): far above any bias
@@ -365,9 +575,9 @@ fn still_intervals(
 
 fn score(effect: Effect, current: &Fit, with: &Fit, threshold: f64) -> CandidateScore {
     let j = with.layout.effects.len() - 1;
-    CandidateScore::from_chi2(
+    CandidateScore::from_drop(
         effect,
-        (current.chi2(), with.chi2(), with.dof(), with.residuals()),
+        (current.chi2() - with.chi2(), with.chi2(), with.dof(), with.measurements()),
         with.effect(j),
         with.effect_std.get(j).cloned().unwrap_or_default(),
         with.gap(),
@@ -376,20 +586,21 @@ fn score(effect: Effect, current: &Fit, with: &Fit, threshold: f64) -> Candidate
 }
 
 impl CandidateScore {
-    /// Score an effect from `(χ² without it, χ² with it, dof with it, residual
-    /// count)`: F-test of the χ² drop per added parameter against the
-    /// remaining χ²/dof, ΔBIC = Δχ² − p ln(residuals); significant when the
-    /// p-value is below `threshold` and ΔBIC > 0.
-    pub fn from_chi2(
+    /// Score an effect from `(drop of −2 ln L when it is added, χ² with it,
+    /// dof with it, measurement count n)`: F-test of the drop per added parameter
+    /// against the remaining χ²/dof, ΔBIC = drop − p ln(n);
+    /// significant when the p-value is below `threshold` and ΔBIC > 0. With
+    /// fixed noise the drop is the χ² drop.
+    pub fn from_drop(
         effect: Effect,
-        (chi2_before, chi2, dof, residuals): (f64, f64, usize, usize),
+        (drop, chi2, dof, residuals): (f64, f64, usize, usize),
         params: Vec<f64>,
         params_std: Vec<f64>,
         gap: f64,
         threshold: f64,
     ) -> CandidateScore {
         let p = effect.dim();
-        let delta = (chi2_before - chi2).max(0.0);
+        let delta = drop.max(0.0);
         let dof = dof.max(1) as f64;
         let f = (delta / p as f64) / (chi2 / dof).max(1e-300);
         let p_value = FisherSnedecor::new(p as f64, dof).map(|d| d.sf(f)).unwrap_or(1.0);

@@ -25,6 +25,8 @@ pub fn iteration_json(
     };
     json!({
         "effect": effect.id(),
+        "family": effect.family(),
+        "form": effect.form(),
         "params": named(&score.params),
         "params_std": named(&score.params_std),
         "score": score.delta_bic,
@@ -42,7 +44,14 @@ pub fn json(a: &Audit) -> serde_json::Value {
     let iterations: Vec<serde_json::Value> = a
         .iterations
         .iter()
-        .map(|it| iteration_json(it.effect, &it.score, it.gap_before, it.gap_after, &it.candidates))
+        .map(|it| {
+            let mut j = iteration_json(it.effect, &it.score, it.gap_before, it.gap_after, &it.candidates);
+            j["form_determined"] = json!(it.form_determined());
+            j["other_forms"] = it.other_forms.iter().map(|(e, b)| json!({"effect": e.id(), "delta_bic": b})).collect();
+            j["confounded_with"] = it.confounded_with.iter().map(|e| json!(e.id())).collect();
+            j["description"] = json!(it.describe());
+            j
+        })
         .collect();
     let fit = a.final_fit();
     let groups: serde_json::Map<String, serde_json::Value> = fit::GROUPS
@@ -56,11 +65,15 @@ pub fn json(a: &Audit) -> serde_json::Value {
         "initial_gap": a.base.gap(),
         "final_gap": fit.gap(),
         "final_chi2_per_dof": fit.chi2() / fit.dof() as f64,
+        "final_gap_p_value": fit.p_value(),
+        "structure": a.structure,
+        "random_walk_estimated": a.walks_estimated,
         "final_groups": groups,
         "last_round": a.last_round,
         "static_intervals": a.data.statics.len(),
         "motions": a.data.motions.len(),
         "random_walk_raw": {"gyro": a.random_walk.0, "accel": a.random_walk.1},
+        "random_walk_raw_axes": {"gyro": a.random_walk_axes.0, "accel": a.random_walk_axes.1},
         "verdict": a.verdict(),
         "notes": a.notes,
     })
@@ -101,6 +114,28 @@ pub fn summary_table(a: &Audit) -> String {
     if !a.last_round.is_empty() {
         let _ = writeln!(s, "round {}: nothing significant", a.iterations.len() + 1);
         round(&mut s, &a.last_round);
+    }
+    let f = a.final_fit();
+    let _ = writeln!(
+        s,
+        "left: χ²/dof {:.3} (gap {:.3}, p {:.1e}); structure of the residuals left:",
+        f.chi2() / f.dof() as f64,
+        f.gap(),
+        f.p_value()
+    );
+    let _ = writeln!(s, "  {:<18} {:<20} {:>5} {:>9} {:>10} {:>8}", "residual", "against", "dof", "T", "p", "share");
+    for t in &a.structure {
+        let _ = writeln!(
+            s,
+            "  {:<18} {:<20} {:>5} {:>9.1} {:>10.2e} {:>7.0}%{}",
+            t.residual,
+            t.regressor,
+            t.dof,
+            t.statistic,
+            t.p_value,
+            100.0 * t.share_of_gap,
+            if t.significant { "  *" } else { "" }
+        );
     }
     s
 }
@@ -198,7 +233,7 @@ fn effect_figure(a: &Audit, prev: &Fit, next: &Fit, effect: Effect, path: &Path)
         }
     };
     let (x_label, x_of): (String, Box<dyn Fn(usize, usize) -> f64>) = match effect {
-        Effect::TemperatureBias | Effect::TemperatureScale => {
+        e if e.needs_temperature() => {
             ("temperature [°C]".into(), Box::new(|i, _| context(i).0 + data.reference_temperature))
         }
         Effect::BiasDrift => ("time [s]".into(), Box::new(|i, _| context(i).1 + data.reference_time)),
@@ -266,7 +301,7 @@ fn markdown(a: &Audit, figures: &[String]) -> String {
         let _ = writeln!(s, "| – | none | | | {:.3} | {:.3} |", a.base.gap(), a.base.gap());
     }
     for it in &a.iterations {
-        let _ = writeln!(s, "\n## `{}`\n\n| parameter | value | std |\n|---|---|---|", it.effect);
+        let _ = writeln!(s, "\n## `{}`: {}\n\n| parameter | value | std |\n|---|---|---|", it.effect, it.describe());
         for ((n, v), sd) in it.effect.param_names().iter().zip(&it.score.params).zip(&it.score.params_std) {
             let _ = writeln!(s, "| {n} | {v:.4e} | {sd:.1e} |");
         }

@@ -33,8 +33,9 @@ pub struct AuditArgs {
     offset_step_ms: f64,
     #[command(flatten)]
     frontend: FrontendArgs,
-    /// Kalibr imu.yaml with the noise (from `tumble allan`): its bias random walks set how
-    /// far biases may wander (default: generous consumer-MEMS values).
+    /// Kalibr imu.yaml with the noise (from `tumble allan`): its bias random walks (per axis
+    /// when it has tumble's `axes` block) set how far biases may wander (default: estimated
+    /// from the recording, per axis, and stated in the report).
     #[arg(long)]
     noise: Option<PathBuf>,
     /// Output folder.
