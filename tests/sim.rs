@@ -139,7 +139,8 @@ fn quantization_saturation_and_temperature() {
     let gt = d.groundtruth.unwrap();
     let ba = gt.bias_accel.unwrap();
     let dtemp = c.imu.temperature.at(s.imu.t[200]) - c.imu.temperature.reference;
-    let want = c.imu.accel.bias[0] + c.imu.accel.temperature_bias[0] * dtemp;
+    let a = &c.imu.accel;
+    let want = a.bias[0] + a.temperature_bias[0] * dtemp + a.temperature_bias_quadratic[0] * dtemp * dtemp;
     assert!((ba[200][0] - want).abs() < 1e-12);
 }
 
@@ -225,8 +226,10 @@ fn nonlinearity_and_temperature_scale_are_exact_on_a_still_sensor() {
     let i = 1000;
     let dtemp = c.imu.temperature.at(s.imu.t[i]) - c.imu.temperature.reference;
     let g = c.gravity;
-    // f(a) = a + c a², scaled by (1 + s_T ΔT), plus η = c_T ΔT.
-    let want = (g + a.nonlinearity[2] * g * g) * (1.0 + a.temperature_scale[2] * dtemp) + a.temperature_bias[2] * dtemp;
+    // f(a) = a + c a², scaled by (1 + s_T ΔT + r_T ΔT²), plus η = c_T ΔT + q_T ΔT².
+    let scale = 1.0 + a.temperature_scale[2] * dtemp + a.temperature_scale_quadratic[2] * dtemp * dtemp;
+    let eta = a.temperature_bias[2] * dtemp + a.temperature_bias_quadratic[2] * dtemp * dtemp;
+    let want = (g + a.nonlinearity[2] * g * g) * scale + eta;
     assert!((s.imu.accel[i][2] - want).abs() < 1e-12, "{} vs {want}", s.imu.accel[i][2]);
     assert!(a.nonlinearity[2] * g * g > 0.01, "the effect is visible");
 }
