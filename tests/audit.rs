@@ -136,7 +136,7 @@ fn estimates_the_bias_random_walk_from_the_recording() {
         assert!(a.walks_estimated);
         let axes = ImuNoise::from_model(&cfg.imu).axes.unwrap();
         let pooled = |v: [f64; 3]| (v.iter().map(|x| x * x).sum::<f64>() / 3.0).sqrt();
-        let g = a.random_walk.0 / cal.calibration.gyro.mean_scale();
+        let g = a.random_walk().0 / cal.calibration.gyro.mean_scale();
         let want = pooled(axes.gyroscope_random_walk);
         println!("seed {seed}: gyro walk {g:.2e}, truth {want:.2e}; {}", a.notes.join(" | "));
         assert!(g > want / 3.0 && g < want * 3.0, "gyro walk {g:.2e} vs {want:.2e}");

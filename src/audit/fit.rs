@@ -204,14 +204,7 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
     let mut chi2_groups = [0.0; 5];
     let mut dims = [0usize; 5];
     for (i, entry) in graph.entries().iter().enumerate() {
-        let vars: Vec<&dyn tumble_solvers::DynVariable> = entry
-            .factor
-            .keys()
-            .iter()
-            .map(|k| values.get_dyn(*k))
-            .collect::<Result<_, _>>()
-            .map_err(|e| e.to_string())?;
-        let (w, _) = entry.evaluate(Vars::new(&vars)).map_err(|e| e.to_string())?;
+        let w = whitened_entry(entry, &values)?;
         if i < n[0] {
             chi2_groups[0] += w[0] * w[0];
             chi2_groups[1] += w.rows(1, 3).norm_squared();
@@ -427,18 +420,19 @@ pub fn whitened(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Residuals,
     let mut statics = Vec::with_capacity(data.statics.len());
     let mut motions = Vec::with_capacity(data.motions.len());
     for entry in graph.entries().iter().take(data.statics.len() + data.motions.len()) {
-        let vars: Vec<&dyn tumble_solvers::DynVariable> = entry
-            .factor
-            .keys()
-            .iter()
-            .map(|k| fit.values.get_dyn(*k))
-            .collect::<Result<_, _>>()
-            .map_err(|e| e.to_string())?;
-        let (w, _) = entry.evaluate(Vars::new(&vars)).map_err(|e| e.to_string())?;
+        let w = whitened_entry(entry, &fit.values)?;
         match w.len() {
             4 => statics.push([w[0], w[1], w[2], w[3]]),
             _ => motions.push([w[0], w[1]]),
         }
     }
     Ok((statics, motions))
+}
+
+/// The whitened residual of one graph entry at `values` (what [`solve`]'s χ²
+/// groups and [`whitened`] read).
+fn whitened_entry(entry: &tumble_solvers::FactorEntry, values: &Values) -> Result<nalgebra::DVector<f64>, AuditError> {
+    let vars: Vec<&dyn tumble_solvers::DynVariable> =
+        entry.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
+    Ok(entry.evaluate(Vars::new(&vars)).map_err(|e| e.to_string())?.0)
 }

@@ -219,9 +219,7 @@ pub struct Audit {
     pub last_round: Vec<CandidateScore>,
     /// The calibration with the effects (re-solved jointly).
     pub calibration: ImuCalibration,
-    /// Random walks used \[raw units/√s\]: gyro, accel (root mean square of the axes).
-    pub random_walk: (f64, f64),
-    /// Per axis.
+    /// Random walks used per axis \[raw units/√s\]: gyro, accel.
     pub random_walk_axes: fit::Walks,
     /// Whether the walks were estimated from the recording (no noise file).
     pub walks_estimated: bool,
@@ -234,6 +232,10 @@ pub struct Audit {
 }
 
 impl Audit {
+    /// Random walks used \[raw units/√s\]: gyro, accel (root mean square of the axes).
+    pub fn random_walk(&self) -> (f64, f64) {
+        (fit::pooled(&self.random_walk_axes.0), fit::pooled(&self.random_walk_axes.1))
+    }
     /// The final fit.
     pub fn final_fit(&self) -> &Fit {
         self.iterations.last().map(|i| &i.fit).unwrap_or(&self.base)
@@ -471,7 +473,6 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
         iterations,
         last_round,
         calibration,
-        random_walk: (fit::pooled(&noise.walks.0), fit::pooled(&noise.walks.1)),
         random_walk_axes: noise.walks,
         walks_estimated: estimate,
         structure,

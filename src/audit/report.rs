@@ -72,7 +72,7 @@ pub fn json(a: &Audit) -> serde_json::Value {
         "last_round": a.last_round,
         "static_intervals": a.data.statics.len(),
         "motions": a.data.motions.len(),
-        "random_walk_raw": {"gyro": a.random_walk.0, "accel": a.random_walk.1},
+        "random_walk_raw": {"gyro": a.random_walk().0, "accel": a.random_walk().1},
         "random_walk_raw_axes": {"gyro": a.random_walk_axes.0, "accel": a.random_walk_axes.1},
         "verdict": a.verdict(),
         "notes": a.notes,
