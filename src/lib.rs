@@ -22,6 +22,7 @@ pub mod model;
 pub mod pipeline;
 pub mod plot;
 pub mod posegraph;
+pub mod rig;
 pub mod sim;
 pub mod vio;
 

@@ -61,33 +61,106 @@ pub struct CameraModel {
     pub distortion: Distortion,
 }
 
+/// Which distortion model, without its coefficients (for estimating them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DistortionKind {
+    /// No distortion.
+    None,
+    /// Radial–tangential `[k1, k2, p1, p2]`.
+    RadTan,
+    /// Equidistant `[k1, k2, k3, k4]`.
+    Equidistant,
+}
+
+impl Distortion {
+    /// The model's kind.
+    pub fn kind(&self) -> DistortionKind {
+        match self {
+            Distortion::None => DistortionKind::None,
+            Distortion::RadTan { .. } => DistortionKind::RadTan,
+            Distortion::Equidistant { .. } => DistortionKind::Equidistant,
+        }
+    }
+    /// The coefficients in Kalibr's order (`[k1, k2, p1, p2]` or `[k1, k2, k3, k4]`; zeros for none).
+    pub fn coefficients(&self) -> [f64; 4] {
+        match *self {
+            Distortion::None => [0.0; 4],
+            Distortion::RadTan { k1, k2, p1, p2 } => [k1, k2, p1, p2],
+            Distortion::Equidistant { k1, k2, k3, k4 } => [k1, k2, k3, k4],
+        }
+    }
+    /// The model of `kind` with coefficients `c` (ignored for none).
+    pub fn from_coefficients(kind: DistortionKind, c: [f64; 4]) -> Distortion {
+        match kind {
+            DistortionKind::None => Distortion::None,
+            DistortionKind::RadTan => Distortion::RadTan { k1: c[0], k2: c[1], p1: c[2], p2: c[3] },
+            DistortionKind::Equidistant => Distortion::Equidistant { k1: c[0], k2: c[1], k3: c[2], k4: c[3] },
+        }
+    }
+}
+
+/// Distort normalized coordinates `[x/z, y/z]` by a model of `kind` whose
+/// coefficients `c` are themselves of the generic scalar (so they can be
+/// estimated with automatic differentiation).
+pub fn distort_with<T: Real>(kind: DistortionKind, c: &[T; 4], x: T, y: T) -> [T; 2] {
+    match kind {
+        DistortionKind::None => [x, y],
+        DistortionKind::RadTan => {
+            let [k1, k2, p1, p2] = *c;
+            let r2 = x * x + y * y;
+            let radial = T::one() + r2 * k1 + r2 * r2 * k2;
+            let xy = x * y;
+            [x * radial + xy * p1 * 2.0 + (r2 + x * x * 2.0) * p2, y * radial + (r2 + y * y * 2.0) * p1 + xy * p2 * 2.0]
+        }
+        DistortionKind::Equidistant => {
+            let [k1, k2, k3, k4] = *c;
+            let r2 = x * x + y * y;
+            if r2.re() < 1e-16 {
+                return [x, y];
+            }
+            let r = r2.sqrt();
+            let th = r.atan();
+            let t2 = th * th;
+            let thd = th * (T::one() + t2 * (t2 * (t2 * (t2 * k4 + k3) + k2) + k1));
+            let s = thd / r;
+            [x * s, y * s]
+        }
+    }
+}
+
+/// Project a point `p` of the camera frame to pixels through intrinsics
+/// `k = [fx, fy, cx, cy, c0, c1, c2, c3]` (focal lengths and principal point
+/// in px, then the distortion coefficients of `kind`), all of the generic
+/// scalar; None behind the camera (z ≤ 1 mm).
+pub fn project_with<T: Real>(kind: DistortionKind, k: &[T], p: &[T; 3]) -> Option<[T; 2]> {
+    if p[2].re() <= 1e-3 {
+        return None;
+    }
+    let [xd, yd] = distort_with(kind, &[k[4], k[5], k[6], k[7]], p[0] / p[2], p[1] / p[2]);
+    Some([xd * k[0] + k[2], yd * k[1] + k[3]])
+}
+
 impl CameraModel {
+    /// The intrinsics as one vector `[fx, fy, cx, cy, c0, c1, c2, c3]` (see [`project_with`]).
+    pub fn to_vector(&self) -> [f64; 8] {
+        let c = self.distortion.coefficients();
+        [self.fx, self.fy, self.cx, self.cy, c[0], c[1], c[2], c[3]]
+    }
+    /// The model of `kind` from `[fx, fy, cx, cy, c0, c1, c2, c3]`.
+    pub fn from_vector(kind: DistortionKind, k: &[f64]) -> CameraModel {
+        CameraModel {
+            fx: k[0],
+            fy: k[1],
+            cx: k[2],
+            cy: k[3],
+            distortion: Distortion::from_coefficients(kind, [k[4], k[5], k[6], k[7]]),
+        }
+    }
+
     /// Distort normalized coordinates `[x/z, y/z]`.
     pub fn distort<T: Real>(&self, x: T, y: T) -> [T; 2] {
-        match self.distortion {
-            Distortion::None => [x, y],
-            Distortion::RadTan { k1, k2, p1, p2 } => {
-                let r2 = x * x + y * y;
-                let radial = T::one() + r2 * k1 + r2 * r2 * k2;
-                let xy = x * y;
-                [
-                    x * radial + xy * (2.0 * p1) + (r2 + x * x * 2.0) * p2,
-                    y * radial + (r2 + y * y * 2.0) * p1 + xy * (2.0 * p2),
-                ]
-            }
-            Distortion::Equidistant { k1, k2, k3, k4 } => {
-                let r2 = x * x + y * y;
-                if r2.re() < 1e-16 {
-                    return [x, y];
-                }
-                let r = r2.sqrt();
-                let th = r.atan();
-                let t2 = th * th;
-                let thd = th * (T::one() + t2 * (t2 * (t2 * (t2 * k4 + k3) + k2) + k1));
-                let s = thd / r;
-                [x * s, y * s]
-            }
-        }
+        let c = self.distortion.coefficients().map(T::from);
+        distort_with(self.distortion.kind(), &c, x, y)
     }
 
     /// Project a point in the camera frame to pixels; None behind the camera

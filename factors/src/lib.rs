@@ -10,6 +10,7 @@
 //! - [`imu_calib`]: gravity-norm and integrated-rotation factors of turntable-free IMU calibration.
 //! - [`imu_preint`]: IMU preintegration (GTSAM's zero-order hold or VINS-Mono's midpoint), [`ImuFactor`], [`bias_random_walk`].
 //! - [`InverseDepthReprojection`]: VINS-Mono's inverse-depth reprojection through any [`camera::CameraModel`].
+//! - [`rig`]: a target corner seen by a camera with unknown intrinsics, pose in the IMU frame and time offset ([`rig::TargetCorner`]), the camera-only corner ([`rig::CameraCorner`]) and the target's gauge.
 //! - [`SnavelyReprojection`]: the Bundle-Adjustment-in-the-Large camera model (analytic Jacobians; its residual is generic too, for autodiff).
 //!
 //! Every factor's Jacobians are verified against central differences in tests.
@@ -26,6 +27,7 @@ pub mod imu_preint;
 pub mod pose_graph_3d;
 pub mod prior;
 pub mod reprojection;
+pub mod rig;
 pub mod testing;
 
 pub use bal::SnavelyReprojection;

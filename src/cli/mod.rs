@@ -15,6 +15,7 @@ mod eval;
 mod export;
 mod inspect;
 mod noise;
+mod rig;
 mod run;
 mod sim;
 mod solve;
@@ -51,6 +52,11 @@ enum Command {
     /// (≥ 50 s still, then many poses held still): writes calibration.json/.yaml,
     /// imu_tk_acc.calib, imu_tk_gyro.calib and static_detection.png.
     Calibrate(calibrate::CalibrateArgs),
+    /// Calibrate a camera–IMU rig on a target (Kalibr's job): each camera's
+    /// intrinsics, its pose in the IMU frame and the time offset, with σ, from
+    /// an ASL folder with camN/corners.csv. Writes camchain-imucam.yaml,
+    /// camN/sensor.yaml, rig.json and report.md.
+    CalibrateRig(rig::RigArgs),
     /// Correct a recording with a calibration (paper eq. 16) and write it in the format it was read.
     Apply(apply::ApplyArgs),
     /// Model-discrepancy audit of a calibration recording: find the effect the
@@ -107,6 +113,7 @@ pub fn main() -> ExitCode {
         Command::Inspect(a) => a.run(),
         Command::Allan(a) => a.run(),
         Command::Calibrate(a) => a.run(),
+        Command::CalibrateRig(a) => a.run(),
         Command::Apply(a) => a.run(),
         Command::Audit(a) => a.run(),
         Command::Vio(a) => a.run(),
@@ -173,6 +180,18 @@ mod tests {
             &["calibrate", "r.csv", "--out", "o", "--multipliers", "2,3.5", "--latitude", "45", "--height", "100"],
             &["calibrate", "--accel", "a", "--gyro", "g", "--format", "imu-tk", "--out", "o"],
             &["apply", "r.csv", "--calibration", "c.json", "--out", "o"],
+            &[
+                "calibrate-rig",
+                "d",
+                "--target",
+                "t.yaml",
+                "--out",
+                "o",
+                "--resolution",
+                "752x480",
+                "--distortion",
+                "equidistant",
+            ],
             &["audit", "r.csv", "--calibration", "c.json", "--out", "o", "--candidates", "temperature_bias,bias_drift"],
             &["audit", "--vio", "v", "--out", "o", "--offset-step-ms", "2"],
             &["vio", "v", "--out", "o", "--init", "motion", "--window", "8", "--keyframe-parallax", "20", "--midpoint"],

@@ -17,6 +17,7 @@
 
 pub mod intrinsics;
 mod targets;
+pub(crate) use targets::kalibr_camera_blocks;
 
 use crate::error::{InputError, OutputError};
 use crate::io::ImuNoise;
@@ -242,7 +243,8 @@ pub struct ExportSources {
     pub noise: Option<PathBuf>,
     /// `audit.json` of the same recording.
     pub audit: Option<PathBuf>,
-    /// An ASL folder whose `camN/sensor.yaml` and `imu0/sensor.yaml` give the cameras and extrinsics.
+    /// An ASL folder whose `camN/sensor.yaml` and `imu0/sensor.yaml` give the
+    /// cameras and extrinsics, or the output folder of `tumble calibrate-rig`.
     pub asl: Option<PathBuf>,
 }
 
@@ -383,9 +385,12 @@ impl ExportInputs {
     }
 }
 
-/// The cameras of an ASL folder: intrinsics, resolution, rate and IMU ← camera from the `T_BS` of both sensors.
+/// The cameras of an ASL folder (or of `tumble calibrate-rig`'s output, whose
+/// `camN/sensor.yaml` sit beside `rig.json`): intrinsics, resolution, rate and
+/// IMU ← camera from the `T_BS` of both sensors.
 fn rig_cameras(dir: &Path) -> Result<Vec<RigCamera>, InputError> {
-    let root = crate::io::asl::resolve_mav0(dir)?;
+    let rig_output = dir.join("rig.json").is_file() && dir.join("cam0").join("sensor.yaml").is_file();
+    let root = if rig_output { dir.to_path_buf() } else { crate::io::asl::resolve_mav0(dir)? };
     let imu_yaml = root.join("imu0").join("sensor.yaml");
     let body_imu =
         if imu_yaml.is_file() { crate::io::asl::read_imu_sensor(&imu_yaml)?.t_bs } else { Isometry3::identity() };

@@ -123,9 +123,15 @@ fn kalibr_camera(c: &RigCamera) -> (&'static str, Vec<f64>) {
 }
 
 fn kalibr_cameras(inp: &ExportInputs, t_imu_cam_key: bool) -> String {
+    kalibr_camera_blocks(&inp.cameras, inp.camera_time_offset(), t_imu_cam_key)
+}
+
+/// Kalibr's per-camera blocks (`cam0:`, `cam1:` …) of `camchain-imucam.yaml`
+/// (`T_cam_imu` and `T_cn_cnm1`) or, with `t_imu_cam_key`, of Basalt-style
+/// `T_imu_cam` listings; `dt` is `timeshift_cam_imu` \[s\] (`t_imu = t_cam + dt`).
+pub(crate) fn kalibr_camera_blocks(cameras: &[RigCamera], dt: f64, t_imu_cam_key: bool) -> String {
     let mut s = String::new();
-    let dt = inp.camera_time_offset();
-    for (i, c) in inp.cameras.iter().enumerate() {
+    for (i, c) in cameras.iter().enumerate() {
         let (dist, d) = kalibr_camera(c);
         let _ = writeln!(s, "cam{i}:");
         if t_imu_cam_key {
@@ -135,12 +141,12 @@ fn kalibr_cameras(inp: &ExportInputs, t_imu_cam_key: bool) -> String {
             let _ = writeln!(s, "  T_cam_imu:");
             s.push_str(&rows(&m4(&c.t_imu_cam.inverse()), 2));
             if i > 0 {
-                let rel = c.t_imu_cam.inverse() * inp.cameras[i - 1].t_imu_cam;
+                let rel = c.t_imu_cam.inverse() * cameras[i - 1].t_imu_cam;
                 let _ = writeln!(s, "  T_cn_cnm1:");
                 s.push_str(&rows(&m4(&rel), 2));
             }
         }
-        let overlaps: Vec<String> = (0..inp.cameras.len()).filter(|&j| j != i).map(|j| j.to_string()).collect();
+        let overlaps: Vec<String> = (0..cameras.len()).filter(|&j| j != i).map(|j| j.to_string()).collect();
         let _ = writeln!(s, "  cam_overlaps: [{}]", overlaps.join(", "));
         let _ = writeln!(s, "  camera_model: pinhole");
         let _ = writeln!(s, "  distortion_coeffs: [{}]", list(&d));

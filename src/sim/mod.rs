@@ -16,6 +16,7 @@ pub mod corridor;
 pub mod imu;
 pub use crate::model::imu_model as model;
 pub mod motion;
+pub mod target;
 pub mod writer;
 
 pub use camera::{CameraSettings, Scene, SimulatedTracks};

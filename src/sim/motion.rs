@@ -317,6 +317,18 @@ impl Loop {
             rot,
         }
     }
+    /// A rig waved in front of a calibration target, as for a camera–IMU
+    /// calibration: within ±15 cm and about ±0.3 rad on every axis, at
+    /// periods of 1–4 s (turn rates up to ≈ 1.5 rad/s), looking along world
+    /// +x from around the origin; still for 3 s at both ends.
+    pub fn target_wave(duration: f64, seed: u64) -> Loop {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x72696700);
+        let period = duration - 10.0;
+        let cycles = |s: f64| [period / 3.7 * s, period / 2.3 * s, period / 1.3 * s].map(f64::round);
+        let pos = Harmonics::random(&mut rng, period, &cycles(1.0), Vector3::new(0.3, 0.3, 0.2));
+        let rot = Harmonics::random(&mut rng, period, &cycles(1.1), Vector3::new(0.8, 0.8, 0.8));
+        Loop { duration, rest_s: 3.0, ramp_s: 2.0, centre: Vector3::zeros(), r0: Matrix3::identity(), pos, rot }
+    }
     /// An EuRoC-like flight: a few metres in a room, faster and with larger yaw.
     pub fn flight(duration: f64, seed: u64) -> Loop {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x666c7900);

@@ -1,0 +1,261 @@
+//! What a rig calibration reads: the target (Kalibr's `target.yaml`), each
+//! camera's detected corners (`camN/corners.csv`), the IMU (`imu0/data.csv`)
+//! and its noise.
+
+use crate::error::InputError;
+use crate::io::table::{read_table, TableSpec, TimeUnit};
+use crate::io::yaml::read_yaml;
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+/// A calibration target in Kalibr's terms.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Target {
+    /// AprilGrid: `cols`×`rows` tags of side `size` \[m\], `spacing` the gap as a fraction of `size`.
+    AprilGrid {
+        /// Tags per row.
+        cols: u32,
+        /// Tag rows.
+        rows: u32,
+        /// Tag side \[m\].
+        size: f64,
+        /// Gap between tags as a fraction of `size`.
+        spacing: f64,
+    },
+    /// Checkerboard: `cols`×`rows` inner corners, spaced `col_spacing` × `row_spacing` \[m\].
+    Checkerboard {
+        /// Inner corners per row.
+        cols: u32,
+        /// Inner-corner rows.
+        rows: u32,
+        /// Spacing along a row \[m\].
+        col_spacing: f64,
+        /// Spacing along a column \[m\].
+        row_spacing: f64,
+    },
+}
+
+#[derive(Deserialize)]
+#[allow(non_snake_case)]
+struct TargetYaml {
+    target_type: String,
+    tagCols: Option<u32>,
+    tagRows: Option<u32>,
+    tagSize: Option<f64>,
+    tagSpacing: Option<f64>,
+    targetCols: Option<u32>,
+    targetRows: Option<u32>,
+    rowSpacingMeters: Option<f64>,
+    colSpacingMeters: Option<f64>,
+}
+
+impl Target {
+    /// Read Kalibr's `target.yaml` (`target_type: aprilgrid` with `tagCols`, `tagRows`,
+    /// `tagSize`, `tagSpacing`, or `checkerboard` with `targetCols`, `targetRows`,
+    /// `rowSpacingMeters`, `colSpacingMeters`).
+    pub fn read(path: &Path) -> Result<Target, InputError> {
+        let y: TargetYaml = read_yaml(path)?;
+        let need_u = |v: Option<u32>, key: &str| match v {
+            Some(n) if n > 0 => Ok(n),
+            Some(n) => Err(InputError::file(path, format!("{key} must be a positive count, found {n}"))),
+            None => Err(InputError::file(path, format!("missing {key}"))),
+        };
+        let need_f = |v: Option<f64>, key: &str, zero_ok: bool| match v {
+            Some(x) if x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0)) => Ok(x),
+            Some(x) => Err(InputError::file(path, format!("{key} must be a positive number of metres, found {x}"))),
+            None => Err(InputError::file(path, format!("missing {key}"))),
+        };
+        match y.target_type.trim_matches(['\'', '"']) {
+            "aprilgrid" => Ok(Target::AprilGrid {
+                cols: need_u(y.tagCols, "tagCols")?,
+                rows: need_u(y.tagRows, "tagRows")?,
+                size: need_f(y.tagSize, "tagSize", false)?,
+                spacing: need_f(y.tagSpacing, "tagSpacing", true)?,
+            }),
+            "checkerboard" => Ok(Target::Checkerboard {
+                cols: need_u(y.targetCols, "targetCols")?,
+                rows: need_u(y.targetRows, "targetRows")?,
+                col_spacing: need_f(y.colSpacingMeters, "colSpacingMeters", false)?,
+                row_spacing: need_f(y.rowSpacingMeters, "rowSpacingMeters", false)?,
+            }),
+            other => Err(InputError::file(path, format!("target_type '{other}' is not supported"))
+                .with_hint("aprilgrid or checkerboard (Kalibr's keys)")),
+        }
+    }
+
+    /// Number of corners: 4 per tag, or the inner corners of a checkerboard.
+    pub fn corner_count(&self) -> usize {
+        match *self {
+            Target::AprilGrid { cols, rows, .. } => 4 * (cols * rows) as usize,
+            Target::Checkerboard { cols, rows, .. } => (cols * rows) as usize,
+        }
+    }
+
+    /// Target-frame position \[m\] of corner `id` (z = 0): for an AprilGrid
+    /// `id = 4·tag + corner` with Kalibr's layout (tag `row·cols + col`, corners
+    /// counter-clockwise from the lower left: (0,0), (s,0), (s,s), (0,s));
+    /// for a checkerboard `id = row·cols + col`. None for an id beyond the target.
+    pub fn corner(&self, id: usize) -> Option<[f64; 3]> {
+        if id >= self.corner_count() {
+            return None;
+        }
+        Some(match *self {
+            Target::AprilGrid { cols, size, spacing, .. } => {
+                let (tag, c) = (id / 4, id % 4);
+                let pitch = size * (1.0 + spacing);
+                let (col, row) = ((tag % cols as usize) as f64, (tag / cols as usize) as f64);
+                let (dx, dy) = [(0.0, 0.0), (size, 0.0), (size, size), (0.0, size)][c];
+                [col * pitch + dx, row * pitch + dy, 0.0]
+            }
+            Target::Checkerboard { cols, col_spacing, row_spacing, .. } => {
+                let (col, row) = ((id % cols as usize) as f64, (id / cols as usize) as f64);
+                [col * col_spacing, row * row_spacing, 0.0]
+            }
+        })
+    }
+}
+
+/// One detected corner: its id on the target, its target-frame position \[m\] and its pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Corner {
+    /// Corner id ([`Target::corner`]).
+    pub id: usize,
+    /// Position on the target \[m\].
+    pub target: [f64; 3],
+    /// Pixel in the raw (distorted) image \[px\].
+    pub uv: [f64; 2],
+}
+
+/// One image of a camera: its stamp and the corners detected in it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct View {
+    /// Camera stamp \[ns\].
+    pub t_ns: i64,
+    /// Corners detected (possibly none).
+    pub corners: Vec<Corner>,
+}
+
+/// One camera's detections.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraCorners {
+    /// Folder name (`cam0`).
+    pub name: String,
+    /// The corners file.
+    pub path: PathBuf,
+    /// Views in time order (every frame of `frames.csv`, or every stamp with corners).
+    pub views: Vec<View>,
+    /// Image size `[width, height]` \[px\] when known (`sensor.yaml` or the options).
+    pub resolution: Option<[u32; 2]>,
+}
+
+/// Tolerance between a corner's position in `corners.csv` and the target's geometry \[m\].
+const GEOMETRY_TOLERANCE_M: f64 = 1e-3;
+
+/// Read `camN/corners.csv` (`timestamp_ns,tag_id,corner_idx,u_px,v_px,x_m,y_m,z_m`;
+/// for a checkerboard `tag_id` is 0 and `corner_idx` the corner's index), check
+/// each corner against the target's geometry, and group them by frame. Frames
+/// of `frames.csv` (one stamp per line), when present, are kept even without corners.
+pub fn read_corners(cam_dir: &Path, target: &Target) -> Result<Vec<View>, InputError> {
+    let path = cam_dir.join("corners.csv");
+    let spec = TableSpec {
+        time: Some((0, TimeUnit::Ns)),
+        values: vec![1, 2, 3, 4, 5, 6, 7],
+        names: ["tag_id", "corner_idx", "u_px", "v_px", "x_m", "y_m", "z_m"].map(String::from).to_vec(),
+        ..TableSpec::default()
+    };
+    let t = read_table(&path, &spec)?;
+    let mut views: Vec<View> = Vec::new();
+    for i in 0..t.t_ns.len() {
+        let line = || t.lines.line(i);
+        let col = |c: usize| t.columns[c][i];
+        let (tag, idx) = (col(0), col(1));
+        if tag < 0.0 || tag.fract() != 0.0 || idx < 0.0 || idx.fract() != 0.0 {
+            return Err(InputError::at(
+                &path,
+                line(),
+                format!("tag_id {tag} and corner_idx {idx} must be non-negative integers"),
+            ));
+        }
+        let id = match target {
+            Target::AprilGrid { .. } => {
+                if idx > 3.0 {
+                    return Err(InputError::at(
+                        &path,
+                        line(),
+                        format!("corner_idx {idx} of an AprilGrid tag must be 0–3"),
+                    ));
+                }
+                4 * tag as usize + idx as usize
+            }
+            Target::Checkerboard { .. } => idx as usize,
+        };
+        let p = [col(4), col(5), col(6)];
+        let expected = target.corner(id).ok_or_else(|| {
+            InputError::at(
+                &path,
+                line(),
+                format!(
+                    "corner {id} (tag {tag}, corner {idx}) is beyond the target's {} corners",
+                    target.corner_count()
+                ),
+            )
+            .with_hint("check --target against the target the corners were detected on")
+        })?;
+        let off = (0..3).map(|k| (p[k] - expected[k]).powi(2)).sum::<f64>().sqrt();
+        if off > GEOMETRY_TOLERANCE_M {
+            return Err(InputError::at(
+                &path,
+                line(),
+                format!(
+                    "corner {id} at ({:.4}, {:.4}, {:.4}) m, but the target puts it at ({:.4}, {:.4}, {:.4}) m",
+                    p[0], p[1], p[2], expected[0], expected[1], expected[2]
+                ),
+            )
+            .with_hint("the target file does not describe the target of these corners"));
+        }
+        let uv = [col(2), col(3)];
+        let t_ns = t.t_ns[i];
+        match views.last_mut() {
+            Some(v) if v.t_ns == t_ns => v.corners.push(Corner { id, target: expected, uv }),
+            Some(v) if v.t_ns > t_ns => {
+                return Err(InputError::at(&path, line(), "corners must be in time order"));
+            }
+            _ => views.push(View { t_ns, corners: vec![Corner { id, target: expected, uv }] }),
+        }
+    }
+    let frames_csv = cam_dir.join("frames.csv");
+    if frames_csv.is_file() {
+        let spec = TableSpec { time: Some((0, TimeUnit::Ns)), ..TableSpec::default() };
+        let f = read_table(&frames_csv, &spec)?;
+        let mut all: Vec<View> = f.t_ns.iter().map(|&t_ns| View { t_ns, corners: Vec::new() }).collect();
+        for v in views {
+            match all.binary_search_by_key(&v.t_ns, |w| w.t_ns) {
+                Ok(k) => all[k] = v,
+                Err(_) => {
+                    return Err(InputError::file(
+                        &path,
+                        format!("corners stamped {} ns, a frame {} does not list", v.t_ns, frames_csv.display()),
+                    ))
+                }
+            }
+        }
+        views = all;
+    }
+    if views.iter().all(|v| v.corners.is_empty()) {
+        return Err(InputError::file(&path, "holds no corners"));
+    }
+    Ok(views)
+}
+
+/// The intrinsics of `dir/camN/sensor.yaml` (or `dir/mav0/camN/…`) for N = 0, 1, … until one is missing.
+pub fn read_intrinsics(dir: &Path) -> Result<Vec<tumble_factors::camera::CameraModel>, InputError> {
+    let base = if dir.join("mav0").is_dir() { dir.join("mav0") } else { dir.to_path_buf() };
+    let mut out = Vec::new();
+    while let Some(p) = Some(base.join(format!("cam{}", out.len())).join("sensor.yaml")).filter(|p| p.is_file()) {
+        out.push(crate::io::asl::read_camera_sensor(&p)?.0);
+    }
+    if out.is_empty() {
+        return Err(InputError::file(dir, "holds no cam0/sensor.yaml with intrinsics"));
+    }
+    Ok(out)
+}

@@ -1,0 +1,458 @@
+//! Calibration of a visual-inertial rig on a known target (`tumble
+//! calibrate-rig`, Kalibr's job): each camera's intrinsics and distortion,
+//! its pose in the IMU frame `T_BC`, the camera–IMU time offset, the
+//! target's pose against gravity and the IMU biases, estimated jointly with
+//! their covariances on the one solver.
+//!
+//! The state is discrete: a body pose, velocity and bias at every camera
+//! frame, IMU preintegration and bias random walks between frames
+//! ([`tumble_factors::ImuFactor`]), and every target corner seen as a
+//! [`tumble_factors::rig::TargetCorner`] (Huber loss, pixel σ measured by the
+//! camera-only calibration). The time offset moves each frame's pose along
+//! the measured rate and the velocity. Nothing is guessed by the user: see
+//! [`init`] for the starting values.
+//!
+//! ```no_run
+//! use tumble::rig::{calibrate_rig, RigInput, RigOptions};
+//! let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
+//! let input = RigInput::from_asl("imu_april".as_ref(), "target.yaml".as_ref(), None, None, &opts).unwrap();
+//! let rig = calibrate_rig(&input, &opts, &mut |msg| eprintln!("{msg}")).unwrap();
+//! for c in &rig.cameras {
+//!     println!("{}: fx {:.2} px, T_BC translation {:?}", c.name, c.model.fx, c.t_bc.translation);
+//! }
+//! println!("time offset {:.3} ms ± {:.3}", rig.time_offset_s * 1e3, rig.time_offset_sigma_s * 1e3);
+//! ```
+
+pub mod init;
+pub mod input;
+pub mod output;
+mod solve;
+
+pub use input::{CameraCorners, Corner, Target, View};
+pub use solve::calibrate_rig;
+
+use crate::error::{InputError, OptionError};
+use crate::io::ImuNoise;
+use crate::model::calibration::ImuCalibration;
+use crate::vio::ImuData;
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use std::path::{Path, PathBuf};
+use tumble_factors::camera::{CameraModel, DistortionKind};
+use tumble_factors::imu_preint::PreintegrationParams;
+
+/// Options of a rig calibration (validated by [`RigOptions::validate`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigOptions {
+    /// Distortion model to estimate for every camera (`--distortion`).
+    pub distortion: DistortionKind,
+    /// Estimate the camera–IMU time offset (`--time-offset on|off`); off holds it at 0.
+    pub estimate_time_offset: bool,
+    /// Largest time offset the coarse search considers \[s\] (`--max-time-offset`).
+    pub max_time_offset_s: f64,
+    /// Local gravity \[m/s²\] (`--gravity`).
+    pub gravity: f64,
+    /// Image size `[width, height]` \[px\] of every camera, when the folder's
+    /// `camN/sensor.yaml` does not give it (`--resolution WxH`).
+    pub resolution: Option<[u32; 2]>,
+    /// Iterations of each joint solve at most.
+    pub max_iterations: usize,
+    /// Intrinsics to hold fixed, per camera in order (Kalibr's two-step
+    /// workflow: cameras calibrated first, then the camera–IMU calibration
+    /// with their intrinsics fixed; `--intrinsics DIR`). Empty: all estimated.
+    pub fixed_intrinsics: Vec<CameraModel>,
+}
+
+impl Default for RigOptions {
+    fn default() -> Self {
+        RigOptions {
+            distortion: DistortionKind::RadTan,
+            estimate_time_offset: true,
+            max_time_offset_s: 0.1,
+            gravity: 9.81,
+            resolution: None,
+            max_iterations: 60,
+            fixed_intrinsics: Vec::new(),
+        }
+    }
+}
+
+impl RigOptions {
+    /// Refuse options no calibration can honour.
+    pub fn validate(&self) -> Result<(), OptionError> {
+        if self.distortion == DistortionKind::None {
+            return Err(OptionError::new("--distortion", "must be radtan or equidistant"));
+        }
+        OptionError::positive("--gravity", self.gravity, "m/s²")?;
+        if !(self.max_time_offset_s.is_finite() && self.max_time_offset_s > 0.0 && self.max_time_offset_s <= 1.0) {
+            return Err(OptionError::new(
+                "--max-time-offset",
+                format!("must be a number of seconds in (0, 1], got {}", self.max_time_offset_s),
+            ));
+        }
+        if let Some(r) = self.resolution {
+            if r[0] == 0 || r[1] == 0 {
+                return Err(OptionError::new("--resolution", "must be WIDTHxHEIGHT in pixels, both > 0"));
+            }
+        }
+        if self.fixed_intrinsics.iter().any(|m| m.distortion.kind() == DistortionKind::None) {
+            return Err(OptionError::new(
+                "--intrinsics",
+                "cameras without distortion cannot be held: give radtan or equidistant",
+            ));
+        }
+        if self.max_iterations == 0 {
+            return Err(OptionError::new("max_iterations", "must be at least 1"));
+        }
+        Ok(())
+    }
+}
+
+/// Everything a rig calibration reads.
+#[derive(Debug, Clone)]
+pub struct RigInput {
+    /// IMU samples (corrected by the IMU calibration when one is given), times
+    /// relative to `imu_t0_ns` \[s\].
+    pub imu: ImuData,
+    /// Absolute time of the IMU's first sample \[ns\].
+    pub imu_t0_ns: i64,
+    /// IMU noise in use (its integration scheme is ignored: the calibration
+    /// always uses the midpoint rule).
+    pub noise: PreintegrationParams,
+    /// Where the noise came from.
+    pub noise_source: String,
+    /// The cameras' detections.
+    pub cameras: Vec<CameraCorners>,
+    /// The target.
+    pub target: Target,
+    /// Files read.
+    pub sources: Vec<PathBuf>,
+}
+
+impl RigInput {
+    /// Read an ASL folder (`mav0/imu0/data.csv`, `mav0/camN/corners.csv`) and
+    /// the target. The IMU noise is `noise` (Kalibr `imu.yaml`, e.g. from
+    /// `tumble allan`), else `imu0/sensor.yaml`'s; without either the input is
+    /// refused. `calibration` (`calibration.json` of `tumble calibrate`)
+    /// corrects the IMU samples first. Each camera's resolution comes from its
+    /// `sensor.yaml`, else from `options.resolution`.
+    pub fn from_asl(
+        path: &Path,
+        target: &Path,
+        noise: Option<&Path>,
+        calibration: Option<&Path>,
+        options: &RigOptions,
+    ) -> Result<RigInput, InputError> {
+        let target_path = target;
+        let target = Target::read(target)?;
+        let ds = crate::io::asl::read_asl(path, &Default::default())?;
+        let calibration = calibration.map(ImuCalibration::read).transpose()?;
+        let mut params = PreintegrationParams::default();
+        let sensor_yaml = ds.root.join("imu0").join("sensor.yaml");
+        let noise_source = match (noise, crate::vio::input::sensor_noise(&ds)) {
+            (Some(p), _) => {
+                ImuNoise::read(p)?.apply(&mut params);
+                p.display().to_string()
+            }
+            (None, Some(n)) => {
+                n.apply(&mut params);
+                sensor_yaml.display().to_string()
+            }
+            (None, None) => {
+                return Err(InputError::file(&sensor_yaml, "absent or without the IMU's four noise figures").with_hint(
+                    "give --noise imu.yaml (from `tumble allan`, or Kalibr's imu.yaml with the datasheet's figures)",
+                ))
+            }
+        };
+        let mut cameras = Vec::new();
+        let mut sources = vec![target_path.to_path_buf(), ds.imu.sources.first().cloned().unwrap_or_default()];
+        for k in 0..8 {
+            let dir = ds.root.join(format!("cam{k}"));
+            if !dir.join("corners.csv").is_file() {
+                continue;
+            }
+            let views = input::read_corners(&dir, &target)?;
+            let resolution = ds.cameras.iter().find(|c| c.name == format!("cam{k}")).and_then(|c| c.resolution);
+            let resolution = resolution.or(options.resolution);
+            sources.push(dir.join("corners.csv"));
+            cameras.push(CameraCorners { name: format!("cam{k}"), path: dir.join("corners.csv"), views, resolution });
+        }
+        if cameras.is_empty() {
+            return Err(InputError::file(&ds.root, "has no camN/corners.csv")
+                .with_hint("detect the target's corners first (the `opencv` feature's detector, or Kalibr's/AprilTag's) and write them as camN/corners.csv"));
+        }
+        if let Some(c) = cameras.iter().find(|c| c.resolution.is_none()) {
+            return Err(InputError::file(
+                &c.path,
+                "the camera's image size is unknown (no sensor.yaml with resolution)",
+            )
+            .with_hint("give --resolution WIDTHxHEIGHT"));
+        }
+        let imu = crate::vio::input::imu_data(&ds.imu, calibration.as_ref());
+        Ok(RigInput { imu, imu_t0_ns: ds.imu.t0_ns, noise: params, noise_source, cameras, target, sources })
+    }
+}
+
+/// How well a recording determines a parameter: its 3σ against the accuracy a
+/// rig calibration is expected to reach ([`accuracy`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Determination {
+    /// 3σ within the accuracy.
+    Determined,
+    /// 3σ within 5× the accuracy: usable, but a better recording would help.
+    Weak,
+    /// 3σ beyond 5× the accuracy: the recording does not determine it.
+    NotDetermined,
+}
+
+impl Determination {
+    /// From a standard deviation and the accuracy expected of it (same units).
+    pub fn of(sigma: f64, accuracy: f64) -> Determination {
+        if !sigma.is_finite() {
+            Determination::NotDetermined
+        } else if 3.0 * sigma <= accuracy {
+            Determination::Determined
+        } else if 3.0 * sigma <= 5.0 * accuracy {
+            Determination::Weak
+        } else {
+            Determination::NotDetermined
+        }
+    }
+    /// Word for reports.
+    pub fn word(self) -> &'static str {
+        match self {
+            Determination::Determined => "determined",
+            Determination::Weak => "weak",
+            Determination::NotDetermined => "NOT determined",
+        }
+    }
+}
+
+/// The accuracy a rig calibration is expected to reach (what the verdicts
+/// compare 3σ with): what a VIO needs not to be limited by its calibration
+/// — 0.15° and 1 cm of `T_BC`, 0.5 % of focal length, 3 px of principal
+/// point, 0.5 ms of time offset.
+pub mod accuracy {
+    /// `T_BC` rotation \[deg\].
+    pub const ROTATION_DEG: f64 = 0.15;
+    /// `T_BC` translation \[m\].
+    pub const TRANSLATION_M: f64 = 0.01;
+    /// Focal length, relative.
+    pub const FOCAL_RELATIVE: f64 = 0.005;
+    /// Principal point \[px\].
+    pub const PRINCIPAL_POINT_PX: f64 = 3.0;
+    /// Time offset \[s\].
+    pub const TIME_OFFSET_S: f64 = 5e-4;
+}
+
+/// Reprojection statistics of one camera's corners at the solution \[px\].
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct Reprojection {
+    /// Corners used.
+    pub corners: usize,
+    /// RMS of the residual norm.
+    pub rms_px: f64,
+    /// Median of the residual norm.
+    pub median_px: f64,
+    /// Share of corners beyond the Huber threshold (down-weighted).
+    pub outlier_fraction: f64,
+}
+
+/// One corner at the solution: time \[s, IMU axis\], measured pixel and residual \[px\].
+pub type CornerResidual = (f64, [f64; 2], [f64; 2]);
+
+/// The biases at one frame: time \[s\], `b_a` \[m/s²\], `b_g` \[rad/s\].
+pub type BiasSample = (f64, Vector3<f64>, Vector3<f64>);
+
+/// One camera's calibration.
+#[derive(Debug, Clone)]
+pub struct CameraResult {
+    /// Folder name (`cam0`).
+    pub name: String,
+    /// Intrinsics and distortion.
+    pub model: CameraModel,
+    /// σ of `[fx, fy, cx, cy, c0..c3]` (zeros when held fixed).
+    pub model_sigma: [f64; 8],
+    /// The intrinsics were held fixed ([`RigOptions::fixed_intrinsics`]).
+    pub intrinsics_fixed: bool,
+    /// Image size \[px\].
+    pub resolution: [u32; 2],
+    /// Frame rate \[Hz\] (from the median spacing of the frames).
+    pub rate_hz: f64,
+    /// Camera to body (IMU) transform.
+    pub t_bc: Isometry3<f64>,
+    /// σ of the rotation about the body axes \[rad\].
+    pub rotation_sigma: Vector3<f64>,
+    /// σ of the translation along the body axes \[m\].
+    pub translation_sigma: Vector3<f64>,
+    /// Pixel σ of the corners used (camera-only calibration's robust estimate) \[px\].
+    pub pixel_sigma: f64,
+    /// Reprojection at the solution.
+    pub reprojection: Reprojection,
+    /// Hand–eye rotation residual of the start \[rad\].
+    pub hand_eye_rms: f64,
+    /// Per corner at the solution: time \[s, IMU axis\], pixel and residual \[px\] (for figures).
+    pub residuals: Vec<CornerResidual>,
+}
+
+/// The result of a rig calibration.
+#[derive(Debug, Clone)]
+pub struct RigResult {
+    /// Every camera.
+    pub cameras: Vec<CameraResult>,
+    /// Kalibr's `timeshift_cam_imu` \[s\]: `t_imu = t_cam + shift`.
+    pub time_offset_s: f64,
+    /// Its σ \[s\] (NaN when not estimated).
+    pub time_offset_sigma_s: f64,
+    /// The coarse offset of the rate correlation \[s\] and its correlation.
+    pub coarse_time_offset: Option<(f64, f64)>,
+    /// The rate correlation at each shift of the coarse search `(shift [s], correlation)`.
+    pub time_offset_profile: Vec<(f64, f64)>,
+    /// Gravity in the target frame \[m/s²\].
+    pub gravity_in_target: Vector3<f64>,
+    /// Camera-1-from-camera-0 style chain `T_cn_cnm1` for cameras 1.. (camera n ← camera n−1).
+    pub chain: Vec<Isometry3<f64>>,
+    /// Biases `(t [s], b_a [m/s²], b_g [rad/s])` at the frames.
+    pub biases: Vec<BiasSample>,
+    /// Whitened χ² per degree of freedom of the IMU factors (≈ 1 when the noise is right).
+    pub imu_chi2_per_dof: f64,
+    /// Frames in the estimate.
+    pub frames: usize,
+    /// Joint-solve iterations and its final cost.
+    pub iterations: usize,
+    /// Whether both joint solves converged.
+    pub converged: bool,
+    /// Wall time \[s\].
+    pub seconds: f64,
+    /// Noise source (for the report).
+    pub noise_source: String,
+    /// What the calibration noticed.
+    pub notes: Vec<String>,
+}
+
+/// A determined / weak / not determined verdict on one parameter.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Verdict {
+    /// What (e.g. `cam0 T_BC rotation`).
+    pub parameter: String,
+    /// Its largest σ in the verdict's units.
+    pub sigma: f64,
+    /// The accuracy compared with.
+    pub accuracy: f64,
+    /// Units of both.
+    pub units: &'static str,
+    /// The verdict.
+    pub determination: Determination,
+}
+
+impl RigResult {
+    /// Verdict on every parameter (see [`accuracy`]).
+    pub fn verdicts(&self) -> Vec<Verdict> {
+        let mut out = Vec::new();
+        let mut add = |parameter: String, sigma: f64, accuracy: f64, units: &'static str| {
+            out.push(Verdict { parameter, sigma, accuracy, units, determination: Determination::of(sigma, accuracy) })
+        };
+        for c in &self.cameras {
+            add(
+                format!("{} T_BC rotation", c.name),
+                c.rotation_sigma.max().to_degrees(),
+                accuracy::ROTATION_DEG,
+                "deg",
+            );
+            add(format!("{} T_BC translation", c.name), c.translation_sigma.max(), accuracy::TRANSLATION_M, "m");
+            if c.intrinsics_fixed {
+                continue;
+            }
+            let f = c.model_sigma[0] / c.model.fx;
+            add(
+                format!("{} focal length", c.name),
+                f.max(c.model_sigma[1] / c.model.fy),
+                accuracy::FOCAL_RELATIVE,
+                "relative",
+            );
+            add(
+                format!("{} principal point", c.name),
+                c.model_sigma[2].max(c.model_sigma[3]),
+                accuracy::PRINCIPAL_POINT_PX,
+                "px",
+            );
+        }
+        if self.time_offset_sigma_s.is_finite() {
+            add("time offset".into(), self.time_offset_sigma_s, accuracy::TIME_OFFSET_S, "s");
+        }
+        out
+    }
+
+    /// Why the result must not be used, if it must not: a solve that did not
+    /// converge or a parameter the recording does not determine.
+    pub fn refusal(&self) -> Option<String> {
+        if !self.converged {
+            return Some("the joint solve did not converge".into());
+        }
+        let bad: Vec<String> = self
+            .verdicts()
+            .into_iter()
+            .filter(|v| v.determination == Determination::NotDetermined)
+            .map(|v| format!("{} (σ {:.3e} {})", v.parameter, v.sigma, v.units))
+            .collect();
+        (!bad.is_empty()).then(|| format!("the recording does not determine {}", bad.join(", ")))
+    }
+}
+
+/// Rotation matrix of an isometry (nalgebra), for reports.
+pub(crate) fn rotation(t: &Isometry3<f64>) -> Matrix3<f64> {
+    t.rotation.to_rotation_matrix().into_inner()
+}
+
+/// One camera of a rig calibration against a reference calibration of the
+/// same rig (e.g. an earlier Kalibr `camchain` or a dataset's `sensor.yaml`).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Comparison {
+    /// Camera name.
+    pub name: String,
+    /// Angle of `R_BC,refᵀ R_BC` \[deg\].
+    pub rotation_deg: f64,
+    /// `t_BC − t_BC,ref` along the body axes \[m\].
+    pub translation_m: [f64; 3],
+    /// `(fx − fx_ref)/fx_ref`, `(fy − fy_ref)/fy_ref`.
+    pub focal_relative: [f64; 2],
+    /// `cx − cx_ref`, `cy − cy_ref` \[px\].
+    pub principal_point_px: [f64; 2],
+    /// Each difference over its σ: rotation (angle / largest axis σ),
+    /// translation x y z, fx, fy, cx, cy (NaN for intrinsics held fixed).
+    pub normalized: [f64; 8],
+}
+
+impl RigResult {
+    /// Compare each camera with a reference `(model, T_BC)`, in camera order.
+    pub fn compare(&self, reference: &[(CameraModel, Isometry3<f64>)]) -> Vec<Comparison> {
+        self.cameras
+            .iter()
+            .zip(reference)
+            .map(|(c, (m, t))| {
+                let dr = rotation(t).transpose() * rotation(&c.t_bc);
+                let rotation_deg = tumble_solvers::lie::so3_log(&dr).norm().to_degrees();
+                let dt = c.t_bc.translation.vector - t.translation.vector;
+                let s = c.model_sigma;
+                let (ts, rs) = (c.translation_sigma, c.rotation_sigma.max().to_degrees());
+                Comparison {
+                    name: c.name.clone(),
+                    rotation_deg,
+                    translation_m: dt.into(),
+                    focal_relative: [(c.model.fx - m.fx) / m.fx, (c.model.fy - m.fy) / m.fy],
+                    principal_point_px: [c.model.cx - m.cx, c.model.cy - m.cy],
+                    normalized: [
+                        rotation_deg / rs,
+                        dt.x / ts.x,
+                        dt.y / ts.y,
+                        dt.z / ts.z,
+                        (c.model.fx - m.fx) / s[0],
+                        (c.model.fy - m.fy) / s[1],
+                        (c.model.cx - m.cx) / s[2],
+                        (c.model.cy - m.cy) / s[3],
+                    ],
+                }
+            })
+            .collect()
+    }
+}

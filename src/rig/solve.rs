@@ -1,0 +1,475 @@
+//! The joint rig calibration: starting values from [`super::init`], one
+//! factor graph of IMU preintegration, bias random walks and target corners,
+//! solved twice (the second time with the rates corrected by the first's gyro
+//! bias), and the covariances of the calibration parameters.
+
+use super::init::{self, RateIntegral};
+use super::{CameraResult, CornerResidual, Reprojection, RigInput, RigOptions, RigResult};
+use crate::vio::geometry::{gravity_aligned, parts, pose, preintegrate};
+use nalgebra::{Isometry3, Matrix3, SVector, Translation3, UnitQuaternion, Vector1, Vector3, Vector6};
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::time::Instant;
+use tumble_factors::rig::{TargetCorner, TargetGauge};
+use tumble_factors::{bias_random_walk_axes, ImuFactor};
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::{AutoDiff, Graph, Huber, Key, LmOptions, NoiseModel, Optimizer, Values, B, V, X};
+
+/// The target's pose `T_WT`.
+const TARGET: Key = Key::new('t', 0);
+/// The time offset.
+const OFFSET: Key = Key::new('d', 0);
+/// Camera `c`'s `T_BC`.
+fn extrinsic(c: usize) -> Key {
+    Key::new('e', c as u64)
+}
+/// Camera `c`'s intrinsics.
+fn intrinsics(c: usize) -> Key {
+    Key::new('k', c as u64)
+}
+
+/// Huber threshold of the corners, in σ.
+const HUBER_SIGMAS: f64 = 2.0;
+/// σ of the target gauge (its position and yaw are fixed, not estimated).
+const GAUGE_SIGMA: f64 = 1e-6;
+/// Frames at most this far apart \[s\] give a camera's rotation rate for the time-offset correlation.
+const RATE_MAX_GAP_S: f64 = 0.15;
+/// The exposure-time rotation error `|b_g| · |td|` \[rad\] below which the
+/// corners' rates need no second solve with the bias removed (1 % of the
+/// angle of a pixel of a 460 px focal length).
+const RATE_BIAS_TOLERANCE_RAD: f64 = 2e-5;
+/// Hand–eye pairs span this many frames of a camera (≈ 0.25 s at 20 Hz: rotations well above the views' noise).
+const HAND_EYE_SPAN: usize = 5;
+
+/// One camera frame of the estimate: its time on the IMU axis and, per camera, the view seen then.
+struct FrameSlot {
+    t: f64,
+    views: Vec<Option<usize>>,
+}
+
+fn to_nalgebra(x: &Isometry3F64) -> Isometry3<f64> {
+    let (r, t) = parts(x);
+    Isometry3::from_parts(
+        Translation3::from(t),
+        UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
+/// Projection of the mean of rotation matrices onto SO(3) (chordal mean).
+fn mean_rotation(rs: &[Matrix3<f64>]) -> Matrix3<f64> {
+    let sum: Matrix3<f64> = rs.iter().sum();
+    let svd = sum.svd(true, true);
+    match (svd.u, svd.v_t) {
+        (Some(u), Some(vt)) => {
+            let d = if (u * vt).determinant() < 0.0 { -1.0 } else { 1.0 };
+            u * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * vt
+        }
+        _ => Matrix3::identity(),
+    }
+}
+
+/// Calibrate the rig; `progress` receives one line per stage.
+pub fn calibrate_rig(
+    input: &RigInput,
+    o: &RigOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<RigResult, crate::error::OutputError> {
+    o.validate().map_err(|e| e.to_string())?;
+    let t0 = Instant::now();
+    let kind = o.distortion;
+    let mut notes = Vec::new();
+    let n_cams = input.cameras.len();
+    if input.imu.t.len() < 2 || n_cams == 0 {
+        return Err(format!("{} IMU sample(s) and {n_cams} camera(s): nothing to calibrate", input.imu.t.len()).into());
+    }
+    let stamp = |t_ns: i64| (t_ns - input.imu_t0_ns) as f64 * 1e-9;
+    // Samples are point samples at their stamps: the midpoint rule, not a
+    // zero-order hold, which would lag the IMU by half a sample period
+    // (2.5 ms at 200 Hz) and bias the time offset by as much.
+    let mut params = input.noise;
+    params.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
+
+    // 1. Each camera alone: intrinsics, then every view's target pose.
+    let mut starts = Vec::new();
+    let mut view_poses: Vec<Vec<Option<Isometry3F64>>> = Vec::new();
+    for cam in &input.cameras {
+        progress(&format!("{}: intrinsics from {} views (Zhang, then bundle adjustment)", cam.name, cam.views.len()));
+        let fixed = o.fixed_intrinsics.get(starts.len());
+        let s = init::calibrate_camera(&cam.views, kind, fixed, cam.resolution)
+            .map_err(|e| format!("{}: {e}", cam.path.display()))?;
+        progress(&format!(
+            "{}: fx {:.1} fy {:.1} cx {:.1} cy {:.1} px, corner σ {:.3} px",
+            cam.name, s.model.fx, s.model.fy, s.model.cx, s.model.cy, s.pixel_sigma
+        ));
+        view_poses.push(cam.views.iter().map(|v| init::view_pose(v, &s.model)).collect());
+        starts.push(s);
+    }
+
+    for (c, cam) in input.cameras.iter().enumerate() {
+        let stamps: Vec<f64> = cam.views.iter().map(|v| stamp(v.t_ns)).collect();
+        let n =
+            init::drop_unreachable_poses(&stamps, &mut view_poses[c], &input.imu, RATE_MAX_GAP_S, o.max_time_offset_s);
+        if n > 0 {
+            progress(&format!("{}: {n} view pose(s) the gyro cannot reach from their neighbours set aside", cam.name));
+        }
+    }
+
+    // 2. Coarse time offset from the rotation rates of the first camera.
+    let gyro_integral = RateIntegral::new(&input.imu);
+    let coarse = if o.estimate_time_offset {
+        let stamps: Vec<f64> = input.cameras[0].views.iter().map(|v| stamp(v.t_ns)).collect();
+        let rates = init::camera_rates(&stamps, &view_poses[0], RATE_MAX_GAP_S);
+        let c = init::correlate_time_offset(&rates, &gyro_integral, o.max_time_offset_s);
+        match &c {
+            Some((tau, r, _)) => progress(&format!("coarse time offset {:.1} ms (rate correlation {r:.3})", tau * 1e3)),
+            None => {
+                notes.push("too little rotation to correlate camera and gyro rates: the time offset starts at 0".into())
+            }
+        }
+        c
+    } else {
+        None
+    };
+    let td0 = coarse.as_ref().map_or(0.0, |c| c.0);
+
+    // 3. Frames: every stamp at which some camera has a pose, on the IMU axis.
+    let mut slots: BTreeMap<i64, FrameSlot> = BTreeMap::new();
+    for (c, cam) in input.cameras.iter().enumerate() {
+        for (i, v) in cam.views.iter().enumerate() {
+            if view_poses[c][i].is_some() {
+                let s = slots
+                    .entry(v.t_ns)
+                    .or_insert_with(|| FrameSlot { t: stamp(v.t_ns) + td0, views: vec![None; n_cams] });
+                s.views[c] = Some(i);
+            }
+        }
+    }
+    let (t_first, t_last) = (input.imu.t.first().copied().unwrap_or(0.0), input.imu.t.last().copied().unwrap_or(0.0));
+    let frames: Vec<FrameSlot> = slots.into_values().filter(|s| s.t > t_first && s.t < t_last).collect();
+    if frames.len() < 10 {
+        return Err(
+            format!("{} frame(s) with the target in view within the IMU's time span: too few", frames.len()).into()
+        );
+    }
+
+    // 4. Camera–IMU rotations by hand–eye.
+    let zero_bias = (Vector3::zeros(), Vector3::zeros());
+    let mut r_bc = Vec::new();
+    let mut hand_eye_rms = Vec::new();
+    for c in 0..n_cams {
+        let seen: Vec<usize> = (0..frames.len()).filter(|&k| frames[k].views[c].is_some()).collect();
+        let mut pairs = Vec::new();
+        for w in seen.windows(HAND_EYE_SPAN + 1) {
+            let (a, b) = (w[0], w[HAND_EYE_SPAN]);
+            if frames[b].t - frames[a].t > 1.0 {
+                continue;
+            }
+            let (pim, _) = preintegrate(&input.imu, frames[a].t, frames[b].t, zero_bias, params);
+            let pa = view_poses[c][frames[a].views[c].unwrap_or(0)].as_ref();
+            let pb = view_poses[c][frames[b].views[c].unwrap_or(0)].as_ref();
+            if let (Some(pa), Some(pb)) = (pa, pb) {
+                let rc = pa.rotation().matrix() * pb.rotation().matrix().transpose();
+                pairs.push((pim.delta_rotation(), rc));
+            }
+        }
+        let (r, rms) = init::hand_eye_rotation(&pairs).ok_or_else(|| {
+            format!("{}: too few views to relate the camera's rotation to the gyro's", input.cameras[c].name)
+        })?;
+        progress(&format!(
+            "{}: camera–IMU rotation from {} hand–eye pairs, residual {:.2}°",
+            input.cameras[c].name,
+            pairs.len(),
+            rms.to_degrees()
+        ));
+        r_bc.push(r);
+        hand_eye_rms.push(rms);
+    }
+
+    // 5. Gravity in the target frame, the world, body poses, velocities.
+    let acc_at = |t: f64| {
+        let j = input.imu.t.partition_point(|&s| s <= t).clamp(1, input.imu.t.len() - 1);
+        let (ta, tb) = (input.imu.t[j - 1], input.imu.t[j]);
+        let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
+        input.imu.acc[j - 1] * (1.0 - w) + input.imu.acc[j] * w
+    };
+    let body_in_target = |k: usize, c: usize, t_bc: &Isometry3F64| -> Option<Isometry3F64> {
+        let t_ct = view_poses[c][frames[k].views[c]?]?;
+        Some(t_ct.inverse().group_mul(t_bc.inverse()))
+    };
+    let mut t_bc: Vec<Isometry3F64> = r_bc.iter().map(|r| pose(r, &Vector3::zeros())).collect();
+    let mut g_sum = Vector3::zeros();
+    let mut g_n = 0usize;
+    for (k, f) in frames.iter().enumerate() {
+        if let Some(tb) = body_in_target(k, 0, &t_bc[0]) {
+            g_sum -= tb.rotation().matrix() * acc_at(f.t);
+            g_n += 1;
+        }
+    }
+    let g_t = g_sum / g_n.max(1) as f64;
+    let r_wt = gravity_aligned(&(-g_t));
+    let t_wt = pose(&r_wt, &Vector3::zeros());
+    // Cameras after the first: T_BC from the frames both see.
+    for c in 1..n_cams {
+        let (mut rs, mut ts) = (Vec::new(), Vec::new());
+        for (k, f) in frames.iter().enumerate() {
+            if let (Some(tb), Some(v)) = (body_in_target(k, 0, &t_bc[0]), f.views[c]) {
+                if let Some(t_ct) = view_poses[c][v] {
+                    let (r, t) = parts(&tb.inverse().group_mul(t_ct.inverse()));
+                    rs.push(r);
+                    ts.push(t);
+                }
+            }
+        }
+        if rs.len() >= 3 {
+            let t = ts.iter().sum::<Vector3<f64>>() / ts.len() as f64;
+            t_bc[c] = pose(&mean_rotation(&rs), &t);
+        }
+    }
+    let mut body: Vec<Isometry3F64> = Vec::with_capacity(frames.len());
+    for k in 0..frames.len() {
+        let tb = (0..n_cams).find_map(|c| body_in_target(k, c, &t_bc[c])).ok_or("a frame without a pose (internal)")?;
+        body.push(t_wt.group_mul(tb));
+    }
+    let position = |k: usize| parts(&body[k]).1;
+    let vel: Vec<Vector3<f64>> = (0..frames.len())
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(frames.len() - 1));
+            if b > a && frames[b].t > frames[a].t {
+                (position(b) - position(a)) / (frames[b].t - frames[a].t)
+            } else {
+                Vector3::zeros()
+            }
+        })
+        .collect();
+
+    // 6. The joint graph, solved twice.
+    let mut values = Values::new();
+    for k in 0..frames.len() {
+        values.insert(X(k as u64), body[k]);
+        values.insert(V(k as u64), vel[k]);
+        values.insert(B(k as u64), Vector6::<f64>::zeros());
+    }
+    values.insert(TARGET, t_wt);
+    values.insert(OFFSET, Vector1::new(0.0));
+    if !o.estimate_time_offset {
+        values.set_constant(OFFSET, true);
+    }
+    for c in 0..n_cams {
+        values.insert(extrinsic(c), t_bc[c]);
+        values.insert(intrinsics(c), SVector::<f64, 8>::from_column_slice(&starts[c].model.to_vector()));
+        values.set_constant(intrinsics(c), c < o.fixed_intrinsics.len());
+    }
+    let gravity = Vector3::new(0.0, 0.0, -o.gravity);
+    let mut gyro_bias: Vec<Vector3<f64>> = vec![Vector3::zeros(); frames.len()];
+    let mut converged = true;
+    let mut iterations = 0;
+    let mut imu_chi2_per_dof = f64::NAN;
+    let mut solution = values.clone();
+    let mut cov = None;
+    let mut graph = Graph::new();
+    let mut corners: Vec<CornerEntry> = Vec::new();
+    for pass in 0..2 {
+        progress(&format!("joint solve {}: {} frames, {} cameras", pass + 1, frames.len(), n_cams));
+        graph = Graph::new();
+        corners.clear();
+        let mut imu_factors = Vec::new();
+        for k in 0..frames.len() - 1 {
+            let b = solution.get::<Vector6<f64>>(B(k as u64)).map_err(|e| e.to_string())?;
+            let bias = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
+            let (pim, _) = preintegrate(&input.imu, frames[k].t, frames[k + 1].t, bias, params);
+            let (i, j) = (k as u64, k as u64 + 1);
+            let f = ImuFactor::new([X(i), V(i), B(i), X(j), V(j)], Arc::new(pim), gravity);
+            let noise = f.noise_model().map_err(|e| e.to_string())?;
+            imu_factors.push(graph.add(f, noise));
+            let p = &params;
+            let dt = frames[k + 1].t - frames[k].t;
+            let (f, noise) = bias_random_walk_axes(B(i), B(j), p.accel_walk().into(), p.gyro_walk().into(), dt)
+                .map_err(|e| e.to_string())?;
+            graph.add(f, noise);
+        }
+        graph.add(
+            AutoDiff::new(TargetGauge::new(TARGET, &t_wt)),
+            NoiseModel::isotropic(4, GAUGE_SIGMA).map_err(|e| e.to_string())?,
+        );
+        for (k, f) in frames.iter().enumerate() {
+            let rate = gyro_integral.mean(f.t - 2.5e-3, f.t + 2.5e-3).unwrap_or_else(Vector3::zeros) - gyro_bias[k];
+            for (c, cam) in input.cameras.iter().enumerate() {
+                let Some(v) = f.views[c] else { continue };
+                let noise = NoiseModel::isotropic(2, starts[c].pixel_sigma).map_err(|e| e.to_string())?;
+                for corner in &cam.views[v].corners {
+                    let keys = [X(k as u64), V(k as u64), TARGET, extrinsic(c), intrinsics(c), OFFSET];
+                    corners.push(CornerEntry { entry: graph.len(), camera: c, frame: k, uv: corner.uv });
+                    graph.add_robust(
+                        AutoDiff::new(TargetCorner::new(
+                            keys,
+                            corner.target,
+                            corner.uv,
+                            rate.into(),
+                            starts[c].model.distortion.kind(),
+                        )),
+                        noise.clone(),
+                        Huber(HUBER_SIGMAS),
+                    );
+                }
+            }
+        }
+        let opts = LmOptions { max_iterations: o.max_iterations, log_iterations: false, ..LmOptions::default() };
+        let mut keys: Vec<Key> =
+            (0..n_cams).flat_map(|c| [extrinsic(c), intrinsics(c)]).filter(|k| !solution.is_constant(*k)).collect();
+        if o.estimate_time_offset {
+            keys.push(OFFSET);
+        }
+        let (sol, summary, c) =
+            Optimizer::new(opts).optimize_with_covariances(&graph, &solution, &keys).map_err(|e| e.to_string())?;
+        progress(&format!(
+            "  {} iterations, cost {:.4e} → {:.4e} ({:?}, {:.1} s)",
+            summary.iterations, summary.initial_cost, summary.final_cost, summary.termination, summary.time_total
+        ));
+        converged &= summary.converged();
+        iterations += summary.iterations;
+        solution = sol;
+        cov = Some(c);
+        for (k, b) in gyro_bias.iter_mut().enumerate() {
+            let v = solution.get::<Vector6<f64>>(B(k as u64)).map_err(|e| e.to_string())?;
+            *b = v.fixed_rows::<3>(3).into_owned();
+        }
+        let mut chi2 = 0.0;
+        for &i in &imu_factors {
+            let e = &graph.entries()[i];
+            let vars: Vec<&dyn tumble_solvers::DynVariable> =
+                e.factor.keys().iter().filter_map(|k| solution.get_dyn(*k).ok()).collect();
+            if let Ok((r, _)) = e.evaluate(tumble_solvers::Vars::new(&vars)) {
+                chi2 += r.norm_squared();
+            }
+        }
+        imu_chi2_per_dof = chi2 / (9 * imu_factors.len()).max(1) as f64;
+        // The corners' rates were taken without the gyro bias: solve again
+        // only if the bias moves the exposure-time rotation `b_g · td` by
+        // more than a small fraction of a pixel's angle.
+        let td = solution.get::<Vector1<f64>>(OFFSET).map_err(|e| e.to_string())?[0];
+        let largest_bias = gyro_bias.iter().map(|b| b.norm()).fold(0.0, f64::max);
+        if largest_bias * td.abs() < RATE_BIAS_TOLERANCE_RAD {
+            break;
+        }
+    }
+    let cov = cov.ok_or("no solve ran (internal)")?.map_err(|e| format!("covariances: {e}"))?;
+
+    // 7. Results.
+    let td = solution.get::<Vector1<f64>>(OFFSET).map_err(|e| e.to_string())?[0];
+    let td_sigma =
+        if o.estimate_time_offset { cov.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()) } else { f64::NAN };
+    let mut cameras = Vec::new();
+    for (c, cam) in input.cameras.iter().enumerate() {
+        let e: &Isometry3F64 = solution.get(extrinsic(c)).map_err(|e| e.to_string())?;
+        let kv: &SVector<f64, 8> = solution.get(intrinsics(c)).map_err(|e| e.to_string())?;
+        let fixed = c < o.fixed_intrinsics.len();
+        let model = tumble_factors::camera::CameraModel::from_vector(starts[c].model.distortion.kind(), kv.as_slice());
+        let ce = cov.get(extrinsic(c)).ok_or("no covariance of T_BC (internal)")?;
+        let ck = match fixed {
+            true => nalgebra::DMatrix::zeros(8, 8),
+            false => cov.get(intrinsics(c)).ok_or("no covariance of the intrinsics (internal)")?,
+        };
+        let r = e.rotation().matrix();
+        // Tangent [ω, ν] on the right: rotation about camera axes, translation along them.
+        let rot_cov = r * ce.fixed_view::<3, 3>(0, 0) * r.transpose();
+        let tr_cov = r * ce.fixed_view::<3, 3>(3, 3) * r.transpose();
+        let sd = |m: &Matrix3<f64>| Vector3::new(m[(0, 0)].sqrt(), m[(1, 1)].sqrt(), m[(2, 2)].sqrt());
+        let mut model_sigma = [0.0; 8];
+        for (i, s) in model_sigma.iter_mut().enumerate() {
+            *s = ck[(i, i)].sqrt();
+        }
+        let (reprojection, residuals) = reprojection(&graph, &solution, &corners, c, &frames, starts[c].pixel_sigma);
+        cameras.push(CameraResult {
+            name: cam.name.clone(),
+            model,
+            model_sigma,
+            intrinsics_fixed: fixed,
+            resolution: cam.resolution.unwrap_or([0, 0]),
+            rate_hz: {
+                let mut d: Vec<f64> = cam.views.windows(2).map(|w| (w[1].t_ns - w[0].t_ns) as f64 * 1e-9).collect();
+                init::median(&mut d).map_or(f64::NAN, |m| 1.0 / m)
+            },
+            t_bc: to_nalgebra(e),
+            rotation_sigma: sd(&rot_cov),
+            translation_sigma: sd(&tr_cov),
+            pixel_sigma: starts[c].pixel_sigma,
+            reprojection,
+            residuals,
+            hand_eye_rms: hand_eye_rms[c],
+        });
+    }
+    let chain = (1..n_cams).map(|c| cameras[c].t_bc.inverse() * cameras[c - 1].t_bc).collect();
+    let biases = (0..frames.len())
+        .filter_map(|k| {
+            let b = solution.get::<Vector6<f64>>(B(k as u64)).ok()?;
+            Some((frames[k].t, b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned()))
+        })
+        .collect();
+    let t_wt_final: &Isometry3F64 = solution.get(TARGET).map_err(|e| e.to_string())?;
+    let gravity_in_target = t_wt_final.rotation().matrix().transpose() * gravity;
+    if imu_chi2_per_dof > 4.0 {
+        notes.push(format!(
+            "the IMU residuals are {imu_chi2_per_dof:.1}× what the noise model predicts: the noise figures ({}) are too small for this IMU, so the σ given here are too small as well",
+            input.noise_source
+        ));
+    }
+    Ok(RigResult {
+        cameras,
+        time_offset_s: td0 + td,
+        time_offset_sigma_s: td_sigma,
+        coarse_time_offset: coarse.as_ref().map(|c| (c.0, c.1)),
+        time_offset_profile: coarse.map(|c| c.2).unwrap_or_default(),
+        gravity_in_target,
+        chain,
+        biases,
+        imu_chi2_per_dof,
+        frames: frames.len(),
+        iterations,
+        converged,
+        seconds: t0.elapsed().as_secs_f64(),
+        noise_source: input.noise_source.clone(),
+        notes,
+    })
+}
+
+/// A corner factor of the graph: its entry, camera, frame and pixel.
+struct CornerEntry {
+    entry: usize,
+    camera: usize,
+    frame: usize,
+    uv: [f64; 2],
+}
+
+/// Reprojection statistics and per-corner residuals of camera `c` at the solution.
+fn reprojection(
+    graph: &Graph,
+    values: &Values,
+    corners: &[CornerEntry],
+    c: usize,
+    frames: &[FrameSlot],
+    sigma: f64,
+) -> (Reprojection, Vec<CornerResidual>) {
+    let mut norms = Vec::new();
+    let mut out = Vec::new();
+    for ce in corners.iter().filter(|ce| ce.camera == c) {
+        let e = &graph.entries()[ce.entry];
+        let vars: Vec<&dyn tumble_solvers::DynVariable> =
+            e.factor.keys().iter().filter_map(|k| values.get_dyn(*k).ok()).collect();
+        let Ok(r) = e.factor.residual(tumble_solvers::Vars::new(&vars)) else { continue };
+        norms.push(r.norm());
+        out.push((frames[ce.frame].t, ce.uv, [r[0], r[1]]));
+    }
+    let n = norms.len();
+    let rms = (norms.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt();
+    let outliers = norms.iter().filter(|&&x| x > HUBER_SIGMAS * sigma).count();
+    let median = init::median(&mut norms).unwrap_or(f64::NAN);
+    (
+        Reprojection {
+            corners: n,
+            rms_px: rms,
+            median_px: median,
+            outlier_fraction: outliers as f64 / n.max(1) as f64,
+        },
+        out,
+    )
+}
