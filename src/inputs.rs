@@ -27,6 +27,9 @@ pub struct VioSource {
     pub frontend: FrontendOptions,
     /// Where the frontend writes its tracks and figures.
     pub frontend_dir: PathBuf,
+    /// A rig calibration (`tumble calibrate-rig`) whose cameras and time
+    /// offset replace the dataset's own.
+    pub rig: Option<crate::rig::input::RigCalibration>,
 }
 
 /// An opened VIO input and what opening it did.
@@ -74,7 +77,15 @@ pub fn open_vio(
         }
         crate::vio::read_eqvio(path, source.groundtruth.as_deref())?
     } else {
-        let ds = crate::io::asl::read_asl(path, &Default::default())?;
+        let mut ds = crate::io::asl::read_asl(path, &Default::default())?;
+        if let Some(rig) = &source.rig {
+            rig.apply_to(&mut ds)?;
+            notes.push(format!(
+                "cameras: the rig calibration of {} (time offset {:.3} ms)",
+                rig.dir.display(),
+                rig.time_offset_s * 1e3
+            ));
+        }
         if let Some(seed) = source.simulate_camera {
             let cam = crate::sim::CameraSettings::default();
             notes.push(format!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}"));
@@ -95,9 +106,19 @@ pub fn open_vio(
             // Stereo matches next to cam0's tracks.csv (not with the tracks
             // the frontend just made).
             let stereo = !source.mono && tracks.is_none();
-            VioInput::from_dataset(ds, cal, tracks, stereo)?
+            let input = VioInput::from_dataset(ds, cal, tracks, stereo)?;
+            match &source.rig {
+                Some(rig) if rig.time_offset_s != 0.0 => input.with_time_offsets(rig.time_offset_s, 0.0),
+                _ => input,
+            }
         }
     };
+    if let (Some(rig), true) = (&source.rig, is_csv) {
+        warnings.push(format!(
+            "{}: not applied (an EqVIO file carries normalized features of its own camera)",
+            rig.dir.display()
+        ));
+    }
     if let (Some(g), false) = (&source.groundtruth, is_csv) {
         input.groundtruth = Some(crate::io::trajectory::read_asl_groundtruth(g)?);
     }

@@ -177,13 +177,15 @@ fn bad_inputs_name_the_file_and_line() {
     let root = dir.join("mav0");
     std::fs::create_dir_all(root.join("imu0")).unwrap();
     std::fs::create_dir_all(root.join("cam0")).unwrap();
-    let mut imu = String::from("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y,w_RS_S_z,a_RS_S_x [m s^-2],a_RS_S_y,a_RS_S_z\n");
+    let mut imu =
+        String::from("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y,w_RS_S_z,a_RS_S_x [m s^-2],a_RS_S_y,a_RS_S_z\n");
     for i in 0..400 {
         imu.push_str(&format!("{},0,0,0,0,0,9.81\n", 1_000_000_000i64 + i * 5_000_000));
     }
     std::fs::write(root.join("imu0/data.csv"), imu).unwrap();
     let target = dir.as_path().join("target.yaml");
-    std::fs::write(&target, "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n").unwrap();
+    std::fs::write(&target, "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n")
+        .unwrap();
     let noise = dir.as_path().join("imu.yaml");
     std::fs::write(
         &noise,
@@ -193,7 +195,11 @@ fn bad_inputs_name_the_file_and_line() {
     let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
     let header = "timestamp_ns,tag_id,corner_idx,u_px,v_px,x_m,y_m,z_m\n";
     let cases = [
-        (format!("{header}1100000000,0,0,100,100,0,0,0\n1100000000,0,1,130,100,0.05,0,0\n"), ":3:", "the target puts it at"),
+        (
+            format!("{header}1100000000,0,0,100,100,0,0,0\n1100000000,0,1,130,100,0.05,0,0\n"),
+            ":3:",
+            "the target puts it at",
+        ),
         (format!("{header}1100000000,40,0,100,100,0,0,0\n"), ":2:", "beyond the target"),
         (format!("{header}1100000000,0,7,100,100,0,0,0\n"), ":2:", "must be 0–3"),
         (format!("{header}1200000000,0,0,100,100,0,0,0\n1100000000,0,1,130,100,0.088,0,0\n"), ":3:", "time order"),
@@ -207,10 +213,63 @@ fn bad_inputs_name_the_file_and_line() {
     let e = RigInput::from_asl(dir.as_path(), &target, Some(&noise), None, &opts).unwrap_err().to_string();
     assert!(e.contains("target.yaml") && e.contains("circlegrid"), "{e}");
     // Too few views: an error, not a panic, and nothing written.
-    std::fs::write(&target, "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n").unwrap();
+    std::fs::write(&target, "target_type: aprilgrid\ntagCols: 6\ntagRows: 6\ntagSize: 0.088\ntagSpacing: 0.3\n")
+        .unwrap();
     std::fs::write(root.join("cam0/corners.csv"), format!("{header}1100000000,0,0,100,100,0,0,0\n")).unwrap();
     let input = RigInput::from_asl(dir.as_path(), &target, Some(&noise), None, &opts).unwrap();
     assert!(calibrate_rig(&input, &opts, &mut |_| {}).is_err());
     assert!(RigOptions { max_time_offset_s: 0.0, ..opts }.validate().is_err());
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The written result reads back (`RigCalibration`) and `tumble vio --rig`'s
+/// path puts its cameras and time offset into a recording.
+#[test]
+fn the_written_rig_is_what_vio_uses() {
+    use tumble::sim::target::{simulate_rig, RigSimSettings};
+    use tumble::sim::{simulate, Scenario, SimConfig};
+    let dir = std::env::temp_dir().join(format!("tumble_rig_vio_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let sim = simulate_rig(&RigSimSettings { duration_s: 20.0, ..RigSimSettings::default() }, 4);
+    let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
+    let rig = calibrate_rig(&sim.input, &opts, &mut |_| {}).unwrap();
+    tumble::rig::output::write_rig(&rig, &dir.join("rig")).unwrap();
+    let read = tumble::rig::input::RigCalibration::read(&dir.join("rig")).unwrap();
+    assert!((read.time_offset_s - rig.time_offset_s).abs() < 1e-15);
+    let (model, t_bc, _) = &read.cameras[0];
+    assert!((model.fx - rig.cameras[0].model.fx).abs() < 1e-9);
+    assert!((t_bc.translation.vector - rig.cameras[0].t_bc.translation.vector).norm() < 1e-12);
+
+    let mut cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
+    cfg.camera.max_features = 20;
+    let walk = simulate(Scenario::Walk, &cfg, 1).unwrap();
+    tumble::sim::writer::write_asl(&walk, &dir.join("walk")).unwrap();
+    let plain = tumble::inputs::open_vio(&dir.join("walk"), &Default::default(), &mut |_, _| {}).unwrap().input;
+    let source = tumble::inputs::VioSource { rig: Some(read.clone()), ..Default::default() };
+    let with = tumble::inputs::open_vio(&dir.join("walk"), &source, &mut |_, _| {}).unwrap().input;
+    assert_eq!(with.camera, *model);
+    let (r, t) = tumble::vio::geometry::parts(&with.body_from_camera);
+    assert!((t - t_bc.translation.vector).norm() < 1e-9 && (r - rotation(t_bc)).norm() < 1e-9);
+    let shift = with.frames[0].t - plain.frames[0].t;
+    assert!((shift - read.time_offset_s).abs() < 1e-9, "frames moved by {shift} s");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A recording that turns about one axis only cannot determine the camera's
+/// position along it: the verdict says so and nothing is written.
+#[test]
+fn a_recording_turning_about_one_axis_is_refused() {
+    use tumble::sim::target::{simulate_rig, RigSimSettings};
+    // Turns about body z only (the image's vertical axis), no translation.
+    let s = RigSimSettings { amplitudes: [[0.0; 3], [0.0, 0.0, 0.8]], ..RigSimSettings::default() };
+    let sim = simulate_rig(&s, 1);
+    let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
+    let rig = calibrate_rig(&sim.input, &opts, &mut |m| println!("{m}")).unwrap();
+    println!("{}", tumble::rig::output::summary_markdown(&rig));
+    let why = rig.refusal().expect("a refusal");
+    println!("{why}");
+    assert!(why.contains("T_BC"), "{why}");
+    let dir = std::env::temp_dir().join(format!("tumble_rig_refused_{}", std::process::id()));
+    assert!(tumble::rig::output::write_rig(&rig, &dir).is_err());
+    assert!(!dir.join("camchain-imucam.yaml").exists());
 }

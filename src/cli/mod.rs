@@ -195,6 +195,7 @@ mod tests {
             &["audit", "r.csv", "--calibration", "c.json", "--out", "o", "--candidates", "temperature_bias,bias_drift"],
             &["audit", "--vio", "v", "--out", "o", "--offset-step-ms", "2"],
             &["vio", "v", "--out", "o", "--init", "motion", "--window", "8", "--keyframe-parallax", "20", "--midpoint"],
+            &["vio", "v", "--out", "o", "--rig", "rig/"],
             &["vio", "--print-config"],
             &["track", "v", "--out", "o", "--stereo"],
             &["eval", "--estimate", "e", "--groundtruth", "g", "--align", "sim3", "--rpe-distances", "1,2"],

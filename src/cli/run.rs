@@ -39,6 +39,10 @@ pub struct RunArgs {
     /// Kalibr imu.yaml to use instead of the allan stage.
     #[arg(long)]
     noise: Option<PathBuf>,
+    /// Output folder of `tumble calibrate-rig`: its cameras and time offset
+    /// replace the VIO recording's camN/sensor.yaml.
+    #[arg(long)]
+    rig: Option<PathBuf>,
     /// Local gravity [m/s²] (default: WGS-84 at --latitude, else 9.80665).
     #[arg(long, conflicts_with = "latitude")]
     gravity: Option<f64>,
@@ -145,6 +149,7 @@ impl RunArgs {
                 simulate_camera: self.simulate_camera.then_some(1),
                 frontend: self.frontend.options(),
                 frontend_dir: out.join(Stage::Vio.id()),
+                rig: self.rig.as_deref().map(tumble::rig::input::RigCalibration::read).transpose()?,
                 ..Default::default()
             };
             inputs.vio = Some(Box::new(move |cal| {

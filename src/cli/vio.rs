@@ -135,6 +135,10 @@ pub struct VioArgs {
     /// Kalibr imu.yaml with the noise (from `tumble allan`); default: imu0/sensor.yaml's figures.
     #[arg(long)]
     noise: Option<PathBuf>,
+    /// Output folder of `tumble calibrate-rig`: its cameras (intrinsics, T_BC)
+    /// and time offset replace the dataset's camN/sensor.yaml.
+    #[arg(long)]
+    rig: Option<PathBuf>,
     /// Ground truth (ASL CSV) for evaluation; an ASL folder's own is used when present.
     #[arg(long)]
     groundtruth: Option<PathBuf>,
@@ -194,6 +198,7 @@ impl VioArgs {
             mono: self.mono,
             frontend: self.frontend.options(),
             frontend_dir: out.clone(),
+            rig: self.rig.as_deref().map(tumble::rig::input::RigCalibration::read).transpose()?,
         };
         let vin = open_vio(&input, &source)?;
         if let (Some(st), Some(baseline)) = (&vin.stereo, vin.stereo_baseline_m()) {

@@ -259,3 +259,72 @@ pub fn read_intrinsics(dir: &Path) -> Result<Vec<tumble_factors::camera::CameraM
     }
     Ok(out)
 }
+
+/// A rig calibration as `tumble calibrate-rig` wrote it, read back for use:
+/// each camera's model and pose in the IMU frame, and the time offset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigCalibration {
+    /// The folder it was read from.
+    pub dir: PathBuf,
+    /// Per camera (`cam0`, `cam1`, …): model, IMU ← camera, image size \[px\].
+    pub cameras: Vec<(tumble_factors::camera::CameraModel, nalgebra::Isometry3<f64>, Option<[u32; 2]>)>,
+    /// Kalibr's `timeshift_cam_imu` \[s\]: `t_imu = t_cam + shift`.
+    pub time_offset_s: f64,
+}
+
+#[derive(Deserialize)]
+struct RigJsonOffset {
+    timeshift_cam_imu_s: f64,
+}
+
+impl RigCalibration {
+    /// Read `dir/camN/sensor.yaml` (N = 0, 1, … while present) and `dir/rig.json`'s time offset.
+    pub fn read(dir: &Path) -> Result<RigCalibration, InputError> {
+        let json = dir.join("rig.json");
+        let text = crate::io::tokens::read_text(&json)?;
+        let offset: RigJsonOffset = serde_json::from_str(&text)
+            .map_err(|e| InputError::at(&json, e.line(), format!("not a rig.json of `tumble calibrate-rig`: {e}")))?;
+        let mut cameras = Vec::new();
+        while let Some(p) = Some(dir.join(format!("cam{}", cameras.len())).join("sensor.yaml")).filter(|p| p.is_file())
+        {
+            let (model, t_bs, resolution, _) = crate::io::asl::read_camera_sensor(&p)?;
+            let t_bs = t_bs.ok_or_else(|| InputError::file(&p, "has no T_BS: the camera's pose in the IMU frame"))?;
+            cameras.push((model, t_bs, resolution));
+        }
+        if cameras.is_empty() {
+            return Err(InputError::file(
+                dir,
+                "holds no cam0/sensor.yaml: not an output folder of `tumble calibrate-rig`",
+            ));
+        }
+        if !offset.timeshift_cam_imu_s.is_finite() {
+            return Err(InputError::file(&json, "timeshift_cam_imu_s is not a finite number"));
+        }
+        Ok(RigCalibration { dir: dir.to_path_buf(), cameras, time_offset_s: offset.timeshift_cam_imu_s })
+    }
+
+    /// Put the rig's cameras into a dataset in place of its own `camN/sensor.yaml`
+    /// figures (intrinsics, distortion, image size, and `T_BS` through the
+    /// dataset's `imu0` `T_BS`, so that the IMU ← camera transform is the rig's).
+    /// Refuses a dataset with more cameras than the rig.
+    pub fn apply_to(&self, ds: &mut crate::io::asl::AslDataset) -> Result<(), InputError> {
+        if ds.cameras.len() > self.cameras.len() {
+            return Err(InputError::file(
+                &self.dir,
+                format!(
+                    "calibrates {} camera(s), the dataset {} has {}",
+                    self.cameras.len(),
+                    ds.root.display(),
+                    ds.cameras.len()
+                ),
+            ));
+        }
+        let body_imu = ds.imu_sensor.as_ref().map_or_else(nalgebra::Isometry3::identity, |s| s.t_bs);
+        for (cam, (model, t_bc, resolution)) in ds.cameras.iter_mut().zip(&self.cameras) {
+            cam.model = Some(*model);
+            cam.t_bs = Some(body_imu * t_bc);
+            cam.resolution = resolution.or(cam.resolution);
+        }
+        Ok(())
+    }
+}

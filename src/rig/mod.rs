@@ -386,16 +386,20 @@ impl RigResult {
     /// Why the result must not be used, if it must not: a solve that did not
     /// converge or a parameter the recording does not determine.
     pub fn refusal(&self) -> Option<String> {
-        if !self.converged {
-            return Some("the joint solve did not converge".into());
-        }
+        let mut why = Vec::new();
         let bad: Vec<String> = self
             .verdicts()
             .into_iter()
             .filter(|v| v.determination == Determination::NotDetermined)
-            .map(|v| format!("{} (σ {:.3e} {})", v.parameter, v.sigma, v.units))
+            .map(|v| format!("{} (3σ {:.3e} {})", v.parameter, 3.0 * v.sigma, v.units))
             .collect();
-        (!bad.is_empty()).then(|| format!("the recording does not determine {}", bad.join(", ")))
+        if !bad.is_empty() {
+            why.push(format!("the recording does not determine {}", bad.join(", ")));
+        }
+        if !self.converged {
+            why.push("the joint solve did not converge".into());
+        }
+        (!why.is_empty()).then(|| why.join("; "))
     }
 }
 

@@ -322,11 +322,17 @@ impl Loop {
     /// periods of 1–4 s (turn rates up to ≈ 1.5 rad/s), looking along world
     /// +x from around the origin; still for 3 s at both ends.
     pub fn target_wave(duration: f64, seed: u64) -> Loop {
+        Loop::target_wave_with(duration, seed, Vector3::new(0.3, 0.3, 0.2), Vector3::new(0.8, 0.8, 0.8))
+    }
+    /// [`Loop::target_wave`] with other amplitudes of position \[m\] and
+    /// rotation vector \[rad\] per body axis (each the sum of three harmonics'
+    /// amplitudes, drawn between half and all of it): zeros leave an axis unexcited.
+    pub fn target_wave_with(duration: f64, seed: u64, position: Vector3<f64>, rotation: Vector3<f64>) -> Loop {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x72696700);
         let period = duration - 10.0;
         let cycles = |s: f64| [period / 3.7 * s, period / 2.3 * s, period / 1.3 * s].map(f64::round);
-        let pos = Harmonics::random(&mut rng, period, &cycles(1.0), Vector3::new(0.3, 0.3, 0.2));
-        let rot = Harmonics::random(&mut rng, period, &cycles(1.1), Vector3::new(0.8, 0.8, 0.8));
+        let pos = Harmonics::random(&mut rng, period, &cycles(1.0), position);
+        let rot = Harmonics::random(&mut rng, period, &cycles(1.1), rotation);
         Loop { duration, rest_s: 3.0, ramp_s: 2.0, centre: Vector3::zeros(), r0: Matrix3::identity(), pos, rot }
     }
     /// An EuRoC-like flight: a few metres in a room, faster and with larger yaw.

@@ -42,6 +42,9 @@ pub struct RigSimSettings {
     pub bias: [[f64; 3]; 2],
     /// Gravity \[m/s²\].
     pub gravity: f64,
+    /// Amplitudes of the wave's position \[m\] and rotation vector \[rad\] per
+    /// body axis ([`Loop::target_wave_with`]).
+    pub amplitudes: [[f64; 3]; 2],
 }
 
 impl Default for RigSimSettings {
@@ -57,6 +60,7 @@ impl Default for RigSimSettings {
             noise: PreintegrationParams::default(),
             bias: [[0.05, -0.08, 0.03], [0.004, -0.003, 0.002]],
             gravity: 9.81,
+            amplitudes: [[0.3, 0.3, 0.2], [0.8, 0.8, 0.8]],
         }
     }
 }
@@ -86,7 +90,8 @@ pub struct SimulatedRig {
 /// projected at each image's exposure time (`stamp + time offset`) with
 /// Gaussian pixel noise; corners outside the image are not seen.
 pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
-    let motion = Loop::target_wave(s.duration_s, seed);
+    let [pa, ra] = s.amplitudes.map(Vector3::from);
+    let motion = Loop::target_wave_with(s.duration_s, seed, pa, ra);
     let p = &s.noise;
     let triad = |noise: [f64; 3], walk: [f64; 3], bias: [f64; 3]| TriadModel {
         noise_density: noise,
