@@ -65,6 +65,15 @@ fn small_rotation<T: Real>(phi: [T; 3], v: [T; 3]) -> [T; 3] {
     [0, 1, 2].map(|i| v[i] + a[i] + b[i] * 0.5 + c[i] * (1.0 / 6.0))
 }
 
+/// `π(p_C) − uv` \[px\]; behind the camera a residual that is finite and
+/// large, so a trial step there is rejected rather than failing the solve.
+fn pixel_residual<T: Real>(kind: DistortionKind, k: &[T], pc: &[T; 3], measured: [f64; 2]) -> Vec<T> {
+    match project_with(kind, k, pc) {
+        Some(uv) => vec![uv[0] - measured[0], uv[1] - measured[1]],
+        None => vec![T::from(1e4), T::from(1e4)],
+    }
+}
+
 /// A target corner seen in one image: residual `π(p_C) − uv` \[px\] on
 /// `[X (T_WB), V, T_WT, T_BC, intrinsics, td]`; see the module docs. Wrap it
 /// in [`tumble_solvers::AutoDiff`] (30 tangent dimensions) and give it an
@@ -110,12 +119,7 @@ impl AutoDiffResidual<30> for TargetCorner {
         // Exp(φ)ᵀ b = Exp(−φ) b.
         let pb = small_rotation(phi.map(|a| -a), b_rot);
         let pc = rot_t(&tbc[..9], [0, 1, 2].map(|i| pb[i] - tbc[9 + i]));
-        match project_with(self.kind, k, &pc) {
-            Some(uv) => vec![uv[0] - self.measured[0], uv[1] - self.measured[1]],
-            // Behind the camera: a residual that is finite and large, so a
-            // trial step there is rejected rather than failing the solve.
-            None => vec![T::from(1e4), T::from(1e4)],
-        }
+        pixel_residual(self.kind, k, &pc, self.measured)
     }
 }
 
@@ -159,10 +163,7 @@ impl AutoDiffResidual<14> for CameraCorner {
         let (t, k) = (p[0], p[1]);
         let c = rot(&t[..9], self.corner.map(T::from));
         let pc = [0, 1, 2].map(|i| c[i] + t[9 + i]);
-        match project_with(self.kind, k, &pc) {
-            Some(uv) => vec![uv[0] - self.measured[0], uv[1] - self.measured[1]],
-            None => vec![T::from(1e4), T::from(1e4)],
-        }
+        pixel_residual(self.kind, k, &pc, self.measured)
     }
 }
 

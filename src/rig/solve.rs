@@ -38,6 +38,8 @@ const RATE_MAX_GAP_S: f64 = 0.15;
 /// corners' rates need no second solve with the bias removed (1 % of the
 /// angle of a pixel of a 460 px focal length).
 const RATE_BIAS_TOLERANCE_RAD: f64 = 2e-5;
+/// Below this rank correlation of camera and gyro rates the coarse time offset is reported as doubtful.
+const WEAK_RATE_CORRELATION: f64 = 0.8;
 /// Hand–eye pairs span this many frames of a camera (≈ 0.25 s at 20 Hz: rotations well above the views' noise).
 const HAND_EYE_SPAN: usize = 5;
 
@@ -121,7 +123,16 @@ pub fn calibrate_rig(
         let rates = init::camera_rates(&stamps, &view_poses[0], RATE_MAX_GAP_S);
         let c = init::correlate_time_offset(&rates, &gyro_integral, o.max_time_offset_s);
         match &c {
-            Some((tau, r, _)) => progress(&format!("coarse time offset {:.1} ms (rate correlation {r:.3})", tau * 1e3)),
+            Some((tau, r, _)) => {
+                progress(&format!("coarse time offset {:.1} ms (rate correlation {r:.3})", tau * 1e3));
+                if *r < WEAK_RATE_CORRELATION {
+                    notes.push(format!(
+                        "the camera's and the gyro's rotation rates correlate only {r:.2} at the best shift ({:.1} ms): \
+                         the coarse time offset is doubtful (views too noisy, or too little rotation)",
+                        tau * 1e3
+                    ));
+                }
+            }
             None => {
                 notes.push("too little rotation to correlate camera and gyro rates: the time offset starts at 0".into())
             }
