@@ -8,6 +8,7 @@
 
 use super::input::View;
 use crate::vio::geometry::pose;
+use crate::vio::residual_at;
 use crate::vio::ImuData;
 use nalgebra::{DMatrix, Matrix3, Matrix4, UnitQuaternion, Vector3, Vector4};
 use tumble_factors::camera::{CameraModel, DistortionKind};
@@ -273,9 +274,7 @@ pub fn calibrate_camera(
         model = CameraModel::from_vector(kind, kv.as_slice());
         let mut res = Vec::new();
         for e in graph.entries() {
-            let vars: Vec<&dyn tumble_solvers::DynVariable> =
-                e.factor.keys().iter().filter_map(|k| sol.get_dyn(*k).ok()).collect();
-            if let Ok(r) = e.factor.residual(tumble_solvers::Vars::new(&vars)) {
+            if let Some(r) = residual_at(&sol, e.factor.as_ref()) {
                 res.extend(r.iter().map(|x| x.abs()));
             }
         }

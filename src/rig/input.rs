@@ -247,13 +247,20 @@ pub fn read_corners(cam_dir: &Path, target: &Target) -> Result<Vec<View>, InputE
     Ok(views)
 }
 
+/// `dir/camN/sensor.yaml` read for N = 0, 1, … until one is missing, with their paths.
+fn camera_sensors(dir: &Path) -> Result<Vec<(PathBuf, crate::io::asl::CameraSensor)>, InputError> {
+    let mut out = Vec::new();
+    while let Some(p) = Some(dir.join(format!("cam{}", out.len())).join("sensor.yaml")).filter(|p| p.is_file()) {
+        let s = crate::io::asl::read_camera_sensor(&p)?;
+        out.push((p, s));
+    }
+    Ok(out)
+}
+
 /// The intrinsics of `dir/camN/sensor.yaml` (or `dir/mav0/camN/…`) for N = 0, 1, … until one is missing.
 pub fn read_intrinsics(dir: &Path) -> Result<Vec<tumble_factors::camera::CameraModel>, InputError> {
     let base = if dir.join("mav0").is_dir() { dir.join("mav0") } else { dir.to_path_buf() };
-    let mut out = Vec::new();
-    while let Some(p) = Some(base.join(format!("cam{}", out.len())).join("sensor.yaml")).filter(|p| p.is_file()) {
-        out.push(crate::io::asl::read_camera_sensor(&p)?.0);
-    }
+    let out: Vec<_> = camera_sensors(&base)?.into_iter().map(|(_, s)| s.0).collect();
     if out.is_empty() {
         return Err(InputError::file(dir, "holds no cam0/sensor.yaml with intrinsics"));
     }
@@ -285,9 +292,7 @@ impl RigCalibration {
         let offset: RigJsonOffset = serde_json::from_str(&text)
             .map_err(|e| InputError::at(&json, e.line(), format!("not a rig.json of `tumble calibrate-rig`: {e}")))?;
         let mut cameras = Vec::new();
-        while let Some(p) = Some(dir.join(format!("cam{}", cameras.len())).join("sensor.yaml")).filter(|p| p.is_file())
-        {
-            let (model, t_bs, resolution, _) = crate::io::asl::read_camera_sensor(&p)?;
+        for (p, (model, t_bs, resolution, _)) in camera_sensors(dir)? {
             let t_bs = t_bs.ok_or_else(|| InputError::file(&p, "has no T_BS: the camera's pose in the IMU frame"))?;
             cameras.push((model, t_bs, resolution));
         }

@@ -6,6 +6,7 @@
 use super::init::{self, RateIntegral};
 use super::{CameraResult, CornerResidual, Reprojection, RigInput, RigOptions, RigResult};
 use crate::vio::geometry::{gravity_aligned, parts, pose, preintegrate};
+use crate::vio::residual_at;
 use nalgebra::{Isometry3, Matrix3, SVector, Translation3, UnitQuaternion, Vector1, Vector3, Vector6};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -197,12 +198,6 @@ pub fn calibrate_rig(
     }
 
     // 5. Gravity in the target frame, the world, body poses, velocities.
-    let acc_at = |t: f64| {
-        let j = input.imu.t.partition_point(|&s| s <= t).clamp(1, input.imu.t.len() - 1);
-        let (ta, tb) = (input.imu.t[j - 1], input.imu.t[j]);
-        let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
-        input.imu.acc[j - 1] * (1.0 - w) + input.imu.acc[j] * w
-    };
     let body_in_target = |k: usize, c: usize, t_bc: &Isometry3F64| -> Option<Isometry3F64> {
         let t_ct = view_poses[c][frames[k].views[c]?]?;
         Some(t_ct.inverse().group_mul(t_bc.inverse()))
@@ -212,7 +207,7 @@ pub fn calibrate_rig(
     let mut g_n = 0usize;
     for (k, f) in frames.iter().enumerate() {
         if let Some(tb) = body_in_target(k, 0, &t_bc[0]) {
-            g_sum -= tb.rotation().matrix() * acc_at(f.t);
+            g_sum -= tb.rotation().matrix() * input.imu.at(f.t).0;
             g_n += 1;
         }
     }
@@ -347,9 +342,8 @@ pub fn calibrate_rig(
         let mut chi2 = 0.0;
         for &i in &imu_factors {
             let e = &graph.entries()[i];
-            let vars: Vec<&dyn tumble_solvers::DynVariable> =
-                e.factor.keys().iter().filter_map(|k| solution.get_dyn(*k).ok()).collect();
-            if let Ok((r, _)) = e.evaluate(tumble_solvers::Vars::new(&vars)) {
+            if let Some(mut r) = residual_at(&solution, e.factor.as_ref()) {
+                e.noise.whiten(&mut r);
                 chi2 += r.norm_squared();
             }
         }
@@ -463,10 +457,7 @@ fn reprojection(
     let mut norms = Vec::new();
     let mut out = Vec::new();
     for ce in corners.iter().filter(|ce| ce.camera == c) {
-        let e = &graph.entries()[ce.entry];
-        let vars: Vec<&dyn tumble_solvers::DynVariable> =
-            e.factor.keys().iter().filter_map(|k| values.get_dyn(*k).ok()).collect();
-        let Ok(r) = e.factor.residual(tumble_solvers::Vars::new(&vars)) else { continue };
+        let Some(r) = residual_at(values, graph.entries()[ce.entry].factor.as_ref()) else { continue };
         norms.push(r.norm());
         out.push((frames[ce.frame].t, ce.uv, [r[0], r[1]]));
     }

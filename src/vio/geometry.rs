@@ -64,13 +64,7 @@ pub fn preintegrate(
             }
         }
         Scheme::Midpoint => {
-            let at = |t: f64| -> (Vector3<f64>, Vector3<f64>) {
-                let j = imu.t.partition_point(|&s| s <= t).clamp(1, n.max(2) - 1);
-                let (t0, t1) = (imu.t[j - 1], imu.t[j]);
-                let w = if t1 > t0 { ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
-                (imu.acc[j - 1] * (1.0 - w) + imu.acc[j] * w, imu.gyro[j - 1] * (1.0 - w) + imu.gyro[j] * w)
-            };
-            let (a0, g0) = at(ta);
+            let (a0, g0) = imu.at(ta);
             pim.integrate(a0, g0, 0.0);
             let mut last = ta;
             k = imu.t.partition_point(|&t| t <= ta);
@@ -80,7 +74,7 @@ pub fn preintegrate(
                 last = imu.t[k];
                 k += 1;
             }
-            let (a1, g1) = at(tb);
+            let (a1, g1) = imu.at(tb);
             max_gap = max_gap.max(tb - last);
             pim.integrate(a1, g1, tb - last);
         }

@@ -27,6 +27,18 @@ pub struct ImuData {
     pub acc: Vec<Vector3<f64>>,
 }
 
+impl ImuData {
+    /// Specific force and rate at `t` \[s\], interpolated linearly between the
+    /// samples around it (held at the ends); at least two samples.
+    pub fn at(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let n = self.t.len();
+        let j = self.t.partition_point(|&s| s <= t).clamp(1, n.max(2) - 1);
+        let (t0, t1) = (self.t[j - 1], self.t[j]);
+        let w = if t1 > t0 { ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+        (self.acc[j - 1] * (1.0 - w) + self.acc[j] * w, self.gyro[j - 1] * (1.0 - w) + self.gyro[j] * w)
+    }
+}
+
 /// One camera frame: its time and the features seen, as `(track id, pixel [u, v])`.
 #[derive(Debug, Clone, Default)]
 pub struct Frame {

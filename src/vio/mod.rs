@@ -41,6 +41,7 @@ pub mod init;
 pub mod input;
 mod keyframe;
 mod landmarks;
+pub(crate) use landmarks::residual_at;
 mod marginalization;
 pub mod options;
 pub mod output;
