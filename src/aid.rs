@@ -119,8 +119,8 @@ impl VioInput {
         })?;
         let t0 = ds.imu.t0_ns;
         let motion = crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e.to_string()))?;
-        let centre = motion.p_mean();
-        let tracks = crate::sim::camera::simulate_tracks(&motion, cam, &crate::sim::camera::Scene::Room(centre), seed);
+        let (scene, cam) = crate::sim::camera::room_around(motion.positions(), cam);
+        let tracks = crate::sim::camera::simulate_tracks(&motion, &cam, &scene, seed);
         // Frames where both the ground truth and the IMU are.
         let start = (gt.t_ns.iter().copied().find(|&t| t >= t0).unwrap_or(t0) - t0) as f64 * 1e-9;
         let end = match ds.imu.len() {
@@ -135,7 +135,7 @@ impl VioInput {
             }
         }
         let body_from_camera = iso(&cam.body_from_camera());
-        let stereo = simulated_stereo(cam, &frames, &tracks.stereo);
+        let stereo = simulated_stereo(&cam, &frames, &tracks.stereo);
         let imu = imu_data(&ds.imu, calibration);
         let noise = sensor_noise(&ds);
         Ok(with_calibrated_offsets(
@@ -153,6 +153,116 @@ impl VioInput {
             },
             calibration,
         ))
+    }
+}
+
+/// The per-frame PnP ground truth of a target recording (see
+/// [`VioInput::from_target_recording`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetTruth {
+    /// Frames with a PnP pose, of all frames with corners.
+    pub posed: usize,
+    /// Frames with corners.
+    pub frames: usize,
+    /// Median RMS reprojection error of the PnP poses \[px\].
+    pub median_rms_px: f64,
+}
+
+/// Largest RMS reprojection \[px\] of a PnP pose kept as ground truth: the
+/// corners of a sharp image reproject within a few tenths of a pixel; a
+/// blurred or partly wrong detection does not give a pose to judge by.
+pub const TARGET_TRUTH_MAX_RMS_PX: f64 = 1.0;
+
+/// Fewest corners a PnP ground-truth pose is made from.
+pub const TARGET_TRUTH_MIN_CORNERS: usize = 20;
+
+impl VioInput {
+    /// A recording in front of a calibration target as a VIO input with a
+    /// ground truth: `dir` (ASL, `mav0/imu0/data.csv` and `mav0/cam0/corners.csv`
+    /// as `tumble calibrate-rig` reads them) and its `target` (Kalibr yaml);
+    /// cam0's model and pose in the IMU frame, and the IMU noise, from the ASL
+    /// folder `cameras` (`camN/sensor.yaml`, `imu0/sensor.yaml`, e.g. EuRoC's or
+    /// `tumble calibrate-rig`'s). Every corner is a feature whose track id is its
+    /// corner id on the target (`4·tag + corner` for an AprilGrid). The ground
+    /// truth is a PnP per frame with those cameras ([`crate::rig::init::refine_view_pose`];
+    /// frames with ≥ [`TARGET_TRUTH_MIN_CORNERS`] corners reprojecting within
+    /// [`TARGET_TRUTH_MAX_RMS_PX`]), in a world whose z is up: the target frame
+    /// turned by the mean specific force over the recording (gravity, as the
+    /// motion's accelerations average out), so that a position + yaw
+    /// alignment applies.
+    pub fn from_target_recording(
+        dir: &std::path::Path,
+        target: &std::path::Path,
+        cameras: &std::path::Path,
+    ) -> Result<(VioInput, TargetTruth), VioError> {
+        let target = crate::rig::input::Target::read(target)?;
+        let ds = asl::read_asl(dir, &Default::default())?;
+        let cams = asl::read_asl(cameras, &Default::default())?;
+        let cam = cams.cameras.first().ok_or_else(|| InputError::file(cameras, "holds no cam0/sensor.yaml"))?;
+        let model = cam.model.ok_or_else(|| InputError::file(cameras, "cam0/sensor.yaml has no intrinsics"))?;
+        let body_imu = cams.imu_sensor.as_ref().map_or_else(nalgebra::Isometry3::identity, |s| s.t_bs);
+        let t_bc = body_imu.inverse()
+            * cam.t_bs.ok_or_else(|| {
+                InputError::file(cameras, "cam0/sensor.yaml has no T_BS (its pose in the body frame)")
+            })?;
+        let views = crate::rig::input::read_corners(&ds.root.join("cam0"), &target)?;
+        let t0 = ds.imu.t0_ns;
+        let imu = imu_data(&ds.imu, None);
+        let mut frames = Vec::new();
+        let mut poses: Vec<(i64, nalgebra::Isometry3<f64>)> = Vec::new();
+        let mut rms = Vec::new();
+        let with_corners = views.iter().filter(|v| !v.corners.is_empty()).count();
+        for v in &views {
+            let t = (v.t_ns - t0) as f64 * 1e-9;
+            frames.push(Frame { t, features: v.corners.iter().map(|c| (c.id as u64, c.uv)).collect() });
+            if v.corners.len() < TARGET_TRUTH_MIN_CORNERS {
+                continue;
+            }
+            let Some((t_ct, e)) = crate::rig::init::refine_view_pose(v, &model) else { continue };
+            if e > TARGET_TRUTH_MAX_RMS_PX {
+                continue;
+            }
+            rms.push(e);
+            let (r, p) = crate::vio::geometry::parts(&t_ct);
+            let t_ct =
+                nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p), UnitQuaternion::from_matrix(&r));
+            // Target ← body = (camera ← target)⁻¹ · (body ← camera)⁻¹.
+            poses.push((v.t_ns, t_ct.inverse() * t_bc.inverse()));
+        }
+        if poses.len() < 2 {
+            return Err(InputError::file(&ds.root, "fewer than two frames give a PnP pose of the target").into());
+        }
+        // Gravity's direction in the target frame: the mean specific force.
+        let mut up = Vector3::zeros();
+        for (t_ns, p) in &poses {
+            let (acc, _) = imu.at((t_ns - t0) as f64 * 1e-9);
+            up += p.rotation * acc;
+        }
+        let r_wt = UnitQuaternion::rotation_between(&up, &Vector3::z())
+            .ok_or_else(|| InputError::file(&ds.root, "no IMU samples at the frames"))?;
+        let mut gt = Trajectory::default();
+        for (t_ns, p) in &poses {
+            let q = r_wt * p.rotation;
+            let x = r_wt * p.translation.vector;
+            gt.t_ns.push(*t_ns);
+            gt.p.push([x.x, x.y, x.z]);
+            gt.q.push([q.w, q.i, q.j, q.k]);
+        }
+        rms.sort_by(f64::total_cmp);
+        let truth = TargetTruth { posed: poses.len(), frames: with_corners, median_rms_px: rms[rms.len() / 2] };
+        let input = VioInput {
+            name: format!("{} (target corners as features)", ds.root.display()),
+            t0_ns: t0,
+            imu,
+            frames,
+            camera: model,
+            body_from_camera: iso(&t_bc),
+            stereo: None,
+            groundtruth: Some(gt),
+            noise: sensor_noise(&cams),
+            images: Vec::new(),
+        };
+        Ok((input, truth))
     }
 }
 

@@ -210,8 +210,12 @@ fn frames_without_features_warn_and_recover() {
     }
     let out = run(&input, &opts, None).unwrap();
     assert!(finite(&out));
-    assert!(out.warnings.iter().any(|w| w.contains("no features")), "{:?}", out.warnings);
-    assert!(out.warnings.iter().any(|w| w.contains("features back")), "{:?}", out.warnings);
+    assert!(out.warnings.iter().any(|w| w.contains("vision lost at 15.0")), "{:?}", out.warnings);
+    assert!(out.warnings.iter().any(|w| w.contains("features back at 17.0")), "{:?}", out.warnings);
+    // One blind span, from the first frame without features to the first with them.
+    assert_eq!(out.blind_spans.len(), 1, "{:?}", out.blind_spans);
+    let [a, b] = out.blind_spans[0];
+    assert!((a - 15.0).abs() < 0.06 && (b - 17.0).abs() < 0.06, "{a} {b}");
     let s = summarize(&input, &opts, &out, 10.0);
     assert!(s.ate_rmse_m.unwrap() < 0.5, "{}", s.table());
 }
@@ -578,4 +582,53 @@ fn camera_and_imu_that_do_not_fit_together_are_named() {
     })
     .unwrap_err();
     assert!(e.contains("resolution must be"), "{e}");
+}
+
+/// EuRoC's calibration sequence with its real corners as features (track id =
+/// corner id) and EuRoC's calibration of cam0, against a per-frame PnP of the
+/// corners: within 2 cm (measured 0.016 m, rotation RMSE 0.86° — the issue's
+/// 0.5° is not reached). Its start is in motion with the raw IMU's 0.08 rad/s
+/// gyro bias: held at 0 ± 5e-3 rad/s the start drifted 1 m and 8° (ATE 0.08 m).
+#[test]
+fn imu_april_with_its_corners_as_features_tracks_the_pnp_poses() {
+    let (Some(dir), Some(cams)) = (common::shared("euroc/imu_april"), common::shared("euroc/V1_01_easy_micro")) else {
+        return;
+    };
+    let (input, truth) = VioInput::from_target_recording(&dir, &dir.join("target.yaml"), &cams).unwrap();
+    assert!(truth.posed > 1300 && truth.median_rms_px < 0.6, "{truth:?}");
+    let mut opts = VioOptions::default();
+    input.apply_noise(None, &mut opts.noise.imu);
+    let out = run(&input, &opts, None).unwrap();
+    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    let gt = input.groundtruth.as_ref().unwrap();
+    let eval_opts = tumble::eval::EvalOptions { alignment: tumble::eval::Alignment::Se3, ..Default::default() };
+    let ev = tumble::eval::evaluate(&tumble::vio::trajectory(&input, &out), None, gt, &eval_opts).unwrap();
+    println!("ATE {:.4} m, rotation RMSE {:.2}°", ev.metrics.ate_rmse_m, ev.metrics.rotation_rmse_deg);
+    assert!(ev.metrics.ate_rmse_m < 0.02, "ATE {}", ev.metrics.ate_rmse_m);
+    assert!(ev.metrics.rotation_rmse_deg < 1.0, "rotation RMSE {}°", ev.metrics.rotation_rmse_deg);
+    // The target leaves the image for a second at 55.8 s: reported as a blind span.
+    assert!(out.blind_spans.iter().any(|[a, b]| *a > 55.0 && b - a > 0.5), "{:?}", out.blind_spans);
+}
+
+/// A whole EuRoC sequence (real IMU, a simulated camera along the ground
+/// truth): the rotors shake the IMU far beyond its datasheet figures; the
+/// window's IMU residuals show it and the noise in use rises (measured: gyro
+/// 2.9×, accelerometer 7.5×), which brings the bias NEES from 28 to 5 on
+/// average over the six axes, with no reset.
+#[test]
+fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
+    let Some(seq) = common::shared("euroc/full_imu/V1_02_medium") else { return };
+    let source = tumble::inputs::VioSource { simulate_camera: Some(1), ..Default::default() };
+    let input = tumble::inputs::open_vio(&seq, &source, &mut |_, _| {}).unwrap().input;
+    let opts = VioOptions::default();
+    let (out, s) = run_without_resets(&input, &opts, 10.0);
+    let noise = out.noise.expect("measured");
+    println!("{}", noise.line());
+    assert!(noise.in_use[0] > 2.0 * noise.given[0] && noise.in_use[1] > 3.0 * noise.given[1], "{}", noise.line());
+    let m = &s.evaluation.as_ref().unwrap().metrics;
+    let (g, a) = (m.bias_nees_gyro_axes.unwrap(), m.bias_nees_accel_axes.unwrap());
+    let mean = (g.iter().sum::<f64>() + a.iter().sum::<f64>()) / 6.0;
+    println!("bias NEES gyro {g:?}, accel {a:?}, mean {mean:.2}");
+    assert!(mean < 8.0, "bias NEES mean {mean}");
+    assert!(s.ate_rmse_m.unwrap() < 0.08, "ATE {:?}", s.ate_rmse_m);
 }

@@ -327,6 +327,13 @@ impl Preintegrated {
         }
     }
 
+    /// Redo the integration from the stored samples with other settings
+    /// (e.g. the noise measured since), at the same bias estimate.
+    pub fn reintegrate_with(&mut self, params: PreintegrationParams) {
+        self.params = params;
+        self.reintegrate(self.bias_acc, self.bias_gyro);
+    }
+
     /// The settings.
     pub fn params(&self) -> &PreintegrationParams {
         &self.params

@@ -73,12 +73,17 @@ pub struct EstimatorArgs {
     /// between tracked against the fixed window.
     #[arg(long)]
     pub solve_every_frame: bool,
-    /// Integrate with VINS-Mono's midpoint rule instead of GTSAM's zero-order hold.
+    /// Integrate with GTSAM's zero-order hold instead of the midpoint rule
+    /// (the default: the hold lags the IMU by half a sample).
     #[arg(long)]
-    pub midpoint: bool,
+    pub zoh: bool,
     /// Raise the IMU noise to what the static start measured (vibration).
     #[arg(long)]
     pub noise_from_static: bool,
+    /// Keep the given IMU noise throughout instead of measuring it in motion
+    /// from the window's IMU residuals (and raising it where they show more).
+    #[arg(long)]
+    pub fixed_noise: bool,
     /// Also put cam1's matches into the sliding window (not only into the
     /// initialization): more landmarks and constraints, about half the speed;
     /// on four simulated walks it was not consistently more accurate.
@@ -107,8 +112,9 @@ impl EstimatorArgs {
         o.window.solve_every_frame |= self.solve_every_frame;
         o.window.stereo |= self.stereo_window;
         o.noise.from_static |= self.noise_from_static;
-        if self.midpoint {
-            o.noise.imu.scheme = tumble::factors::imu_preint::Scheme::Midpoint;
+        o.noise.measure_in_motion &= !self.fixed_noise;
+        if self.zoh {
+            o.noise.imu.scheme = tumble::factors::imu_preint::Scheme::ZeroOrderHold;
         }
         o.validate()?;
         Ok(o)

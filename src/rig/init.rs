@@ -169,6 +169,37 @@ pub fn view_pose(v: &View, model: &CameraModel) -> Option<Isometry3F64> {
     pose_from_homography(&homography(&obj, &img)?)
 }
 
+/// `T_CT` of a view under a known camera `model`: the homography pose
+/// ([`view_pose`]) refined by Levenberg–Marquardt on the corners'
+/// reprojection (Huber, 2 px), the intrinsics held. Returns the pose and the
+/// RMS reprojection error \[px\]; None with fewer than [`MIN_CORNERS`] corners
+/// or when the solve fails. A per-frame PnP: ground truth of a target recording.
+pub fn refine_view_pose(v: &View, model: &CameraModel) -> Option<(Isometry3F64, f64)> {
+    let start = view_pose(v, model)?;
+    let kind = model.distortion.kind();
+    let kkey = Key::new('k', 0);
+    let mut values = Values::new();
+    values.insert(X(0), start);
+    values.insert(kkey, nalgebra::SVector::<f64, 8>::from_column_slice(&model.to_vector()));
+    values.set_constant(kkey, true);
+    let mut graph = tumble_solvers::Graph::new();
+    let noise = NoiseModel::isotropic(2, 1.0).ok()?;
+    for c in &v.corners {
+        graph.add_robust(
+            AutoDiff::new(CameraCorner::new([X(0), kkey], c.target, c.uv, kind)),
+            noise.clone(),
+            Huber(2.0),
+        );
+    }
+    let opts = LmOptions { max_iterations: 30, log_iterations: false, ..LmOptions::default() };
+    let (sol, _) = Optimizer::new(opts).optimize(&graph, &values).ok()?;
+    let t = *sol.get::<Isometry3F64>(X(0)).ok()?;
+    let squares: Vec<f64> =
+        graph.entries().iter().filter_map(|e| residual_at(&sol, e.factor.as_ref())).map(|r| r.norm_squared()).collect();
+    let rms = (squares.iter().sum::<f64>() / squares.len().max(1) as f64).sqrt();
+    Some((t, rms))
+}
+
 /// The result of the camera-only calibration of one camera.
 #[derive(Debug, Clone)]
 pub struct CameraStart {

@@ -196,6 +196,35 @@ pub enum Scene {
     Corridor(Corridor),
 }
 
+/// Room margin around a replayed path \[m\]: horizontally, and above and
+/// below (the walls stay a few metres from the camera wherever it flies).
+pub const ROOM_MARGIN_M: [f64; 3] = [2.0, 2.0, 1.0];
+
+/// A room that holds the whole of `path` (world positions \[m\]): the box
+/// of `s`' half extents grown to the path's bounding box plus
+/// [`ROOM_MARGIN_M`], with as many landmarks as keep `s`' density on its
+/// faces. Returns the scene and the settings to simulate it with. A room of
+/// fixed size around the path's mean lost half of a 19 × 17 m Machine Hall
+/// path: the camera flew outside it, blind.
+pub fn room_around(path: &[Vector3<f64>], s: &CameraSettings) -> (Scene, CameraSettings) {
+    let (mut lo, mut hi) = (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY));
+    for p in path.iter().filter(|p| p.iter().all(|x| x.is_finite())) {
+        lo = lo.inf(p);
+        hi = hi.sup(p);
+    }
+    if !lo.iter().all(|x| x.is_finite()) {
+        return (Scene::Room(Vector3::zeros()), s.clone());
+    }
+    let centre = (lo + hi) * 0.5;
+    let mut out = s.clone();
+    for k in 0..3 {
+        out.room_half_extent[k] = s.room_half_extent[k].max((hi[k] - lo[k]) * 0.5 + ROOM_MARGIN_M[k]);
+    }
+    let area = |h: &[f64; 3]| 8.0 * (h[0] * h[1] + h[1] * h[2] + h[0] * h[2]);
+    out.landmarks = (s.landmarks as f64 * area(&out.room_half_extent) / area(&s.room_half_extent)).round() as usize;
+    (Scene::Room(centre), out)
+}
+
 /// Simulate feature tracks along `motion` in `scene`.
 pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, scene: &Scene, seed: u64) -> SimulatedTracks {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -292,4 +321,30 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, scene: &Scene, s
         t = frames.len() as f64 * dt;
     }
     SimulatedTracks { frames, landmarks, observations, stereo }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_room_around_a_path_holds_it_at_the_same_density() {
+        let s = CameraSettings::default();
+        let path = [Vector3::new(-8.0, 1.0, 0.2), Vector3::new(11.0, 18.0, 3.0), Vector3::new(0.0, 5.0, 1.0)];
+        let (scene, big) = room_around(&path, &s);
+        let Scene::Room(c) = scene else { panic!("a room") };
+        for p in &path {
+            for k in 0..3 {
+                assert!((p[k] - c[k]).abs() + ROOM_MARGIN_M[k] <= big.room_half_extent[k] + 1e-9);
+            }
+        }
+        let density = |s: &CameraSettings| {
+            let h = s.room_half_extent;
+            s.landmarks as f64 / (8.0 * (h[0] * h[1] + h[1] * h[2] + h[0] * h[2]))
+        };
+        assert!((density(&big) / density(&s) - 1.0).abs() < 1e-3);
+        // A path smaller than the default room keeps the default room.
+        let (_, small) = room_around(&[Vector3::zeros(), Vector3::new(1.0, 1.0, 0.5)], &s);
+        assert_eq!((small.room_half_extent, small.landmarks), (s.room_half_extent, s.landmarks));
+    }
 }

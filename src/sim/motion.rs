@@ -594,9 +594,14 @@ impl Replay {
         Ok(Replay { t, p, q })
     }
 
-    /// Mean position \[m\] (the centre of the simulated room).
+    /// Mean position \[m\].
     pub fn p_mean(&self) -> Vector3<f64> {
         self.p.iter().sum::<Vector3<f64>>() / self.p.len() as f64
+    }
+
+    /// The positions replayed \[m\], in time order.
+    pub fn positions(&self) -> &[Vector3<f64>] {
+        &self.p
     }
 
     fn pose(&self, t: f64) -> (Vector3<f64>, UnitQuaternion<f64>) {

@@ -9,6 +9,7 @@ use super::geometry::{parts, pose, preintegrate};
 use super::keyframe::{is_keyframe, FeatureMotion, FrameObs};
 use super::landmarks::{observation_factors, pixel_noise, Landmarks};
 use super::marginalization::{marginalize_oldest, window_graph, ResidualTally};
+use super::noise_meter::{NoiseMeter, NoiseReport};
 use super::rest::RestDetector;
 use super::startup::Startup;
 use super::window::{add_rest_prior, InitState, State, StateValues, Window};
@@ -23,6 +24,10 @@ use tumble_solvers::{Covariances, FactorEntry, Graph, LmOptions, Optimizer, Valu
 const MIN_LANDMARKS_TO_TRACK: usize = 30;
 /// Observations a landmark needs before a tracked frame uses it.
 const MIN_TRACK_OBSERVATIONS: usize = 4;
+/// Features below which a frame counts as blind: a pose from fewer points is
+/// ill-conditioned (a PnP needs 4 in general position, a robust one several
+/// times that), so the IMU carries the estimate alone.
+pub const BLIND_FEATURES: usize = 10;
 
 /// The estimate at one camera frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -65,6 +70,11 @@ pub struct VioResult {
     pub wall_s: f64,
     /// The measurement residuals at their final estimates, for the audit.
     pub residuals: ResidualTally,
+    /// Spans `[from, to]` \[s\] of frames with fewer than [`BLIND_FEATURES`]
+    /// features, where the estimate was the IMU's alone.
+    pub blind_spans: Vec<[f64; 2]>,
+    /// The IMU noise given, measured at rest and in motion, and in use at the end.
+    pub noise: Option<NoiseReport>,
 }
 
 /// The sliding-window estimator; feed it frames in time order with [`Estimator::process`].
@@ -89,8 +99,12 @@ pub struct Estimator<'a> {
     keyframe_std: [[f64; 3]; 5],
     /// The last frame tracked against the window: time \[s\] and state.
     last_tracked: Option<(f64, Isometry3F64, Vector3<f64>, Vector6<f64>)>,
-    no_feature_since: Option<f64>,
+    /// Since when (time, frames) the frames have been blind ([`BLIND_FEATURES`]).
+    blind_since: Option<(f64, usize)>,
+    blind_spans: Vec<[f64; 2]>,
     residuals: ResidualTally,
+    /// The IMU noise in motion ([`super::NoiseOptions::measure_in_motion`]), from initialization on.
+    noise: Option<NoiseMeter>,
 }
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
@@ -125,8 +139,10 @@ impl<'a> Estimator<'a> {
             init_time: None,
             keyframe_std: [[f64::NAN; 3]; 5],
             last_tracked: None,
-            no_feature_since: None,
+            blind_since: None,
+            blind_spans: Vec::new(),
             residuals: ResidualTally::default(),
+            noise: None,
         }
     }
 
@@ -161,7 +177,7 @@ impl<'a> Estimator<'a> {
         let (x, v, b) = self.last_good.expect("initialized");
         let t = self.window.states.last().map_or(0.0, |s| s.t);
         self.resets += 1;
-        self.start(t, InitState { x, v, b, v_sigma: 0.5, tilt_sigma: None });
+        self.start(t, InitState { x, v, b, v_sigma: 0.5, tilt_sigma: None, gyro_bias_sigma: None });
         if let Some(p) = self.window.init_prior.as_mut() {
             // Position and yaw stay the gauge; roll, pitch and biases loosen.
             p.b_sigma = [0.2, 0.2, 0.2, 0.02, 0.02, 0.02];
@@ -203,6 +219,9 @@ impl<'a> Estimator<'a> {
             let init = self.startup.initialize(self.input, &mut self.opts, &mut self.warnings, index, t)?;
             let x = init.x;
             self.init_time = Some(t);
+            if self.opts.noise.measure_in_motion {
+                self.noise = Some(NoiseMeter::new(self.opts.noise.imu));
+            }
             self.start(t, init);
             let obs = self.frame_obs(index);
             self.add_observations(index, &obs);
@@ -263,14 +282,7 @@ impl<'a> Estimator<'a> {
         let zero_velocity = rest_since.is_some();
         let kf_t = self.window.states.last().map_or(t, |s| s.t);
         let keyframe = is_keyframe(&self.opts.window, par_kf, t - kf_t, common_kf, self.keyframe_obs.len());
-        if obs.is_empty() {
-            if self.no_feature_since.is_none() {
-                self.no_feature_since = Some(t);
-                self.warn(format!("no features from {t:.3} s on: IMU only until features return"));
-            }
-        } else if let Some(t0) = self.no_feature_since.take() {
-            self.warn(format!("features back at {t:.3} s after {:.2} s without", t - t0));
-        }
+        self.watch_blindness(t, obs.len());
         self.window.push(State { sid, t, rest_since }, (predicted, vj, bl), (pim, scale));
         self.add_observations(index, &obs);
         self.rest.push(t, &obs, rj, &self.opts);
@@ -288,8 +300,15 @@ impl<'a> Estimator<'a> {
         }
         self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
         let graph = window_graph(&self.window, &self.landmarks, self.input, &self.opts);
-        // The σ of the new state, from the solve's own last linearization.
-        let (solved, covariances) = self.solve(&graph, &self.window.values, &[X(sid), V(sid), B(sid)], vec!['l']);
+        // The σ of the new state, from the solve's own last linearization;
+        // and of the states of the link that leaves the window, to measure the noise.
+        let leaving = keyframe && self.window.states.len() > self.opts.window.size;
+        let mut cov_keys = vec![X(sid), V(sid), B(sid)];
+        if leaving && self.noise.is_some() {
+            let (a, b) = (self.window.states[0].sid, self.window.states[1].sid);
+            cov_keys.extend([X(a), V(a), B(a), X(b), V(b)].into_iter().filter(|k| ![X(sid), V(sid)].contains(k)));
+        }
+        let (solved, covariances) = self.solve(&graph, &self.window.values, &cov_keys, vec!['l']);
         let failure = match solved {
             Ok((v, _)) => {
                 self.window.values = v;
@@ -307,7 +326,10 @@ impl<'a> Estimator<'a> {
         if keyframe {
             self.keyframe_std = est.std;
             self.keyframe_obs = obs;
-            if self.window.states.len() > self.opts.window.size {
+            if leaving {
+                if let Some(c) = covariances.as_ref() {
+                    self.measure_noise(t, c);
+                }
                 self.marginalize_oldest();
             }
         } else {
@@ -322,6 +344,61 @@ impl<'a> Estimator<'a> {
         if let Err(e) = marginalize_oldest(window, landmarks, self.input, &self.opts, &mut self.residuals) {
             self.warn(format!("marginalization failed ({e}); the window restarts from its newest state"));
             self.reset_to_newest();
+        }
+    }
+
+    /// Follow blind frames (fewer than [`BLIND_FEATURES`] features at time
+    /// `t`): a warning when vision is lost, the span when it returns.
+    fn watch_blindness(&mut self, t: f64, features: usize) {
+        match (&mut self.blind_since, features < BLIND_FEATURES) {
+            (None, true) => {
+                self.blind_since = Some((t, 1));
+                self.warn(format!(
+                    "vision lost at {t:.3} s ({features} features, fewer than {BLIND_FEATURES}): IMU only until features return"
+                ));
+            }
+            (Some((_, n)), true) => *n += 1,
+            (Some(_), false) => {
+                let (t0, n) = self.blind_since.take().expect("blind");
+                self.blind_spans.push([t0, t]);
+                self.warn(format!(
+                    "features back at {t:.3} s after {:.2} s blind ({n} frames): the estimate over that span is the IMU's alone",
+                    t - t0
+                ));
+            }
+            (None, false) => {}
+        }
+    }
+
+    /// Close a blind span still open at the last frame `t`.
+    fn finish_blindness(&mut self, t: f64) {
+        if let Some((t0, n)) = self.blind_since.take() {
+            self.blind_spans.push([t0, t]);
+            self.warn(format!(
+                "blind from {t0:.3} s to the end ({:.2} s, {n} frames): the estimate over that span is the IMU's alone",
+                t - t0
+            ));
+        }
+    }
+
+    /// Measure the IMU noise on the window's oldest link, which leaves it at
+    /// time `t` (`c`: the solve's covariances, with its states'); when the
+    /// noise in use changes, integrate the window's links and the next ones with it.
+    fn measure_noise(&mut self, t: f64, c: &Covariances) {
+        let Some(meter) = self.noise.as_mut() else { return };
+        let Some(link) = self.window.link_linearization(0) else { return };
+        let Some(sigma) = joint_covariance(c, &link.keys).filter(|s| s.ncols() == link.jacobian.ncols()) else {
+            return;
+        };
+        let given = meter.given();
+        let scales = [
+            link.params.gyro_noise_density / given.gyro_noise_density,
+            link.params.accel_noise_density / given.accel_noise_density,
+        ];
+        meter.measure(t, &link.residual, &link.jacobian, &sigma, &link.covariance, scales);
+        if meter.update(t) {
+            self.opts.noise.imu = meter.params();
+            self.window.reweight_links(self.opts.noise.imu);
         }
     }
 
@@ -514,6 +591,20 @@ impl<'a> Estimator<'a> {
     }
 }
 
+/// The joint covariance of `keys` (in their order) from `c`; None when a key is missing.
+fn joint_covariance(c: &Covariances, keys: &[tumble_solvers::Key]) -> Option<nalgebra::DMatrix<f64>> {
+    let dims: Vec<usize> = keys.iter().map(|k| c.get(*k).map(|m| m.nrows())).collect::<Option<_>>()?;
+    let offsets: Vec<usize> = dims.iter().scan(0, |o, d| Some(std::mem::replace(o, *o + d))).collect();
+    let n = dims.iter().sum();
+    let mut sigma = nalgebra::DMatrix::zeros(n, n);
+    for (i, ki) in keys.iter().enumerate() {
+        for (j, kj) in keys.iter().enumerate() {
+            sigma.view_mut((offsets[i], offsets[j]), (dims[i], dims[j])).copy_from(&c.block(*ki, *kj)?);
+        }
+    }
+    Some(sigma)
+}
+
 /// Run the estimator over every frame of `input`. `progress` is called with
 /// `(frames done, frames total)`.
 pub fn run(
@@ -564,10 +655,15 @@ pub fn run_observed(
             Init::Given { t, .. } => format!("could not initialize: no frame after the given initial state at {t:.3} s"),
         }).into());
     }
+    if let Some(last) = out.estimates.last() {
+        est.finish_blindness(last.t);
+    }
     out.warnings = est.warnings;
+    out.blind_spans = est.blind_spans;
     out.resets = est.resets;
     out.init_time = est.init_time;
     out.residuals = est.residuals;
+    out.noise = est.noise.as_ref().map(|m| m.report(est.startup.at_rest));
     out.wall_s = t0.elapsed().as_secs_f64();
     Ok(out)
 }

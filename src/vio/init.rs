@@ -10,8 +10,10 @@
 //! landmark at depth `λ` along its first ray `u_a`:
 //! `[û_k]× R_ckᵀ (p_ca + λ R_ca u_a − p_ck) = 0`. One linear least-squares
 //! problem in `(v₀, g, λ…)` gives velocity, gravity direction — roll and pitch —
-//! and metric scale at once, without visual SfM. The gyro bias is taken as
-//! zero (the calibration removed it); the window refines it afterwards.
+//! and metric scale at once, without visual SfM. The gyro bias is found
+//! first, from the features alone ([`gyro_bias`]): a raw MEMS gyro's bias
+//! (EuRoC's ADIS16448: 0.08 rad/s about z) turns the window's rotations by
+//! several degrees and spoils every row; the window refines it afterwards.
 //!
 //! Two things spoil it and are guarded against. A mismatched observation
 //! enters every row of its track; mismatches are removed first, free of the
@@ -36,6 +38,7 @@ use super::VioError;
 use super::{VioInput, VioOptions};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use std::collections::BTreeMap;
+use tumble_factors::imu_preint::Preintegrated;
 
 /// What the closed-form initialization found, at the window's last frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,6 +48,9 @@ pub struct MotionInit {
     pub rotation: Matrix3<f64>,
     /// Velocity at the last frame in the world frame \[m/s\].
     pub velocity: Vector3<f64>,
+    /// Gyro bias found from the features \[rad/s\] ([`gyro_bias`]); zero
+    /// when they do not determine it to within the start prior's σ.
+    pub bias_gyro: Vector3<f64>,
     /// Gravity magnitude of the unconstrained solution \[m/s²\] (a check of
     /// the motion's excitation: far from the true value means the window did
     /// not observe scale).
@@ -74,6 +80,13 @@ const MIN_PAIR_FEATURES: usize = 8;
 const MISMATCH_ROUNDS: usize = 4;
 /// Relative error of the free gravity magnitude accepted.
 const MAX_GRAVITY_ERROR: f64 = 0.1;
+/// The σ of the gyro-bias prior of a window's start \[rad/s\]
+/// (`super::window::START_GYRO_BIAS_SIGMA`): the features' estimate of the
+/// bias is used when it is better determined than that, else the bias starts at 0.
+const GYRO_BIAS_PRIOR_SIGMA: f64 = super::window::START_GYRO_BIAS_SIGMA;
+/// Rounds of the gyro-bias estimate, each with the IMU integrated again at
+/// the last one (the bias enters the rotations to first order only).
+const GYRO_BIAS_ROUNDS: usize = 3;
 
 /// Solve the closed-form initialization over the frames `frames` (indices
 /// into `input.frames`, in time order, at least 4), the IMU already corrected
@@ -86,26 +99,6 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         return Err(format!("{} frames in the window, 4 needed", frames.len()).into());
     }
     let t0 = input.frames[frames[0]].t;
-    let zero = (Vector3::zeros(), Vector3::zeros());
-    // Body rotation, metric displacement and velocity change since the first frame.
-    let mut rot = Vec::with_capacity(frames.len());
-    let mut dp = Vec::with_capacity(frames.len());
-    let mut dv = Vec::with_capacity(frames.len());
-    let mut time = Vec::with_capacity(frames.len());
-    for &k in frames {
-        let t = input.frames[k].t;
-        if t <= t0 {
-            rot.push(Matrix3::identity());
-            dp.push(Vector3::zeros());
-            dv.push(Vector3::zeros());
-        } else {
-            let (pim, _) = preintegrate(&input.imu, t0, t, zero, opts.noise.imu);
-            rot.push(pim.delta_rotation());
-            dp.push(pim.delta_position());
-            dv.push(pim.delta_velocity());
-        }
-        time.push(t - t0);
-    }
     // Observations by track: (window position, undistorted normalized xy).
     let mut by_track: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
     for (w, &k) in frames.iter().enumerate() {
@@ -114,6 +107,61 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
                 by_track.entry(*id).or_default().push((w, Vector3::new(xy[0], xy[1], 1.0)));
             }
         }
+    }
+    let (r_bc, t_bc) = parts(&input.body_from_camera);
+    // The gyro bias from the features, then the IMU integrated with it.
+    let integrate = |bg: Vector3<f64>| -> Vec<Option<Preintegrated>> {
+        frames
+            .iter()
+            .map(|&k| {
+                let t = input.frames[k].t;
+                (t > t0).then(|| preintegrate(&input.imu, t0, t, (Vector3::zeros(), bg), opts.noise.imu).0)
+            })
+            .collect()
+    };
+    let mut bias_gyro = Vector3::zeros();
+    for _ in 0..GYRO_BIAS_ROUNDS {
+        let pims = integrate(bias_gyro);
+        let rot: Vec<Matrix3<f64>> =
+            pims.iter().map(|p| p.as_ref().map_or(Matrix3::identity(), |p| p.delta_rotation())).collect();
+        let mut cleaned: Vec<Vec<Bearing>> = by_track.values().cloned().collect();
+        drop_mismatches(&mut cleaned, &rot, &r_bc);
+        let tracks: Vec<&Vec<Bearing>> = cleaned.iter().collect();
+        match gyro_bias(&pims, &tracks, &r_bc, bias_gyro) {
+            // Used only where the features determine it to better than the
+            // window's start prior on the gyro bias assumes.
+            Some((b, sigma)) if sigma < GYRO_BIAS_PRIOR_SIGMA => {
+                let done = (b - bias_gyro).norm() < 1e-6;
+                bias_gyro = b;
+                if done {
+                    break;
+                }
+            }
+            _ => {
+                bias_gyro = Vector3::zeros();
+                break;
+            }
+        }
+    }
+    // Body rotation, metric displacement and velocity change since the first frame.
+    let mut rot = Vec::with_capacity(frames.len());
+    let mut dp = Vec::with_capacity(frames.len());
+    let mut dv = Vec::with_capacity(frames.len());
+    let mut time = Vec::with_capacity(frames.len());
+    for (&k, pim) in frames.iter().zip(integrate(bias_gyro)) {
+        match pim {
+            None => {
+                rot.push(Matrix3::identity());
+                dp.push(Vector3::zeros());
+                dv.push(Vector3::zeros());
+            }
+            Some(pim) => {
+                rot.push(pim.delta_rotation());
+                dp.push(pim.delta_position());
+                dv.push(pim.delta_velocity());
+            }
+        }
+        time.push(input.frames[k].t - t0);
     }
     // The second camera's matches of the same tracks, when there is one.
     let mut stereo: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
@@ -126,7 +174,6 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             }
         }
     }
-    let (r_bc, t_bc) = parts(&input.body_from_camera);
     // Camera c's (R_BC, t_BC): 0 the first, 1 the second.
     let extrinsics = [(r_bc, t_bc), input.stereo.as_ref().map_or((r_bc, t_bc), |st| parts(&st.body_from_camera))];
     let (ids, mut tracks): (Vec<u64>, Vec<Vec<Bearing>>) = by_track.into_iter().unzip();
@@ -273,10 +320,122 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     Ok(MotionInit {
         rotation: r_w0 * rot[last],
         velocity: r_w0 * (v0 + g * time[last] + dv[last]),
+        bias_gyro,
         free_gravity,
         landmarks: kept,
         stereo_observations,
     })
+}
+
+/// The gyro bias that makes the window's rotations agree with its features
+/// (after the eigenvalue formulation of Kneip and Lynen, 2013): between two
+/// frames `a`, `b` every landmark's bearings `u_a`, `R_ab u_b` and the
+/// camera's translation are coplanar, so the normals `u_a × R_ab u_b` of all
+/// the pair's landmarks are orthogonal to the translation and the scatter of
+/// their directions has a zero smallest eigenvalue — at the right rotation
+/// only. Pairs are each track's first frame with each later one. `R_ab(b_g)` comes from the
+/// preintegrated rotations (`pims[w]`, None for the first frame) corrected to
+/// first order from `start`; the sum over frame pairs of the smallest
+/// eigenvalues is minimized over `b_g` by Levenberg–Marquardt (one residual
+/// √λ_min per pair, numerical derivatives). None when fewer than three pairs
+/// share [`MIN_PAIR_FEATURES`] features or the solve fails. Returns the
+/// bias \[rad/s\] and the largest of its standard deviations \[rad/s\] (over
+/// a slow walk with far landmarks a sideways translation looks like a yaw
+/// rate, and the features hardly determine it).
+pub fn gyro_bias(
+    pims: &[Option<Preintegrated>],
+    tracks: &[&Vec<Bearing>],
+    r_bc: &Matrix3<f64>,
+    start: Vector3<f64>,
+) -> Option<(Vector3<f64>, f64)> {
+    let mut pairs: BTreeMap<(usize, usize), Vec<BearingPair>> = BTreeMap::new();
+    // Each track's first observation against each later one: the longest
+    // baselines the window has (consecutive frames' parallax is too small to
+    // tell a translation from a rotation).
+    for obs in tracks {
+        let Some((&(a, ua), rest)) = obs.split_first() else { continue };
+        for &(b, ub) in rest {
+            pairs.entry((a, b)).or_default().push((ua.normalize(), ub.normalize()));
+        }
+    }
+    let key = tumble_solvers::Key::new('w', 0);
+    let mut graph = tumble_solvers::Graph::new();
+    let pims: std::sync::Arc<Vec<Option<Preintegrated>>> = std::sync::Arc::new(pims.to_vec());
+    for ((a, b), list) in pairs.into_iter().filter(|(_, l)| l.len() >= MIN_PAIR_FEATURES) {
+        let f = CoplanarityFactor { keys: [key], pims: pims.clone(), frames: (a, b), bearings: list, r_bc: *r_bc };
+        graph.add(f, tumble_solvers::NoiseModel::Unit);
+    }
+    if graph.entries().len() < 3 {
+        return None;
+    }
+    let mut values = tumble_solvers::Values::new();
+    values.insert(key, start);
+    let lm = tumble_solvers::LmOptions { max_iterations: 20, log_iterations: false, ..Default::default() };
+    let (sol, summary) = tumble_solvers::Optimizer::new(lm).optimize(&graph, &values).ok()?;
+    let b = sol.get::<Vector3<f64>>(key).ok().copied().filter(|b| b.iter().all(|x| x.is_finite()))?;
+    // Its covariance: the inverse Gauss–Newton information scaled by the
+    // residuals' own variance (one residual per pair, three unknowns).
+    let m = graph.entries().len();
+    let s2 = 2.0 * summary.final_cost / (m - 3) as f64;
+    let cov = tumble_solvers::covariances(&graph, &sol, &[key]).ok()?.get(key)?;
+    let sigma = (0..3).map(|i| (cov[(i, i)] * s2).max(0.0).sqrt()).fold(0.0, f64::max);
+    Some((b, sigma))
+}
+
+/// A landmark's unit bearings in two frames.
+type BearingPair = (Vector3<f64>, Vector3<f64>);
+
+/// `√λ_min` of one frame pair's coplanarity normals as a function of the gyro
+/// bias (see [`gyro_bias`]).
+struct CoplanarityFactor {
+    keys: [tumble_solvers::Key; 1],
+    pims: std::sync::Arc<Vec<Option<Preintegrated>>>,
+    frames: (usize, usize),
+    bearings: Vec<BearingPair>,
+    r_bc: Matrix3<f64>,
+}
+
+impl tumble_solvers::Factor for CoplanarityFactor {
+    fn keys(&self) -> &[tumble_solvers::Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        1
+    }
+    fn residual(&self, vars: tumble_solvers::Vars<'_>) -> Result<DVector<f64>, tumble_solvers::FactorError> {
+        let bg: &Vector3<f64> = vars.get(0)?;
+        let rot = |w: usize| self.pims[w].as_ref().map_or(Matrix3::identity(), |p| p.corrected(&p.bias().0, bg).0);
+        let r_ab = self.r_bc.transpose() * rot(self.frames.0).transpose() * rot(self.frames.1) * self.r_bc;
+        // Directions only (floored): a rotation that cancels the parallax
+        // would otherwise shrink every normal and look like a fit.
+        let dirs: Vec<Vector3<f64>> = self
+            .bearings
+            .iter()
+            .map(|(ua, ub)| {
+                let n = ua.cross(&(r_ab * ub));
+                n / n.norm().max(PAIR_ANGLE_FLOOR_RAD)
+            })
+            .collect();
+        let smallest = |ds: &mut dyn Iterator<Item = &Vector3<f64>>| {
+            let (m, k) = ds.fold((Matrix3::zeros(), 0usize), |(m, k), d| (m + d * d.transpose(), k + 1));
+            let e = m.symmetric_eigen();
+            let i = e.eigenvalues.imin();
+            (e.eigenvalues[i].max(0.0) / k.max(1) as f64, e.eigenvectors.column(i).into_owned())
+        };
+        // A mismatched observation's normal points anywhere: trimmed at 3×
+        // the median miss of the plane (as `drop_mismatches`), then again.
+        let (_, mut t) = smallest(&mut dirs.iter());
+        let mut lambda = 0.0;
+        for _ in 0..2 {
+            let mut miss: Vec<f64> = dirs.iter().map(|d| d.dot(&t).abs()).collect();
+            let limit = (3.0 * crate::rig::init::median(&mut miss.clone()).unwrap_or(0.0)).max(PAIR_ANGLE_FLOOR_RAD);
+            miss.iter_mut().for_each(|m| *m = if *m <= limit { 1.0 } else { 0.0 });
+            let (l, tn) = smallest(&mut dirs.iter().zip(&miss).filter(|(_, &k)| k > 0.0).map(|(d, _)| d));
+            lambda = l;
+            t = tn;
+        }
+        Ok(DVector::from_element(1, lambda.sqrt()))
+    }
 }
 
 /// An observation: window position and undistorted normalized `[x, y, 1]`.

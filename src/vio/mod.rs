@@ -43,6 +43,7 @@ mod keyframe;
 mod landmarks;
 pub(crate) use landmarks::residual_at;
 mod marginalization;
+pub mod noise_meter;
 pub mod options;
 pub mod output;
 #[cfg(feature = "rerun")]

@@ -142,6 +142,11 @@ pub struct NoiseOptions {
     /// reported as a warning, but on EuRoC V1_01 raising the noise made the
     /// ATE 6× worse (0.29 vs 0.05 m).
     pub from_static: bool,
+    /// Measure the IMU's white noise in motion from the window's own IMU
+    /// residuals (variance component estimation, see `vio/noise_meter.rs`)
+    /// and integrate with it where it exceeds the given figures (vibration,
+    /// unmodelled effects). Off: the given figures throughout.
+    pub measure_in_motion: bool,
     /// IMU spacing above which an interval is reported as a gap \[s\].
     pub max_imu_gap_s: f64,
 }
@@ -215,10 +220,11 @@ impl Default for RestOptions {
 impl Default for NoiseOptions {
     fn default() -> Self {
         NoiseOptions {
-            imu: PreintegrationParams { scheme: Scheme::ZeroOrderHold, ..PreintegrationParams::default() },
+            imu: PreintegrationParams { scheme: Scheme::Midpoint, ..PreintegrationParams::default() },
             pixel_sigma: 1.0,
             gravity: 9.81,
             from_static: false,
+            measure_in_motion: true,
             max_imu_gap_s: 0.05,
         }
     }

@@ -49,7 +49,7 @@ pub struct Summary {
     /// Start of the bias RMSE window \[s\] (convergence time skipped).
     pub bias_rmse_from_s: f64,
     /// The gyro bias's steady-state std per axis that the noise coefficients
-    /// predict, `√(N·K)` \[rad/s\] (see [`allan_steady_std`]).
+    /// in use at the end predict, `√(N·K)` \[rad/s\] (see [`allan_steady_std`]).
     pub bias_allan_std_gyro: f64,
     /// The same for the accelerometer bias \[m/s²\].
     pub bias_allan_std_accel: f64,
@@ -58,6 +58,14 @@ pub struct Summary {
     pub residuals: super::ResidualTally,
     /// `residuals.gap()`.
     pub residual_gap: f64,
+    /// The IMU white noise given, measured and in use (with
+    /// [`super::NoiseOptions::measure_in_motion`]).
+    pub noise: Option<super::noise_meter::NoiseReport>,
+    /// Time with fewer than [`super::estimator::BLIND_FEATURES`] features per
+    /// frame, the IMU alone carrying the estimate \[s\].
+    pub blind_s: f64,
+    /// The longest such span \[s\].
+    pub blind_longest_s: f64,
     /// Warnings of the run.
     pub warnings: Vec<String>,
     /// The evaluation against the ground truth (written to `eval/`), when known.
@@ -152,6 +160,9 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         let (a, b) = (ev.pairs[0].gt.translation.vector, ev.pairs[ev.pairs.len() - 1].gt.translation.vector);
         (a - b).norm() < 0.05
     });
+    // The white noise in use at the end (measured in motion, or as given).
+    let in_use =
+        result.noise.map_or([opts.noise.imu.gyro_noise_density, opts.noise.imu.accel_noise_density], |n| n.in_use);
     Summary {
         duration_s,
         distance_m,
@@ -171,8 +182,11 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         bias_rmse_gyro: m.and_then(|m| m.bias_rmse_gyro),
         bias_rmse_accel: m.and_then(|m| m.bias_rmse_accel),
         bias_rmse_from_s: first.map_or(0.0, |f| f.t) + bias_from_s,
-        bias_allan_std_gyro: allan_steady_std(opts.noise.imu.gyro_noise_density, opts.noise.imu.gyro_random_walk),
-        bias_allan_std_accel: allan_steady_std(opts.noise.imu.accel_noise_density, opts.noise.imu.accel_random_walk),
+        bias_allan_std_gyro: allan_steady_std(in_use[0], opts.noise.imu.gyro_random_walk),
+        bias_allan_std_accel: allan_steady_std(in_use[1], opts.noise.imu.accel_random_walk),
+        noise: result.noise,
+        blind_s: result.blind_spans.iter().map(|[a, b]| b - a).sum(),
+        blind_longest_s: result.blind_spans.iter().map(|[a, b]| b - a).fold(0.0, f64::max),
         warnings,
         evaluation,
     }
@@ -215,7 +229,7 @@ impl Summary {
              closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
              bias RMSE after {:.1} s: gyro {}, accel {}{}\n\
-             {}speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
+             {}{}{}speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
             self.duration_s,
             self.distance_m,
             self.groundtruth_distance_m.map_or(String::new(), |d| format!(" (ground truth {d:.2} m)")),
@@ -235,6 +249,17 @@ impl Summary {
                 .as_ref()
                 .and_then(|ev| ev.metrics.bias_nees_gyro_axes.zip(ev.metrics.bias_nees_accel_axes))
                 .map_or(String::new(), |(g, a)| format!("{}\n", crate::eval::nees_line(g, a))),
+            self.noise.map_or(String::new(), |n| format!("{}\n", n.line())),
+            if self.blind_s > 0.0 {
+                format!(
+                    "blind (fewer than {} features, IMU only): {:.1} s in all, longest {:.1} s\n",
+                    super::estimator::BLIND_FEATURES,
+                    self.blind_s,
+                    self.blind_longest_s
+                )
+            } else {
+                String::new()
+            },
             self.realtime_factor,
             self.solve_ms_median,
             self.solve_ms_p95,

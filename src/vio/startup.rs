@@ -11,6 +11,11 @@ use nalgebra::{UnitQuaternion, Vector3, Vector6};
 const MOTION_V_SIGMA: f64 = 0.1;
 /// Roll/pitch prior σ of a start in motion \[rad\] (2°).
 const MOTION_TILT_SIGMA: f64 = 0.035;
+/// Gyro-bias prior σ of a start in motion whose features did not determine
+/// the bias \[rad/s\]: a raw MEMS gyro's turn-on bias is a few °/s (EuRoC's
+/// ADIS16448 0.08 rad/s = 4.4 °/s about z), so 0.1 rad/s (5.7 °/s) leaves it
+/// to the window; a calibrated one (`tumble calibrate`) is far inside.
+const MOTION_GYRO_BIAS_SIGMA: f64 = 0.1;
 /// Largest change of the mean gyro rate between quarters of a window at rest \[rad/s\].
 const REST_GYRO_STEP: f64 = 0.02;
 /// Largest change of the mean specific force between quarters of a window at rest \[m/s²\].
@@ -30,6 +35,8 @@ pub(crate) enum AtRest {
 pub(crate) struct Startup {
     /// Why the last initialization in motion failed (for the error when none worked).
     pub failure: Option<String>,
+    /// The white-noise densities a static start measured, `[gyro, accel]`.
+    pub at_rest: Option<[f64; 2]>,
 }
 
 impl Startup {
@@ -59,10 +66,16 @@ impl Startup {
                     b,
                 ))
             }
-            Init::Static => initialize_static(input, opts, warnings, t).ok(),
+            Init::Static => initialize_static(input, opts, warnings, t).ok().map(|(s, m)| {
+                self.at_rest = Some(m);
+                s
+            }),
             Init::Motion => self.initialize_moving(input, opts, warnings, index, t),
             Init::Auto => match initialize_static(input, opts, warnings, t) {
-                Ok(state) => Some(state),
+                Ok((state, measured)) => {
+                    self.at_rest = Some(measured);
+                    Some(state)
+                }
                 Err(AtRest::Moving) => self.initialize_moving(input, opts, warnings, index, t),
                 Err(AtRest::TooEarly) => None,
             },
@@ -96,18 +109,24 @@ impl Startup {
                         n => format!(", {n} stereo matches"),
                     };
                     warnings.push(format!(
-                        "initialized in motion at {t:.3} s from {} frames and {} landmarks{stereo} (speed {:.2} m/s, free gravity {:.2} m/s²)",
+                        "initialized in motion at {t:.3} s from {} frames and {} landmarks{stereo} (speed {:.2} m/s, free gravity {:.2} m/s², gyro bias [{:.4}, {:.4}, {:.4}] rad/s)",
                         window.len(),
                         m.landmarks,
                         m.velocity.norm(),
-                        m.free_gravity
+                        m.free_gravity,
+                        m.bias_gyro.x,
+                        m.bias_gyro.y,
+                        m.bias_gyro.z
                     ));
                     return Some(InitState {
                         x: pose(&m.rotation, &Vector3::zeros()),
                         v: m.velocity,
-                        b: Vector6::zeros(),
+                        b: Vector6::new(0.0, 0.0, 0.0, m.bias_gyro.x, m.bias_gyro.y, m.bias_gyro.z),
                         v_sigma: MOTION_V_SIGMA,
                         tilt_sigma: Some(MOTION_TILT_SIGMA),
+                        // The features' estimate when they determined it,
+                        // else nothing is known of a raw gyro's bias.
+                        gyro_bias_sigma: (m.bias_gyro == Vector3::zeros()).then_some(MOTION_GYRO_BIAS_SIGMA),
                     });
                 }
                 Err(why) => failure = Some(format!("at {t:.3} s over {span:.1} s: {why}")),
@@ -122,12 +141,14 @@ impl Startup {
 
 /// [`Init::Static`] at time `t`: the last `static_window_s` of IMU data must
 /// be at rest (means over its quarters agree, so vibration averages out).
+/// Returns the start and the white-noise densities `[gyro, accel]` the
+/// samples' spread shows.
 pub(crate) fn initialize_static(
     input: &VioInput,
     opts: &mut VioOptions,
     warnings: &mut Vec<String>,
     t: f64,
-) -> Result<InitState, AtRest> {
+) -> Result<(InitState, [f64; 2]), AtRest> {
     let imu = &input.imu;
     let w = opts.init.static_window_s;
     let (i0, i1) = (imu.t.partition_point(|&s| s < t - w), imu.t.partition_point(|&s| s <= t));
@@ -174,7 +195,7 @@ pub(crate) fn initialize_static(
     }
     let r = gravity_aligned(&am);
     let b = Vector6::new(0.0, 0.0, 0.0, gm.x, gm.y, gm.z);
-    Ok(InitState::at_rest(pose(&r, &Vector3::zeros()), Vector3::zeros(), b))
+    Ok((InitState::at_rest(pose(&r, &Vector3::zeros()), Vector3::zeros(), b), [sg, sa]))
 }
 
 #[cfg(test)]
@@ -201,7 +222,7 @@ mod tests {
         let inp = input(1.5, 0.0);
         let mut opts = VioOptions::default();
         let mut warnings = Vec::new();
-        let s = initialize_static(&inp, &mut opts, &mut warnings, 1.4).unwrap();
+        let (s, _) = initialize_static(&inp, &mut opts, &mut warnings, 1.4).unwrap();
         assert!((s.b[3] - 0.01).abs() < 1e-12 && s.b[4].abs() < 1e-12);
         let (r, _) = crate::vio::geometry::parts(&s.x);
         let up = r.transpose() * Vector3::z();

@@ -30,8 +30,8 @@ pub(crate) type StateValues = (Isometry3F64, Vector3<f64>, Vector6<f64>);
 /// Velocity prior σ of a start at rest or from a given state \[m/s\].
 pub(crate) const STATIC_V_SIGMA: f64 = 0.01;
 
-/// Gyro-bias prior σ of a start \[rad/s\].
-const START_GYRO_BIAS_SIGMA: f64 = 5e-3;
+/// Gyro-bias prior σ of a start whose bias was measured (at rest) or given \[rad/s\].
+pub(crate) const START_GYRO_BIAS_SIGMA: f64 = 5e-3;
 
 /// Standard deviation of the zero-velocity pseudo-measurement of a frame at
 /// rest \[m/s\] (and of its position change since a previous frame at rest,
@@ -51,12 +51,15 @@ pub(crate) struct InitState {
     pub v_sigma: f64,
     /// Roll/pitch prior σ \[rad\]; default: what the accelerometer-bias prior allows.
     pub tilt_sigma: Option<f64>,
+    /// Gyro-bias prior σ \[rad/s\]; default [`START_GYRO_BIAS_SIGMA`] (a bias
+    /// measured at rest, or given).
+    pub gyro_bias_sigma: Option<f64>,
 }
 
 impl InitState {
     /// A start at rest (or from a given state): velocity known to [`STATIC_V_SIGMA`].
     pub fn at_rest(x: Isometry3F64, v: Vector3<f64>, b: Vector6<f64>) -> Self {
-        InitState { x, v, b, v_sigma: STATIC_V_SIGMA, tilt_sigma: None }
+        InitState { x, v, b, v_sigma: STATIC_V_SIGMA, tilt_sigma: None, gyro_bias_sigma: None }
     }
 }
 
@@ -71,6 +74,20 @@ pub(crate) struct InitPrior {
     b: Vector6<f64>,
     /// Bias prior σ `[b_a (m/s²), b_g (rad/s)]`.
     pub b_sigma: [f64; 6],
+}
+
+/// An IMU link linearized at the window's values ([`Window::link_linearization`]).
+pub(crate) struct LinkLinearization {
+    /// `[X(a), V(a), B(a), X(b), V(b)]`.
+    pub keys: [tumble_solvers::Key; 5],
+    /// Raw residual `[θ, p, v]`.
+    pub residual: nalgebra::DVector<f64>,
+    /// Jacobian over the keys, 9 × 24.
+    pub jacobian: DMatrix<f64>,
+    /// The covariance the factor is weighed with.
+    pub covariance: DMatrix<f64>,
+    /// The noise figures it was integrated with.
+    pub params: tumble_factors::imu_preint::PreintegrationParams,
 }
 
 /// The window: states, values, IMU links and priors.
@@ -108,7 +125,7 @@ impl Window {
     /// prior. Roll and pitch are as uncertain as an accelerometer bias makes
     /// them (or `init.tilt_sigma`); yaw and position are fixed (the gauge of VIO).
     pub fn start(&mut self, t: f64, init: InitState, opts: &VioOptions) {
-        let InitState { x, v, b, v_sigma, tilt_sigma } = init;
+        let InitState { x, v, b, v_sigma, tilt_sigma, gyro_bias_sigma } = init;
         let sid = self.next_id();
         self.values = Values::new();
         self.values.insert(X(sid), x);
@@ -124,7 +141,7 @@ impl Window {
         let mut pose_cov = DMatrix::identity(6, 6) * 1e-6;
         pose_cov.view_mut((0, 0), (3, 3)).copy_from(&rot_cov);
         let sa = opts.init.bias_accel_sigma;
-        let sg = START_GYRO_BIAS_SIGMA;
+        let sg = gyro_bias_sigma.unwrap_or(START_GYRO_BIAS_SIGMA);
         self.init_prior = Some(InitPrior { sid, pose: x, pose_cov, v, v_sigma, b, b_sigma: [sa, sa, sa, sg, sg, sg] });
     }
 
@@ -204,6 +221,44 @@ impl Window {
         let imu = &opts.noise.imu;
         if let Ok((rw, n)) = bias_random_walk_axes(B(a), B(b), imu.accel_walk().into(), imu.gyro_walk().into(), dt) {
             g.add(rw, n);
+        }
+    }
+
+    /// Link `i`'s IMU factor linearized at the window's values: its keys
+    /// `[X, V, B, X, V]`, raw residual (9), Jacobian (9 × 24) and the
+    /// covariance it is weighed with (9 × 9); None when it cannot be evaluated.
+    pub fn link_linearization(&self, i: usize) -> Option<LinkLinearization> {
+        let (pim, scale) = self.links.get(i)?;
+        let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
+        let keys = [X(a), V(a), B(a), X(b), V(b)];
+        let f = ImuFactor::new(keys, pim.clone(), self.gravity);
+        let vars: Vec<&dyn tumble_solvers::DynVariable> =
+            keys.iter().map(|&k| self.values.get_dyn(k).ok()).collect::<Option<_>>()?;
+        let lin = tumble_solvers::Factor::linearize(&f, tumble_solvers::Vars::new(&vars)).ok()?;
+        let cols: usize = lin.jacobians.iter().map(|j| j.ncols()).sum();
+        let mut j = DMatrix::zeros(9, cols);
+        let mut c0 = 0;
+        for jk in &lin.jacobians {
+            j.view_mut((0, c0), (9, jk.ncols())).copy_from(jk);
+            c0 += jk.ncols();
+        }
+        let cov = pim.covariance() * *scale;
+        Some(LinkLinearization {
+            keys,
+            residual: lin.residual,
+            jacobian: j,
+            covariance: DMatrix::from_fn(9, 9, |r, c| cov[(r, c)]),
+            params: *pim.params(),
+        })
+    }
+
+    /// Integrate every link again with the noise figures `params` (their
+    /// samples and bias estimates kept).
+    pub fn reweight_links(&mut self, params: tumble_factors::imu_preint::PreintegrationParams) {
+        for link in &mut self.links {
+            let mut p = (*link.0).clone();
+            p.reintegrate_with(params);
+            link.0 = Arc::new(p);
         }
     }
 
