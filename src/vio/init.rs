@@ -338,7 +338,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
 /// first order from `start`; the sum over frame pairs of the smallest
 /// eigenvalues is minimized over `b_g` by Levenberg–Marquardt (one residual
 /// √λ_min per pair, numerical derivatives). None when fewer than three pairs
-/// share [`MIN_PAIR_FEATURES`] features or the solve fails. Returns the
+/// share 8 features (`MIN_PAIR_FEATURES`) or the solve fails. Returns the
 /// bias \[rad/s\] and the largest of its standard deviations \[rad/s\] (over
 /// a slow walk with far landmarks a sideways translation looks like a yaw
 /// rate, and the features hardly determine it).
