@@ -6,7 +6,7 @@
 use crate::calib::model::ImuCalibration;
 use crate::io::{asl, trajectory::Trajectory};
 use crate::sim::{CameraSettings, SimConfig, Simulation, TriadModel};
-use crate::vio::input::{imu_data, iso, sensor_noise, with_calibrated_offsets};
+use crate::vio::input::{imu_data, iso, sensor_noise, to_nalgebra, with_calibrated_offsets};
 use crate::vio::VioError;
 use crate::vio::{Frame, ImuData, ImuNoise, StereoCamera, VioInput, VioOptions};
 use crate::InputError;
@@ -223,9 +223,7 @@ impl VioInput {
                 continue;
             }
             rms.push(e);
-            let (r, p) = crate::vio::geometry::parts(&t_ct);
-            let t_ct =
-                nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p), UnitQuaternion::from_matrix(&r));
+            let t_ct = to_nalgebra(&t_ct);
             // Target ← body = (camera ← target)⁻¹ · (body ← camera)⁻¹.
             poses.push((v.t_ns, t_ct.inverse() * t_bc.inverse()));
         }

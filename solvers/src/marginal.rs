@@ -252,11 +252,21 @@ impl Covariances {
     }
     /// Cross-covariance block between two requested keys.
     pub fn block(&self, a: Key, b: Key) -> Option<DMatrix<f64>> {
-        let ia = self.keys.iter().position(|k| *k == a)?;
-        let ib = self.keys.iter().position(|k| *k == b)?;
-        let (oa, da) = (self.offsets[ia], self.offsets[ia + 1] - self.offsets[ia]);
-        let (ob, db) = (self.offsets[ib], self.offsets[ib + 1] - self.offsets[ib]);
+        let (oa, da) = self.span(a)?;
+        let (ob, db) = self.span(b)?;
         Some(self.joint.view((oa, ob), (da, db)).into_owned())
+    }
+    /// Joint covariance of some of the requested keys, in the order given
+    /// (None when one was not requested).
+    pub fn joint(&self, keys: &[Key]) -> Option<DMatrix<f64>> {
+        let spans: Vec<(usize, usize)> = keys.iter().map(|k| self.span(*k)).collect::<Option<_>>()?;
+        let idx: Vec<usize> = spans.iter().flat_map(|&(o, d)| o..o + d).collect();
+        Some(DMatrix::from_fn(idx.len(), idx.len(), |r, c| self.joint[(idx[r], idx[c])]))
+    }
+    /// Offset and dimension of a requested key in the joint matrix.
+    fn span(&self, k: Key) -> Option<(usize, usize)> {
+        let i = self.keys.iter().position(|x| *x == k)?;
+        Some((self.offsets[i], self.offsets[i + 1] - self.offsets[i]))
     }
 }
 

@@ -417,6 +417,11 @@ fn covariance_equals_dense_inverse() {
             );
         }
     }
+    // A joint selection in another order is the dense inverse's rows and columns.
+    let joint = cov.joint(&[X(2), X(0)]).unwrap();
+    let idx: Vec<usize> = (6..9).chain(0..3).collect();
+    assert_relative_eq!(joint, DMatrix::from_fn(6, 6, |r, c| dense[(idx[r], idx[c])]), epsilon = 1e-10);
+    assert!(cov.joint(&[X(n as u64)]).is_none());
 }
 
 /// A small bundle-adjustment problem: `n_cams` Snavely cameras looking at

@@ -6,8 +6,9 @@
 use super::init::{self, RateIntegral};
 use super::{CameraResult, CornerResidual, Reprojection, RigInput, RigOptions, RigResult};
 use crate::vio::geometry::{gravity_aligned, parts, pose, preintegrate};
+use crate::vio::input::to_nalgebra;
 use crate::vio::residual_at;
-use nalgebra::{Isometry3, Matrix3, SVector, Translation3, UnitQuaternion, Vector1, Vector3, Vector6};
+use nalgebra::{Matrix3, SVector, Vector1, Vector3, Vector6};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
@@ -48,14 +49,6 @@ const HAND_EYE_SPAN: usize = 5;
 struct FrameSlot {
     t: f64,
     views: Vec<Option<usize>>,
-}
-
-fn to_nalgebra(x: &Isometry3F64) -> Isometry3<f64> {
-    let (r, t) = parts(x);
-    Isometry3::from_parts(
-        Translation3::from(t),
-        UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
-    )
 }
 
 /// Projection of the mean of rotation matrices onto SO(3) (chordal mean).

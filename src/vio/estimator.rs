@@ -387,7 +387,7 @@ impl<'a> Estimator<'a> {
     fn measure_noise(&mut self, t: f64, c: &Covariances) {
         let Some(meter) = self.noise.as_mut() else { return };
         let Some(link) = self.window.link_linearization(0) else { return };
-        let Some(sigma) = joint_covariance(c, &link.keys).filter(|s| s.ncols() == link.jacobian.ncols()) else {
+        let Some(sigma) = c.joint(&link.keys).filter(|s| s.ncols() == link.jacobian.ncols()) else {
             return;
         };
         let given = meter.given();
@@ -589,20 +589,6 @@ impl<'a> Estimator<'a> {
             solve_s: t0.elapsed().as_secs_f64(),
         }
     }
-}
-
-/// The joint covariance of `keys` (in their order) from `c`; None when a key is missing.
-fn joint_covariance(c: &Covariances, keys: &[tumble_solvers::Key]) -> Option<nalgebra::DMatrix<f64>> {
-    let dims: Vec<usize> = keys.iter().map(|k| c.get(*k).map(|m| m.nrows())).collect::<Option<_>>()?;
-    let offsets: Vec<usize> = dims.iter().scan(0, |o, d| Some(std::mem::replace(o, *o + d))).collect();
-    let n = dims.iter().sum();
-    let mut sigma = nalgebra::DMatrix::zeros(n, n);
-    for (i, ki) in keys.iter().enumerate() {
-        for (j, kj) in keys.iter().enumerate() {
-            sigma.view_mut((offsets[i], offsets[j]), (dims[i], dims[j])).copy_from(&c.block(*ki, *kj)?);
-        }
-    }
-    Some(sigma)
 }
 
 /// Run the estimator over every frame of `input`. `progress` is called with

@@ -48,9 +48,10 @@ pub struct MotionInit {
     pub rotation: Matrix3<f64>,
     /// Velocity at the last frame in the world frame \[m/s\].
     pub velocity: Vector3<f64>,
-    /// Gyro bias found from the features \[rad/s\] ([`gyro_bias`]); zero
-    /// when they do not determine it to within the start prior's σ.
-    pub bias_gyro: Vector3<f64>,
+    /// Gyro bias found from the features \[rad/s\] ([`gyro_bias`]); None
+    /// when they do not determine it to within the start prior's σ (the
+    /// window's rotations were then integrated with a zero bias).
+    pub bias_gyro: Option<Vector3<f64>>,
     /// Gravity magnitude of the unconstrained solution \[m/s²\] (a check of
     /// the motion's excitation: far from the true value means the window did
     /// not observe scale).
@@ -120,6 +121,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             .collect()
     };
     let mut bias_gyro = Vector3::zeros();
+    let mut determined = true;
     for _ in 0..GYRO_BIAS_ROUNDS {
         let pims = integrate(bias_gyro);
         let rot: Vec<Matrix3<f64>> =
@@ -139,6 +141,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             }
             _ => {
                 bias_gyro = Vector3::zeros();
+                determined = false;
                 break;
             }
         }
@@ -320,7 +323,7 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     Ok(MotionInit {
         rotation: r_w0 * rot[last],
         velocity: r_w0 * (v0 + g * time[last] + dv[last]),
-        bias_gyro,
+        bias_gyro: determined.then_some(bias_gyro),
         free_gravity,
         landmarks: kept,
         stereo_observations,

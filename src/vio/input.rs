@@ -358,6 +358,15 @@ pub(crate) fn iso(t: &nalgebra::Isometry3<f64>) -> Isometry3F64 {
     pose(t.rotation.to_rotation_matrix().matrix(), &t.translation.vector)
 }
 
+/// The solver's SE(3) as nalgebra's (the inverse of [`iso`]).
+pub(crate) fn to_nalgebra(x: &Isometry3F64) -> nalgebra::Isometry3<f64> {
+    let (r, t) = super::geometry::parts(x);
+    nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::from(t),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
 /// `input` with the calibration's time offsets applied, when it has any.
 pub(crate) fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuCalibration>) -> VioInput {
     match calibration.and_then(|c| c.time_offsets) {

@@ -127,12 +127,20 @@ pub(crate) fn observation_factors(
     out
 }
 
+/// A factor's variables in `values`, in its keys' order (None when one is missing).
+fn vars_of<'a>(values: &'a Values, f: &dyn Factor) -> Option<Vec<&'a dyn tumble_solvers::DynVariable>> {
+    f.keys().iter().map(|&k| values.get_dyn(k).ok()).collect()
+}
+
 /// A factor's raw residual at `values` (None when a variable is missing or
 /// the factor cannot be evaluated).
 pub(crate) fn residual_at(values: &Values, f: &dyn Factor) -> Option<nalgebra::DVector<f64>> {
-    let vars: Vec<&dyn tumble_solvers::DynVariable> =
-        f.keys().iter().map(|&k| values.get_dyn(k).ok()).collect::<Option<_>>()?;
-    f.residual(tumble_solvers::Vars::new(&vars)).ok()
+    f.residual(tumble_solvers::Vars::new(&vars_of(values, f)?)).ok()
+}
+
+/// A factor's raw residual and Jacobians at `values` (None as [`residual_at`]).
+pub(crate) fn linearize_at(values: &Values, f: &dyn Factor) -> Option<tumble_solvers::Linearization> {
+    f.linearize(tumble_solvers::Vars::new(&vars_of(values, f)?)).ok()
 }
 
 /// The reprojection noise and robust loss of the window's observations.

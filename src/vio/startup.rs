@@ -104,6 +104,7 @@ impl Startup {
             let window: Vec<usize> = (first..=index).collect();
             match super::init::closed_form(input, &window, opts) {
                 Ok(m) => {
+                    let bias_gyro = m.bias_gyro.unwrap_or_else(Vector3::zeros);
                     let stereo = match m.stereo_observations {
                         0 => String::new(),
                         n => format!(", {n} stereo matches"),
@@ -114,19 +115,19 @@ impl Startup {
                         m.landmarks,
                         m.velocity.norm(),
                         m.free_gravity,
-                        m.bias_gyro.x,
-                        m.bias_gyro.y,
-                        m.bias_gyro.z
+                        bias_gyro.x,
+                        bias_gyro.y,
+                        bias_gyro.z
                     ));
                     return Some(InitState {
                         x: pose(&m.rotation, &Vector3::zeros()),
                         v: m.velocity,
-                        b: Vector6::new(0.0, 0.0, 0.0, m.bias_gyro.x, m.bias_gyro.y, m.bias_gyro.z),
+                        b: Vector6::new(0.0, 0.0, 0.0, bias_gyro.x, bias_gyro.y, bias_gyro.z),
                         v_sigma: MOTION_V_SIGMA,
                         tilt_sigma: Some(MOTION_TILT_SIGMA),
                         // The features' estimate when they determined it,
                         // else nothing is known of a raw gyro's bias.
-                        gyro_bias_sigma: (m.bias_gyro == Vector3::zeros()).then_some(MOTION_GYRO_BIAS_SIGMA),
+                        gyro_bias_sigma: m.bias_gyro.is_none().then_some(MOTION_GYRO_BIAS_SIGMA),
                     });
                 }
                 Err(why) => failure = Some(format!("at {t:.3} s over {span:.1} s: {why}")),

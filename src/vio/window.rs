@@ -231,10 +231,7 @@ impl Window {
         let (pim, scale) = self.links.get(i)?;
         let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
         let keys = [X(a), V(a), B(a), X(b), V(b)];
-        let f = ImuFactor::new(keys, pim.clone(), self.gravity);
-        let vars: Vec<&dyn tumble_solvers::DynVariable> =
-            keys.iter().map(|&k| self.values.get_dyn(k).ok()).collect::<Option<_>>()?;
-        let lin = tumble_solvers::Factor::linearize(&f, tumble_solvers::Vars::new(&vars)).ok()?;
+        let lin = super::landmarks::linearize_at(&self.values, &ImuFactor::new(keys, pim.clone(), self.gravity))?;
         let cols: usize = lin.jacobians.iter().map(|j| j.ncols()).sum();
         let mut j = DMatrix::zeros(9, cols);
         let mut c0 = 0;
