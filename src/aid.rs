@@ -284,6 +284,32 @@ fn simulated_stereo(
     Some(StereoCamera { camera: cam.model(), body_from_camera: iso(&cam.body_from_second_camera()), features })
 }
 
+impl VioInput {
+    /// The same recording with a wrong camera calibration, to test its online
+    /// estimation ([`crate::vio::CameraCalibrationOptions`]): the given `T_BC`
+    /// turned by `rotation` (a rotation vector in the camera frame \[rad\]) and
+    /// moved by `translation` (camera frame \[m\]), and every frame stamped
+    /// `shift` later \[s\] — whose true time offset (t_imu = t_cam + td) is then
+    /// the old one minus `shift`. Returns the input and the correct `T_BC`.
+    pub fn with_camera_error(
+        mut self,
+        rotation: Vector3<f64>,
+        translation: Vector3<f64>,
+        shift: f64,
+    ) -> (VioInput, tumble_solvers::sophus_lie::Isometry3F64) {
+        let correct = self.body_from_camera;
+        let delta = crate::vio::geometry::pose(
+            UnitQuaternion::from_scaled_axis(rotation).to_rotation_matrix().matrix(),
+            &translation,
+        );
+        self.body_from_camera = correct * delta;
+        for f in &mut self.frames {
+            f.t += shift;
+        }
+        (self, correct)
+    }
+}
+
 impl VioOptions {
     /// Defaults with the noise, gravity and pixel noise a simulation was made with
     /// (what `tumble allan` and the camera's specification would tell).

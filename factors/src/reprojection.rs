@@ -235,3 +235,96 @@ impl StereoInverseDepth {
 }
 
 pixel_factor!(StereoInverseDepth);
+
+/// [`InverseDepthReprojection`] with the camera's extrinsic `T_BC` and time
+/// offset `td` as unknowns, for their online calibration in a sliding window
+/// (VINS-Mono's `estimate_extrinsic` / `estimate_td`): a factor on
+/// `[X_a, V_a, X_j, V_j, ρ, T_BC, td]` (SE(3), R³, SE(3), R³, R¹, SE(3), R¹;
+/// 26 tangent dimensions), to be wrapped in [`tumble_solvers::AutoDiff`].
+///
+/// An image stamped `t` by the camera was exposed at IMU time `t + td`
+/// (Kalibr's `timeshift_cam_imu`), as in [`crate::rig::TargetCorner`]: each
+/// body pose (state at the stamp `t`, velocity `v` \[m/s, world\]) is moved to
+/// the exposure along its bias-corrected rate `ω` \[rad/s, body\] and its
+/// velocity — `R_WB Exp(ω td)`, `t_WB + v td` — then the landmark
+/// `p_Ba = R_BC f_a / ρ + t_BC` of the anchor goes through the world into the
+/// observing camera: `r = π(R_BCᵀ (p_Bj − t_BC)) − uv_j` \[px\]. Behind the
+/// camera the residual is finite and large, so a trial step there is rejected.
+///
+/// ```
+/// use nalgebra::{Vector1, Vector3};
+/// use tumble_factors::camera::{CameraModel, Distortion};
+/// use tumble_factors::reprojection::CalibratingReprojection;
+/// use tumble_solvers::{check_jacobians, se3_from_quaternion, AutoDiff, Key, L, V, X};
+/// let cam = CameraModel { fx: 460.0, fy: 460.0, cx: 376.0, cy: 240.0,
+///     distortion: Distortion::RadTan { k1: -0.28, k2: 0.07, p1: 2e-4, p2: 2e-5 } };
+/// let keys = [X(0), V(0), X(1), V(1), L(7), Key::new('c', 0), Key::new('d', 0)];
+/// let rates = [[0.3, -0.2, 0.5], [0.1, 0.4, -0.3]];
+/// let f = AutoDiff::new(CalibratingReprojection::new(keys, [0.1, -0.05], [380.0, 230.0], rates, cam));
+/// let xa = se3_from_quaternion([1.0, 0.0, 0.0, 0.0], Vector3::zeros());
+/// let xj = se3_from_quaternion([0.999, 0.02, -0.03, 0.01], Vector3::new(0.2, 0.05, -0.1));
+/// let (va, vj) = (Vector3::new(0.5, 0.1, 0.0), Vector3::new(0.4, -0.2, 0.1));
+/// let t_bc = se3_from_quaternion([0.7, 0.0, 0.0, 0.7], Vector3::new(0.05, -0.02, 0.01));
+/// let (rho, td) = (Vector1::new(0.4), Vector1::new(0.006));
+/// assert!(check_jacobians(&f, &[&xa, &va, &xj, &vj, &rho, &t_bc, &td]).unwrap().passes(1e-6));
+/// ```
+#[derive(Clone, Debug)]
+pub struct CalibratingReprojection {
+    keys: [Key; 7],
+    bearing: [f64; 3],
+    measured: [f64; 2],
+    rates: [[f64; 3]; 2],
+    kind: crate::camera::DistortionKind,
+    intrinsics: [f64; 8],
+}
+
+impl CalibratingReprojection {
+    /// Factor on `[X_a, V_a, X_j, V_j, ρ, T_BC, td]`: anchor observation
+    /// `anchor_xy` (undistorted normalized), observation `measured_uv` \[px\]
+    /// in frame j, the bias-corrected body rates `[ω_a, ω_j]` \[rad/s\] at the
+    /// two frames' stamps, and the camera's model (intrinsics fixed).
+    pub fn new(
+        keys: [Key; 7],
+        anchor_xy: [f64; 2],
+        measured_uv: [f64; 2],
+        rates: [[f64; 3]; 2],
+        camera: CameraModel,
+    ) -> Self {
+        CalibratingReprojection {
+            keys,
+            bearing: [anchor_xy[0], anchor_xy[1], 1.0],
+            measured: measured_uv,
+            rates,
+            kind: camera.distortion.kind(),
+            intrinsics: camera.to_vector(),
+        }
+    }
+}
+
+impl tumble_solvers::AutoDiffResidual<26> for CalibratingReprojection {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual<T: tumble_solvers::Real>(&self, p: &[&[T]]) -> Vec<T> {
+        use crate::rig::{pixel_residual, rot, rot_t, small_rotation};
+        let (xa, va, xj, vj, rho, tbc, td) = (p[0], p[1], p[2], p[3], p[4][0], p[5], p[6][0]);
+        let inv = T::one() / rho;
+        // The landmark in the anchor body frame at its exposure.
+        let pca = self.bearing.map(|b| inv * b);
+        let r_pca = rot(&tbc[..9], pca);
+        let pba = [0, 1, 2].map(|i| r_pca[i] + tbc[9 + i]);
+        // Anchor pose at exposure: R_a Exp(ω_a td), p_a + v_a td.
+        let moved = small_rotation(self.rates[0].map(|w| td * w), pba);
+        let rw = rot(&xa[..9], moved);
+        let pw = [0, 1, 2].map(|i| rw[i] + xa[9 + i] + va[i] * td);
+        // Into the observing body at its exposure: Exp(ω_j td)ᵀ R_jᵀ (p_W − p_j − v_j td).
+        let d = [0, 1, 2].map(|i| pw[i] - xj[9 + i] - vj[i] * td);
+        let pbj = small_rotation(self.rates[1].map(|w| -(td * w)), rot_t(&xj[..9], d));
+        let pc = rot_t(&tbc[..9], [0, 1, 2].map(|i| pbj[i] - tbc[9 + i]));
+        let k = self.intrinsics.map(T::from);
+        pixel_residual(self.kind, &k, &pc, self.measured)
+    }
+}

@@ -38,7 +38,7 @@ use crate::camera::{project_with, DistortionKind};
 use tumble_solvers::{AutoDiffResidual, Key, Real};
 
 /// Rotation matrix (row-major, 9) times a vector.
-fn rot<T: Real>(r: &[T], v: [T; 3]) -> [T; 3] {
+pub(crate) fn rot<T: Real>(r: &[T], v: [T; 3]) -> [T; 3] {
     [
         r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
         r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
@@ -47,7 +47,7 @@ fn rot<T: Real>(r: &[T], v: [T; 3]) -> [T; 3] {
 }
 
 /// Transposed rotation matrix (row-major, 9) times a vector.
-fn rot_t<T: Real>(r: &[T], v: [T; 3]) -> [T; 3] {
+pub(crate) fn rot_t<T: Real>(r: &[T], v: [T; 3]) -> [T; 3] {
     [
         r[0] * v[0] + r[3] * v[1] + r[6] * v[2],
         r[1] * v[0] + r[4] * v[1] + r[7] * v[2],
@@ -56,7 +56,7 @@ fn rot_t<T: Real>(r: &[T], v: [T; 3]) -> [T; 3] {
 }
 
 /// `Exp(φ) v` to third order in `φ`: `v + φ×v + ½ φ×(φ×v) + ⅙ φ×(φ×(φ×v))`.
-fn small_rotation<T: Real>(phi: [T; 3], v: [T; 3]) -> [T; 3] {
+pub(crate) fn small_rotation<T: Real>(phi: [T; 3], v: [T; 3]) -> [T; 3] {
     let cross =
         |a: [T; 3], b: [T; 3]| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
     let a = cross(phi, v);
@@ -67,7 +67,7 @@ fn small_rotation<T: Real>(phi: [T; 3], v: [T; 3]) -> [T; 3] {
 
 /// `π(p_C) − uv` \[px\]; behind the camera a residual that is finite and
 /// large, so a trial step there is rejected rather than failing the solve.
-fn pixel_residual<T: Real>(kind: DistortionKind, k: &[T], pc: &[T; 3], measured: [f64; 2]) -> Vec<T> {
+pub(crate) fn pixel_residual<T: Real>(kind: DistortionKind, k: &[T], pc: &[T; 3], measured: [f64; 2]) -> Vec<T> {
     match project_with(kind, k, pc) {
         Some(uv) => vec![uv[0] - measured[0], uv[1] - measured[1]],
         None => vec![T::from(1e4), T::from(1e4)],

@@ -207,6 +207,8 @@ mod tests {
                 "20",
                 "--zoh",
                 "--fixed-noise",
+                "--estimate-extrinsics",
+                "--estimate-time-offset",
             ],
             &["vio", "v", "--out", "o", "--rig", "rig/"],
             &["vio", "--print-config"],

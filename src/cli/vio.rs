@@ -89,6 +89,15 @@ pub struct EstimatorArgs {
     /// on four simulated walks it was not consistently more accurate.
     #[arg(long)]
     pub stereo_window: bool,
+    /// Estimate cam0's pose in the IMU frame (T_BC) in the window, starting
+    /// from the given one under a prior of camera.rotation_sigma_deg (5°) and
+    /// camera.translation_sigma_m (5 cm); needs rotation about several axes.
+    #[arg(long)]
+    pub estimate_extrinsics: bool,
+    /// Estimate the camera–IMU time offset (t_imu = t_cam + td) in the
+    /// window, from 0 under a prior of camera.time_offset_sigma_s (20 ms).
+    #[arg(long)]
+    pub estimate_time_offset: bool,
 }
 
 impl EstimatorArgs {
@@ -113,6 +122,12 @@ impl EstimatorArgs {
         o.window.stereo |= self.stereo_window;
         o.noise.from_static |= self.noise_from_static;
         o.noise.measure_in_motion &= !self.fixed_noise;
+        if self.estimate_extrinsics {
+            o.camera.extrinsics = tumble::vio::Estimate::On;
+        }
+        if self.estimate_time_offset {
+            o.camera.time_offset = tumble::vio::Estimate::On;
+        }
         if self.zoh {
             o.noise.imu.scheme = tumble::factors::imu_preint::Scheme::ZeroOrderHold;
         }

@@ -10,6 +10,7 @@ use super::keyframe::{is_keyframe, FeatureMotion, FrameObs};
 use super::landmarks::{observation_factors, pixel_noise, Landmarks};
 use super::marginalization::{marginalize_oldest, window_graph, ResidualTally};
 use super::noise_meter::{NoiseMeter, NoiseReport};
+use super::online_calib::{CameraEstimate, CameraPrior, EXTRINSIC, TIME_OFFSET};
 use super::rest::RestDetector;
 use super::startup::Startup;
 use super::window::{add_rest_prior, InitState, State, StateValues, Window};
@@ -75,6 +76,10 @@ pub struct VioResult {
     pub blind_spans: Vec<[f64; 2]>,
     /// The IMU noise given, measured at rest and in motion, and in use at the end.
     pub noise: Option<NoiseReport>,
+    /// The camera's online calibration at the end ([`super::CameraCalibrationOptions`]).
+    pub camera: Option<CameraEstimate>,
+    /// Its estimate after each keyframe's solve, with the keyframe's time \[s\].
+    pub camera_track: Vec<(f64, CameraEstimate)>,
 }
 
 /// The sliding-window estimator; feed it frames in time order with [`Estimator::process`].
@@ -105,6 +110,8 @@ pub struct Estimator<'a> {
     residuals: ResidualTally,
     /// The IMU noise in motion ([`super::NoiseOptions::measure_in_motion`]), from initialization on.
     noise: Option<NoiseMeter>,
+    /// The camera's online calibration after each keyframe solve.
+    camera_track: Vec<(f64, CameraEstimate)>,
 }
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
@@ -126,7 +133,7 @@ impl<'a> Estimator<'a> {
     /// An estimator over `input` (frames are given to [`Estimator::process`] by index).
     pub fn new(input: &'a VioInput, opts: &VioOptions) -> Self {
         Estimator {
-            window: Window::new(opts.noise.gravity),
+            window: Window::new(opts.noise.gravity).with_camera(CameraPrior::new(input, opts)),
             opts: opts.clone(),
             input,
             landmarks: Landmarks::default(),
@@ -143,6 +150,7 @@ impl<'a> Estimator<'a> {
             blind_spans: Vec::new(),
             residuals: ResidualTally::default(),
             noise: None,
+            camera_track: Vec::new(),
         }
     }
 
@@ -154,11 +162,7 @@ impl<'a> Estimator<'a> {
 
     /// The landmarks in the window now, by track id, in the world frame \[m\].
     pub fn landmarks(&self) -> Vec<(u64, [f64; 3])> {
-        self.landmarks
-            .world_points(&self.window.values, &self.input.body_from_camera)
-            .into_iter()
-            .map(|(id, p)| (id, vec3(&p)))
-            .collect()
+        self.landmarks.world_points(self.input, &self.window.values).into_iter().map(|(id, p)| (id, vec3(&p))).collect()
     }
 
     fn warn(&mut self, msg: String) {
@@ -308,6 +312,9 @@ impl<'a> Estimator<'a> {
             let (a, b) = (self.window.states[0].sid, self.window.states[1].sid);
             cov_keys.extend([X(a), V(a), B(a), X(b), V(b)].into_iter().filter(|k| ![X(sid), V(sid)].contains(k)));
         }
+        if keyframe {
+            cov_keys.extend(self.window.camera.iter().flat_map(|c| c.keys()));
+        }
         let (solved, covariances) = self.solve(&graph, &self.window.values, &cov_keys, vec!['l']);
         let failure = match solved {
             Ok((v, _)) => {
@@ -324,6 +331,9 @@ impl<'a> Estimator<'a> {
         let est = self.estimate(sid, keyframe, t_start, covariances.as_ref());
         self.last_good = Some(self.window.state_values(sid));
         if keyframe {
+            if let Some(c) = &self.window.camera {
+                self.camera_track.push((t, c.estimate(&self.window.values, covariances.as_ref())));
+            }
             self.keyframe_std = est.std;
             self.keyframe_obs = obs;
             if leaving {
@@ -459,7 +469,12 @@ impl<'a> Estimator<'a> {
             };
             copy(&mut values, X(anchor), true);
             copy(&mut values, L(lid), true);
-            for (factor, _) in observation_factors(self.input, anchor, lid, a.xy, o) {
+            if self.opts.camera.online() {
+                for key in [V(anchor), EXTRINSIC, TIME_OFFSET] {
+                    copy(&mut values, key, true);
+                }
+            }
+            for (factor, _) in observation_factors(self.input, self.opts.camera.online(), a, lid, o) {
                 g.add_entry(FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
             }
         }
@@ -612,6 +627,13 @@ pub fn run_observed(
 ) -> Result<VioResult, VioError> {
     opts.validate()?;
     input.check()?;
+    if opts.camera.online() && opts.window.stereo && input.stereo.is_some() {
+        return Err(VioError::Invalid(
+            "the online camera calibration (camera.extrinsics, camera.time_offset) estimates the first camera alone: \
+             run it without the second camera in the window (--mono)"
+                .into(),
+        ));
+    }
     let t0 = Instant::now();
     let mut est = Estimator::new(input, opts);
     let mut out = VioResult::default();
@@ -650,6 +672,8 @@ pub fn run_observed(
     out.init_time = est.init_time;
     out.residuals = est.residuals;
     out.noise = est.noise.as_ref().map(|m| m.report(est.startup.at_rest));
+    out.camera = est.camera_track.last().map(|c| c.1.clone());
+    out.camera_track = est.camera_track;
     out.wall_s = t0.elapsed().as_secs_f64();
     Ok(out)
 }

@@ -5,15 +5,16 @@
 //! A landmark is an inverse depth `L(lid)` along its anchor observation's ray.
 
 use super::geometry::{parts, triangulate};
+use super::online_calib::{body_from_camera, EXTRINSIC, TIME_OFFSET};
 use super::{VioInput, VioOptions};
 use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use tumble_factors::camera::CameraModel;
-use tumble_factors::reprojection::StereoInverseDepth;
+use tumble_factors::reprojection::{CalibratingReprojection, StereoInverseDepth};
 use tumble_factors::InverseDepthReprojection;
 use tumble_solvers::sophus_lie::Isometry3F64;
-use tumble_solvers::{Factor, FactorEntry, Graph, Huber, NoiseModel, Values, L, X};
+use tumble_solvers::{AutoDiff, Factor, FactorEntry, Graph, Huber, NoiseModel, Values, B, L, V, X};
 
 /// One observation of a track in a window state.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,6 +28,9 @@ pub(crate) struct Obs {
     /// The second camera's match at the same time \[px\], when there is one
     /// and [`super::WindowOptions::stereo`] puts it into the window.
     pub uv1: Option<[f64; 2]>,
+    /// The body's bias-corrected rate at the frame's stamp \[rad/s\] (moves the
+    /// pose to the exposure when the time offset is estimated).
+    pub rate: [f64; 3],
 }
 
 /// A feature track and, once triangulated, its landmark.
@@ -99,21 +103,29 @@ fn reprojection(
     InverseDepthReprojection::new([X(anchor), X(sid), L(lid)], anchor_xy, uv, input.camera, &input.body_from_camera)
 }
 
-/// The factors of observation `o` of landmark `lid` (anchored at state
-/// `anchor` with normalized anchor observation `anchor_xy`): the first
-/// camera's reprojection (none at the anchor itself) and the second
-/// camera's, when `o` has a stereo match — at the anchor a factor on the
-/// inverse depth alone. Each with whether it is the stereo one.
+/// The factors of observation `o` of landmark `lid` anchored in observation
+/// `a`: the first camera's reprojection (none at the anchor itself) and the
+/// second camera's, when `o` has a stereo match — at the anchor a factor on
+/// the inverse depth alone. Each with whether it is the stereo one. With
+/// `calibrating` (the camera's `T_BC` and time offset are variables of the
+/// window), the first camera's is a [`CalibratingReprojection`] on them too.
 pub(crate) fn observation_factors(
     input: &VioInput,
-    anchor: u64,
+    calibrating: bool,
+    a: &Obs,
     lid: u64,
-    anchor_xy: [f64; 2],
     o: &Obs,
 ) -> Vec<(Box<dyn Factor>, bool)> {
+    let (anchor, anchor_xy) = (a.sid, a.xy);
     let mut out: Vec<(Box<dyn Factor>, bool)> = Vec::new();
     if o.sid != anchor {
-        out.push((Box::new(reprojection(input, anchor, o.sid, lid, anchor_xy, o.uv)), false));
+        let f: Box<dyn Factor> = if calibrating {
+            let keys = [X(anchor), V(anchor), X(o.sid), V(o.sid), L(lid), EXTRINSIC, TIME_OFFSET];
+            Box::new(AutoDiff::new(CalibratingReprojection::new(keys, anchor_xy, o.uv, [a.rate, o.rate], input.camera)))
+        } else {
+            Box::new(reprojection(input, anchor, o.sid, lid, anchor_xy, o.uv))
+        };
+        out.push((f, false));
     }
     if let (Some(uv1), Some(st)) = (o.uv1, &input.stereo) {
         let f: Box<dyn Factor> = if o.sid == anchor {
@@ -164,11 +176,13 @@ impl Landmarks {
         self.tracks.values().filter(|t| t.landmark.is_some()).count()
     }
 
-    /// The landmarks in the world frame \[m\], by track id.
-    pub fn world_points(&self, values: &Values, body_from_camera: &Isometry3F64) -> Vec<(u64, Vector3<f64>)> {
+    /// The landmarks in the world frame \[m\], by track id (`input`'s camera,
+    /// or its online estimate in `values`).
+    pub fn world_points(&self, input: &VioInput, values: &Values) -> Vec<(u64, Vector3<f64>)> {
+        let body_from_camera = body_from_camera(input, values);
         self.tracks
             .iter()
-            .filter_map(|(id, tr)| landmark_world(values, body_from_camera, tr).map(|p| (*id, p)))
+            .filter_map(|(id, tr)| landmark_world(values, &body_from_camera, tr).map(|p| (*id, p)))
             .collect()
     }
 
@@ -179,7 +193,7 @@ impl Landmarks {
             let Some((lid, anchor)) = tr.landmark else { continue };
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             for o in &tr.obs {
-                for (factor, _) in observation_factors(input, anchor, lid, a.xy, o) {
+                for (factor, _) in observation_factors(input, opts.camera.online(), a, lid, o) {
                     g.add_entry(FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
                 }
             }
@@ -209,13 +223,22 @@ impl Landmarks {
             }
             _ => HashMap::new(),
         };
-        let (r_bc, t_bc) = parts(&input.body_from_camera);
+        let body_from_camera = body_from_camera(input, values);
+        let (r_bc, t_bc) = parts(&body_from_camera);
         let (rj, pj) = parts(values.get::<Isometry3F64>(X(sid)).expect("newest state"));
+        // The rate moves the pose to the exposure, for the time offset alone.
+        let rate = match values.get::<nalgebra::Vector6<f64>>(B(sid)) {
+            Ok(b) if opts.camera.online() && input.imu.t.len() >= 2 => {
+                let w = input.imu.at(input.frames[index].t).1 - b.fixed_rows::<3>(3);
+                [w.x, w.y, w.z]
+            }
+            _ => [0.0; 3],
+        };
         for (id, uv) in &input.frames[index].features {
             let Some(&xy) = obs.get(id) else { continue };
             let tr = self.tracks.entry(*id).or_default();
             if tr.landmark.is_some() {
-                let Some(pw) = landmark_world(values, &input.body_from_camera, tr) else {
+                let Some(pw) = landmark_world(values, &body_from_camera, tr) else {
                     continue;
                 };
                 let pc = r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc);
@@ -229,7 +252,7 @@ impl Landmarks {
                 }
             }
             let uv1 = stereo.get(id).copied();
-            tr.obs.push(Obs { sid, uv: *uv, xy, uv1 });
+            tr.obs.push(Obs { sid, uv: *uv, xy, uv1, rate });
         }
         let seen: HashSet<u64> = input.frames[index].features.iter().map(|f| f.0).collect();
         self.tracks.retain(|id, t| seen.contains(id) || t.landmark.is_some());
@@ -239,7 +262,7 @@ impl Landmarks {
     /// (their poses in `values`), inserting each new landmark's inverse depth
     /// into `values`.
     pub fn triangulate(&mut self, input: &VioInput, states: &[u64], values: &mut Values, opts: &VioOptions) {
-        let (r_bc, t_bc) = parts(&input.body_from_camera);
+        let (r_bc, t_bc) = parts(&body_from_camera(input, values));
         let min_angle = opts.gates.min_triangulation_deg.to_radians();
         let stereo = input.stereo.as_ref().map(|st| (st, parts(&st.body_from_camera)));
         // Per state: the first camera's pose in the world, and the second's.
@@ -339,9 +362,9 @@ impl Landmarks {
                 drop_landmarks.push(id);
                 continue;
             }
-            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor).map(|o| o.xy) else { continue };
+            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             for o in &tr.obs {
-                for (f, stereo) in observation_factors(input, anchor, lid, a, o) {
+                for (f, stereo) in observation_factors(input, opts.camera.online(), a, lid, o) {
                     if residual_at(values, f.as_ref()).is_none_or(|r| r.norm() > limit) {
                         drop_obs.push((id, o.sid, stereo));
                     }
@@ -450,7 +473,7 @@ mod tests {
         let (inp, mut values, mut lm) = five_views(0.0);
         lm.triangulate(&inp, &[0, 1, 2, 3, 4], &mut values, &VioOptions::default());
         assert_eq!(lm.count(), 1);
-        let points = lm.world_points(&values, &inp.body_from_camera);
+        let points = lm.world_points(&inp, &values);
         assert!((points[0].1 - Vector3::new(0.3, -0.2, 5.0)).norm() < 1e-9, "{:?}", points);
         assert_eq!(lm.anchored_in(0), vec![(7, 0)]);
     }
@@ -462,7 +485,7 @@ mod tests {
         assert_eq!(lm.count(), 1);
         let tr = &lm.tracks()[&7];
         assert_eq!(tr.obs.iter().map(|o| o.sid).collect::<Vec<_>>(), vec![0, 1, 3, 4], "the outlier in state 2 left");
-        let p = lm.world_points(&values, &inp.body_from_camera)[0].1;
+        let p = lm.world_points(&inp, &values)[0].1;
         assert!((p - Vector3::new(0.3, -0.2, 5.0)).norm() < 1e-9);
     }
 

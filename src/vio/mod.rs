@@ -43,6 +43,8 @@ mod keyframe;
 mod landmarks;
 pub(crate) use landmarks::residual_at;
 mod marginalization;
+mod online_calib;
+pub use online_calib::CameraEstimate;
 pub mod noise_meter;
 pub mod options;
 pub mod output;
@@ -57,8 +59,8 @@ pub use estimator::{run, run_observed, Estimator, FrameEstimate, VioResult, Wind
 pub use input::{read_eqvio, Frame, ImuData, NoiseSource, StereoCamera, VioInput};
 pub use marginalization::ResidualTally;
 pub use options::{
-    GateOptions, Init, InitOptions, NoiseOptions, RestOptions, SolverOptions, VioOptions, WindowOptions,
-    REST_NOISE_SIGMAS,
+    CameraCalibrationOptions, Estimate, GateOptions, Init, InitOptions, NoiseOptions, RestOptions, SolverOptions,
+    VioOptions, WindowOptions, REST_NOISE_SIGMAS,
 };
 pub use output::{bias_track, summarize, trajectory, write_outputs, Summary};
 

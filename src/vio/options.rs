@@ -163,6 +163,59 @@ pub struct SolverOptions {
     pub covariances: bool,
 }
 
+/// Whether a camera parameter is estimated in the window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimate {
+    /// Held at the given value.
+    #[default]
+    Off,
+    /// A variable of the window, under a prior at the given value with the
+    /// σ of [`CameraCalibrationOptions`]; its information leaves the window
+    /// through the marginalization prior like the states'.
+    On,
+}
+
+/// Online calibration of the camera against the IMU (VINS-Mono's
+/// `estimate_extrinsic` / `estimate_td`): the first camera's pose in the IMU
+/// frame `T_BC` and the time offset `td` (an image stamped `t` was exposed at
+/// IMU time `t + td`, Kalibr's `timeshift_cam_imu`). Both need rotation about
+/// more than one axis and motion; the summary reports their σ.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CameraCalibrationOptions {
+    /// Estimate `T_BC`.
+    pub extrinsics: Estimate,
+    /// Estimate `td`.
+    pub time_offset: Estimate,
+    /// σ of the given `T_BC`'s rotation, per axis \[deg\] (how far a hand-measured
+    /// or datasheet mounting can be off).
+    pub rotation_sigma_deg: f64,
+    /// σ of the given `T_BC`'s translation, per axis \[m\].
+    pub translation_sigma_m: f64,
+    /// σ of the given time offset (0 unless a calibration says otherwise) \[s\].
+    pub time_offset_sigma_s: f64,
+}
+
+impl Default for CameraCalibrationOptions {
+    fn default() -> Self {
+        CameraCalibrationOptions {
+            extrinsics: Estimate::Off,
+            time_offset: Estimate::Off,
+            rotation_sigma_deg: 5.0,
+            translation_sigma_m: 0.05,
+            time_offset_sigma_s: 0.02,
+        }
+    }
+}
+
+impl CameraCalibrationOptions {
+    /// Whether anything is estimated.
+    pub fn online(&self) -> bool {
+        self.extrinsics == Estimate::On || self.time_offset == Estimate::On
+    }
+}
+
 /// Settings of the estimator.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
@@ -179,6 +232,8 @@ pub struct VioOptions {
     pub noise: NoiseOptions,
     /// The per-frame solve.
     pub solver: SolverOptions,
+    /// Online calibration of the camera's extrinsic and time offset.
+    pub camera: CameraCalibrationOptions,
 }
 
 impl Default for WindowOptions {
@@ -299,6 +354,10 @@ impl VioOptions {
             return Err(OptionError::new("solver.max_iterations", "must be at least 1"));
         }
         OptionError::positive("solver.function_tolerance", self.solver.function_tolerance, "(relative)")?;
+        let c = &self.camera;
+        OptionError::positive("camera.rotation_sigma_deg", c.rotation_sigma_deg, "degrees")?;
+        OptionError::positive("camera.translation_sigma_m", c.translation_sigma_m, "metres")?;
+        OptionError::positive("camera.time_offset_sigma_s", c.time_offset_sigma_s, "seconds")?;
         if let Init::Given { q, p, v, bias_accel, bias_gyro, t } = &i.mode {
             let finite = q.iter().chain(p).chain(v).chain(bias_accel).chain(bias_gyro).all(|x| x.is_finite());
             let norm = q.iter().map(|x| x * x).sum::<f64>().sqrt();

@@ -106,12 +106,19 @@ pub(crate) struct Window {
     next_sid: u64,
     /// Gravity in the world \[m/s²\] (`[0, 0, −g]`).
     pub gravity: Vector3<f64>,
+    /// The camera's online calibration, when it is estimated.
+    pub camera: Option<super::online_calib::CameraPrior>,
 }
 
 impl Window {
     /// An empty window under gravity `g` \[m/s²\].
     pub fn new(g: f64) -> Window {
         Window { gravity: Vector3::new(0.0, 0.0, -g), ..Default::default() }
+    }
+
+    /// The window with the camera's online calibration `camera`.
+    pub fn with_camera(self, camera: Option<super::online_calib::CameraPrior>) -> Window {
+        Window { camera, ..self }
     }
 
     /// A new state id.
@@ -127,7 +134,12 @@ impl Window {
     pub fn start(&mut self, t: f64, init: InitState, opts: &VioOptions) {
         let InitState { x, v, b, v_sigma, tilt_sigma, gyro_bias_sigma } = init;
         let sid = self.next_id();
+        let camera_now = super::online_calib::current(&self.values);
         self.values = Values::new();
+        if let Some(c) = &self.camera {
+            // A restart keeps what the calibration learnt, under its prior alone.
+            c.insert(&mut self.values, camera_now);
+        }
         self.values.insert(X(sid), x);
         self.values.insert(V(sid), v);
         self.values.insert(B(sid), b);
@@ -191,6 +203,9 @@ impl Window {
         }
         if let Some(m) = &self.marginal {
             g.add(m.clone(), NoiseModel::Unit);
+        }
+        if let Some(c) = &self.camera {
+            c.add_factors(g);
         }
         for i in 0..self.links.len() {
             self.add_link(g, i, opts);

@@ -1,0 +1,186 @@
+//! The camera's extrinsic `T_BC` and time offset `td` as variables of the
+//! window ([`super::CameraCalibrationOptions`]): their keys, the prior at the
+//! given values, and the values the landmarks and factors read.
+//!
+//! Each is one variable for the whole run. Their prior stays in every window
+//! graph; the information of the measurements that leave the window reaches
+//! them through the marginalization prior (they are in its separator), so
+//! nothing is counted twice. A parameter that is not estimated is held
+//! constant at its value.
+
+use super::geometry::parts;
+use super::{Estimate, VioInput, VioOptions};
+use nalgebra::Vector1;
+use tumble_factors::PriorFactor;
+use tumble_solvers::sophus_lie::Isometry3F64;
+use tumble_solvers::{Covariances, Graph, Key, NoiseModel, Values};
+
+/// Key of the first camera's pose in the IMU frame `T_BC` (SE(3)).
+pub(crate) const EXTRINSIC: Key = Key::new('c', 0);
+/// Key of the time offset `td` \[s\] (R¹).
+pub(crate) const TIME_OFFSET: Key = Key::new('d', 0);
+
+/// The estimate of the camera's calibration at the end of a run.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CameraEstimate {
+    /// `T_BC`: rotation body←camera `[w, x, y, z]`.
+    pub rotation: [f64; 4],
+    /// `T_BC`: the camera's centre in the body frame \[m\].
+    pub translation: [f64; 3],
+    /// Time offset \[s\] (t_imu = t_cam + td).
+    pub time_offset_s: f64,
+    /// σ of the rotation about the camera's axes \[deg\] (NaN when not estimated or not recovered).
+    pub rotation_sigma_deg: [f64; 3],
+    /// σ of the translation \[m\] (NaN as above).
+    pub translation_sigma_m: [f64; 3],
+    /// σ of the time offset \[s\] (NaN as above).
+    pub time_offset_sigma_s: f64,
+    /// Rotation from the given `T_BC` to the estimate \[deg\].
+    pub rotation_change_deg: f64,
+    /// Distance from the given `T_BC`'s translation to the estimate's \[m\].
+    pub translation_change_m: f64,
+    /// Whether `T_BC` was estimated.
+    pub extrinsics_estimated: bool,
+    /// Whether `td` was estimated.
+    pub time_offset_estimated: bool,
+}
+
+impl CameraEstimate {
+    /// The rotation \[deg\] and the distance between the translations \[m\]
+    /// from `body_from_camera` (a reference `T_BC`) to this estimate.
+    pub fn difference(&self, body_from_camera: &Isometry3F64) -> (f64, f64) {
+        let (r0, t0) = parts(body_from_camera);
+        let [w, x, y, z] = self.rotation;
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+        let dr = tumble_solvers::lie::so3_log(&(r0.transpose() * q.to_rotation_matrix().matrix())).norm();
+        (dr.to_degrees(), (nalgebra::Vector3::from(self.translation) - t0).norm())
+    }
+
+    /// One line for the terminal: what was estimated, its σ and how far it moved from the given values.
+    pub fn line(&self) -> String {
+        let mut parts = Vec::new();
+        if self.extrinsics_estimated {
+            let [a, b, c] = self.rotation_sigma_deg;
+            let [x, y, z] = self.translation_sigma_m.map(|s| s * 1e3);
+            let t = self.translation;
+            parts.push(format!(
+                "T_BC translation [{:.4}, {:.4}, {:.4}] m (σ {x:.1} {y:.1} {z:.1} mm), rotation σ {a:.3} {b:.3} {c:.3}°; \
+                 moved {:.3}° and {:.1} mm from the given",
+                t[0],
+                t[1],
+                t[2],
+                self.rotation_change_deg,
+                self.translation_change_m * 1e3
+            ));
+        }
+        if self.time_offset_estimated {
+            parts.push(format!(
+                "time offset {:.2} ms (σ {:.2} ms, t_imu = t_cam + offset)",
+                self.time_offset_s * 1e3,
+                self.time_offset_sigma_s * 1e3
+            ));
+        }
+        format!("camera estimated online: {}", parts.join("; "))
+    }
+}
+
+/// The prior of the online calibration: the given values and their σ.
+#[derive(Debug, Clone)]
+pub(crate) struct CameraPrior {
+    body_from_camera: Isometry3F64,
+    pose_sigma: [f64; 6],
+    td_sigma: f64,
+    extrinsics: bool,
+    time_offset: bool,
+}
+
+impl CameraPrior {
+    /// The prior for `input` under `opts`; None when nothing is estimated.
+    pub fn new(input: &VioInput, opts: &VioOptions) -> Option<CameraPrior> {
+        let c = &opts.camera;
+        if !c.online() {
+            return None;
+        }
+        let r = c.rotation_sigma_deg.to_radians();
+        let t = c.translation_sigma_m;
+        Some(CameraPrior {
+            body_from_camera: input.body_from_camera,
+            pose_sigma: [r, r, r, t, t, t],
+            td_sigma: c.time_offset_sigma_s,
+            extrinsics: c.extrinsics == Estimate::On,
+            time_offset: c.time_offset == Estimate::On,
+        })
+    }
+
+    /// Put the variables into `values` at `current` (`T_BC`, `td`) or, without
+    /// one, at the given values; a parameter not estimated is constant.
+    pub fn insert(&self, values: &mut Values, current: Option<(Isometry3F64, f64)>) {
+        let (x, td) = current.unwrap_or((self.body_from_camera, 0.0));
+        values.insert(EXTRINSIC, x);
+        values.insert(TIME_OFFSET, Vector1::new(td));
+        values.set_constant(EXTRINSIC, !self.extrinsics);
+        values.set_constant(TIME_OFFSET, !self.time_offset);
+    }
+
+    /// Add the priors of the estimated parameters to `g`.
+    pub fn add_factors(&self, g: &mut Graph) {
+        if self.extrinsics {
+            let n = NoiseModel::diagonal(&self.pose_sigma).expect("validated positive σ");
+            g.add(PriorFactor::new(EXTRINSIC, self.body_from_camera), n);
+        }
+        if self.time_offset {
+            let n = NoiseModel::isotropic(1, self.td_sigma).expect("validated positive σ");
+            g.add(PriorFactor::new(TIME_OFFSET, Vector1::new(0.0)), n);
+        }
+    }
+
+    /// The keys whose covariances the window's solve should recover.
+    pub fn keys(&self) -> Vec<Key> {
+        [(self.extrinsics, EXTRINSIC), (self.time_offset, TIME_OFFSET)]
+            .into_iter()
+            .filter(|p| p.0)
+            .map(|p| p.1)
+            .collect()
+    }
+
+    /// The estimate in `values`, its σ from `covariances` when given.
+    pub fn estimate(&self, values: &Values, covariances: Option<&Covariances>) -> CameraEstimate {
+        let x = current(values).map_or(self.body_from_camera, |c| c.0);
+        let (r, t) = parts(&x);
+        let q = nalgebra::UnitQuaternion::from_matrix(&r);
+        let std = |k: Key, i: usize, estimated: bool| {
+            covariances.filter(|_| estimated).and_then(|c| c.get(k)).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt())
+        };
+        let mut e = CameraEstimate {
+            rotation: [q.w, q.i, q.j, q.k],
+            translation: [t.x, t.y, t.z],
+            time_offset_s: time_offset(values),
+            rotation_sigma_deg: [0, 1, 2].map(|i| std(EXTRINSIC, i, self.extrinsics).to_degrees()),
+            translation_sigma_m: [3, 4, 5].map(|i| std(EXTRINSIC, i, self.extrinsics)),
+            time_offset_sigma_s: std(TIME_OFFSET, 0, self.time_offset),
+            rotation_change_deg: 0.0,
+            translation_change_m: 0.0,
+            extrinsics_estimated: self.extrinsics,
+            time_offset_estimated: self.time_offset,
+        };
+        (e.rotation_change_deg, e.translation_change_m) = e.difference(&self.body_from_camera);
+        e
+    }
+}
+
+/// The online calibration's current `T_BC` and `td` in `values`, when it is there.
+pub(crate) fn current(values: &Values) -> Option<(Isometry3F64, f64)> {
+    let x = values.get::<Isometry3F64>(EXTRINSIC).ok()?;
+    Some((*x, time_offset(values)))
+}
+
+/// The camera's `T_BC` for the window: the online estimate in `values` when
+/// there is one, else the input's.
+pub(crate) fn body_from_camera(input: &VioInput, values: &Values) -> Isometry3F64 {
+    current(values).map_or(input.body_from_camera, |c| c.0)
+}
+
+/// The time offset in `values` \[s\] (0 without online calibration).
+fn time_offset(values: &Values) -> f64 {
+    values.get::<Vector1<f64>>(TIME_OFFSET).map_or(0.0, |v| v[0])
+}
