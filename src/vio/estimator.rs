@@ -112,6 +112,8 @@ pub struct Estimator<'a> {
     noise: Option<NoiseMeter>,
     /// The camera's online calibration after each keyframe solve.
     camera_track: Vec<(f64, CameraEstimate)>,
+    /// Keyframes for which the camera's calibration stays held after an implausible estimate.
+    camera_held: usize,
 }
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
@@ -151,6 +153,7 @@ impl<'a> Estimator<'a> {
             residuals: ResidualTally::default(),
             noise: None,
             camera_track: Vec::new(),
+            camera_held: 0,
         }
     }
 
@@ -303,6 +306,14 @@ impl<'a> Estimator<'a> {
             return self.track_frame(index, sid, &predicted, vj, bl, obs, t_start);
         }
         self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
+        // Freed once a window's length of keyframes has left into the prior:
+        // its first estimate then rests on two windows of frames (a first
+        // window of a couple of seconds cannot determine seven more unknowns,
+        // and a wild first estimate carries the states with it).
+        let free_camera = self.window.marginalized >= self.opts.window.size && self.camera_held == 0;
+        if let Some(c) = &self.window.camera {
+            c.free(&mut self.window.values, free_camera);
+        }
         let graph = window_graph(&self.window, &self.landmarks, self.input, &self.opts);
         // The σ of the new state, from the solve's own last linearization;
         // and of the states of the link that leaves the window, to measure the noise.
@@ -313,9 +324,28 @@ impl<'a> Estimator<'a> {
             cov_keys.extend([X(a), V(a), B(a), X(b), V(b)].into_iter().filter(|k| ![X(sid), V(sid)].contains(k)));
         }
         if keyframe {
-            cov_keys.extend(self.window.camera.iter().flat_map(|c| c.keys()));
+            cov_keys.extend(self.window.camera.iter().flat_map(|c| c.keys(&self.window.values)));
         }
-        let (solved, covariances) = self.solve(&graph, &self.window.values, &cov_keys, vec!['l']);
+        let (mut solved, mut covariances) = self.solve(&graph, &self.window.values, &cov_keys, vec!['l']);
+        // A calibration far outside its prior is a wrong minimum, not a finding:
+        // solve again with it held, and hold it for a window's length.
+        let implausible = match (&solved, &self.window.camera) {
+            (Ok((v, _)), Some(c)) if free_camera => c.implausible(v),
+            _ => None,
+        };
+        if let Some(why) = implausible {
+            self.warn(format!(
+                "at {t:.3} s the window's estimate of the camera's calibration was {why}: rejected, \
+                 held for {} keyframes",
+                self.opts.window.size
+            ));
+            self.camera_held = self.opts.window.size;
+            if let Some(c) = &self.window.camera {
+                c.free(&mut self.window.values, false);
+            }
+            cov_keys.retain(|k| ![EXTRINSIC, TIME_OFFSET].contains(k));
+            (solved, covariances) = self.solve(&graph, &self.window.values, &cov_keys, vec!['l']);
+        }
         let failure = match solved {
             Ok((v, _)) => {
                 self.window.values = v;
@@ -331,6 +361,7 @@ impl<'a> Estimator<'a> {
         let est = self.estimate(sid, keyframe, t_start, covariances.as_ref());
         self.last_good = Some(self.window.state_values(sid));
         if keyframe {
+            self.camera_held = self.camera_held.saturating_sub(1);
             if let Some(c) = &self.window.camera {
                 self.camera_track.push((t, c.estimate(&self.window.values, covariances.as_ref())));
             }
@@ -474,7 +505,7 @@ impl<'a> Estimator<'a> {
                     copy(&mut values, key, true);
                 }
             }
-            for (factor, _) in observation_factors(self.input, self.opts.camera.online(), a, lid, o) {
+            for (factor, _) in observation_factors(self.input, &self.opts, a, lid, o) {
                 g.add_entry(FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
             }
         }

@@ -5,13 +5,13 @@
 //! A landmark is an inverse depth `L(lid)` along its anchor observation's ray.
 
 use super::geometry::{parts, triangulate};
-use super::online_calib::{body_from_camera, EXTRINSIC, TIME_OFFSET};
+use super::online_calib::{body_from_camera, exposure_motion, EXTRINSIC, TIME_OFFSET};
 use super::{VioInput, VioOptions};
 use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use tumble_factors::camera::CameraModel;
-use tumble_factors::reprojection::{CalibratingReprojection, StereoInverseDepth};
+use tumble_factors::reprojection::{CalibratingReprojection, ExposureMotion, StereoInverseDepth};
 use tumble_factors::InverseDepthReprojection;
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{AutoDiff, Factor, FactorEntry, Graph, Huber, NoiseModel, Values, B, L, V, X};
@@ -28,9 +28,9 @@ pub(crate) struct Obs {
     /// The second camera's match at the same time \[px\], when there is one
     /// and [`super::WindowOptions::stereo`] puts it into the window.
     pub uv1: Option<[f64; 2]>,
-    /// The body's bias-corrected rate at the frame's stamp \[rad/s\] (moves the
-    /// pose to the exposure when the time offset is estimated).
-    pub rate: [f64; 3],
+    /// The body's motion around the frame's stamp (moves the pose to the
+    /// exposure when the time offset is estimated).
+    pub motion: ExposureMotion,
 }
 
 /// A feature track and, once triangulated, its landmark.
@@ -106,12 +106,12 @@ fn reprojection(
 /// The factors of observation `o` of landmark `lid` anchored in observation
 /// `a`: the first camera's reprojection (none at the anchor itself) and the
 /// second camera's, when `o` has a stereo match — at the anchor a factor on
-/// the inverse depth alone. Each with whether it is the stereo one. With
-/// `calibrating` (the camera's `T_BC` and time offset are variables of the
-/// window), the first camera's is a [`CalibratingReprojection`] on them too.
+/// the inverse depth alone. Each with whether it is the stereo one. When
+/// `opts` calibrate the camera online (its `T_BC` and time offset are
+/// variables of the window), the first camera's is a [`CalibratingReprojection`] on them too.
 pub(crate) fn observation_factors(
     input: &VioInput,
-    calibrating: bool,
+    opts: &VioOptions,
     a: &Obs,
     lid: u64,
     o: &Obs,
@@ -119,9 +119,17 @@ pub(crate) fn observation_factors(
     let (anchor, anchor_xy) = (a.sid, a.xy);
     let mut out: Vec<(Box<dyn Factor>, bool)> = Vec::new();
     if o.sid != anchor {
-        let f: Box<dyn Factor> = if calibrating {
+        let f: Box<dyn Factor> = if opts.camera.online() {
             let keys = [X(anchor), V(anchor), X(o.sid), V(o.sid), L(lid), EXTRINSIC, TIME_OFFSET];
-            Box::new(AutoDiff::new(CalibratingReprojection::new(keys, anchor_xy, o.uv, [a.rate, o.rate], input.camera)))
+            let g = [0.0, 0.0, -opts.noise.gravity];
+            Box::new(AutoDiff::new(CalibratingReprojection::new(
+                keys,
+                anchor_xy,
+                o.uv,
+                [a.motion, o.motion],
+                input.camera,
+                g,
+            )))
         } else {
             Box::new(reprojection(input, anchor, o.sid, lid, anchor_xy, o.uv))
         };
@@ -193,7 +201,7 @@ impl Landmarks {
             let Some((lid, anchor)) = tr.landmark else { continue };
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             for o in &tr.obs {
-                for (factor, _) in observation_factors(input, opts.camera.online(), a, lid, o) {
+                for (factor, _) in observation_factors(input, opts, a, lid, o) {
                     g.add_entry(FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
                 }
             }
@@ -226,13 +234,12 @@ impl Landmarks {
         let body_from_camera = body_from_camera(input, values);
         let (r_bc, t_bc) = parts(&body_from_camera);
         let (rj, pj) = parts(values.get::<Isometry3F64>(X(sid)).expect("newest state"));
-        // The rate moves the pose to the exposure, for the time offset alone.
-        let rate = match values.get::<nalgebra::Vector6<f64>>(B(sid)) {
+        // The motion around the stamp moves the pose to the exposure, for the time offset alone.
+        let motion = match values.get::<nalgebra::Vector6<f64>>(B(sid)) {
             Ok(b) if opts.camera.online() && input.imu.t.len() >= 2 => {
-                let w = input.imu.at(input.frames[index].t).1 - b.fixed_rows::<3>(3);
-                [w.x, w.y, w.z]
+                exposure_motion(&input.imu, input.frames[index].t, b, opts.camera.time_offset_sigma_s)
             }
-            _ => [0.0; 3],
+            _ => ExposureMotion::default(),
         };
         for (id, uv) in &input.frames[index].features {
             let Some(&xy) = obs.get(id) else { continue };
@@ -252,7 +259,7 @@ impl Landmarks {
                 }
             }
             let uv1 = stereo.get(id).copied();
-            tr.obs.push(Obs { sid, uv: *uv, xy, uv1, rate });
+            tr.obs.push(Obs { sid, uv: *uv, xy, uv1, motion });
         }
         let seen: HashSet<u64> = input.frames[index].features.iter().map(|f| f.0).collect();
         self.tracks.retain(|id, t| seen.contains(id) || t.landmark.is_some());
@@ -364,7 +371,7 @@ impl Landmarks {
             }
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             for o in &tr.obs {
-                for (f, stereo) in observation_factors(input, opts.camera.online(), a, lid, o) {
+                for (f, stereo) in observation_factors(input, opts, a, lid, o) {
                     if residual_at(values, f.as_ref()).is_none_or(|r| r.norm() > limit) {
                         drop_obs.push((id, o.sid, stereo));
                     }

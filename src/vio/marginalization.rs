@@ -105,7 +105,7 @@ fn count_leaving(
         let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
         let mut counted = false;
         for o in &tr.obs {
-            for (f, _) in observation_factors(input, opts.camera.online(), a, lid, o) {
+            for (f, _) in observation_factors(input, opts, a, lid, o) {
                 if let Some(r) = residual_at(&window.values, f.as_ref()) {
                     // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
                     t.reprojection_chi2 += r.norm_squared() / (2.0 * opts.noise.pixel_sigma.powi(2));

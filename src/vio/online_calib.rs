@@ -9,8 +9,10 @@
 //! constant at its value.
 
 use super::geometry::parts;
+use super::ImuData;
 use super::{Estimate, VioInput, VioOptions};
-use nalgebra::Vector1;
+use nalgebra::{Matrix3, Vector1, Vector3, Vector6};
+use tumble_factors::reprojection::ExposureMotion;
 use tumble_factors::PriorFactor;
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{Covariances, Graph, Key, NoiseModel, Values};
@@ -113,13 +115,19 @@ impl CameraPrior {
     }
 
     /// Put the variables into `values` at `current` (`T_BC`, `td`) or, without
-    /// one, at the given values; a parameter not estimated is constant.
+    /// one, at the given values, held constant (see [`CameraPrior::free`]).
     pub fn insert(&self, values: &mut Values, current: Option<(Isometry3F64, f64)>) {
         let (x, td) = current.unwrap_or((self.body_from_camera, 0.0));
         values.insert(EXTRINSIC, x);
         values.insert(TIME_OFFSET, Vector1::new(td));
-        values.set_constant(EXTRINSIC, !self.extrinsics);
-        values.set_constant(TIME_OFFSET, !self.time_offset);
+        self.free(values, false);
+    }
+
+    /// Free the estimated parameters in `values` (`free`), or hold them at
+    /// their values (the estimator decides when).
+    pub fn free(&self, values: &mut Values, free: bool) {
+        values.set_constant(EXTRINSIC, !(free && self.extrinsics));
+        values.set_constant(TIME_OFFSET, !(free && self.time_offset));
     }
 
     /// Add the priors of the estimated parameters to `g`.
@@ -134,13 +142,46 @@ impl CameraPrior {
         }
     }
 
-    /// The keys whose covariances the window's solve should recover.
-    pub fn keys(&self) -> Vec<Key> {
-        [(self.extrinsics, EXTRINSIC), (self.time_offset, TIME_OFFSET)]
-            .into_iter()
-            .filter(|p| p.0)
-            .map(|p| p.1)
-            .collect()
+    /// Why the calibration in `values` cannot be right, or None: its distance
+    /// from the given values, normalized by the prior's σ, beyond the 99.9 %
+    /// quantile of χ² with as many degrees of freedom as are estimated (a
+    /// wrong minimum of the window's solve, or a prior that does not hold).
+    pub fn implausible(&self, values: &Values) -> Option<String> {
+        let (x, td) = current(values)?;
+        let (r0, t0) = parts(&self.body_from_camera);
+        let (r, t) = parts(&x);
+        let rot = tumble_solvers::lie::so3_log(&(r0.transpose() * r));
+        let mut d2 = 0.0;
+        let mut dof = 0;
+        if self.extrinsics {
+            d2 += (rot / self.pose_sigma[0]).norm_squared() + ((t - t0) / self.pose_sigma[3]).norm_squared();
+            dof += 6;
+        }
+        if self.time_offset {
+            d2 += (td / self.td_sigma).powi(2);
+            dof += 1;
+        }
+        // χ² quantiles at 0.999 for 1, 6 and 7 degrees of freedom.
+        let limit = match dof {
+            1 => 10.83,
+            6 => 22.46,
+            _ => 24.32,
+        };
+        (d2 > limit).then(|| {
+            format!(
+                "{:.1}° and {:.0} mm from the given T_BC, time offset {:.1} ms ({:.0} σ² of its prior, limit {limit})",
+                rot.norm().to_degrees(),
+                (t - t0).norm() * 1e3,
+                td * 1e3,
+                d2
+            )
+        })
+    }
+
+    /// The keys whose covariances the window's solve should recover: the
+    /// parameters free in `values`.
+    pub fn keys(&self, values: &Values) -> Vec<Key> {
+        [EXTRINSIC, TIME_OFFSET].into_iter().filter(|&k| values.contains(k) && !values.is_constant(k)).collect()
     }
 
     /// The estimate in `values`, its σ from `covariances` when given.
@@ -183,4 +224,87 @@ pub(crate) fn body_from_camera(input: &VioInput, values: &Values) -> Isometry3F6
 /// The time offset in `values` \[s\] (0 without online calibration).
 fn time_offset(values: &Values) -> f64 {
     values.get::<Vector1<f64>>(TIME_OFFSET).map_or(0.0, |v| v[0])
+}
+
+/// The body's motion around the stamp `t` \[s\] from the IMU, for the time
+/// offset: the gyro minus its bias (`bias` = `[b_a, b_g]`) fitted by a
+/// quadratic in time by least squares over the samples within `half_width`
+/// \[s\] of `t` (at least the two on each side), and the specific force at `t`
+/// minus its bias. Too few samples give the rate at `t` alone.
+pub(crate) fn exposure_motion(imu: &ImuData, t: f64, bias: &Vector6<f64>, half_width: f64) -> ExposureMotion {
+    let (f, w) = imu.at(t);
+    let (ba, bg) = (bias.fixed_rows::<3>(0).into_owned(), bias.fixed_rows::<3>(3).into_owned());
+    let f = f - ba;
+    let mut out = ExposureMotion { rate: [[0.0; 3]; 3], specific_force: [f.x, f.y, f.z] };
+    let w0 = w - bg;
+    out.rate[0] = [w0.x, w0.y, w0.z];
+    let centre = imu.t.partition_point(|&s| s < t);
+    let lo = imu.t.partition_point(|&s| s < t - half_width).min(centre.saturating_sub(2));
+    let hi = imu.t.partition_point(|&s| s <= t + half_width).max((centre + 2).min(imu.t.len()));
+    if hi < lo + 5 {
+        return out;
+    }
+    // Normal equations of ω(s) = c₀ + c₁ s + c₂ s², s = t_k − t, per axis.
+    let mut a = Matrix3::zeros();
+    let mut b = Matrix3::zeros();
+    for k in lo..hi {
+        let s = imu.t[k] - t;
+        let row = Vector3::new(1.0, s, s * s);
+        a += row * row.transpose();
+        b += row * (imu.gyro[k] - bg).transpose();
+    }
+    if let Some(c) = a.cholesky().map(|ch| ch.solve(&b)) {
+        for (k, r) in out.rate.iter_mut().enumerate() {
+            *r = [c[(k, 0)], c[(k, 1)], c[(k, 2)]];
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vio::geometry::pose;
+
+    #[test]
+    fn the_fit_recovers_a_quadratic_rate_and_the_specific_force() {
+        let rate = |s: f64| Vector3::new(1.0 + 2.0 * s + 30.0 * s * s, -0.5 + 40.0 * s, 0.2 - 10.0 * s * s);
+        let t: Vec<f64> = (0..400).map(|k| k as f64 * 0.005).collect();
+        let imu = ImuData {
+            gyro: t.iter().map(|&s| rate(s - 1.0) + Vector3::new(0.01, 0.0, 0.0)).collect(),
+            acc: t.iter().map(|_| Vector3::new(0.1, 0.2, 9.9)).collect(),
+            t,
+        };
+        let bias = Vector6::new(0.1, 0.0, 0.0, 0.01, 0.0, 0.0);
+        let m = exposure_motion(&imu, 1.0, &bias, 0.02);
+        let want = [[1.0, -0.5, 0.2], [2.0, 40.0, 0.0], [30.0, 0.0, -10.0]];
+        for (got, want) in m.rate.iter().zip(want) {
+            for (g, w) in got.iter().zip(want) {
+                assert!((g - w).abs() < 1e-6 * (1.0 + w.abs()), "{:?}", m.rate);
+            }
+        }
+        assert!((Vector3::from(m.specific_force) - Vector3::new(0.0, 0.2, 9.9)).norm() < 1e-12);
+    }
+
+    #[test]
+    fn an_estimate_far_outside_the_prior_is_implausible() {
+        let input = VioInput::for_tests(ImuData::default(), Vec::new());
+        let mut opts = VioOptions::default();
+        opts.camera.extrinsics = Estimate::On;
+        opts.camera.time_offset = Estimate::On;
+        let prior = CameraPrior::new(&input, &opts).unwrap();
+        let mut values = Values::new();
+        prior.insert(&mut values, None);
+        assert!(prior.implausible(&values).is_none());
+        // 10° (2 σ) and 5 ms: within the prior.
+        let turned = |deg: f64| {
+            pose(nalgebra::Rotation3::from_euler_angles(deg.to_radians(), 0.0, 0.0).matrix(), &Vector3::zeros())
+        };
+        prior.insert(&mut values, Some((input.body_from_camera * turned(10.0), 0.005)));
+        assert!(prior.implausible(&values).is_none());
+        // 50° (10 σ): a wrong minimum.
+        prior.insert(&mut values, Some((input.body_from_camera * turned(50.0), 0.0)));
+        let why = prior.implausible(&values).expect("implausible");
+        assert!(why.contains("50.0°"), "{why}");
+    }
 }

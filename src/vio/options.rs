@@ -172,7 +172,9 @@ pub enum Estimate {
     Off,
     /// A variable of the window, under a prior at the given value with the
     /// σ of [`CameraCalibrationOptions`]; its information leaves the window
-    /// through the marginalization prior like the states'.
+    /// through the marginalization prior like the states'. Held at its value
+    /// until a window's length of keyframes has left the window, and after an
+    /// estimate beyond its prior's 99.9 % χ² quantile (rejected, with a warning).
     On,
 }
 

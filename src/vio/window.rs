@@ -108,6 +108,8 @@ pub(crate) struct Window {
     pub gravity: Vector3<f64>,
     /// The camera's online calibration, when it is estimated.
     pub camera: Option<super::online_calib::CameraPrior>,
+    /// States marginalized since the window started.
+    pub marginalized: usize,
 }
 
 impl Window {
@@ -146,6 +148,7 @@ impl Window {
         self.states = vec![State { sid, t, rest_since: None }];
         self.links.clear();
         self.marginal = None;
+        self.marginalized = 0;
         let (r, _) = parts(&x);
         let tilt = tilt_sigma.unwrap_or((opts.init.bias_accel_sigma / opts.noise.gravity).max(1e-3));
         let u = r.transpose() * Vector3::z();
@@ -295,6 +298,7 @@ impl Window {
     pub fn remove_oldest(&mut self, prior: MarginalPrior, keys: &[tumble_solvers::Key]) {
         let old = self.states[0].sid;
         self.marginal = Some(prior);
+        self.marginalized += 1;
         if self.init_prior.as_ref().is_some_and(|p| p.sid == old) {
             self.init_prior = None;
         }
