@@ -29,6 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         calibration: Some(result.calibration),
         inflation: Inflation::none("simulated sensor: its own noise, not inflated"),
         cameras: Vec::new(),
+        rig_time_offset_s: None,
         sources: vec!["the simulated tumble of examples/export_estimator.rs".into()],
     };
     let report = export(target, &inputs, &out)?;

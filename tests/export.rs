@@ -237,6 +237,30 @@ fn kalibr_and_openvins_files_parse_back_with_tumbles_model() {
     assert!(same_pose(&iso_rows(&oc.cam0.T_imu_cam), &cams[0]) && oc.cam0.timeshift_cam_imu == 0.0031);
 }
 
+/// The output folder of `tumble calibrate-rig` as the cameras: its time
+/// offset (rig.json) wins over the calibration's audited one.
+#[test]
+fn a_rig_calibrations_time_offset_is_exported() {
+    let (res, asl, _) = setup("rig");
+    let rig = res.parent().unwrap().join("rig");
+    for cam in ["cam0", "cam1"] {
+        std::fs::create_dir_all(rig.join(cam)).unwrap();
+        std::fs::copy(asl.join("mav0").join(cam).join("sensor.yaml"), rig.join(cam).join("sensor.yaml")).unwrap();
+    }
+    std::fs::write(rig.join("rig.json"), r#"{"timeshift_cam_imu_s": 0.0042}"#).unwrap();
+    let inp = inputs(&res, &rig);
+    assert_eq!(inp.rig_time_offset_s, Some(0.0042));
+    assert!(inp.sources.iter().any(|s| s.contains("rig.json")), "{:?}", inp.sources);
+    let out = res.parent().unwrap().join("vins-rig");
+    export(Target::VinsMono, &inp, &out).unwrap();
+    #[derive(Deserialize)]
+    struct Td {
+        td: f64,
+    }
+    let v: Td = parse(&out.join("vins_mono_config.yaml"));
+    assert_eq!(v.td, 0.0042);
+}
+
 #[test]
 fn vins_and_orbslam3_files_parse_back_in_their_conventions() {
     let (res, asl, cams) = setup("vins");

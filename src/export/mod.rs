@@ -228,6 +228,10 @@ pub struct ExportInputs {
     pub inflation: Inflation,
     /// Cameras (none without an ASL folder).
     pub cameras: Vec<RigCamera>,
+    /// The camera–IMU time offset of a `tumble calibrate-rig` output given as
+    /// the ASL folder (`rig.json`'s `timeshift_cam_imu_s`) \[s\]; it wins over
+    /// the calibration's audited one.
+    pub rig_time_offset_s: Option<f64>,
     /// Where each input came from (for the files' headers).
     pub sources: Vec<String>,
 }
@@ -313,6 +317,15 @@ impl ExportInputs {
             }
             None => Vec::new(),
         };
+        // A rig calibration measured the time offset on a target: it is the one to use.
+        let rig_time_offset_s = match &src.asl {
+            Some(dir) if is_rig_output(dir) => {
+                let t = crate::rig::input::RigCalibration::read(dir)?.time_offset_s;
+                sources.push(format!("camera–IMU time offset: {} ({:.3} ms)", dir.join("rig.json").display(), t * 1e3));
+                Some(t)
+            }
+            _ => None,
+        };
         Ok(ExportInputs {
             noise,
             rate_hz,
@@ -320,6 +333,7 @@ impl ExportInputs {
             calibration,
             inflation,
             cameras,
+            rig_time_offset_s,
             sources,
         })
     }
@@ -379,18 +393,25 @@ impl ExportInputs {
             .collect()
     }
 
-    /// The camera–IMU time offset \[s\] (frame stamped t taken at IMU time t + offset).
+    /// The camera–IMU time offset \[s\] (frame stamped t taken at IMU time t +
+    /// offset): the rig calibration's, else the calibration's audited one, else 0.
     fn camera_time_offset(&self) -> f64 {
-        self.calibration.as_ref().and_then(|c| c.time_offsets).map(|t| t.camera_imu_s).unwrap_or(0.0)
+        self.rig_time_offset_s
+            .or_else(|| self.calibration.as_ref().and_then(|c| c.time_offsets).map(|t| t.camera_imu_s))
+            .unwrap_or(0.0)
     }
+}
+
+/// Whether `dir` is the output folder of `tumble calibrate-rig` (`rig.json` beside `cam0/sensor.yaml`).
+fn is_rig_output(dir: &Path) -> bool {
+    dir.join("rig.json").is_file() && dir.join("cam0").join("sensor.yaml").is_file()
 }
 
 /// The cameras of an ASL folder (or of `tumble calibrate-rig`'s output, whose
 /// `camN/sensor.yaml` sit beside `rig.json`): intrinsics, resolution, rate and
 /// IMU ← camera from the `T_BS` of both sensors.
 fn rig_cameras(dir: &Path) -> Result<Vec<RigCamera>, InputError> {
-    let rig_output = dir.join("rig.json").is_file() && dir.join("cam0").join("sensor.yaml").is_file();
-    let root = if rig_output { dir.to_path_buf() } else { crate::io::asl::resolve_mav0(dir)? };
+    let root = if is_rig_output(dir) { dir.to_path_buf() } else { crate::io::asl::resolve_mav0(dir)? };
     let imu_yaml = root.join("imu0").join("sensor.yaml");
     let body_imu =
         if imu_yaml.is_file() { crate::io::asl::read_imu_sensor(&imu_yaml)?.t_bs } else { Isometry3::identity() };
