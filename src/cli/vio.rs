@@ -92,6 +92,7 @@ pub struct EstimatorArgs {
     /// Estimate cam0's pose in the IMU frame (T_BC) in the window, starting
     /// from the given one under a prior of camera.rotation_sigma_deg (5°) and
     /// camera.translation_sigma_m (5 cm); needs rotation about several axes.
+    /// Held until a window's length of keyframes has left the window.
     #[arg(long)]
     pub estimate_extrinsics: bool,
     /// Estimate the camera–IMU time offset (t_imu = t_cam + td) in the

@@ -6,7 +6,9 @@
 //! graph; the information of the measurements that leave the window reaches
 //! them through the marginalization prior (they are in its separator), so
 //! nothing is counted twice. A parameter that is not estimated is held
-//! constant at its value.
+//! constant at its value; the estimator also holds them until a window's
+//! length of keyframes is in the prior, and after an estimate that
+//! `CameraPrior::implausible` rejects.
 
 use super::geometry::parts;
 use super::ImuData;
@@ -33,7 +35,7 @@ pub struct CameraEstimate {
     pub time_offset_s: f64,
     /// σ of the rotation about the camera's axes \[deg\] (NaN when not estimated or not recovered).
     pub rotation_sigma_deg: [f64; 3],
-    /// σ of the translation \[m\] (NaN as above).
+    /// σ of the translation along the camera's axes \[m\] (NaN as above).
     pub translation_sigma_m: [f64; 3],
     /// σ of the time offset \[s\] (NaN as above).
     pub time_offset_sigma_s: f64,
@@ -82,7 +84,10 @@ impl CameraEstimate {
                 self.time_offset_sigma_s * 1e3
             ));
         }
-        format!("camera estimated online: {}", parts.join("; "))
+        format!(
+            "camera estimated online: {} (σ are the window's precision and optimistic: docs/vio.md)",
+            parts.join("; ")
+        )
     }
 }
 

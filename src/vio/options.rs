@@ -195,7 +195,9 @@ pub struct CameraCalibrationOptions {
     pub rotation_sigma_deg: f64,
     /// σ of the given `T_BC`'s translation, per axis \[m\].
     pub translation_sigma_m: f64,
-    /// σ of the given time offset (0 unless a calibration says otherwise) \[s\].
+    /// σ of the given time offset (0 unless a calibration says otherwise) \[s\];
+    /// also the half-width of the IMU samples the body's motion around each
+    /// stamp is fitted over (the offsets the prior expects).
     pub time_offset_sigma_s: f64,
 }
 
