@@ -164,13 +164,16 @@ fn evaluate(
     input.apply_noise(None, &mut opts.noise.imu);
     let result = run(&input, &opts, None).map_err(|e| e.to_string())?;
     let mut summary = summarize(&input, &opts, &result, 10.0);
-    if let (Case::Target(..), Some(gt)) = (case, &input.groundtruth) {
-        // The target frame's tilt against gravity is known only through the
-        // mean specific force, which an accelerometer bias of 0.1 m/s² tilts
-        // by 0.6°: align in 6 DOF instead of position + yaw.
+    // The target frame's tilt against gravity is known only through the
+    // mean specific force, which an accelerometer bias of 0.1 m/s² tilts
+    // by 0.6°: align in 6 DOF instead of position + yaw.
+    let se3 = |result: &tumble::vio::VioResult| {
+        let gt = input.groundtruth.as_ref().ok_or("no PnP ground truth")?;
         let eval_opts = EvalOptions { alignment: Alignment::Se3, ..EvalOptions::default() };
-        let ev =
-            tumble::eval::evaluate(&trajectory(&input, &result), None, gt, &eval_opts).map_err(|e| e.to_string())?;
+        tumble::eval::evaluate(&trajectory(&input, result), None, gt, &eval_opts).map_err(|e| e.to_string())
+    };
+    if let (Case::Target(..), Some(_)) = (case, &input.groundtruth) {
+        let ev = se3(&result)?;
         summary.ate_rmse_m = Some(ev.metrics.ate_rmse_m);
         summary.evaluation = Some(ev);
     }
@@ -183,10 +186,7 @@ fn evaluate(
         // a window's length of keyframes is in the prior): the ATE after them.
         let mut late = result.clone();
         late.estimates.retain(|e| e.t > LATE_S);
-        let ate = input.groundtruth.as_ref().and_then(|gt| {
-            let eval_opts = EvalOptions { alignment: Alignment::Se3, ..EvalOptions::default() };
-            tumble::eval::evaluate(&trajectory(&input, &late), None, gt, &eval_opts).ok()
-        });
+        let ate = se3(&late).ok();
         format!(
             "{}\n  from EuRoC's calibration: rotation {dr:.3}°, translation {:.1} mm, time offset {:.3} ms; \
              after {LATE_S} s: ATE {}, rotation RMSE {}",

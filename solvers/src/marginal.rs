@@ -250,6 +250,12 @@ impl Covariances {
     pub fn get(&self, key: Key) -> Option<DMatrix<f64>> {
         self.block(key, key)
     }
+    /// Standard deviation of tangent component `i` of a requested key (None
+    /// when the key was not requested or has no such component).
+    pub fn sigma(&self, key: Key, i: usize) -> Option<f64> {
+        let (o, d) = self.span(key)?;
+        (i < d).then(|| self.joint[(o + i, o + i)].max(0.0).sqrt())
+    }
     /// Cross-covariance block between two requested keys.
     pub fn block(&self, a: Key, b: Key) -> Option<DMatrix<f64>> {
         let (oa, da) = self.span(a)?;

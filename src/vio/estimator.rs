@@ -613,11 +613,10 @@ impl<'a> Estimator<'a> {
         let q = UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r));
         let mut std = [[f64::NAN; 3]; 5];
         if let Some(c) = covariances {
-            let d = |k, i: usize| c.get(k).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt());
             let blocks = [(X(sid), 0), (X(sid), 3), (V(sid), 0), (B(sid), 0), (B(sid), 3)];
             for (row, (key, off)) in std.iter_mut().zip(blocks) {
                 for (i, s) in row.iter_mut().enumerate() {
-                    *s = d(key, i + off);
+                    *s = c.sigma(key, i + off).unwrap_or(f64::NAN);
                 }
             }
         }

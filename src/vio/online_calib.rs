@@ -10,7 +10,7 @@
 //! length of keyframes is in the prior, and after an estimate that
 //! `CameraPrior::implausible` rejects.
 
-use super::geometry::parts;
+use super::geometry::{parts, pose};
 use super::ImuData;
 use super::{Estimate, VioInput, VioOptions};
 use nalgebra::{Matrix3, Vector1, Vector3, Vector6};
@@ -53,11 +53,11 @@ impl CameraEstimate {
     /// The rotation \[deg\] and the distance between the translations \[m\]
     /// from `body_from_camera` (a reference `T_BC`) to this estimate.
     pub fn difference(&self, body_from_camera: &Isometry3F64) -> (f64, f64) {
-        let (r0, t0) = parts(body_from_camera);
         let [w, x, y, z] = self.rotation;
         let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-        let dr = tumble_solvers::lie::so3_log(&(r0.transpose() * q.to_rotation_matrix().matrix())).norm();
-        (dr.to_degrees(), (nalgebra::Vector3::from(self.translation) - t0).norm())
+        let estimate = pose(q.to_rotation_matrix().matrix(), &Vector3::from(self.translation));
+        let (rot, t) = deviation(body_from_camera, &estimate);
+        (rot.norm().to_degrees(), t.norm())
     }
 
     /// One line for the terminal: what was estimated, its σ and how far it moved from the given values.
@@ -153,13 +153,11 @@ impl CameraPrior {
     /// wrong minimum of the window's solve, or a prior that does not hold).
     pub fn implausible(&self, values: &Values) -> Option<String> {
         let (x, td) = current(values)?;
-        let (r0, t0) = parts(&self.body_from_camera);
-        let (r, t) = parts(&x);
-        let rot = tumble_solvers::lie::so3_log(&(r0.transpose() * r));
+        let (rot, t) = deviation(&self.body_from_camera, &x);
         let mut d2 = 0.0;
         let mut dof = 0;
         if self.extrinsics {
-            d2 += (rot / self.pose_sigma[0]).norm_squared() + ((t - t0) / self.pose_sigma[3]).norm_squared();
+            d2 += (rot / self.pose_sigma[0]).norm_squared() + (t / self.pose_sigma[3]).norm_squared();
             dof += 6;
         }
         if self.time_offset {
@@ -176,7 +174,7 @@ impl CameraPrior {
             format!(
                 "{:.1}° and {:.0} mm from the given T_BC, time offset {:.1} ms ({:.0} σ² of its prior, limit {limit})",
                 rot.norm().to_degrees(),
-                (t - t0).norm() * 1e3,
+                t.norm() * 1e3,
                 td * 1e3,
                 d2
             )
@@ -195,23 +193,30 @@ impl CameraPrior {
         let (r, t) = parts(&x);
         let q = nalgebra::UnitQuaternion::from_matrix(&r);
         let std = |k: Key, i: usize, estimated: bool| {
-            covariances.filter(|_| estimated).and_then(|c| c.get(k)).map_or(f64::NAN, |m| m[(i, i)].max(0.0).sqrt())
+            covariances.filter(|_| estimated).and_then(|c| c.sigma(k, i)).unwrap_or(f64::NAN)
         };
-        let mut e = CameraEstimate {
+        let (change_rot, change_t) = deviation(&self.body_from_camera, &x);
+        CameraEstimate {
             rotation: [q.w, q.i, q.j, q.k],
             translation: [t.x, t.y, t.z],
             time_offset_s: time_offset(values),
             rotation_sigma_deg: [0, 1, 2].map(|i| std(EXTRINSIC, i, self.extrinsics).to_degrees()),
             translation_sigma_m: [3, 4, 5].map(|i| std(EXTRINSIC, i, self.extrinsics)),
             time_offset_sigma_s: std(TIME_OFFSET, 0, self.time_offset),
-            rotation_change_deg: 0.0,
-            translation_change_m: 0.0,
+            rotation_change_deg: change_rot.norm().to_degrees(),
+            translation_change_m: change_t.norm(),
             extrinsics_estimated: self.extrinsics,
             time_offset_estimated: self.time_offset,
-        };
-        (e.rotation_change_deg, e.translation_change_m) = e.difference(&self.body_from_camera);
-        e
+        }
     }
+}
+
+/// From `from` to `to` (two `T_BC`): the rotation vector `log(R_fromᵀ R_to)`
+/// \[rad, camera frame\] and the translation difference \[m, body frame\].
+fn deviation(from: &Isometry3F64, to: &Isometry3F64) -> (Vector3<f64>, Vector3<f64>) {
+    let (r0, t0) = parts(from);
+    let (r, t) = parts(to);
+    (tumble_solvers::lie::so3_log(&(r0.transpose() * r)), t - t0)
 }
 
 /// The online calibration's current `T_BC` and `td` in `values`, when it is there.
@@ -269,7 +274,6 @@ pub(crate) fn exposure_motion(imu: &ImuData, t: f64, bias: &Vector6<f64>, half_w
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vio::geometry::pose;
 
     #[test]
     fn the_fit_recovers_a_quadratic_rate_and_the_specific_force() {
