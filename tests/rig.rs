@@ -218,7 +218,16 @@ fn bad_inputs_name_the_file_and_line() {
     std::fs::write(root.join("cam0/corners.csv"), format!("{header}1100000000,0,0,100,100,0,0,0\n")).unwrap();
     let input = RigInput::from_asl(dir.as_path(), &target, Some(&noise), None, &opts).unwrap();
     assert!(calibrate_rig(&input, &opts, &mut |_| {}).is_err());
-    assert!(RigOptions { max_time_offset_s: 0.0, ..opts }.validate().is_err());
+    assert!(RigOptions { max_time_offset_s: 0.0, ..opts.clone() }.validate().is_err());
+    // Images but no corners: detected with the `opencv` feature, else refused with the build line;
+    // an image that is not one is named either way.
+    std::fs::remove_file(root.join("cam0/corners.csv")).unwrap();
+    std::fs::create_dir_all(root.join("cam0/data")).unwrap();
+    std::fs::write(root.join("cam0/data.csv"), "#timestamp [ns],filename\n1100000000,a.png\n").unwrap();
+    std::fs::write(root.join("cam0/data/a.png"), "not an image").unwrap();
+    let e = RigInput::from_asl(dir.as_path(), &target, Some(&noise), None, &opts).unwrap_err().to_string();
+    let expected = if cfg!(feature = "opencv") { "a.png" } else { "--features opencv" };
+    assert!(e.contains(expected), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -233,7 +242,7 @@ fn the_written_rig_is_what_vio_uses() {
     let sim = simulate_rig(&RigSimSettings { duration_s: 20.0, ..RigSimSettings::default() }, 4);
     let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
     let rig = calibrate_rig(&sim.input, &opts, &mut |_| {}).unwrap();
-    tumble::rig::output::write_rig(&rig, &dir.join("rig")).unwrap();
+    tumble::rig::output::write_rig(&rig, &sim.input, &dir.join("rig")).unwrap();
     let read = tumble::rig::input::RigCalibration::read(&dir.join("rig")).unwrap();
     assert!((read.time_offset_s - rig.time_offset_s).abs() < 1e-15);
     let (model, t_bc, _) = &read.cameras[0];
@@ -271,6 +280,6 @@ fn a_recording_turning_about_one_axis_is_refused() {
     println!("{why}");
     assert!(why.contains("T_BC"), "{why}");
     let dir = std::env::temp_dir().join(format!("tumble_rig_refused_{}", std::process::id()));
-    assert!(tumble::rig::output::write_rig(&rig, &dir).is_err());
+    assert!(tumble::rig::output::write_rig(&rig, &sim.input, &dir).is_err());
     assert!(!dir.join("camchain-imucam.yaml").exists());
 }

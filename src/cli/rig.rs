@@ -10,7 +10,8 @@ use tumble::rig::{calibrate_rig, output, RigInput, RigOptions};
 /// Flags of `tumble calibrate-rig`.
 #[derive(Args)]
 pub struct RigArgs {
-    /// ASL folder (mav0/ or its parent) with imu0/data.csv and camN/corners.csv.
+    /// ASL folder (mav0/ or its parent) with imu0/data.csv and, per camera, camN/corners.csv
+    /// or the images (camN/data.csv; the target is detected with the `opencv` feature).
     input: PathBuf,
     /// The target, in Kalibr's keys (aprilgrid or checkerboard).
     #[arg(long)]
@@ -76,16 +77,17 @@ impl RigArgs {
             ..RigOptions::default()
         };
         options.validate()?;
-        let input = RigInput::from_asl(
+        let input = RigInput::from_asl_with_progress(
             &self.input,
             &self.target,
             self.noise.as_deref(),
             self.calibration.as_deref(),
             &options,
+            &mut |msg| eprintln!("{msg}"),
         )?;
         let rig = calibrate_rig(&input, &options, &mut |msg| eprintln!("{msg}"))?;
         println!("{}", output::summary_markdown(&rig));
-        let files = output::write_rig(&rig, &self.out)?;
+        let files = output::write_rig(&rig, &input, &self.out)?;
         println!("wrote {}", paths(&files));
         Ok(())
     }

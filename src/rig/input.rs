@@ -146,6 +146,9 @@ pub struct CameraCorners {
     pub views: Vec<View>,
     /// Image size `[width, height]` \[px\] when known (`sensor.yaml` or the options).
     pub resolution: Option<[u32; 2]>,
+    /// When the corners were detected in the images here (no `corners.csv`):
+    /// what the detection found. The rig's output then holds them as `camN/corners.csv`.
+    pub detection: Option<super::detect::DetectionStats>,
 }
 
 /// Tolerance between a corner's position in `corners.csv` and the target's geometry \[m\].
@@ -245,6 +248,29 @@ pub fn read_corners(cam_dir: &Path, target: &Target) -> Result<Vec<View>, InputE
         return Err(InputError::file(&path, "holds no corners"));
     }
     Ok(views)
+}
+
+/// The views as `corners.csv` text (the layout [`read_corners`] reads; for a
+/// checkerboard `tag_id` is 0) and as `frames.csv` text (every view's stamp).
+pub fn corners_csv(views: &[View], target: &Target) -> (String, String) {
+    use std::fmt::Write;
+    let mut corners = String::from("timestamp_ns,tag_id,corner_idx,u_px,v_px,x_m,y_m,z_m\n");
+    let mut frames = String::from("#timestamp [ns]\n");
+    for v in views {
+        let _ = writeln!(frames, "{}", v.t_ns);
+        for c in &v.corners {
+            let (tag, idx) = match target {
+                Target::AprilGrid { .. } => (c.id / 4, c.id % 4),
+                Target::Checkerboard { .. } => (0, c.id),
+            };
+            let _ = writeln!(
+                corners,
+                "{},{tag},{idx},{:.4},{:.4},{:.6},{:.6},{:.6}",
+                v.t_ns, c.uv[0], c.uv[1], c.target[0], c.target[1], c.target[2]
+            );
+        }
+    }
+    (corners, frames)
 }
 
 /// `dir/camN/sensor.yaml` read for N = 0, 1, … until one is missing, with their paths.

@@ -23,6 +23,7 @@
 //! println!("time offset {:.3} ms ± {:.3}", rig.time_offset_s * 1e3, rig.time_offset_sigma_s * 1e3);
 //! ```
 
+pub mod detect;
 pub mod init;
 pub mod input;
 pub mod output;
@@ -142,6 +143,21 @@ impl RigInput {
         calibration: Option<&Path>,
         options: &RigOptions,
     ) -> Result<RigInput, InputError> {
+        Self::from_asl_with_progress(path, target, noise, calibration, options, &mut |_| {})
+    }
+
+    /// [`RigInput::from_asl`], for a folder that may have images instead of
+    /// `camN/corners.csv`: a camera whose folder has no `corners.csv` but
+    /// images (`camN/data.csv`) has its corners detected ([`detect`], feature
+    /// `opencv`; refused with a hint without it), with progress lines to `progress`.
+    pub fn from_asl_with_progress(
+        path: &Path,
+        target: &Path,
+        noise: Option<&Path>,
+        calibration: Option<&Path>,
+        options: &RigOptions,
+        progress: &mut dyn FnMut(&str),
+    ) -> Result<RigInput, InputError> {
         let target_path = target;
         let target = Target::read(target)?;
         let ds = crate::io::asl::read_asl(path, &Default::default())?;
@@ -166,19 +182,26 @@ impl RigInput {
         let mut cameras = Vec::new();
         let mut sources = vec![target_path.to_path_buf(), ds.imu.sources.first().cloned().unwrap_or_default()];
         for k in 0..8 {
-            let dir = ds.root.join(format!("cam{k}"));
-            if !dir.join("corners.csv").is_file() {
-                continue;
+            let name = format!("cam{k}");
+            let dir = ds.root.join(&name);
+            let camera = ds.cameras.iter().find(|c| c.name == name);
+            let resolution = camera.and_then(|c| c.resolution).or(options.resolution);
+            let csv = dir.join("corners.csv");
+            if csv.is_file() {
+                let views = input::read_corners(&dir, &target)?;
+                sources.push(csv.clone());
+                cameras.push(CameraCorners { name, path: csv, views, resolution, detection: None });
+            } else if let Some(cam) = camera.filter(|c| !c.frames.is_empty()) {
+                progress(&format!("{name}: no corners.csv; detecting the target in {} images", cam.frames.len()));
+                let (views, stats) = detect_corners(&cam.frames, &target, progress)?;
+                progress(&format!("{name}: {}", stats.line()));
+                sources.push(dir.join("data.csv"));
+                cameras.push(CameraCorners { name, path: csv, views, resolution, detection: Some(stats) });
             }
-            let views = input::read_corners(&dir, &target)?;
-            let resolution = ds.cameras.iter().find(|c| c.name == format!("cam{k}")).and_then(|c| c.resolution);
-            let resolution = resolution.or(options.resolution);
-            sources.push(dir.join("corners.csv"));
-            cameras.push(CameraCorners { name: format!("cam{k}"), path: dir.join("corners.csv"), views, resolution });
         }
         if cameras.is_empty() {
-            return Err(InputError::file(&ds.root, "has no camN/corners.csv")
-                .with_hint("detect the target's corners first (the `opencv` feature's detector, or Kalibr's/AprilTag's) and write them as camN/corners.csv"));
+            return Err(InputError::file(&ds.root, "has neither camN/corners.csv nor camN/data.csv with images")
+                .with_hint("give the target's corners as camN/corners.csv, or the images with camN/data.csv (detected with the `opencv` feature)"));
         }
         if let Some(c) = cameras.iter().find(|c| c.resolution.is_none()) {
             return Err(InputError::file(
@@ -190,6 +213,26 @@ impl RigInput {
         let imu = crate::vio::input::imu_data(&ds.imu, calibration.as_ref());
         Ok(RigInput { imu, imu_t0_ns: ds.imu.t0_ns, noise: params, noise_source, cameras, target, sources })
     }
+}
+
+#[cfg(feature = "opencv")]
+fn detect_corners(
+    frames: &[(i64, PathBuf)],
+    target: &Target,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<View>, detect::DetectionStats), InputError> {
+    detect::detect_camera(frames, target, progress)
+}
+
+#[cfg(not(feature = "opencv"))]
+fn detect_corners(
+    frames: &[(i64, PathBuf)],
+    _target: &Target,
+    _progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<View>, detect::DetectionStats), InputError> {
+    let folder = frames.first().and_then(|(_, p)| p.parent()).unwrap_or(Path::new("."));
+    Err(InputError::file(folder, "has images but no corners.csv, and this tumble was built without the target detector")
+        .with_hint("build with `--features opencv` (after `apt-get install libopencv-dev clang libclang-dev`), or give camN/corners.csv"))
 }
 
 /// How well a recording determines a parameter: its 3σ against the accuracy a

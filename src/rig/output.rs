@@ -3,7 +3,7 @@
 //! every σ, and `report.md` with its figures — all or nothing, and nothing
 //! when the result must not be used ([`super::RigResult::refusal`]).
 
-use super::{rotation, BiasSample, CornerResidual, RigResult};
+use super::{rotation, BiasSample, CornerResidual, RigInput, RigResult};
 use crate::error::OutputError;
 use crate::export::{kalibr_camera_blocks, RigCamera};
 use crate::plot::{write_panels, ScatterChart, Series, AXIS_COLORS};
@@ -327,8 +327,11 @@ fn imu_figure(rig: &RigResult, path: &Path) -> Result<(), OutputError> {
 
 /// Write `camchain-imucam.yaml`, `camN/sensor.yaml`, `rig.json`, `report.md`
 /// and its figures into `out` (all or nothing); refuses, writing nothing,
-/// when [`RigResult::refusal`] says the result must not be used.
-pub fn write_rig(rig: &RigResult, out: &Path) -> Result<Vec<PathBuf>, OutputError> {
+/// when [`RigResult::refusal`] says the result must not be used. The corners
+/// of a camera whose images were searched ([`RigInput::from_asl_with_progress`])
+/// are written too, as `camN/corners.csv` and `camN/frames.csv`: copied next to
+/// the images, they spare the next run the detection.
+pub fn write_rig(rig: &RigResult, input: &RigInput, out: &Path) -> Result<Vec<PathBuf>, OutputError> {
     if let Some(why) = rig.refusal() {
         return Err(OutputError::Failed(format!("nothing written to {}: {why}", out.display())));
     }
@@ -349,6 +352,17 @@ pub fn write_rig(rig: &RigResult, out: &Path) -> Result<Vec<PathBuf>, OutputErro
         }
         put("rig.json", rig_json(rig)?)?;
         let mut md = String::from("# Rig calibration\n\n");
+        for cam in &input.cameras {
+            if let Some(stats) = &cam.detection {
+                let (corners, frames) = super::input::corners_csv(&cam.views, &input.target);
+                put(&format!("{}/corners.csv", cam.name), corners)?;
+                put(&format!("{}/frames.csv", cam.name), frames)?;
+                let _ = writeln!(md, "- {} corners detected in the images: {}", cam.name, stats.line());
+            }
+        }
+        if input.cameras.iter().any(|c| c.detection.is_some()) {
+            md.push('\n');
+        }
         md.push_str(&summary_markdown(rig));
         for (c, cam) in rig.cameras.iter().enumerate() {
             let name = format!("reprojection_{}.png", cam.name);

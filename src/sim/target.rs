@@ -4,8 +4,9 @@
 //! World `W` z up; the body starts at the origin looking along +x (the
 //! camera's optical axis is body x for the default [`CameraSettings`]); the
 //! target hangs on a wall `distance_m` ahead, its x axis along world −y and its
-//! y axis along world −z (so it appears upright in the image), centred on the
-//! optical axis.
+//! y axis along world +z, centred on the optical axis: upright in the image
+//! and seen from its printed side, as a real one is (from its x axis to its y
+//! axis is a counter-clockwise turn on the screen, as in imu_april's corners).
 //!
 //! ```
 //! use tumble::sim::target::{simulate_rig, RigSimSettings};
@@ -110,8 +111,9 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
     let cam = &s.camera;
     let camera = cam.model();
     let t_bc = cam.body_from_camera();
-    // Target: x along world −y, y along world −z, centred on the optical axis.
-    let r_wt = Matrix3::new(0.0, 0.0, 1.0, -1.0, 0.0, 0.0, 0.0, -1.0, 0.0);
+    // Target: x along world −y, y along world +z, z towards the camera (its
+    // printed side faces the camera), centred on the optical axis.
+    let r_wt = Matrix3::new(0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
     let n = s.target.corner_count();
     let centre =
         (0..n).filter_map(|i| s.target.corner(i)).fold(Vector3::zeros(), |a, c| a + Vector3::from(c)) / n as f64;
@@ -156,6 +158,7 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
             path: "<simulation>/cam0/corners.csv".into(),
             views,
             resolution: Some(cam.resolution),
+            detection: None,
         }],
         target: s.target.clone(),
         sources: Vec::new(),

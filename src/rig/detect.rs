@@ -1,0 +1,291 @@
+//! The target's corners found in the images, for a recording that has no
+//! `camN/corners.csv` (the detector itself needs the cargo feature `opencv`).
+//!
+//! - **AprilGrid**: the tags are found by OpenCV's ArUco detector with its
+//!   AprilTag 36h11 dictionary. Each tag corner is then refined to the
+//!   X-junction it forms with the grid's corner squares (`cornerSubPix`, as
+//!   Kalibr does). The window holds that junction alone: its half-size is a
+//!   third of the gap between tags as the image shows it (at least 2 px).
+//!   ArUco's own corners, from the border's contour, lie a pixel or two inside
+//!   the tag and would be biased by that much. A corner the refinement cannot
+//!   place within its window is dropped.
+//! - **Which detected corner is which corner of the tag is not assumed.**
+//!   Printed grids and detectors differ in the tag's orientation and in the
+//!   order they list its corners. The tag centres do not depend on that order,
+//!   so a homography from the target's tag centres to the detected ones
+//!   predicts every corner of a view. Each view with tags in two rows and two
+//!   columns votes for the order, among the eight of a square (four rotations,
+//!   two directions), that fits its corners best. The recording's majority is
+//!   used, and the vote is reported. The same fit checks the target file: when
+//!   the tag centres do not follow its layout (wrong `tagCols`, a different
+//!   grid), the detection is refused.
+//! - **Checkerboard**: OpenCV's `findChessboardCornersSB` (sub-pixel by
+//!   construction). A checkerboard's corner order is ambiguous under a 180°
+//!   turn. Each view takes the order closest to the previous view's, so the
+//!   order stays continuous through a recording. The first view sets it; an
+//!   AprilGrid has no such ambiguity and is the better target.
+
+use super::init::homography;
+use super::input::{Corner, Target};
+use nalgebra::Vector3;
+
+/// Fewest tags, in two rows and two columns, for a view to vote on the corner order.
+const MIN_VOTING_TAGS: usize = 4;
+
+/// Largest median distance between a detected tag centre and the homography's,
+/// as a fraction of the tag's side in the image, for a view to follow the target's layout.
+const LAYOUT_TOLERANCE: f64 = 0.25;
+
+/// One tag as the detector reports it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TagDetection {
+    /// Tag id (the AprilTag code's number).
+    pub id: usize,
+    /// The four corners in the detector's order \[px\], as detected.
+    pub raw: [[f64; 2]; 4],
+    /// The same corners after the sub-pixel refinement; None where it failed or moved too far.
+    pub refined: [Option<[f64; 2]>; 4],
+}
+
+/// The eight orders of a square's corners: `ORDERS[k][j]` is the target's
+/// corner (Kalibr's 0–3, counter-clockwise from the lower left) of the
+/// detector's corner `j`.
+pub const ORDERS: [[usize; 4]; 8] =
+    [[0, 1, 2, 3], [1, 2, 3, 0], [2, 3, 0, 1], [3, 0, 1, 2], [0, 3, 2, 1], [3, 2, 1, 0], [2, 1, 0, 3], [1, 0, 3, 2]];
+
+/// How a view's tags fit the target's layout.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ViewOrder {
+    /// Too few tags, or all in one row or column: no vote.
+    Abstains,
+    /// The tag centres do not follow the target's layout.
+    OffLayout,
+    /// The best order ([`ORDERS`] index).
+    Votes(usize),
+}
+
+fn mean(p: &[[f64; 2]; 4]) -> [f64; 2] {
+    let s = p.iter().fold([0.0, 0.0], |a, q| [a[0] + q[0], a[1] + q[1]]);
+    [s[0] / 4.0, s[1] / 4.0]
+}
+
+fn apply(h: &nalgebra::Matrix3<f64>, p: [f64; 3]) -> [f64; 2] {
+    let q = h * Vector3::new(p[0], p[1], 1.0);
+    [q.x / q.z, q.y / q.z]
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+}
+
+/// The corner order one view votes for (AprilGrid only; a checkerboard abstains).
+pub fn view_order(tags: &[TagDetection], target: &Target) -> ViewOrder {
+    let Target::AprilGrid { cols, .. } = *target else { return ViewOrder::Abstains };
+    let tags: Vec<&TagDetection> = tags.iter().filter(|t| target.corner(4 * t.id).is_some()).collect();
+    let spans = |f: fn(usize, usize) -> usize| {
+        let first = tags.first().map(|t| f(t.id, cols as usize));
+        tags.iter().any(|t| Some(f(t.id, cols as usize)) != first)
+    };
+    if tags.len() < MIN_VOTING_TAGS || !spans(|id, c| id % c) || !spans(|id, c| id / c) {
+        return ViewOrder::Abstains;
+    }
+    let centre = |id: usize| {
+        let c: Vec<[f64; 3]> = (0..4).filter_map(|k| target.corner(4 * id + k)).collect();
+        [(c[0][0] + c[2][0]) / 2.0, (c[0][1] + c[2][1]) / 2.0]
+    };
+    let obj: Vec<[f64; 2]> = tags.iter().map(|t| centre(t.id)).collect();
+    let img: Vec<[f64; 2]> = tags.iter().map(|t| mean(&t.raw)).collect();
+    let Some(h) = homography(&obj, &img) else { return ViewOrder::Abstains };
+    let mut off: Vec<f64> = tags
+        .iter()
+        .zip(&obj)
+        .map(|(t, o)| {
+            let side = (0..4).map(|j| dist(t.raw[j], t.raw[(j + 1) % 4])).sum::<f64>() / 4.0;
+            dist(apply(&h, [o[0], o[1], 0.0]), mean(&t.raw)) / side.max(1e-9)
+        })
+        .collect();
+    if super::init::median(&mut off).is_none_or(|m| m > LAYOUT_TOLERANCE) {
+        return ViewOrder::OffLayout;
+    }
+    let cost = |order: &[usize; 4]| -> f64 {
+        tags.iter()
+            .map(|t| {
+                (0..4)
+                    .filter_map(|j| target.corner(4 * t.id + order[j]).map(|p| dist(t.raw[j], apply(&h, p)).powi(2)))
+                    .sum::<f64>()
+            })
+            .sum()
+    };
+    let best = (0..ORDERS.len()).min_by(|&a, &b| cost(&ORDERS[a]).total_cmp(&cost(&ORDERS[b]))).unwrap_or(0);
+    ViewOrder::Votes(best)
+}
+
+/// The recording's corner order: the majority of the views' votes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderVote {
+    /// The order used ([`ORDERS`] index).
+    pub order: usize,
+    /// Views that voted for it.
+    pub agree: usize,
+    /// Views that voted.
+    pub voters: usize,
+    /// Views whose tags do not follow the target's layout.
+    pub off_layout: usize,
+}
+
+/// Count the views' votes (`voters` is 0 when no view could vote: too few
+/// tags in two rows and two columns anywhere, or none following the layout).
+pub fn vote(views: &[ViewOrder]) -> OrderVote {
+    let mut counts = [0usize; 8];
+    let mut off_layout = 0;
+    for v in views {
+        match v {
+            ViewOrder::Votes(k) => counts[*k] += 1,
+            ViewOrder::OffLayout => off_layout += 1,
+            ViewOrder::Abstains => {}
+        }
+    }
+    let voters: usize = counts.iter().sum();
+    let (order, &agree) = counts.iter().enumerate().max_by_key(|(_, c)| **c).unwrap_or((0, &0));
+    OrderVote { order, agree, voters, off_layout }
+}
+
+/// A view's corners from its tags in the recording's order (refined corners only),
+/// sorted by corner id; tags beyond the target are left out.
+pub fn tag_corners(tags: &[TagDetection], target: &Target, order: usize) -> Vec<Corner> {
+    let mut out: Vec<Corner> = tags
+        .iter()
+        .flat_map(|t| {
+            (0..4).filter_map(move |j| {
+                let id = 4 * t.id + ORDERS[order][j];
+                Some(Corner { id, target: target.corner(id)?, uv: t.refined[j]? })
+            })
+        })
+        .collect();
+    out.sort_by_key(|c| c.id);
+    out
+}
+
+/// A checkerboard view's corners from OpenCV's list (row by row, `cols` per
+/// row). The list is taken with the rows reversed when it is mirrored: seen
+/// from its printed side, the target's x axis turns counter-clockwise on the
+/// screen into its y axis, and an order that does not is no pose of the board. Of the two orders left (a half turn apart), the one closer to
+/// the previous view's is taken.
+pub fn checkerboard_corners(target: &Target, pts: &[[f64; 2]], previous: Option<&[Corner]>) -> Vec<Corner> {
+    let n = target.corner_count();
+    let Target::Checkerboard { cols, .. } = *target else { return Vec::new() };
+    let cols = cols as usize;
+    if pts.len() != n || n < 2 * cols || cols < 2 {
+        return Vec::new();
+    }
+    let rows = n / cols;
+    let (dx, dy) =
+        ([pts[1][0] - pts[0][0], pts[1][1] - pts[0][1]], [pts[cols][0] - pts[0][0], pts[cols][1] - pts[0][1]]);
+    let mirrored = dx[0] * dy[1] - dx[1] * dy[0] > 0.0;
+    let pts: Vec<[f64; 2]> =
+        if mirrored { (0..n).map(|k| pts[(rows - 1 - k / cols) * cols + k % cols]).collect() } else { pts.to_vec() };
+    let index = |flip: bool, k: usize| if flip { n - 1 - k } else { k };
+    let gap = |flip: bool| match previous {
+        Some(prev) => prev.iter().map(|c| dist(c.uv, pts[index(flip, c.id)])).sum::<f64>(),
+        None => 0.0,
+    };
+    let flip = previous.is_some_and(|p| !p.is_empty()) && gap(true) < gap(false);
+    (0..n).filter_map(|id| Some(Corner { id, target: target.corner(id)?, uv: pts[index(flip, id)] })).collect()
+}
+
+/// What the detection found in one camera.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetectionStats {
+    /// Images read.
+    pub frames: usize,
+    /// Images with corners.
+    pub frames_with_target: usize,
+    /// Corners kept.
+    pub corners: usize,
+    /// Tag corners dropped by the refinement.
+    pub dropped: usize,
+    /// The AprilGrid's corner order and its vote.
+    pub order: Option<OrderVote>,
+    /// Wall time \[s\].
+    pub seconds: f64,
+}
+
+impl DetectionStats {
+    /// One line for the terminal and the report.
+    pub fn line(&self) -> String {
+        let mut s = format!(
+            "target in {} of {} images, {} corners ({} tag corners dropped by the sub-pixel refinement), {:.1} s",
+            self.frames_with_target, self.frames, self.corners, self.dropped, self.seconds
+        );
+        if let Some(v) = &self.order {
+            s.push_str(&format!("; tag corner order {:?} ({} of {} views agree)", ORDERS[v.order], v.agree, v.voters));
+        }
+        s
+    }
+}
+
+#[cfg(feature = "opencv")]
+mod cv;
+#[cfg(feature = "opencv")]
+pub use cv::detect_camera;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid() -> Target {
+        Target::AprilGrid { cols: 6, rows: 6, size: 0.088, spacing: 0.3 }
+    }
+
+    /// Tags seen through a homography, their corners listed in `order`'s inverse.
+    fn seen(ids: &[usize], order: usize) -> Vec<TagDetection> {
+        let t = grid();
+        let h = nalgebra::Matrix3::new(900.0, 40.0, 120.0, -30.0, -880.0, 400.0, 0.05, 0.1, 1.0);
+        ids.iter()
+            .map(|&id| {
+                let mut raw = [[0.0; 2]; 4];
+                for (j, r) in raw.iter_mut().enumerate() {
+                    *r = apply(&h, t.corner(4 * id + ORDERS[order][j]).unwrap());
+                }
+                TagDetection { id, raw, refined: raw.map(Some) }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn every_corner_order_is_recovered_from_the_layout() {
+        for (order, perm) in ORDERS.iter().enumerate() {
+            let tags = seen(&[0, 1, 6, 7, 14, 20], order);
+            assert_eq!(view_order(&tags, &grid()), ViewOrder::Votes(order), "order {order}");
+            let corners = tag_corners(&tags, &grid(), order);
+            assert_eq!(corners.len(), 24);
+            let tag0 = &tags[0];
+            let c0 = corners.iter().find(|c| c.id == 0).unwrap();
+            assert_eq!(c0.uv, tag0.raw[perm.iter().position(|&k| k == 0).unwrap()]);
+        }
+    }
+
+    #[test]
+    fn one_row_abstains_and_a_wrong_layout_is_found() {
+        assert_eq!(view_order(&seen(&[0, 1, 2, 3, 4], 0), &grid()), ViewOrder::Abstains);
+        // The same tags read against a grid of 5 columns: ids land in other places.
+        let five = Target::AprilGrid { cols: 5, rows: 7, size: 0.088, spacing: 0.3 };
+        assert_eq!(view_order(&seen(&[0, 1, 6, 7, 14, 20, 33], 0), &five), ViewOrder::OffLayout);
+        let v = vote(&[ViewOrder::Votes(3), ViewOrder::Votes(3), ViewOrder::OffLayout, ViewOrder::Abstains]);
+        assert_eq!((v.order, v.agree, v.voters, v.off_layout), (3, 2, 2, 1));
+        assert_eq!(vote(&[ViewOrder::Abstains]).voters, 0);
+    }
+
+    #[test]
+    fn a_checkerboard_keeps_its_order_through_a_half_turn_ambiguity() {
+        let t = Target::Checkerboard { cols: 4, rows: 3, col_spacing: 0.05, row_spacing: 0.05 };
+        let pts: Vec<[f64; 2]> =
+            (0..12).map(|k| [100.0 + 30.0 * (k % 4) as f64, 50.0 + 30.0 * (k / 4) as f64]).collect();
+        let first = checkerboard_corners(&t, &pts, None);
+        let mut reversed = pts.clone();
+        reversed.reverse();
+        let second = checkerboard_corners(&t, &reversed, Some(&first));
+        assert_eq!(first, second);
+        assert!(checkerboard_corners(&t, &pts[..11], None).is_empty());
+    }
+}

@@ -1,0 +1,201 @@
+//! The detector itself, on OpenCV (feature `opencv`).
+
+use super::{checkerboard_corners, tag_corners, view_order, vote, DetectionStats, TagDetection};
+use crate::error::InputError;
+use crate::rig::input::{Target, View};
+use opencv::core::{Mat, Point2f, Ptr, Size, TermCriteria, TermCriteria_Type, Vector};
+use opencv::prelude::*;
+use opencv::{aruco, calib3d, imgproc};
+use rayon::prelude::*;
+use std::path::PathBuf;
+
+/// Images detected between two progress lines (and in parallel within them).
+const CHUNK: usize = 64;
+
+/// Smallest half-size of the refinement window \[px\] (a 5 × 5 window, Kalibr's).
+const REFINE_HALF_WINDOW: i32 = 2;
+
+/// Half-size of the refinement window as a share of the gap between tags in
+/// the image (along the tag's shortest side, so foreshortening is allowed for).
+const WINDOW_SHARE: f64 = 0.35;
+
+/// Largest half-size of the refinement window \[px\], for tags seen large.
+const MAX_HALF_WINDOW: i32 = 8;
+
+struct Detector {
+    dictionary: Ptr<aruco::Dictionary>,
+    parameters: Ptr<aruco::DetectorParameters>,
+}
+
+enum Found {
+    Tags(Vec<TagDetection>, usize),
+    Board(Option<Vec<[f64; 2]>>),
+}
+
+fn cv_error(path: &std::path::Path, what: &str, e: impl std::fmt::Display) -> InputError {
+    InputError::file(path, format!("{what}: {e}"))
+}
+
+impl Detector {
+    fn new() -> opencv::Result<Detector> {
+        Ok(Detector {
+            dictionary: aruco::get_predefined_dictionary(aruco::PREDEFINED_DICTIONARY_NAME::DICT_APRILTAG_36h11)?,
+            parameters: {
+                let mut p = aruco::DetectorParameters::create()?;
+                // Corners from lines fitted to the border's contour (sub-pixel, and
+                // blind to the grid's corner squares), then refined below.
+                p.set_corner_refinement_method(aruco::CORNER_REFINE_CONTOUR);
+                p
+            },
+        })
+    }
+
+    fn detect(&self, target: &Target, path: &std::path::Path) -> Result<Found, InputError> {
+        let img = crate::vio::frontend::read_gray(path).map_err(|e| InputError::file(path, e.0))?;
+        match *target {
+            Target::AprilGrid { spacing, .. } => {
+                self.tags(&img, spacing).map_err(|e| cv_error(path, "AprilTag detection", e))
+            }
+            Target::Checkerboard { cols, rows, .. } => {
+                let mut pts = Vector::<Point2f>::new();
+                let size = Size::new(cols as i32, rows as i32);
+                let flags = calib3d::CALIB_CB_EXHAUSTIVE | calib3d::CALIB_CB_ACCURACY;
+                let found = calib3d::find_chessboard_corners_sb(&img, size, &mut pts, flags)
+                    .map_err(|e| cv_error(path, "checkerboard detection", e))?;
+                Ok(Found::Board(found.then(|| pts.iter().map(|p| [p.x as f64, p.y as f64]).collect())))
+            }
+        }
+    }
+
+    fn tags(&self, img: &Mat, spacing: f64) -> opencv::Result<Found> {
+        let mut corners = Vector::<Vector<Point2f>>::new();
+        let mut ids = Vector::<i32>::new();
+        let mut rejected = Vector::<Vector<Point2f>>::new();
+        aruco::detect_markers(img, &self.dictionary, &mut corners, &mut ids, &self.parameters, &mut rejected)?;
+        let criteria = TermCriteria::new(TermCriteria_Type::COUNT as i32 + TermCriteria_Type::EPS as i32, 40, 0.01)?;
+        let mut tags = Vec::with_capacity(ids.len());
+        let mut dropped = 0;
+        for (id, quad) in ids.iter().zip(corners.iter()) {
+            if id < 0 || quad.len() != 4 {
+                continue;
+            }
+            let raw: Vec<[f64; 2]> = quad.iter().map(|p| [p.x as f64, p.y as f64]).collect();
+            let raw = [raw[0], raw[1], raw[2], raw[3]];
+            // The window holds the X-junction of the tag and its corner square
+            // alone: the square's next corner is a gap (spacing × side) away.
+            let side = (0..4).map(|j| super::dist(raw[j], raw[(j + 1) % 4])).fold(f64::INFINITY, f64::min);
+            let half = ((WINDOW_SHARE * spacing * side).floor() as i32).clamp(REFINE_HALF_WINDOW, MAX_HALF_WINDOW);
+            let mut pts = quad.clone();
+            imgproc::corner_sub_pix(img, &mut pts, Size::new(half, half), Size::new(-1, -1), criteria)?;
+            let mut refined = [None; 4];
+            for (j, r) in refined.iter_mut().enumerate() {
+                let p = pts.get(j)?;
+                let q = [p.x as f64, p.y as f64];
+                // cornerSubPix puts a corner that left its window back where it
+                // started: unmoved is a failure too.
+                let moved = super::dist(q, raw[j]);
+                if moved > 0.0 && moved <= half as f64 && q.iter().all(|v| v.is_finite()) {
+                    *r = Some(q);
+                } else {
+                    dropped += 1;
+                }
+            }
+            tags.push(TagDetection { id: id as usize, raw, refined });
+        }
+        Ok(Found::Tags(tags, dropped))
+    }
+}
+
+/// Detect the target in every image of one camera (`frames`: stamp \[ns\] and
+/// image path, in time order), with a progress line every few dozen images.
+/// Every frame is kept as a view, with or without corners. Refused when no
+/// image shows the target, or when the AprilGrid's tags do not follow the
+/// target's layout in most views that show enough of it.
+pub fn detect_camera(
+    frames: &[(i64, PathBuf)],
+    target: &Target,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<View>, DetectionStats), InputError> {
+    let start = std::time::Instant::now();
+    let mut found = Vec::with_capacity(frames.len());
+    for (c, chunk) in frames.chunks(CHUNK).enumerate() {
+        let part: Result<Vec<Found>, InputError> = chunk
+            .par_iter()
+            .map_init(Detector::new, |d, (_, path)| match d {
+                Ok(d) => d.detect(target, path),
+                Err(e) => Err(cv_error(path, "OpenCV's ArUco detector could not be created", &*e)),
+            })
+            .collect();
+        found.extend(part?);
+        let done = (c * CHUNK + chunk.len()).min(frames.len());
+        if c % 8 == 7 || done == frames.len() {
+            progress(&format!("  detecting the target: {done}/{} images", frames.len()));
+        }
+    }
+    let mut stats = DetectionStats {
+        frames: frames.len(),
+        frames_with_target: 0,
+        corners: 0,
+        dropped: 0,
+        order: None,
+        seconds: 0.0,
+    };
+    let mut views: Vec<View> = frames.iter().map(|(t_ns, _)| View { t_ns: *t_ns, corners: Vec::new() }).collect();
+    let folder = frames.first().and_then(|(_, p)| p.parent()).unwrap_or(std::path::Path::new("."));
+    match target {
+        Target::AprilGrid { .. } => {
+            let orders: Vec<_> = found
+                .iter()
+                .map(|f| match f {
+                    Found::Tags(tags, _) => view_order(tags, target),
+                    Found::Board(_) => super::ViewOrder::Abstains,
+                })
+                .collect();
+            let v = vote(&orders);
+            if v.off_layout > v.voters {
+                return Err(InputError::file(
+                    folder,
+                    format!(
+                        "the tags follow the target's layout in only {} of {} views: the target file does not describe this grid",
+                        v.voters,
+                        v.voters + v.off_layout
+                    ),
+                )
+                .with_hint("check tagCols and tagRows (tags are numbered row by row from the lower left)"));
+            }
+            if v.voters == 0 {
+                return Err(InputError::file(
+                    folder,
+                    "no image shows four or more of the grid's tags in two rows and two columns",
+                )
+                .with_hint(
+                    "check the target file (tag family 36h11, tagCols, tagRows) and that the images show the grid",
+                ));
+            }
+            for (view, f) in views.iter_mut().zip(&found) {
+                if let Found::Tags(tags, dropped) = f {
+                    view.corners = tag_corners(tags, target, v.order);
+                    stats.dropped += dropped;
+                }
+            }
+            stats.order = Some(v);
+        }
+        Target::Checkerboard { .. } => {
+            let mut previous: Option<usize> = None;
+            for (k, f) in found.iter().enumerate() {
+                if let Found::Board(Some(pts)) = f {
+                    let prev = previous.map(|p| views[p].corners.clone());
+                    views[k].corners = checkerboard_corners(target, pts, prev.as_deref());
+                    previous = Some(k);
+                }
+            }
+        }
+    }
+    stats.frames_with_target = views.iter().filter(|v| !v.corners.is_empty()).count();
+    stats.corners = views.iter().map(|v| v.corners.len()).sum();
+    stats.seconds = start.elapsed().as_secs_f64();
+    if stats.frames_with_target == 0 {
+        return Err(InputError::file(folder, "the target was found in none of the images"));
+    }
+    Ok((views, stats))
+}
