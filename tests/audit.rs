@@ -49,7 +49,7 @@ fn trials(name: &str, mode: NoiseMode, floor: usize) {
 
 // 360 audits: too long for the dev profile of the README's test command
 // (18 min on two cores) and for CI's 40 minutes even in release (14 min):
-// `cargo test --release --test audit -- --ignored` runs them all, CI four of
+// `cargo test --release --test audit -- --ignored` runs them all, CI one of
 // the cases (see .ci/run). The clean case and g-sensitivity also run by
 // default, in `trials_quick` below.
 macro_rules! trial_tests {

@@ -468,23 +468,8 @@ fn a_rig_is_calibrated_from_its_images() {
 
     let rig = calibrate_rig(&input, &opts, &mut |_| {}).unwrap();
     assert!(rig.refusal().is_none(), "{:?}", rig.refusal());
-    let c = &rig.cameras[0];
-    let t = &sim.truth;
-    let dr = tumble::solvers::lie::so3_log(
-        &(c.t_bc.rotation.to_rotation_matrix().matrix() * t.t_bc.rotation.to_rotation_matrix().matrix().transpose()),
-    );
-    let dt = c.t_bc.translation.vector - t.t_bc.translation.vector;
-    let normalized = [
-        dr.x / c.rotation_sigma.x,
-        dr.y / c.rotation_sigma.y,
-        dr.z / c.rotation_sigma.z,
-        dt.x / c.translation_sigma.x,
-        dt.y / c.translation_sigma.y,
-        dt.z / c.translation_sigma.z,
-        (c.model.fx - t.model.fx) / c.model_sigma[0],
-        (c.model.cx - t.model.cx) / c.model_sigma[2],
-        (rig.time_offset_s - t.time_offset_s) / rig.time_offset_sigma_s,
-    ];
+    let (c, t) = (&rig.cameras[0], &sim.truth);
+    let (dr, dt, normalized) = common::rig_errors(&rig, t);
     println!(
         "T_BC {:.4}°, {:.2} mm, fx {:+.3} px, td {:+.4} ms; normalized errors {}",
         dr.norm().to_degrees(),
