@@ -436,7 +436,8 @@ fn a_rig_is_calibrated_from_its_images() {
     )
     .unwrap();
 
-    let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
+    // No resolution given: the images' own size is used.
+    let opts = RigOptions::default();
     let mut lines = Vec::new();
     let input = RigInput::from_asl_with_progress(&dir, &dir.join("target.yaml"), None, None, &opts, &mut |m| {
         lines.push(m.to_string())
@@ -445,7 +446,7 @@ fn a_rig_is_calibrated_from_its_images() {
     println!("{}", lines.join("\n"));
     assert!(lines.iter().any(|l| l.contains("detecting the target")), "{lines:?}");
     let cam = &input.cameras[0];
-    assert!(cam.detection.is_some());
+    assert!(cam.detection.is_some() && cam.resolution == Some([752, 480]));
     // Detected against simulated corners, frame by frame.
     let mut errors = Vec::new();
     let (mut found, mut simulated) = (0, 0);

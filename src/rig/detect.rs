@@ -206,6 +206,9 @@ pub struct DetectionStats {
     pub dropped: usize,
     /// The AprilGrid's corner order and its vote.
     pub order: Option<OrderVote>,
+    /// The images' size `[width, height]` \[px\] (all the same: an image of
+    /// another size is refused).
+    pub image_size: [u32; 2],
     /// Wall time \[s\].
     pub seconds: f64,
 }

@@ -140,7 +140,7 @@ pub struct View {
 pub struct CameraCorners {
     /// Folder name (`cam0`).
     pub name: String,
-    /// The corners file.
+    /// The corners file, or the images' `data.csv` when the corners were detected.
     pub path: PathBuf,
     /// Views in time order (every frame of `frames.csv`, or every stamp with corners).
     pub views: Vec<View>,

@@ -135,7 +135,8 @@ impl RigInput {
     /// `tumble allan`), else `imu0/sensor.yaml`'s; without either the input is
     /// refused. `calibration` (`calibration.json` of `tumble calibrate`)
     /// corrects the IMU samples first. Each camera's resolution comes from its
-    /// `sensor.yaml`, else from `options.resolution`.
+    /// `sensor.yaml`, else from `options.resolution` (for images searched by
+    /// [`RigInput::from_asl_with_progress`], from the images, which must agree).
     pub fn from_asl(
         path: &Path,
         target: &Path,
@@ -195,8 +196,20 @@ impl RigInput {
                 progress(&format!("{name}: no corners.csv; detecting the target in {} images", cam.frames.len()));
                 let (views, stats) = detect_corners(&cam.frames, &target, progress)?;
                 progress(&format!("{name}: {}", stats.line()));
-                sources.push(dir.join("data.csv"));
-                cameras.push(CameraCorners { name, path: csv, views, resolution, detection: Some(stats) });
+                let data_csv = dir.join("data.csv");
+                if let Some(r) = resolution.filter(|r| *r != stats.image_size) {
+                    return Err(InputError::file(
+                        &data_csv,
+                        format!(
+                            "the images are {}×{} px, but the camera's size is given as {}×{}",
+                            stats.image_size[0], stats.image_size[1], r[0], r[1]
+                        ),
+                    )
+                    .with_hint("check camN/sensor.yaml's resolution or --resolution"));
+                }
+                let resolution = Some(stats.image_size);
+                sources.push(data_csv.clone());
+                cameras.push(CameraCorners { name, path: data_csv, views, resolution, detection: Some(stats) });
             }
         }
         if cameras.is_empty() {

@@ -32,6 +32,9 @@ enum Found {
     Board(Option<Vec<[f64; 2]>>),
 }
 
+/// What one image gave: its size \[px\] and what was found in it.
+type ImageResult = Result<([u32; 2], Found), InputError>;
+
 fn cv_error(path: &std::path::Path, what: &str, e: impl std::fmt::Display) -> InputError {
     InputError::file(path, format!("{what}: {e}"))
 }
@@ -50,9 +53,10 @@ impl Detector {
         })
     }
 
-    fn detect(&self, target: &Target, path: &std::path::Path) -> Result<Found, InputError> {
+    fn detect(&self, target: &Target, path: &std::path::Path) -> ImageResult {
         let img = crate::vio::frontend::read_gray(path).map_err(|e| InputError::file(path, e.0))?;
-        match *target {
+        let size = [img.cols().max(0) as u32, img.rows().max(0) as u32];
+        let found = match *target {
             Target::AprilGrid { spacing, .. } => {
                 self.tags(&img, spacing).map_err(|e| cv_error(path, "AprilTag detection", e))
             }
@@ -64,7 +68,8 @@ impl Detector {
                     .map_err(|e| cv_error(path, "checkerboard detection", e))?;
                 Ok(Found::Board(found.then(|| pts.iter().map(|p| [p.x as f64, p.y as f64]).collect())))
             }
-        }
+        }?;
+        Ok((size, found))
     }
 
     fn tags(&self, img: &Mat, spacing: f64) -> opencv::Result<Found> {
@@ -118,15 +123,28 @@ pub fn detect_camera(
 ) -> Result<(Vec<View>, DetectionStats), InputError> {
     let start = std::time::Instant::now();
     let mut found = Vec::with_capacity(frames.len());
+    let mut sizes: Vec<[u32; 2]> = Vec::with_capacity(1);
     for (c, chunk) in frames.chunks(CHUNK).enumerate() {
-        let part: Result<Vec<Found>, InputError> = chunk
+        let part: Result<Vec<([u32; 2], Found)>, InputError> = chunk
             .par_iter()
             .map_init(Detector::new, |d, (_, path)| match d {
                 Ok(d) => d.detect(target, path),
                 Err(e) => Err(cv_error(path, "OpenCV's ArUco detector could not be created", &*e)),
             })
             .collect();
-        found.extend(part?);
+        for (k, (size, f)) in part?.into_iter().enumerate() {
+            if sizes.first().is_some_and(|s| *s != size) {
+                let path = &chunk[k].1;
+                return Err(InputError::file(
+                    path,
+                    format!("is {}×{} px, the images before it {}×{}", size[0], size[1], sizes[0][0], sizes[0][1]),
+                ));
+            }
+            if sizes.is_empty() {
+                sizes.push(size);
+            }
+            found.push(f);
+        }
         let done = (c * CHUNK + chunk.len()).min(frames.len());
         if c % 8 == 7 || done == frames.len() {
             progress(&format!("  detecting the target: {done}/{} images", frames.len()));
@@ -138,6 +156,7 @@ pub fn detect_camera(
         corners: 0,
         dropped: 0,
         order: None,
+        image_size: sizes.first().copied().unwrap_or([0, 0]),
         seconds: 0.0,
     };
     let mut views: Vec<View> = frames.iter().map(|(t_ns, _)| View { t_ns: *t_ns, corners: Vec::new() }).collect();
