@@ -13,8 +13,8 @@
 //!   Printed grids and detectors differ in the tag's orientation and in the
 //!   order they list its corners. The tag centres do not depend on that order,
 //!   so a homography from the target's tag centres to the detected ones
-//!   predicts every corner of a view. Each view with tags in two rows and two
-//!   columns votes for the order, among the eight of a square (four rotations,
+//!   predicts every corner of a view. Each view with four tags or more, not
+//!   all on one line, votes for the order, among the eight of a square (four rotations,
 //!   two directions), that fits its corners best. The recording's majority is
 //!   used, and the vote is reported. The same fit checks the target file: when
 //!   the tag centres do not follow its layout (wrong `tagCols`, a different
@@ -29,7 +29,7 @@ use super::init::homography;
 use super::input::{Corner, Target};
 use nalgebra::Vector3;
 
-/// Fewest tags, in two rows and two columns, for a view to vote on the corner order.
+/// Fewest tags, not all on one line, for a view to vote on the corner order.
 const MIN_VOTING_TAGS: usize = 4;
 
 /// Largest median distance between a detected tag centre and the homography's,
@@ -78,22 +78,37 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
 }
 
+/// Whether points lie on one line (a row, a column or a diagonal of tags):
+/// their spread across the line is under a tenth of their spread along it, and
+/// no homography follows from them.
+fn collinear(p: &[[f64; 2]]) -> bool {
+    let n = p.len() as f64;
+    let m = p.iter().fold([0.0, 0.0], |a, q| [a[0] + q[0] / n, a[1] + q[1] / n]);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for q in p {
+        let (dx, dy) = (q[0] - m[0], q[1] - m[1]);
+        sxx += dx * dx;
+        sxy += dx * dy;
+        syy += dy * dy;
+    }
+    let half_trace = (sxx + syy) / 2.0;
+    let root = ((sxx - syy).powi(2) / 4.0 + sxy * sxy).sqrt();
+    let (small, large) = (half_trace - root, half_trace + root);
+    large <= 0.0 || small < 0.01 * large
+}
+
 /// The corner order one view votes for (AprilGrid only; a checkerboard abstains).
 pub fn view_order(tags: &[TagDetection], target: &Target) -> ViewOrder {
-    let Target::AprilGrid { cols, .. } = *target else { return ViewOrder::Abstains };
+    let Target::AprilGrid { .. } = *target else { return ViewOrder::Abstains };
     let tags: Vec<&TagDetection> = tags.iter().filter(|t| target.corner(4 * t.id).is_some()).collect();
-    let spans = |f: fn(usize, usize) -> usize| {
-        let first = tags.first().map(|t| f(t.id, cols as usize));
-        tags.iter().any(|t| Some(f(t.id, cols as usize)) != first)
-    };
-    if tags.len() < MIN_VOTING_TAGS || !spans(|id, c| id % c) || !spans(|id, c| id / c) {
-        return ViewOrder::Abstains;
-    }
     let centre = |id: usize| {
         let c: Vec<[f64; 3]> = (0..4).filter_map(|k| target.corner(4 * id + k)).collect();
         [(c[0][0] + c[2][0]) / 2.0, (c[0][1] + c[2][1]) / 2.0]
     };
     let obj: Vec<[f64; 2]> = tags.iter().map(|t| centre(t.id)).collect();
+    if tags.len() < MIN_VOTING_TAGS || collinear(&obj) {
+        return ViewOrder::Abstains;
+    }
     let img: Vec<[f64; 2]> = tags.iter().map(|t| mean(&t.raw)).collect();
     let Some(h) = homography(&obj, &img) else { return ViewOrder::Abstains };
     let mut off: Vec<f64> = tags
@@ -134,7 +149,7 @@ pub struct OrderVote {
 }
 
 /// Count the views' votes (`voters` is 0 when no view could vote: too few
-/// tags in two rows and two columns anywhere, or none following the layout).
+/// tags off one line anywhere, or none following the layout).
 pub fn vote(views: &[ViewOrder]) -> OrderVote {
     let mut counts = [0usize; 8];
     let mut off_layout = 0;
@@ -271,6 +286,8 @@ mod tests {
     #[test]
     fn one_row_abstains_and_a_wrong_layout_is_found() {
         assert_eq!(view_order(&seen(&[0, 1, 2, 3, 4], 0), &grid()), ViewOrder::Abstains);
+        // A diagonal spans rows and columns and is still a line.
+        assert_eq!(view_order(&seen(&[0, 7, 14, 21, 28], 0), &grid()), ViewOrder::Abstains);
         // The same tags read against a grid of 5 columns: ids land in other places.
         let five = Target::AprilGrid { cols: 5, rows: 7, size: 0.088, spacing: 0.3 };
         assert_eq!(view_order(&seen(&[0, 1, 6, 7, 14, 20, 33], 0), &five), ViewOrder::OffLayout);

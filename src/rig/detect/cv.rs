@@ -183,13 +183,10 @@ pub fn detect_camera(
                 .with_hint("check tagCols and tagRows (tags are numbered row by row from the lower left)"));
             }
             if v.voters == 0 {
-                return Err(InputError::file(
-                    folder,
-                    "no image shows four or more of the grid's tags in two rows and two columns",
-                )
-                .with_hint(
-                    "check the target file (tag family 36h11, tagCols, tagRows) and that the images show the grid",
-                ));
+                return Err(InputError::file(folder, "no image shows four or more of the grid's tags off one line")
+                    .with_hint(
+                        "check the target file (tag family 36h11, tagCols, tagRows) and that the images show the grid",
+                    ));
             }
             for (view, f) in views.iter_mut().zip(&found) {
                 if let Found::Tags(tags, dropped) = f {
