@@ -16,7 +16,9 @@
 //!   predicts every corner of a view. Each view with four tags or more, not
 //!   all on one line, votes for the order, among the eight of a square (four rotations,
 //!   two directions), that fits its corners best. The recording's majority is
-//!   used, and the vote is reported. The same fit checks the target file: when
+//!   used, and the vote is reported. A view whose tags do not follow the
+//!   layout (a misread or foreign tag) is left out. The same fit checks the
+//!   target file: when
 //!   the tag centres do not follow its layout (wrong `tagCols`, a different
 //!   grid), the detection is refused.
 //! - **Checkerboard**: OpenCV's `findChessboardCornersSB` (sub-pixel by
@@ -237,6 +239,9 @@ impl DetectionStats {
         );
         if let Some(v) = &self.order {
             s.push_str(&format!("; tag corner order {:?} ({} of {} views agree)", ORDERS[v.order], v.agree, v.voters));
+            if v.off_layout > 0 {
+                s.push_str(&format!("; {} views off the target's layout left out", v.off_layout));
+            }
         }
         s
     }

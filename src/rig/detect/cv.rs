@@ -188,8 +188,10 @@ pub fn detect_camera(
                         "check the target file (tag family 36h11, tagCols, tagRows) and that the images show the grid",
                     ));
             }
-            for (view, f) in views.iter_mut().zip(&found) {
-                if let Found::Tags(tags, dropped) = f {
+            // A view whose tags do not follow the layout holds a misread or a
+            // foreign tag: left out whole (counted in the vote's line).
+            for ((view, f), o) in views.iter_mut().zip(&found).zip(&orders) {
+                if let (Found::Tags(tags, dropped), false) = (f, *o == super::ViewOrder::OffLayout) {
                     view.corners = tag_corners(tags, target, v.order);
                     stats.dropped += dropped;
                 }
