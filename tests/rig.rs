@@ -205,8 +205,8 @@ fn bad_inputs_name_the_file_and_line() {
     let input = RigInput::from_asl(dir.as_path(), &target, Some(&noise), None, &opts).unwrap();
     assert!(calibrate_rig(&input, &opts, &mut |_| {}).is_err());
     assert!(RigOptions { max_time_offset_s: 0.0, ..opts.clone() }.validate().is_err());
-    // Images but no corners: detected with the `opencv` feature, else refused with the build line;
-    // an image that is not one is named either way.
+    // Images but no corners: refused with the build line without the `opencv`
+    // feature; with it, detected, and an image that is not one is named.
     std::fs::remove_file(root.join("cam0/corners.csv")).unwrap();
     std::fs::create_dir_all(root.join("cam0/data")).unwrap();
     std::fs::write(root.join("cam0/data.csv"), "#timestamp [ns],filename\n1100000000,a.png\n").unwrap();
