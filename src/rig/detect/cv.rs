@@ -123,7 +123,7 @@ pub fn detect_camera(
 ) -> Result<(Vec<View>, DetectionStats), InputError> {
     let start = std::time::Instant::now();
     let mut found = Vec::with_capacity(frames.len());
-    let mut sizes: Vec<[u32; 2]> = Vec::with_capacity(1);
+    let mut first_size: Option<[u32; 2]> = None;
     for (c, chunk) in frames.chunks(CHUNK).enumerate() {
         let part: Result<Vec<([u32; 2], Found)>, InputError> = chunk
             .par_iter()
@@ -133,15 +133,12 @@ pub fn detect_camera(
             })
             .collect();
         for (k, (size, f)) in part?.into_iter().enumerate() {
-            if sizes.first().is_some_and(|s| *s != size) {
-                let path = &chunk[k].1;
+            let first = *first_size.get_or_insert(size);
+            if first != size {
                 return Err(InputError::file(
-                    path,
-                    format!("is {}×{} px, the images before it {}×{}", size[0], size[1], sizes[0][0], sizes[0][1]),
+                    &chunk[k].1,
+                    format!("is {}×{} px, the images before it {}×{}", size[0], size[1], first[0], first[1]),
                 ));
-            }
-            if sizes.is_empty() {
-                sizes.push(size);
             }
             found.push(f);
         }
@@ -156,7 +153,7 @@ pub fn detect_camera(
         corners: 0,
         dropped: 0,
         order: None,
-        image_size: sizes.first().copied().unwrap_or([0, 0]),
+        image_size: first_size.unwrap_or([0, 0]),
         seconds: 0.0,
     };
     let mut views: Vec<View> = frames.iter().map(|(t_ns, _)| View { t_ns: *t_ns, corners: Vec::new() }).collect();
