@@ -52,7 +52,10 @@ pub use key::{Key, B, C, L, P, V, X};
 pub use lie::LieGroup;
 pub use linear::LinearSolver;
 pub use loss::{Cauchy, Huber, RobustLoss, Tukey};
-pub use marginal::{covariances, covariances_eliminating, marginalize, Covariances, MarginalPrior, Marginalization};
+pub use marginal::{
+    cluster_robust_covariances, covariances, covariances_eliminating, marginalize, Covariances, MarginalPrior,
+    Marginalization, RobustCovariances,
+};
 pub use noise::NoiseModel;
 pub use optimizer::{IterationLog, LmOptions, Method, Optimizer, Summary, Termination};
 pub use values::Values;

@@ -311,6 +311,14 @@ pub(crate) fn covariances_of_system(
     sys: &System,
     keys: &[Key],
 ) -> Result<Covariances, SolveError> {
+    let (cols, offsets) = key_columns(layout, structure, keys)?;
+    let full = structure.inverse_columns(sys, &cols)?;
+    Ok(Covariances { keys: keys.to_vec(), offsets, joint: rows_of(&full, &cols) })
+}
+
+/// The reduced system's columns of `keys` (which must be kept, not
+/// eliminated or constant) and each key's offset among them.
+fn key_columns(layout: &Layout, structure: &Structure, keys: &[Key]) -> Result<(Vec<usize>, Vec<usize>), SolveError> {
     let mut cols = Vec::new();
     let mut offsets = vec![0];
     for k in keys {
@@ -327,12 +335,124 @@ pub(crate) fn covariances_of_system(
         cols.extend(o..o + structure.kept_dim(b));
         offsets.push(cols.len());
     }
+    Ok((cols, offsets))
+}
+
+/// Rows `cols` of `full` (the columns `cols` of H⁻¹): their joint block.
+fn rows_of(full: &DMatrix<f64>, cols: &[usize]) -> DMatrix<f64> {
+    DMatrix::from_fn(cols.len(), cols.len(), |i, j| full[(cols[i], j)])
+}
+
+/// Covariances of the same keys two ways (see [`cluster_robust_covariances`]).
+#[derive(Clone, Debug)]
+pub struct RobustCovariances {
+    /// From the noise models: the inverse of the information `JᵀJ`.
+    pub model: Covariances,
+    /// Cluster-robust (sandwich): `H⁻¹ (G/(G−1)) Σ_c g_c g_cᵀ H⁻¹`, with
+    /// `g_c` the gradient `Jᵀr` of cluster `c`'s factors. Honest when the
+    /// errors are correlated within a cluster, independent between clusters,
+    /// or not as large as the noise models say.
+    pub robust: Covariances,
+    /// Clusters `G`.
+    pub clusters: usize,
+}
+
+/// Cluster-robust covariances: [`RobustCovariances`] at a solution, from an
+/// assembled system and its linearization (`clusters[fi]`: factor `fi`'s
+/// cluster, `None` for a cluster of its own). Variables eliminated by the
+/// Schur complement are not supported (their rows of H⁻¹ are not formed).
+pub(crate) fn robust_covariances_of_system(
+    layout: &Layout,
+    structure: &mut Structure,
+    sys: &System,
+    lins: &crate::linearized::Linearized,
+    keys: &[Key],
+    clusters: &[Option<usize>],
+) -> Result<RobustCovariances, SolveError> {
+    if !layout.elim_vars.is_empty() {
+        return Err(SolveError::Config("cluster-robust covariances with eliminated variables".into()));
+    }
+    if clusters.len() != layout.factor_vars.len() {
+        return Err(SolveError::Config(format!(
+            "{} cluster labels for {} factors",
+            clusters.len(),
+            layout.factor_vars.len()
+        )));
+    }
+    let (cols, offsets) = key_columns(layout, structure, keys)?;
     let full = structure.inverse_columns(sys, &cols)?;
-    let mut joint = DMatrix::zeros(cols.len(), cols.len());
-    for (i, &r) in cols.iter().enumerate() {
-        for j in 0..cols.len() {
-            joint[(i, j)] = full[(r, j)];
+    let p = cols.len();
+    let labelled = clusters.iter().flatten().max().map_or(0, |m| m + 1);
+    let mut scores: HashMap<usize, DVector<f64>> = HashMap::new();
+    for (fi, fv) in layout.factor_vars.iter().enumerate() {
+        let c = clusters[fi].unwrap_or(labelled + fi);
+        let r = lins.residual(fi);
+        let m = r.len();
+        let u = scores.entry(c).or_insert_with(|| DVector::zeros(p));
+        for (k, &vi) in fv.iter().enumerate() {
+            let crate::linear::Role::Kept(b) = layout.roles[vi] else { continue };
+            let (o, n) = (structure.kept_offset(b), lins.ncols(fi, k));
+            let j = lins.jacobian(fi, k);
+            for col in 0..n {
+                // (Jᵀ r)[col], then its image through the rows of H⁻¹.
+                let g: f64 = (0..m).map(|row| j[col * m + row] * r[row]).sum();
+                if g != 0.0 {
+                    for q in 0..p {
+                        u[q] += full[(o + col, q)] * g;
+                    }
+                }
+            }
         }
     }
-    Ok(Covariances { keys: keys.to_vec(), offsets, joint })
+    let g = scores.len();
+    let mut robust = DMatrix::zeros(p, p);
+    for u in scores.values() {
+        robust += u * u.transpose();
+    }
+    if g > 1 {
+        robust *= g as f64 / (g - 1) as f64;
+    }
+    Ok(RobustCovariances {
+        model: Covariances { keys: keys.to_vec(), offsets: offsets.clone(), joint: rows_of(&full, &cols) },
+        robust: Covariances { keys: keys.to_vec(), offsets, joint: robust },
+        clusters: g,
+    })
+}
+
+/// [`covariances`] and the cluster-robust ("sandwich") covariances of `keys`
+/// at `values` (see [`RobustCovariances`]): `clusters[fi]` labels factor
+/// `fi`'s cluster (`None`: a cluster of its own). Factors whose errors may be
+/// correlated — the corners of one view, the views of a few seconds — belong
+/// in one cluster; the clusters' errors must be independent.
+///
+/// ```
+/// use tumble_solvers::{cluster_robust_covariances, Graph, NoiseModel, Values, X};
+/// use tumble_solvers::testing::LinearFactor;
+/// use nalgebra::{DMatrix, DVector, Vector1};
+/// // The mean of four measurements, in two clusters that disagree.
+/// let y = [1.0, 1.0, 3.0, 3.0];
+/// let mut g = Graph::new();
+/// for v in y {
+///     g.add(LinearFactor::new(vec![X(0)], vec![DMatrix::identity(1, 1)], DVector::from_element(1, -v)), NoiseModel::Unit);
+/// }
+/// let mut v = Values::new();
+/// v.insert(X(0), Vector1::new(2.0));
+/// let c = cluster_robust_covariances(&g, &v, &[X(0)], &[Some(0), Some(0), Some(1), Some(1)]).unwrap();
+/// assert!((c.model.get(X(0)).unwrap()[(0, 0)] - 0.25).abs() < 1e-12);
+/// // Scores ±2/4 per cluster: 2/(2−1) · 2 · 0.25 = 1.
+/// assert!((c.robust.get(X(0)).unwrap()[(0, 0)] - 1.0).abs() < 1e-12);
+/// ```
+pub fn cluster_robust_covariances(
+    graph: &Graph,
+    values: &Values,
+    keys: &[Key],
+    clusters: &[Option<usize>],
+) -> Result<RobustCovariances, SolveError> {
+    let layout = Layout::new(graph, values, &[])?;
+    let vars: Vec<Box<dyn DynVariable>> =
+        layout.keys.iter().map(|&k| values.get_dyn(k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
+    let mut structure = layout.structure(&vars, LinearSolver::Auto)?;
+    let (lins, _) = linearize_all(graph.entries(), &layout, &vars)?;
+    let sys = structure.assemble(&lins);
+    robust_covariances_of_system(&layout, &mut structure, &sys, &lins, keys, clusters)
 }

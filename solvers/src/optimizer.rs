@@ -6,7 +6,7 @@ use crate::graph::Graph;
 use crate::key::Key;
 use crate::linear::{LinearSolver, Role, Roles, Structure, System};
 use crate::linearized::{linearize_all, linearize_all_into, Linearized};
-use crate::marginal::{covariances_of_system, Covariances};
+use crate::marginal::{covariances_of_system, robust_covariances_of_system, Covariances, RobustCovariances};
 use crate::values::Values;
 use crate::variable::DynVariable;
 use std::fmt;
@@ -418,6 +418,13 @@ fn retract_all(
 /// Covariances requested from [`Optimizer::optimize_with_covariances`], or why they failed.
 type CovarianceResult = Result<Covariances, SolveError>;
 
+/// Covariances requested from the optimizer's last linearization: of these
+/// keys, and cluster-robust over these factor clusters when given.
+type CovarianceRequest<'a> = Option<(&'a [Key], Option<&'a [Option<usize>]>)>;
+
+/// What [`Optimizer::optimize_impl`] returns.
+type Solved = (Values, Summary, Option<Result<RobustCovariances, SolveError>>);
+
 /// Variables and factors laid out for the linear algebra.
 pub(crate) struct Layout {
     /// All variables referenced by factors, ascending.
@@ -557,7 +564,29 @@ impl Optimizer {
         initial: &Values,
         keys: &[Key],
     ) -> Result<(Values, Summary, CovarianceResult), SolveError> {
-        self.optimize_impl(graph, initial, Some(keys))
+        self.optimize_impl(graph, initial, Some((keys, None))).map(|(v, s, c)| {
+            let c = match c {
+                Some(Ok(c)) => Ok(c.model),
+                Some(Err(e)) => Err(e),
+                None => Err(SolveError::Config("no covariance requested".into())),
+            };
+            (v, s, c)
+        })
+    }
+
+    /// [`Optimizer::optimize`], then the covariances of `keys` at the
+    /// solution both from the noise models and cluster-robust
+    /// ([`crate::cluster_robust_covariances`]; `clusters[fi]` is factor
+    /// `fi`'s cluster), from the last linearization. Not with
+    /// [`LmOptions::eliminate`].
+    pub fn optimize_with_robust_covariances(
+        &self,
+        graph: &Graph,
+        initial: &Values,
+        keys: &[Key],
+        clusters: &[Option<usize>],
+    ) -> Result<(Values, Summary, Result<RobustCovariances, SolveError>), SolveError> {
+        self.optimize_impl(graph, initial, Some((keys, Some(clusters))))
             .map(|(v, s, c)| (v, s, c.unwrap_or_else(|| Err(SolveError::Config("no covariance requested".into())))))
     }
 
@@ -565,8 +594,8 @@ impl Optimizer {
         &self,
         graph: &Graph,
         initial: &Values,
-        covariance_keys: Option<&[Key]>,
-    ) -> Result<(Values, Summary, Option<CovarianceResult>), SolveError> {
+        request: CovarianceRequest,
+    ) -> Result<Solved, SolveError> {
         let o = &self.options;
         o.validate()?;
         let t0 = Instant::now();
@@ -786,9 +815,17 @@ impl Optimizer {
         summary.final_cost = cost;
         // `lins` is the linearization at the final values (trial points are
         // linearized when tried), so the covariance needs no second pass.
-        let covariances = covariance_keys.map(|keys| {
+        let covariances = request.map(|(keys, clusters)| {
             structure.assemble_into(&lins, &mut sys);
-            covariances_of_system(&layout, &mut structure, &sys, keys)
+            match clusters {
+                Some(c) => robust_covariances_of_system(&layout, &mut structure, &sys, &lins, keys, c),
+                // Only the model's covariances: the robust field repeats them.
+                None => covariances_of_system(&layout, &mut structure, &sys, keys).map(|m| RobustCovariances {
+                    model: m.clone(),
+                    robust: m,
+                    clusters: 0,
+                }),
+            }
         });
         let mut out = initial.clone();
         for (i, k) in layout.keys.iter().enumerate() {

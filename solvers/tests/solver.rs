@@ -756,3 +756,66 @@ fn user_defined_variable_type() {
     assert_relative_eq!(sol.get::<Direction>(P(0)).unwrap().0, target, epsilon = 1e-6);
     assert!(s.final_cost < 1e-12);
 }
+
+/// Cluster-robust covariances against the spread of estimates over many
+/// replications: a line `y = a + b·x` fitted to 20 clusters of 10 points.
+/// With independent errors both covariances match the spread; with a
+/// random offset per cluster that the noise model does not know of, only
+/// the cluster-robust one does.
+#[test]
+fn cluster_robust_covariance_matches_the_spread_of_estimates() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    let (clusters, per) = (20, 10);
+    let normal = |rng: &mut rand::rngs::StdRng| {
+        // Box–Muller.
+        let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    for cluster_sigma in [0.0, 0.3] {
+        let reps = 400;
+        let (mut estimates, mut model, mut robust) = (Vec::new(), 0.0, 0.0);
+        for _ in 0..reps {
+            let mut g = Graph::new();
+            let mut labels = Vec::new();
+            for c in 0..clusters {
+                let offset = cluster_sigma * normal(&mut rng);
+                for _ in 0..per {
+                    let x = c as f64 / clusters as f64 + 0.05 * rng.random::<f64>();
+                    let y = 1.0 + 2.0 * x + offset + 0.1 * normal(&mut rng);
+                    g.add(
+                        LinearFactor::new(
+                            vec![X(0)],
+                            vec![DMatrix::from_row_slice(1, 2, &[1.0, x])],
+                            DVector::from_element(1, -y),
+                        ),
+                        NoiseModel::isotropic(1, 0.1).unwrap(),
+                    );
+                    labels.push(Some(c));
+                }
+            }
+            let mut v = Values::new();
+            v.insert(X(0), Vector2::new(0.0, 0.0));
+            let (sol, _, cov) =
+                Optimizer::new(lm()).optimize_with_robust_covariances(&g, &v, &[X(0)], &labels).unwrap();
+            let cov = cov.unwrap();
+            assert_eq!(cov.clusters, clusters);
+            estimates.push(sol.get::<Vector2<f64>>(X(0)).unwrap()[1]);
+            model += cov.model.get(X(0)).unwrap()[(1, 1)] / reps as f64;
+            robust += cov.robust.get(X(0)).unwrap()[(1, 1)] / reps as f64;
+        }
+        let mean = estimates.iter().sum::<f64>() / reps as f64;
+        let spread = estimates.iter().map(|e| (e - mean).powi(2)).sum::<f64>() / (reps - 1) as f64;
+        println!(
+            "cluster σ {cluster_sigma}: variance of b model/spread {:.2}, robust/spread {:.2}",
+            model / spread,
+            robust / spread
+        );
+        // 400 replications: the spread's own relative error is ≈ 7 %.
+        assert!((robust / spread - 1.0).abs() < 0.25, "robust {robust:.3e} vs spread {spread:.3e}");
+        if cluster_sigma == 0.0 {
+            assert!((model / spread - 1.0).abs() < 0.25, "model {model:.3e} vs spread {spread:.3e}");
+        } else {
+            assert!(model < 0.2 * spread, "model {model:.3e} vs spread {spread:.3e}");
+        }
+    }
+}
