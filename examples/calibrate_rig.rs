@@ -56,12 +56,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fixed = RigOptions { fixed_intrinsics: reference.iter().map(|r| r.0).collect(), ..opts.clone() };
     let held = calibrate_rig(&input, &fixed, &mut |_| {})?;
     println!("\nWith EuRoC's intrinsics held fixed (as Kalibr's camera–IMU step does):\n");
-    println!("| camera | rotation [°] | translation [mm] x y z | reprojection RMS / median [px] |\n|---|---|---|---|");
+    println!(
+        "| camera | rotation [°] (largest σ) | translation [mm] x y z (largest σ) | reprojection RMS / median [px] |\n|---|---|---|---|"
+    );
     for (d, c) in held.compare(&reference).iter().zip(&held.cameras) {
         let t = d.translation_m.map(|x| x * 1e3);
         println!(
-            "| {} | {:.3} | {:.1} {:.1} {:.1} | {:.3} / {:.3} |",
-            d.name, d.rotation_deg, t[0], t[1], t[2], c.reprojection.rms_px, c.reprojection.median_px
+            "| {} | {:.3} ({:.3}) | {:.1} {:.1} {:.1} ({:.1}) | {:.3} / {:.3} |",
+            d.name,
+            d.rotation_deg,
+            c.rotation_sigma.max().to_degrees(),
+            t[0],
+            t[1],
+            t[2],
+            c.translation_sigma.max() * 1e3,
+            c.reprojection.rms_px,
+            c.reprojection.median_px
         );
     }
     println!("time offset {:.3} ms ± {:.3}", held.time_offset_s * 1e3, held.time_offset_sigma_s * 1e3);

@@ -372,6 +372,8 @@ pub struct RigResult {
     pub biases: Vec<BiasSample>,
     /// Whitened χ² per degree of freedom of the IMU factors (≈ 1 when the noise is right).
     pub imu_chi2_per_dof: f64,
+    /// How the σ were found.
+    pub sigma_source: SigmaSource,
     /// Frames in the estimate.
     pub frames: usize,
     /// Joint-solve iterations and its final cost.
@@ -384,6 +386,23 @@ pub struct RigResult {
     pub noise_source: String,
     /// What the calibration noticed.
     pub notes: Vec<String>,
+}
+
+/// How the rig's σ were found: each is the larger of the noise model's
+/// (the corners' scatter, the IMU's noise figures) and the cluster-robust
+/// ("sandwich") one over blocks of consecutive frames, which also holds when
+/// the corners' errors are alike in neighbouring views (a detector's bias
+/// that depends on the view, a target that is not flat, a lens the model
+/// fits imperfectly) — errors the scatter alone does not show.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct SigmaSource {
+    /// Frames per block (⌊√frames⌋, the batch-means rule).
+    pub block_frames: usize,
+    /// Blocks (clusters).
+    pub blocks: usize,
+    /// The largest ratio of a cluster-robust σ to the noise model's, over the
+    /// estimated parameters (≈ 1 when the corners' errors are independent).
+    pub largest_ratio: f64,
 }
 
 /// A determined / weak / not determined verdict on one parameter.

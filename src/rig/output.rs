@@ -45,6 +45,7 @@ struct RigJson<'a> {
     gravity_in_target_m_s2: [f64; 3],
     imu_noise_source: &'a str,
     imu_chi2_per_dof: f64,
+    sigma_source: super::SigmaSource,
     frames: usize,
     iterations: usize,
     converged: bool,
@@ -150,6 +151,7 @@ pub fn rig_json(rig: &RigResult) -> Result<String, OutputError> {
         gravity_in_target_m_s2: rig.gravity_in_target.into(),
         imu_noise_source: &rig.noise_source,
         imu_chi2_per_dof: rig.imu_chi2_per_dof,
+        sigma_source: rig.sigma_source,
         frames: rig.frames,
         iterations: rig.iterations,
         converged: rig.converged,
@@ -203,6 +205,15 @@ pub fn summary_markdown(rig: &RigResult) -> String {
         s,
         "IMU residuals: χ²/dof {:.2} with the noise of {}. {} frames, {} iterations, {:.1} s.",
         rig.imu_chi2_per_dof, rig.noise_source, rig.frames, rig.iterations, rig.seconds
+    );
+    let q = rig.sigma_source;
+    let _ = writeln!(
+        s,
+        "σ: the larger of the noise model's and the cluster-robust one over {} blocks of {} frames; the cluster-robust σ are up to {:.1}× the noise model's{}.",
+        q.blocks,
+        q.block_frames,
+        q.largest_ratio,
+        if q.largest_ratio > 2.0 { " (the corners' errors are alike in neighbouring views)" } else { "" }
     );
     let _ = writeln!(s, "\n| parameter | 3σ | accuracy sought | verdict |\n|---|---|---|---|");
     for v in rig.verdicts() {

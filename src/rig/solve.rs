@@ -267,10 +267,19 @@ pub fn calibrate_rig(
     let mut cov = None;
     let mut graph = Graph::new();
     let mut corners: Vec<CornerEntry> = Vec::new();
+    // The σ: the larger of the noise model's and the cluster-robust one over
+    // blocks of √N consecutive frames (batch means' rule): corner errors that
+    // depend on the view's geometry (the detector's bias, the target's
+    // flatness, the lens model's misfit) are alike in neighbouring views, and
+    // the corners' scatter alone does not show them.
+    let block = ((frames.len() as f64).sqrt().floor() as usize).max(1);
+    let mut clusters: Vec<Option<usize>> = Vec::new();
+    let mut cov_keys: Vec<Key> = Vec::new();
     for pass in 0..2 {
         progress(&format!("joint solve {}: {} frames, {} cameras", pass + 1, frames.len(), n_cams));
         graph = Graph::new();
         corners.clear();
+        clusters.clear();
         let mut imu_factors = Vec::new();
         for k in 0..frames.len() - 1 {
             let b = solution.get::<Vector6<f64>>(B(k as u64)).map_err(|e| e.to_string())?;
@@ -280,16 +289,19 @@ pub fn calibrate_rig(
             let f = ImuFactor::new([X(i), V(i), B(i), X(j), V(j)], Arc::new(pim), gravity);
             let noise = f.noise_model().map_err(|e| e.to_string())?;
             imu_factors.push(graph.add(f, noise));
+            clusters.push(Some(k / block));
             let p = &params;
             let dt = frames[k + 1].t - frames[k].t;
             let (f, noise) = bias_random_walk_axes(B(i), B(j), p.accel_walk().into(), p.gyro_walk().into(), dt)
                 .map_err(|e| e.to_string())?;
             graph.add(f, noise);
+            clusters.push(Some(k / block));
         }
         graph.add(
             AutoDiff::new(TargetGauge::new(TARGET, &t_wt)),
             NoiseModel::isotropic(4, GAUGE_SIGMA).map_err(|e| e.to_string())?,
         );
+        clusters.push(None);
         for (k, f) in frames.iter().enumerate() {
             let rate = gyro_integral.mean(f.t - 2.5e-3, f.t + 2.5e-3).unwrap_or_else(Vector3::zeros) - gyro_bias[k];
             for (c, cam) in input.cameras.iter().enumerate() {
@@ -309,6 +321,7 @@ pub fn calibrate_rig(
                         noise.clone(),
                         Huber(HUBER_SIGMAS),
                     );
+                    clusters.push(Some(k / block));
                 }
             }
         }
@@ -318,8 +331,10 @@ pub fn calibrate_rig(
         if o.estimate_time_offset {
             keys.push(OFFSET);
         }
-        let (sol, summary, c) =
-            Optimizer::new(opts).optimize_with_covariances(&graph, &solution, &keys).map_err(|e| e.to_string())?;
+        cov_keys.clone_from(&keys);
+        let (sol, summary, c) = Optimizer::new(opts)
+            .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters)
+            .map_err(|e| e.to_string())?;
         progress(&format!(
             "  {} iterations, cost {:.4e} → {:.4e} ({:?}, {:.1} s)",
             summary.iterations, summary.initial_cost, summary.final_cost, summary.termination, summary.time_total
@@ -354,27 +369,43 @@ pub fn calibrate_rig(
 
     // 7. Results.
     let td = solution.get::<Vector1<f64>>(OFFSET).map_err(|e| e.to_string())?[0];
-    let td_sigma =
-        if o.estimate_time_offset { cov.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()) } else { f64::NAN };
+    // Each σ is the larger of the two covariances' (see `block`).
+    let both = [&cov.model, &cov.robust];
+    let mut largest_ratio: f64 = 0.0;
+    for k in &cov_keys {
+        if let (Some(m), Some(r)) = (cov.model.get(*k), cov.robust.get(*k)) {
+            for i in 0..m.nrows() {
+                largest_ratio = largest_ratio.max((r[(i, i)] / m[(i, i)]).sqrt());
+            }
+        }
+    }
+    let sigma_source = super::SigmaSource { block_frames: block, blocks: cov.clusters, largest_ratio };
+    let td_sigma = if o.estimate_time_offset {
+        both.iter().map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt())).fold(0.0, f64::max)
+    } else {
+        f64::NAN
+    };
     let mut cameras = Vec::new();
     for (c, cam) in input.cameras.iter().enumerate() {
         let e: &Isometry3F64 = solution.get(extrinsic(c)).map_err(|e| e.to_string())?;
         let kv: &SVector<f64, 8> = solution.get(intrinsics(c)).map_err(|e| e.to_string())?;
         let fixed = c < o.fixed_intrinsics.len();
         let model = tumble_factors::camera::CameraModel::from_vector(starts[c].model.distortion.kind(), kv.as_slice());
-        let ce = cov.get(extrinsic(c)).ok_or("no covariance of T_BC (internal)")?;
-        let ck = match fixed {
-            true => nalgebra::DMatrix::zeros(8, 8),
-            false => cov.get(intrinsics(c)).ok_or("no covariance of the intrinsics (internal)")?,
-        };
         let r = e.rotation().matrix();
-        // Tangent [ω, ν] on the right: rotation about camera axes, translation along them.
-        let rot_cov = r * ce.fixed_view::<3, 3>(0, 0) * r.transpose();
-        let tr_cov = r * ce.fixed_view::<3, 3>(3, 3) * r.transpose();
         let sd = |m: &Matrix3<f64>| Vector3::new(m[(0, 0)].sqrt(), m[(1, 1)].sqrt(), m[(2, 2)].sqrt());
-        let mut model_sigma = [0.0; 8];
-        for (i, s) in model_sigma.iter_mut().enumerate() {
-            *s = ck[(i, i)].sqrt();
+        let (mut rotation_sigma, mut translation_sigma) = (Vector3::zeros(), Vector3::zeros());
+        let mut model_sigma = [0.0f64; 8];
+        for cv in both {
+            let ce = cv.get(extrinsic(c)).ok_or("no covariance of T_BC (internal)")?;
+            // Tangent [ω, ν] on the right: rotation about camera axes, translation along them.
+            rotation_sigma = rotation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(0, 0) * r.transpose())));
+            translation_sigma = translation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(3, 3) * r.transpose())));
+            if !fixed {
+                let ck = cv.get(intrinsics(c)).ok_or("no covariance of the intrinsics (internal)")?;
+                for (i, s) in model_sigma.iter_mut().enumerate() {
+                    *s = s.max(ck[(i, i)].sqrt());
+                }
+            }
         }
         let (reprojection, residuals) = reprojection(&graph, &solution, &corners, c, &frames, starts[c].pixel_sigma);
         cameras.push(CameraResult {
@@ -388,8 +419,8 @@ pub fn calibrate_rig(
                 init::median(&mut d).map_or(f64::NAN, |m| 1.0 / m)
             },
             t_bc: to_nalgebra(e),
-            rotation_sigma: sd(&rot_cov),
-            translation_sigma: sd(&tr_cov),
+            rotation_sigma,
+            translation_sigma,
             pixel_sigma: starts[c].pixel_sigma,
             reprojection,
             residuals,
@@ -421,6 +452,7 @@ pub fn calibrate_rig(
         chain,
         biases,
         imu_chi2_per_dof,
+        sigma_source,
         frames: frames.len(),
         iterations,
         converged,
