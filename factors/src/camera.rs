@@ -140,6 +140,44 @@ pub fn project_with<T: Real>(kind: DistortionKind, k: &[T], p: &[T; 3]) -> Optio
     Some([xd * k[0] + k[2], yd * k[1] + k[3]])
 }
 
+/// [`project_with`] at `f64` with its Jacobians: with respect to the point
+/// (2×3) and to the intrinsics `k` (2×8), rows u, v. The distortion's part
+/// comes from forward-mode dual numbers over the point and the four
+/// coefficients (7 directions); the focal lengths' and principal point's
+/// columns are `[x_d, 0]`, `[0, y_d]`, `[1, 0]`, `[0, 1]`. None behind the camera.
+#[allow(clippy::type_complexity)]
+pub fn project_with_jacobians(
+    kind: DistortionKind,
+    k: &[f64; 8],
+    p: &[f64; 3],
+) -> Option<([f64; 2], [[f64; 3]; 2], [[f64; 8]; 2])> {
+    if p[2] <= 1e-3 {
+        return None;
+    }
+    let lift = |i: usize, x: f64| {
+        let mut e = nalgebra::SVector::<f64, 7>::zeros();
+        e[i] = 1.0;
+        DualSVec64::<7>::new(x, Derivative::some(e))
+    };
+    let c = [lift(3, k[4]), lift(4, k[5]), lift(5, k[6]), lift(6, k[7])];
+    let (x, y, z) = (lift(0, p[0]), lift(1, p[1]), lift(2, p[2]));
+    let d = distort_with(kind, &c, x / z, y / z);
+    let mut jp = [[0.0; 3]; 2];
+    let mut jk = [[0.0; 8]; 2];
+    for (row, (dv, f)) in d.iter().zip([k[0], k[1]]).enumerate() {
+        let eps = dv.eps.unwrap_generic(nalgebra::Const::<7>, nalgebra::Const::<1>);
+        for i in 0..3 {
+            jp[row][i] = f * eps[i];
+        }
+        for i in 0..4 {
+            jk[row][4 + i] = f * eps[3 + i];
+        }
+        jk[row][row] = dv.re;
+        jk[row][2 + row] = 1.0;
+    }
+    Some(([d[0].re * k[0] + k[2], d[1].re * k[1] + k[3]], jp, jk))
+}
+
 impl CameraModel {
     /// The intrinsics as one vector `[fx, fy, cx, cy, c0, c1, c2, c3]` (see [`project_with`]).
     pub fn to_vector(&self) -> [f64; 8] {

@@ -590,12 +590,7 @@ impl Optimizer {
             .map(|(v, s, c)| (v, s, c.unwrap_or_else(|| Err(SolveError::Config("no covariance requested".into())))))
     }
 
-    fn optimize_impl(
-        &self,
-        graph: &Graph,
-        initial: &Values,
-        request: CovarianceRequest,
-    ) -> Result<Solved, SolveError> {
+    fn optimize_impl(&self, graph: &Graph, initial: &Values, request: CovarianceRequest) -> Result<Solved, SolveError> {
         let o = &self.options;
         o.validate()?;
         let t0 = Instant::now();

@@ -311,13 +311,13 @@ pub fn calibrate_rig(
                     let keys = [X(k as u64), V(k as u64), TARGET, extrinsic(c), intrinsics(c), OFFSET];
                     corners.push(CornerEntry { entry: graph.len(), camera: c, frame: k, uv: corner.uv });
                     graph.add_robust(
-                        AutoDiff::new(TargetCorner::new(
+                        TargetCorner::new(
                             keys,
                             corner.target,
                             corner.uv,
                             rate.into(),
                             starts[c].model.distortion.kind(),
-                        )),
+                        ),
                         noise.clone(),
                         Huber(HUBER_SIGMAS),
                     );
