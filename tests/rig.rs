@@ -123,13 +123,16 @@ fn imu_april_extrinsics_follow_moved_stamps_and_rotated_axes() {
     }
 }
 
-/// Simulated rigs with known truth, 10 seeds: every estimate within its σ —
-/// the mean squared normalized error of each parameter over the seeds below
-/// 3 (its 99.9 % bound for 10 seeds is 2.96 when the σ are honest).
+/// Simulated stereo rigs with known truth, 10 seeds: every estimate of both
+/// cameras within its σ — the mean squared normalized error of each
+/// parameter over the seeds below 3 (its 99.9 % bound for 10 seeds is 2.96
+/// when the σ are honest) — and the stereo extrinsic `T_cam1_cam0` close to
+/// the simulated baseline.
 #[test]
 fn simulated_rigs_recover_their_truth_within_sigma() {
     use tumble::sim::target::{simulate_rig, RigSimSettings};
-    let settings = RigSimSettings::default();
+    let mut settings = RigSimSettings::default();
+    settings.camera.stereo_baseline_m = 0.11;
     let names = [
         "rotation x",
         "rotation y",
@@ -144,22 +147,34 @@ fn simulated_rigs_recover_their_truth_within_sigma() {
         "time offset",
     ];
     let seeds = 10;
-    let mut sum = [0.0; 11];
+    let mut sum = [[0.0; 11]; 2];
     for seed in 0..seeds {
         let sim = simulate_rig(&settings, seed);
+        assert_eq!(sim.input.cameras.len(), 2);
         let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
         let rig = calibrate_rig(&sim.input, &opts, &mut |_| {}).unwrap();
         assert!(rig.refusal().is_none(), "seed {seed}: {:?}", rig.refusal());
-        let (_, _, e) = common::rig_errors(&rig, &sim.truth);
-        println!("seed {seed}: {}", e.iter().map(|x| format!("{x:+.2}")).collect::<Vec<_>>().join(" "));
-        for (s, x) in sum.iter_mut().zip(e) {
-            *s += x * x;
+        let truths = [sim.truth.t_bc, sim.truth.second_t_bc.unwrap()];
+        for (c, t_bc) in truths.iter().enumerate() {
+            let (_, _, e) = common::camera_errors(&rig, c, &sim.truth, t_bc);
+            println!("seed {seed} cam{c}: {}", e.iter().map(|x| format!("{x:+.2}")).collect::<Vec<_>>().join(" "));
+            for (s, x) in sum[c].iter_mut().zip(e) {
+                *s += x * x;
+            }
         }
+        // Camera 1 ← camera 0, from the two estimates.
+        let chain = truths[1].inverse() * truths[0];
+        let d = rig.chain[0].inverse() * chain;
+        let (dr, dt) = (d.rotation.angle().to_degrees(), d.translation.vector.norm());
+        println!("seed {seed}: T_cam1_cam0 {dr:.4}°, {:.2} mm from the truth", dt * 1e3);
+        assert!(dr < 0.05 && dt < 2e-3, "seed {seed}: {dr}° {dt} m");
     }
-    for (name, s) in names.iter().zip(sum) {
-        let nees = s / seeds as f64;
-        println!("{name}: mean squared normalized error {nees:.2}");
-        assert!(nees < 3.0, "{name}: {nees}");
+    for (c, sums) in sum.iter().enumerate() {
+        for (name, s) in names.iter().zip(sums) {
+            let nees = s / seeds as f64;
+            println!("cam{c} {name}: mean squared normalized error {nees:.2}");
+            assert!(nees < 3.0, "cam{c} {name}: {nees}");
+        }
     }
 }
 

@@ -75,6 +75,9 @@ pub struct RigTruth {
     pub t_bc: Isometry3<f64>,
     /// Kalibr's `timeshift_cam_imu` \[s\].
     pub time_offset_s: f64,
+    /// The second camera's pose in the body (camera to body; same model and
+    /// time offset as the first), when the camera settings give a stereo baseline.
+    pub second_t_bc: Option<Isometry3<f64>>,
 }
 
 /// A simulated recording and its truth.
@@ -87,7 +90,8 @@ pub struct SimulatedRig {
 }
 
 /// Simulate the rig: IMU at 200 Hz with white noise and bias random walks on
-/// the given turn-on biases, and the target's corners at the camera's rate,
+/// the given turn-on biases, and the target's corners at the camera's rate
+/// (in both cameras when `camera.stereo_baseline_m` > 0),
 /// projected at each image's exposure time (`stamp + time offset`) with
 /// Gaussian pixel noise; corners outside the image are not seen.
 pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
@@ -118,31 +122,43 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
     let centre =
         (0..n).filter_map(|i| s.target.corner(i)).fold(Vector3::zeros(), |a, c| a + Vector3::from(c)) / n as f64;
     let t_wt = Vector3::new(s.distance_m, 0.0, 0.0) - r_wt * centre;
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x636f726e);
     let noise = Normal::new(0.0, cam.pixel_noise_px.max(1e-300)).expect("finite σ");
     let [w, h] = cam.resolution.map(f64::from);
-    let mut views = Vec::new();
     let frames = (s.duration_s * cam.rate_hz).floor() as i64;
-    for k in 0..frames {
-        let stamp = k as f64 / cam.rate_hz;
-        let exposure = stamp + cam.time_offset_s;
-        if exposure < 0.0 || exposure > s.duration_s {
-            continue;
-        }
-        let st = motion.at(exposure);
-        let mut corners = Vec::new();
-        for id in 0..n {
-            let Some(c) = s.target.corner(id) else { continue };
-            let pw = r_wt * Vector3::from(c) + t_wt;
-            let pb = st.rotation.transpose() * (pw - st.position);
-            let pc = t_bc.inverse_transform_point(&pb.into());
-            let Some(uv) = camera.project(&[pc.x, pc.y, pc.z]) else { continue };
-            let uv = [uv[0] + noise.sample(&mut rng), uv[1] + noise.sample(&mut rng)];
-            if pc.z > 0.1 && uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h {
-                corners.push(Corner { id, target: c, uv });
+    let second_t_bc = (cam.stereo_baseline_m > 0.0).then(|| cam.body_from_second_camera());
+    let mut cameras = Vec::new();
+    for (i, t_bc) in std::iter::once(t_bc).chain(second_t_bc).enumerate() {
+        // The first camera's noise as before stereo existed; the second's its own.
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x636f726e ^ ((i as u64) << 40));
+        let mut views = Vec::new();
+        for k in 0..frames {
+            let stamp = k as f64 / cam.rate_hz;
+            let exposure = stamp + cam.time_offset_s;
+            if exposure < 0.0 || exposure > s.duration_s {
+                continue;
             }
+            let st = motion.at(exposure);
+            let mut corners = Vec::new();
+            for id in 0..n {
+                let Some(c) = s.target.corner(id) else { continue };
+                let pw = r_wt * Vector3::from(c) + t_wt;
+                let pb = st.rotation.transpose() * (pw - st.position);
+                let pc = t_bc.inverse_transform_point(&pb.into());
+                let Some(uv) = camera.project(&[pc.x, pc.y, pc.z]) else { continue };
+                let uv = [uv[0] + noise.sample(&mut rng), uv[1] + noise.sample(&mut rng)];
+                if pc.z > 0.1 && uv[0] >= 0.0 && uv[0] < w && uv[1] >= 0.0 && uv[1] < h {
+                    corners.push(Corner { id, target: c, uv });
+                }
+            }
+            views.push(View { t_ns: (stamp * 1e9).round() as i64, corners });
         }
-        views.push(View { t_ns: (stamp * 1e9).round() as i64, corners });
+        cameras.push(CameraCorners {
+            name: format!("cam{i}"),
+            path: format!("<simulation>/cam{i}/corners.csv").into(),
+            views,
+            resolution: Some(cam.resolution),
+            detection: None,
+        });
     }
     let input = RigInput {
         imu: ImuData {
@@ -153,15 +169,9 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
         imu_t0_ns: 0,
         noise: s.noise,
         noise_source: "the simulation's".into(),
-        cameras: vec![CameraCorners {
-            name: "cam0".into(),
-            path: "<simulation>/cam0/corners.csv".into(),
-            views,
-            resolution: Some(cam.resolution),
-            detection: None,
-        }],
+        cameras,
         target: s.target.clone(),
         sources: Vec::new(),
     };
-    SimulatedRig { input, truth: RigTruth { model: camera, t_bc, time_offset_s: cam.time_offset_s } }
+    SimulatedRig { input, truth: RigTruth { model: camera, t_bc, time_offset_s: cam.time_offset_s, second_t_bc } }
 }

@@ -18,18 +18,29 @@ pub fn shared(rel: &str) -> Option<PathBuf> {
     }
 }
 
-/// A rig calibration's error against a simulation's truth: the rotation error
-/// about the body axes \[rad\], the translation error along them \[m\], and every
-/// parameter's error over its σ (rotation x y z, translation x y z, fx, fy, cx,
-/// cy, time offset).
+/// A rig calibration's error against a simulation's truth, for camera 0:
+/// the rotation error about the body axes \[rad\], the translation error
+/// along them \[m\], and every parameter's error over its σ (rotation x y z,
+/// translation x y z, fx, fy, cx, cy, time offset).
 pub fn rig_errors(
     rig: &tumble::rig::RigResult,
     truth: &tumble::sim::target::RigTruth,
 ) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, [f64; 11]) {
-    let c = &rig.cameras[0];
+    camera_errors(rig, 0, truth, &truth.t_bc)
+}
+
+/// [`rig_errors`] for camera `c`, whose true `T_BC` is `t_bc` (the model and
+/// the time offset are the truth's).
+pub fn camera_errors(
+    rig: &tumble::rig::RigResult,
+    c: usize,
+    truth: &tumble::sim::target::RigTruth,
+    t_bc: &nalgebra::Isometry3<f64>,
+) -> (nalgebra::Vector3<f64>, nalgebra::Vector3<f64>, [f64; 11]) {
+    let c = &rig.cameras[c];
     let r = |t: &nalgebra::Isometry3<f64>| *t.rotation.to_rotation_matrix().matrix();
-    let dr = tumble::solvers::lie::so3_log(&(r(&c.t_bc) * r(&truth.t_bc).transpose()));
-    let dt = c.t_bc.translation.vector - truth.t_bc.translation.vector;
+    let dr = tumble::solvers::lie::so3_log(&(r(&c.t_bc) * r(t_bc).transpose()));
+    let dt = c.t_bc.translation.vector - t_bc.translation.vector;
     let (m, s) = (&c.model, &c.model_sigma);
     let normalized = [
         dr.x / c.rotation_sigma.x,
