@@ -14,7 +14,7 @@ use tumble_factors::camera::CameraModel;
 use tumble_factors::reprojection::{CalibratingReprojection, ExposureMotion, StereoInverseDepth};
 use tumble_factors::InverseDepthReprojection;
 use tumble_solvers::sophus_lie::Isometry3F64;
-use tumble_solvers::{AutoDiff, Factor, FactorEntry, Graph, Huber, NoiseModel, Values, B, L, V, X};
+use tumble_solvers::{Factor, FactorEntry, Graph, Huber, NoiseModel, Values, B, L, V, X};
 
 /// One observation of a track in a window state.
 #[derive(Debug, Clone, PartialEq)]
@@ -122,14 +122,7 @@ pub(crate) fn observation_factors(
         let f: Box<dyn Factor> = if opts.camera.online() {
             let keys = [X(anchor), V(anchor), X(o.sid), V(o.sid), L(lid), EXTRINSIC, TIME_OFFSET];
             let g = [0.0, 0.0, -opts.noise.gravity];
-            Box::new(AutoDiff::new(CalibratingReprojection::new(
-                keys,
-                anchor_xy,
-                o.uv,
-                [a.motion, o.motion],
-                input.camera,
-                g,
-            )))
+            Box::new(CalibratingReprojection::new(keys, anchor_xy, o.uv, [a.motion, o.motion], input.camera, g))
         } else {
             Box::new(reprojection(input, anchor, o.sid, lid, anchor_xy, o.uv))
         };
