@@ -164,6 +164,8 @@ macro_rules! pixel_factor {
     };
 }
 
+pub(crate) use pixel_factor;
+
 pixel_factor!(InverseDepthReprojection);
 
 /// A landmark's anchor observation matched in a second camera at the same
@@ -393,23 +395,11 @@ impl CalibratingReprojection {
         let sj = series(&-phi_j);
         let pc = r_bc.transpose() * (sj * e - t_bc);
         let cols = [6, 3, 6, 3, 1, 6, 1];
-        out.reshape(2, if jac { &cols[..] } else { &[] }.iter().copied());
-        let camera = CameraModel::from_vector(self.kind, &self.intrinsics);
-        let Some((uv, jp)) = camera.project_with_jacobian(&[pc.x, pc.y, pc.z]) else {
-            // Behind the camera: large and flat, as the generic residual.
-            out.residual.fill(1e4);
-            out.jacobians.iter_mut().for_each(|j| j.fill(0.0));
+        let Some((jpi, _)) =
+            crate::rig::pixel_linearization(self.kind, &self.intrinsics, &pc, self.measured, (jac, &cols), out)?
+        else {
             return Ok(());
         };
-        out.residual[0] = uv[0] - self.measured[0];
-        out.residual[1] = uv[1] - self.measured[1];
-        if !out.residual.iter().all(|r| r.is_finite()) {
-            return Err(FactorError::NonFinite);
-        }
-        if !jac {
-            return Ok(());
-        }
-        let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
         // d uv / d pbj, d e, d pw; and d pw / d pba.
         let gb = jpi * r_bc.transpose();
         let h = gb * sj;

@@ -83,6 +83,37 @@ pub(crate) fn pixel_residual<T: Real>(kind: DistortionKind, k: &[T], pc: &[T; 3]
     }
 }
 
+/// The projection's Jacobians with respect to the point in the camera frame
+/// (2×3, px/m) and to the intrinsics (2×8), rows u, v.
+pub(crate) type PixelJacobians = (Matrix2x3<f64>, [[f64; 8]; 2]);
+
+/// `π(p_C) − uv` \[px\] at `f64` into `out`, reshaped to two rows and, with
+/// `jac`, Jacobian blocks of `cols` columns for the caller to fill; returns
+/// the projection's Jacobians with respect to the point (2×3) and the
+/// intrinsics `k` (2×8) when `jac`. Behind the camera the residual is large
+/// and flat (zero Jacobians), as [`pixel_residual`]'s, and `None` is returned.
+pub(crate) fn pixel_linearization(
+    kind: DistortionKind,
+    k: &[f64; 8],
+    pc: &Vector3<f64>,
+    measured: [f64; 2],
+    (jac, cols): (bool, &[usize]),
+    out: &mut Linearization,
+) -> Result<Option<PixelJacobians>, FactorError> {
+    out.reshape(2, if jac { cols } else { &[] }.iter().copied());
+    let Some((uv, jp, jk)) = project_with_jacobians(kind, k, &[pc.x, pc.y, pc.z]) else {
+        out.residual.fill(1e4);
+        out.jacobians.iter_mut().for_each(|j| j.fill(0.0));
+        return Ok(None);
+    };
+    out.residual[0] = uv[0] - measured[0];
+    out.residual[1] = uv[1] - measured[1];
+    if !out.residual.iter().all(|r| r.is_finite()) {
+        return Err(FactorError::NonFinite);
+    }
+    Ok(jac.then(|| (Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]), jk)))
+}
+
 /// A target corner seen in one image: residual `π(p_C) − uv` \[px\] on
 /// `[X (T_WB), V, T_WT, T_BC, intrinsics, td]` (30 tangent dimensions); see
 /// the module docs. A [`Factor`] with hand-written Jacobians; wrapped in
@@ -157,24 +188,11 @@ impl TargetCorner {
         let (a2, a3) = (a * a, a * a * a);
         let m = Matrix3::identity() + a * td + a2 * (0.5 * td * td) + a3 * (td * td * td / 6.0);
         let pc = r_bc.transpose() * (m * b - t_bc);
-        let cols = [6, 3, 6, 6, 8, 1];
-        out.reshape(2, if jac { &cols[..] } else { &[] }.iter().copied());
         let kv: [f64; 8] = k.as_slice().try_into().expect("an R⁸ variable");
-        let Some((uv, jp, jk)) = project_with_jacobians(self.kind, &kv, &[pc.x, pc.y, pc.z]) else {
-            // Behind the camera: large and flat, as the generic residual.
-            out.residual.fill(1e4);
-            out.jacobians.iter_mut().for_each(|j| j.fill(0.0));
+        let cols = [6, 3, 6, 6, 8, 1];
+        let Some((jpi, jk)) = pixel_linearization(self.kind, &kv, &pc, self.measured, (jac, &cols), out)? else {
             return Ok(());
         };
-        out.residual[0] = uv[0] - self.measured[0];
-        out.residual[1] = uv[1] - self.measured[1];
-        if !out.residual.iter().all(|r| r.is_finite()) {
-            return Err(FactorError::NonFinite);
-        }
-        if !jac {
-            return Ok(());
-        }
-        let jpi = Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]]);
         let g = jpi * r_bc.transpose();
         let gm = g * m;
         let to_b = gm * r_wb.transpose();
@@ -198,27 +216,7 @@ impl TargetCorner {
     }
 }
 
-impl Factor for TargetCorner {
-    fn keys(&self) -> &[Key] {
-        &self.keys
-    }
-    fn residual_dim(&self) -> usize {
-        2
-    }
-    fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
-        let mut out = Linearization::default();
-        self.evaluate(vars, false, &mut out)?;
-        Ok(out.residual)
-    }
-    fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-        let mut out = Linearization::default();
-        self.evaluate(vars, true, &mut out)?;
-        Ok(out)
-    }
-    fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
-        self.evaluate(vars, true, out)
-    }
-}
+crate::reprojection::pixel_factor!(TargetCorner);
 
 /// A target corner seen by a camera alone (no IMU): residual `π(R_CT c + t_CT) − uv`
 /// \[px\] on `[T_CT, intrinsics]` (target-to-camera SE(3), R⁸); the camera-only
