@@ -442,7 +442,7 @@ pub fn calibrate_rig(
             input.noise_source
         ));
     }
-    Ok(RigResult {
+    let mut rig = RigResult {
         cameras,
         time_offset_s: td0 + td,
         time_offset_sigma_s: td_sigma,
@@ -459,7 +459,22 @@ pub fn calibrate_rig(
         seconds: t0.elapsed().as_secs_f64(),
         noise_source: input.noise_source.clone(),
         notes,
-    })
+    };
+    // Weak parameters are written (a VIO refines them, or tolerates them), but said.
+    let weak: Vec<String> = rig
+        .verdicts()
+        .into_iter()
+        .filter(|v| v.determination == super::Determination::Weak)
+        .map(|v| format!("{} (3σ {:.3e} {} against {:.3e} sought)", v.parameter, 3.0 * v.sigma, v.units, v.accuracy))
+        .collect();
+    if !weak.is_empty() {
+        rig.notes.push(format!(
+            "weakly determined, written all the same: {}; more rotation about every axis and the target over the \
+             whole image and tilted determine them better (docs/rig.md, recording advice)",
+            weak.join(", ")
+        ));
+    }
+    Ok(rig)
 }
 
 /// A corner factor of the graph: its entry, camera, frame and pixel.
