@@ -273,13 +273,11 @@ pub fn calibrate_rig(
     // flatness, the lens model's misfit) are alike in neighbouring views, and
     // the corners' scatter alone does not show them.
     let block = ((frames.len() as f64).sqrt().floor() as usize).max(1);
-    let mut clusters: Vec<Option<usize>> = Vec::new();
     let mut cov_keys: Vec<Key> = Vec::new();
     for pass in 0..2 {
         progress(&format!("joint solve {}: {} frames, {} cameras", pass + 1, frames.len(), n_cams));
         graph = Graph::new();
         corners.clear();
-        clusters.clear();
         let mut imu_factors = Vec::new();
         for k in 0..frames.len() - 1 {
             let b = solution.get::<Vector6<f64>>(B(k as u64)).map_err(|e| e.to_string())?;
@@ -289,19 +287,16 @@ pub fn calibrate_rig(
             let f = ImuFactor::new([X(i), V(i), B(i), X(j), V(j)], Arc::new(pim), gravity);
             let noise = f.noise_model().map_err(|e| e.to_string())?;
             imu_factors.push(graph.add(f, noise));
-            clusters.push(Some(k / block));
             let p = &params;
             let dt = frames[k + 1].t - frames[k].t;
             let (f, noise) = bias_random_walk_axes(B(i), B(j), p.accel_walk().into(), p.gyro_walk().into(), dt)
                 .map_err(|e| e.to_string())?;
             graph.add(f, noise);
-            clusters.push(Some(k / block));
         }
         graph.add(
             AutoDiff::new(TargetGauge::new(TARGET, &t_wt)),
             NoiseModel::isotropic(4, GAUGE_SIGMA).map_err(|e| e.to_string())?,
         );
-        clusters.push(None);
         for (k, f) in frames.iter().enumerate() {
             let rate = gyro_integral.mean(f.t - 2.5e-3, f.t + 2.5e-3).unwrap_or_else(Vector3::zeros) - gyro_bias[k];
             for (c, cam) in input.cameras.iter().enumerate() {
@@ -321,7 +316,6 @@ pub fn calibrate_rig(
                         noise.clone(),
                         Huber(HUBER_SIGMAS),
                     );
-                    clusters.push(Some(k / block));
                 }
             }
         }
@@ -332,6 +326,18 @@ pub fn calibrate_rig(
             keys.push(OFFSET);
         }
         cov_keys.clone_from(&keys);
+        // A factor's block: that of the first frame whose pose, velocity or
+        // bias it holds (a corner's frame, an IMU link's or a bias walk's
+        // first); the target's gauge is a cluster of its own.
+        let clusters: Vec<Option<usize>> = graph
+            .entries()
+            .iter()
+            .map(|e| {
+                let per_frame = |k: &&Key| [X(0), V(0), B(0)].iter().any(|f| f.chr() == k.chr());
+                let frame = e.factor.keys().iter().find(per_frame)?;
+                Some(frame.index() as usize / block)
+            })
+            .collect();
         let (sol, summary, c) = Optimizer::new(opts)
             .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters)
             .map_err(|e| e.to_string())?;
