@@ -418,12 +418,12 @@ fn retract_all(
 /// Covariances requested from [`Optimizer::optimize_with_covariances`], or why they failed.
 type CovarianceResult = Result<Covariances, SolveError>;
 
-/// Covariances requested from the optimizer's last linearization: of these
-/// keys, and cluster-robust over these factor clusters when given.
-type CovarianceRequest<'a> = Option<(&'a [Key], Option<&'a [Option<usize>]>)>;
+/// What is computed at the solution from the optimizer's last linearization
+/// (covariances of some kind), by [`Optimizer::optimize_impl`].
+type AtSolution<'a, R> = &'a dyn Fn(&Layout, &mut Structure, &System, &Linearized) -> Result<R, SolveError>;
 
-/// What [`Optimizer::optimize_impl`] returns.
-type Solved = (Values, Summary, Option<Result<RobustCovariances, SolveError>>);
+/// The solution, its summary and, when asked for, what was computed at it.
+type Solved<R> = (Values, Summary, Option<Result<R, SolveError>>);
 
 /// Variables and factors laid out for the linear algebra.
 pub(crate) struct Layout {
@@ -535,7 +535,7 @@ impl Optimizer {
     /// Minimize the graph's cost starting from `initial`; returns the solution
     /// (all of `initial`'s values, the free ones updated) and a [`Summary`].
     pub fn optimize(&self, graph: &Graph, initial: &Values) -> Result<(Values, Summary), SolveError> {
-        self.optimize_impl(graph, initial, None).map(|(v, s, _)| (v, s))
+        self.optimize_impl::<()>(graph, initial, None).map(|(v, s, _)| (v, s))
     }
 
     /// As [`Optimizer::optimize`], and the marginal covariance blocks of `keys`
@@ -564,14 +564,9 @@ impl Optimizer {
         initial: &Values,
         keys: &[Key],
     ) -> Result<(Values, Summary, CovarianceResult), SolveError> {
-        self.optimize_impl(graph, initial, Some((keys, None))).map(|(v, s, c)| {
-            let c = match c {
-                Some(Ok(c)) => Ok(c.model),
-                Some(Err(e)) => Err(e),
-                None => Err(SolveError::Config("no covariance requested".into())),
-            };
-            (v, s, c)
-        })
+        let at = |l: &Layout, st: &mut Structure, sys: &System, _: &Linearized| covariances_of_system(l, st, sys, keys);
+        self.optimize_impl(graph, initial, Some(&at))
+            .map(|(v, s, c)| (v, s, c.unwrap_or_else(|| Err(SolveError::Config("no covariance requested".into())))))
     }
 
     /// [`Optimizer::optimize`], then the covariances of `keys` at the
@@ -586,11 +581,19 @@ impl Optimizer {
         keys: &[Key],
         clusters: &[Option<usize>],
     ) -> Result<(Values, Summary, Result<RobustCovariances, SolveError>), SolveError> {
-        self.optimize_impl(graph, initial, Some((keys, Some(clusters))))
+        let at = |l: &Layout, st: &mut Structure, sys: &System, lins: &Linearized| {
+            robust_covariances_of_system(l, st, sys, lins, keys, clusters)
+        };
+        self.optimize_impl(graph, initial, Some(&at))
             .map(|(v, s, c)| (v, s, c.unwrap_or_else(|| Err(SolveError::Config("no covariance requested".into())))))
     }
 
-    fn optimize_impl(&self, graph: &Graph, initial: &Values, request: CovarianceRequest) -> Result<Solved, SolveError> {
+    fn optimize_impl<R>(
+        &self,
+        graph: &Graph,
+        initial: &Values,
+        at_solution: Option<AtSolution<R>>,
+    ) -> Result<Solved<R>, SolveError> {
         let o = &self.options;
         o.validate()?;
         let t0 = Instant::now();
@@ -810,17 +813,9 @@ impl Optimizer {
         summary.final_cost = cost;
         // `lins` is the linearization at the final values (trial points are
         // linearized when tried), so the covariance needs no second pass.
-        let covariances = request.map(|(keys, clusters)| {
+        let covariances = at_solution.map(|f| {
             structure.assemble_into(&lins, &mut sys);
-            match clusters {
-                Some(c) => robust_covariances_of_system(&layout, &mut structure, &sys, &lins, keys, c),
-                // Only the model's covariances: the robust field repeats them.
-                None => covariances_of_system(&layout, &mut structure, &sys, keys).map(|m| RobustCovariances {
-                    model: m.clone(),
-                    robust: m,
-                    clusters: 0,
-                }),
-            }
+            f(&layout, &mut structure, &sys, &lins)
         });
         let mut out = initial.clone();
         for (i, k) in layout.keys.iter().enumerate() {
