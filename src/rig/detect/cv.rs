@@ -188,7 +188,10 @@ pub fn detect_camera(
             // A view whose tags do not follow the layout holds a misread or a
             // foreign tag: left out whole (counted in the vote's line).
             for ((view, f), o) in views.iter_mut().zip(&found).zip(&orders) {
-                if let (Found::Tags(tags, dropped), false) = (f, *o == super::ViewOrder::OffLayout) {
+                if *o == super::ViewOrder::OffLayout {
+                    continue;
+                }
+                if let Found::Tags(tags, dropped) = f {
                     view.corners = tag_corners(tags, target, v.order);
                     stats.dropped += dropped;
                 }
