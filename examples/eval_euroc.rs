@@ -8,7 +8,7 @@
 //! as the target's tilt against gravity is known only to the accelerometer's bias).
 //!
 //! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--seed N]
-//! [--only TEXT] [--out DIR] [--markdown]`
+//! [--walk-scale G[,A]] [--only TEXT] [--out DIR] [--markdown]`
 //!
 //! `--only` runs the cases whose name contains TEXT; `--out` writes each
 //! case's files and figures (as `tumble vio` does) into DIR/<case>/.
@@ -21,7 +21,8 @@
 //! estimator's choices off or on, to compare: `--noise-from-static` raises the
 //! noise to the static start's spread, `--zoh` integrates with the zero-order
 //! hold instead of the midpoint rule, `--fixed-noise` does not measure the
-//! noise in motion.
+//! noise in motion, `--walk-scale G,A` multiplies the bias random walks given
+//! (gyro, accelerometer; `docs/vio.md`, "The bias random walk in flight").
 
 use std::path::{Path, PathBuf};
 use tumble::eval::{Alignment, EvalOptions};
@@ -36,13 +37,29 @@ fn main() {
     let only = value("--only");
     let out = value("--out").map(PathBuf::from);
     let known = |i: usize, a: &str| {
-        matches!(a, "--noise-from-static" | "--zoh" | "--fixed-noise" | "--markdown" | "--seed" | "--only" | "--out")
-            || (i > 0 && matches!(args[i - 1].as_str(), "--seed" | "--only" | "--out"))
+        matches!(
+            a,
+            "--noise-from-static"
+                | "--zoh"
+                | "--fixed-noise"
+                | "--markdown"
+                | "--seed"
+                | "--only"
+                | "--out"
+                | "--walk-scale"
+        ) || (i > 0 && matches!(args[i - 1].as_str(), "--seed" | "--only" | "--out" | "--walk-scale"))
     };
     if let Some((_, bad)) = args.iter().enumerate().find(|(i, a)| !known(*i, a)) {
         eprintln!("unknown argument {bad}; see the example's doc comment");
         std::process::exit(2);
     }
+    let walk_scale = match value("--walk-scale").map(|v| parse_walk_scale(&v)).transpose() {
+        Ok(w) => w.unwrap_or([1.0, 1.0]),
+        Err(e) => {
+            eprintln!("--walk-scale: {e}");
+            std::process::exit(2);
+        }
+    };
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/euroc");
     let mut opts = VioOptions::default();
     opts.noise.from_static = has("--noise-from-static");
@@ -92,7 +109,7 @@ fn main() {
         }
         eprintln!("running {name} …");
         let dir = out.as_ref().map(|d| d.join(name.split(' ').next().unwrap_or("case")));
-        match evaluate(case, o, &data, dir.as_deref()) {
+        match evaluate(case, o, walk_scale, &data, dir.as_deref()) {
             Ok((s, note)) => {
                 notes.extend(note.map(|n| format!("{name}: {n}")));
                 rows.push((name.clone(), s));
@@ -106,6 +123,35 @@ fn main() {
     print_table(&rows, has("--markdown"));
     for n in notes {
         println!("{n}");
+    }
+}
+
+/// `G` or `G,A`: the factors on the gyro's and the accelerometer's bias
+/// random walks (one factor for both when A is left out); positive and finite.
+fn parse_walk_scale(v: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<&str> = v.split(',').collect();
+    let num = |s: &str| -> Result<f64, String> {
+        let x: f64 = s.trim().parse().map_err(|_| format!("`{s}` is not a number (expected G or G,A)"))?;
+        if x.is_finite() && x > 0.0 {
+            Ok(x)
+        } else {
+            Err(format!("`{s}` must be positive and finite"))
+        }
+    };
+    match parts.as_slice() {
+        [g] => Ok([num(g)?, num(g)?]),
+        [g, a] => Ok([num(g)?, num(a)?]),
+        _ => Err(format!("`{v}`: expected G or G,A")),
+    }
+}
+
+/// `p` with its bias random walks (and their per-axis figures) multiplied by `[gyro, accel]`.
+fn scale_walks(p: &mut tumble_factors::imu_preint::PreintegrationParams, [g, a]: [f64; 2]) {
+    p.gyro_random_walk *= g;
+    p.accel_random_walk *= a;
+    if let Some(axes) = p.axes.as_mut() {
+        axes.gyro_random_walk.iter_mut().for_each(|d| *d *= g);
+        axes.accel_random_walk.iter_mut().for_each(|d| *d *= a);
     }
 }
 
@@ -132,6 +178,7 @@ const LATE_S: f64 = 15.0;
 fn evaluate(
     case: &Case,
     opts: &VioOptions,
+    walk_scale: [f64; 2],
     data: &Path,
     out: Option<&Path>,
 ) -> Result<(Summary, Option<String>), String> {
@@ -162,6 +209,7 @@ fn evaluate(
         }
     };
     input.apply_noise(None, &mut opts.noise.imu);
+    scale_walks(&mut opts.noise.imu, walk_scale);
     let result = run(&input, &opts, None).map_err(|e| e.to_string())?;
     let mut summary = summarize(&input, &opts, &result, 10.0);
     // The target frame's tilt against gravity is known only through the
