@@ -493,5 +493,23 @@ fn a_rig_is_calibrated_from_its_images() {
     assert!(files.contains(&out.join("cam0/corners.csv")) && out.join("cam0/frames.csv").is_file());
     let back = tumble::rig::input::read_corners(&out.join("cam0"), &input.target).unwrap();
     assert_eq!(back.len(), cam.views.len());
+    // The command line on the same folder of images: the target detected,
+    // the calibration and the detected corners written.
+    let cli_out = dir.join("cli_out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_tumble"))
+        .arg("calibrate-rig")
+        .arg(&dir)
+        .arg("--target")
+        .arg(dir.join("target.yaml"))
+        .arg("--out")
+        .arg(&cli_out)
+        .output()
+        .unwrap();
+    let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{text}");
+    assert!(text.contains("detecting the target"), "{text}");
+    for f in ["rig.json", "camchain-imucam.yaml", "cam0/corners.csv"] {
+        assert!(cli_out.join(f).is_file(), "{f} not written: {text}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
