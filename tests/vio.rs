@@ -626,6 +626,9 @@ fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
     let noise = out.noise.expect("measured");
     println!("{}", noise.line());
     assert!(noise.in_use[0] > 2.0 * noise.given[0] && noise.in_use[1] > 3.0 * noise.given[1], "{}", noise.line());
+    // The bias σ that rest on the datasheet's walk are flagged (docs/vio.md,
+    // "The bias random walk in flight").
+    assert!(s.warnings.iter().any(|w| w.contains("bias σ may then be several times too small")), "{:?}", s.warnings);
     let m = &s.evaluation.as_ref().unwrap().metrics;
     let (g, a) = (m.bias_nees_gyro_axes.unwrap(), m.bias_nees_accel_axes.unwrap());
     let mean = (g.iter().sum::<f64>() + a.iter().sum::<f64>()) / 6.0;

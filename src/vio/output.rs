@@ -118,6 +118,26 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
+/// The warning a run whose noise meter raised the white noise gets: a
+/// platform that shakes its IMU beyond the figures given also moves its
+/// biases more slowly than the random walk given allows (on EuRoC's flights
+/// the gyro's slow error is 5–18× what the datasheet's walk allows over
+/// 2–10 s, `examples/imu_in_flight.rs`), and the bias σ then come out too
+/// small; the biases are written all the same, with this warning. None when
+/// the noise in use is the noise given.
+pub fn slow_error_warning(noise: &super::noise_meter::NoiseReport) -> Option<String> {
+    let ratio = [noise.in_use[0] / noise.given[0], noise.in_use[1] / noise.given[1]];
+    (ratio[0] > 1.0 || ratio[1] > 1.0).then(|| {
+        format!(
+            "the IMU's white noise in motion was raised beyond the figures given (gyro ×{:.1}, accelerometer ×{:.1}): \
+             a platform that shakes its IMU so also moves its biases faster than the random walk given allows, and the \
+             bias σ may then be several times too small (EuRoC: 3–10×); give the walks the platform shows \
+             (--noise; docs/vio.md, \"The bias random walk in flight\")",
+            ratio[0], ratio[1]
+        )
+    })
+}
+
 /// IMU-only dead reckoning from the first estimate to the last frame time:
 /// end position \[m\] with the initial bias held.
 fn imu_only_end(input: &VioInput, opts: &VioOptions, first: &FrameEstimate, t_end: f64) -> Vector3<f64> {
@@ -151,6 +171,7 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
     };
     let mut solve: Vec<f64> = e.iter().map(|x| x.solve_s * 1e3).collect();
     let mut warnings = result.warnings.clone();
+    warnings.extend(result.noise.as_ref().and_then(slow_error_warning));
     let evaluation = input.groundtruth.as_ref().and_then(|gt| {
         let opts = EvalOptions { alignment: Alignment::PosYaw, bias_after_s: bias_from_s, ..EvalOptions::default() };
         evaluate(&trajectory(input, result), Some(&bias_track(input, result)), gt, &opts)
@@ -336,6 +357,16 @@ mod tests {
         let (n, k) = (5.25e-3, 2e-5);
         let p = allan_steady_std(n, k).powi(2);
         assert!((k * k - p * p / (n * n)).abs() < 1e-12 * k * k, "{p}");
+    }
+
+    #[test]
+    fn a_raised_noise_warns_that_the_bias_sigma_may_be_too_small() {
+        use crate::vio::noise_meter::NoiseReport;
+        let given = [1.7e-4, 2.0e-3];
+        let report = |in_use| NoiseReport { given, at_rest: None, in_motion: None, in_motion_largest: None, in_use };
+        assert_eq!(slow_error_warning(&report(given)), None);
+        let w = slow_error_warning(&report([4.9e-4, 2.0e-3])).expect("raised");
+        assert!(w.contains("gyro ×2.9, accelerometer ×1.0") && w.contains("--noise"), "{w}");
     }
 
     #[test]
