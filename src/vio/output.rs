@@ -118,19 +118,19 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
     v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
-/// The warning a run whose noise meter raised the white noise gets: a
-/// platform that shakes its IMU beyond the figures given also moves its
-/// biases more slowly than the random walk given allows (on EuRoC's flights
-/// the gyro's slow error is 5–18× what the datasheet's walk allows over
-/// 2–10 s, `examples/imu_in_flight.rs`), and the bias σ then come out too
-/// small; the biases are written all the same, with this warning. None when
-/// the noise in use is the noise given.
+/// The warning a run whose noise meter raised the white noise gets: on a
+/// platform that shakes its IMU beyond the figures given the biases also
+/// wander more, over seconds, than the random walk given allows (on EuRoC's
+/// flights the gyro's slow error is 5–18× what the datasheet's walk allows
+/// over 2–10 s, `examples/imu_in_flight.rs`), and the bias σ then come out
+/// too small; the biases are written all the same, with this warning. None
+/// when the noise in use is the noise given.
 pub fn slow_error_warning(noise: &super::noise_meter::NoiseReport) -> Option<String> {
     let ratio = [noise.in_use[0] / noise.given[0], noise.in_use[1] / noise.given[1]];
     (ratio[0] > 1.0 || ratio[1] > 1.0).then(|| {
         format!(
             "the IMU's white noise in motion was raised beyond the figures given (gyro ×{:.1}, accelerometer ×{:.1}): \
-             a platform that shakes its IMU so also moves its biases faster than the random walk given allows, and the \
+             a platform that shakes its IMU so also makes its biases wander more than the random walk given allows, and the \
              bias σ may then be several times too small (EuRoC: 3–10×); give the walks the platform shows \
              (--noise; docs/vio.md, \"The bias random walk in flight\")",
             ratio[0], ratio[1]
