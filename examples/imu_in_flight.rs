@@ -105,7 +105,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 continue;
             }
             let dev: Vec<f64> = curves.iter().map(|c| at(c).map_or(f64::NAN, |(_, d)| d)).collect();
-            let m = (n * n / t_near + k * k * t_near / 3.0).sqrt();
+            let m = white_and_walk_dev(n, k, t_near);
             println!(
                 "  {t_near:5.2}   {:.1e} {:.1e} {:.1e}          {m:.1e}               {:.1} {:.1} {:.1}",
                 dev[0],
@@ -165,13 +165,20 @@ fn fit_white_and_walk(c: &tumble::allan::AllanCurve, from: f64) -> (f64, f64) {
     let mut best = (f64::INFINITY, 0.0, 0.0);
     for n in grid(-70, -10) {
         for k in grid(-80, -10) {
-            let cost: f64 = pts.iter().map(|(t, d)| ((n * n / t + k * k * t / 3.0).sqrt() / d).ln().powi(2)).sum();
+            let cost: f64 = pts.iter().map(|(t, d)| (white_and_walk_dev(n, k, *t) / d).ln().powi(2)).sum();
             if cost < best.0 {
                 best = (cost, n, k);
             }
         }
     }
     (best.1, best.2)
+}
+
+/// The Allan deviation of white noise `n` and a random walk `k` at `tau`,
+/// from the allan module's term basis (`√(N²/τ + K²τ/3)`).
+fn white_and_walk_dev(n: f64, k: f64, tau: f64) -> f64 {
+    let b = tumble::allan::identify::basis(tau);
+    (n * n * b[1] + k * k * b[3]).sqrt()
 }
 
 /// Column `axis` of `y` at `t`, linear between the samples at `ts` (held at the ends).
