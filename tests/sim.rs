@@ -316,3 +316,24 @@ fn a_corridor_walk_sees_only_what_the_block_leaves_in_sight() {
     let bad = SimConfig { corridor: tumble::sim::Corridor { half_width: 9.0, ..Default::default() }, ..c };
     assert!(simulate(Scenario::Corridor, &bad, 2).err().unwrap().to_string().contains("half width"));
 }
+
+/// Effects hidden one after the other each keep their own strength: hiding a
+/// second effect does not scale the first one's coefficients again.
+#[test]
+fn hidden_effects_keep_their_own_strengths() {
+    use tumble::sim::hide_effect;
+    let base = SimConfig::default();
+    let mut cfg = base.clone();
+    hide_effect(&mut cfg, "g_sensitivity", 2.0).unwrap();
+    hide_effect(&mut cfg, "temperature_bias", 3.0).unwrap();
+    hide_effect(&mut cfg, "accel_nonlinearity_odd", 10.0).unwrap();
+    for (row, row0) in cfg.imu.g_sensitivity.iter().zip(&base.imu.g_sensitivity) {
+        for (x, x0) in row.iter().zip(row0) {
+            assert_eq!(*x, 2.0 * x0);
+        }
+    }
+    for (x, x0) in cfg.imu.gyro.temperature_bias.iter().zip(&base.imu.gyro.temperature_bias) {
+        assert_eq!(*x, 3.0 * x0);
+    }
+    assert!(cfg.imu.effects.g_sensitivity && cfg.imu.effects.temperature && cfg.imu.effects.nonlinearity);
+}

@@ -230,17 +230,29 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
     if !(strength.is_finite() && strength >= 0.0) {
         return Err(format!("effect strength must be ≥ 0, found {strength}").into());
     }
+    // Only the named effect's coefficients are scaled, so that effects hidden
+    // one after the other each keep their own strength.
     let m = &mut config.imu;
     let scale3 = |v: &mut [f64; 3]| v.iter_mut().for_each(|x| *x *= strength);
-    for t in [&mut m.gyro, &mut m.accel] {
-        scale3(&mut t.nonlinearity);
-        scale3(&mut t.temperature_bias);
-        scale3(&mut t.temperature_bias_quadratic);
-        scale3(&mut t.temperature_scale);
-        scale3(&mut t.temperature_scale_quadratic);
-        scale3(&mut t.bias_drift);
+    let temperature = |t: &mut model::TriadModel, scale: bool| {
+        if scale {
+            scale3(&mut t.temperature_scale);
+            scale3(&mut t.temperature_scale_quadratic);
+        } else {
+            scale3(&mut t.temperature_bias);
+            scale3(&mut t.temperature_bias_quadratic);
+        }
+    };
+    match effect {
+        "g_sensitivity" => m.g_sensitivity.iter_mut().for_each(scale3),
+        "gyro_nonlinearity" => scale3(&mut m.gyro.nonlinearity),
+        "accel_nonlinearity" => scale3(&mut m.accel.nonlinearity),
+        "bias_drift" => [&mut m.gyro, &mut m.accel].into_iter().for_each(|t| scale3(&mut t.bias_drift)),
+        e if e.starts_with("temperature_") => {
+            [&mut m.gyro, &mut m.accel].into_iter().for_each(|t| temperature(t, e.starts_with("temperature_scale")))
+        }
+        _ => {}
     }
-    m.g_sensitivity.iter_mut().for_each(scale3);
     let warm = |c: &mut SimConfig| {
         c.imu.temperature = TemperatureTrace {
             start: 10.0,
@@ -268,7 +280,7 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
         };
         zero(&mut off.nonlinearity);
         // Deviation at full scale: c·h(range) = strength % · range (the model's
-        // coefficients, already times `strength`, give the signs).
+        // coefficients give the signs).
         let size = 0.01 * strength * on.range / shape.eval(on.range).abs();
         for c in on.nonlinearity.iter_mut() {
             *c = if *c == 0.0 { 0.0 } else { c.signum() * size };
