@@ -68,9 +68,9 @@ macro_rules! trial_tests {
 trial_tests! {
     finds_gyro_g_sensitivity: "g_sensitivity", 9, 9;
     finds_temperature_bias: "temperature_bias", 9, 7;
-    finds_temperature_bias_quadratic: "temperature_bias_quadratic", 4, 4;
+    finds_temperature_bias_quadratic: "temperature_bias_quadratic", 9, 9;
     finds_temperature_scale: "temperature_scale", 9, 7;
-    finds_temperature_scale_quadratic: "temperature_scale_quadratic", 0, 0;
+    finds_temperature_scale_quadratic: "temperature_scale_quadratic", 9, 8;
     finds_gyro_scale_nonlinearity_even: "gyro_nonlinearity_even", 6, 6;
     finds_gyro_scale_nonlinearity_odd: "gyro_nonlinearity_odd", 9, 9;
     finds_gyro_scale_nonlinearity_cubic: "gyro_nonlinearity_cubic", 7, 7;
@@ -81,7 +81,7 @@ trial_tests! {
     finds_accel_scale_asymmetry: "accel_nonlinearity_asymmetric", 9, 9;
     finds_bias_drift: "bias_drift", 9, 9;
     adds_nothing_to_clean_recordings: "clean", 19, 19;
-    finds_two_hidden_effects: "g_sensitivity + accel_nonlinearity_odd", 7, 6;
+    finds_two_hidden_effects: "g_sensitivity + accel_nonlinearity_odd", 9, 9;
     reports_temperature_and_time_as_confounded: "temperature_bias, warm-up linear in time", 9, 5;
 }
 

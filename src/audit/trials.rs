@@ -14,7 +14,7 @@
 use super::{audit, Audit, AuditOptions, Effect};
 use crate::calib::{calibrate, CalibOptions};
 use crate::io::ImuNoise;
-use crate::sim::{hide_effect, simulate, Scenario, SimConfig, TemperatureTrace};
+use crate::sim::{hide_effect, simulate, Motion, Scenario, SimConfig, TemperatureTrace, Tumble};
 
 /// Gyro full scale the nonlinearity trials use \[rad/s\]: ±250 °/s, the range a
 /// hand tumble (turns of 1–3 rad/s) is recorded at.
@@ -70,9 +70,9 @@ impl Case {
         vec![
             one("g_sensitivity", 1.0, 3.0, GyroGSensitivity),
             one("temperature_bias", 2.0, 5.0, TemperatureBias),
-            one("temperature_bias_quadratic", 5.0, 10.0, TemperatureBiasQuadratic),
+            one("temperature_bias_quadratic", 2.0, 5.0, TemperatureBiasQuadratic),
             one("temperature_scale", 10.0, 20.0, TemperatureScale),
-            one("temperature_scale_quadratic", 5.0, 10.0, TemperatureScaleQuadratic),
+            one("temperature_scale_quadratic", 10.0, 20.0, TemperatureScaleQuadratic),
             one("gyro_nonlinearity_even", 2.0, 5.0, GyroScaleNonlinearity),
             one("gyro_nonlinearity_odd", 12.0, 24.0, GyroScaleNonlinearityOdd),
             one("gyro_nonlinearity_cubic", 20.0, 40.0, GyroScaleNonlinearityCubic),
@@ -170,16 +170,28 @@ pub fn config(case: &Case, seed: u64) -> Result<(SimConfig, Vec<f64>, f64), Stri
             reference: 10.0,
             ..Default::default()
         };
-        // A quadratic temperature curve with its vertex halfway through the
-        // warm-up (a bias or scale that turns around as the part warms), so
-        // the curvature is not a straight line over the span recorded.
+        // A quadratic temperature curve turns around in the middle of the
+        // temperatures the tumbling covers (after the initial rest, which
+        // takes much of the warm-up), and is sized by what the recording can
+        // see of it: its sagitta over that span equals the drift the linear
+        // coefficient drawn (the model's times the strength) gives over the
+        // span. A vertex outside the span, or a curvature sized alone, leaves
+        // a curve that is straight or flat over the temperatures recorded.
+        let duration = Tumble::new(&cfg.tumble, seed).duration();
+        let trace = &cfg.imu.temperature;
+        let (lo, hi) = (trace.at(cfg.tumble.initial_static_s) - trace.reference, trace.at(duration) - trace.reference);
+        let (vertex, span) = (0.5 * (lo + hi), (hi - lo).abs().max(f64::EPSILON));
         for t in [&mut cfg.imu.gyro, &mut cfg.imu.accel] {
             for k in 0..3 {
-                if t.temperature_bias_quadratic[k] != 0.0 {
-                    t.temperature_bias[k] = -t.temperature_bias_quadratic[k] * warmup_c;
-                }
-                if t.temperature_scale_quadratic[k] != 0.0 {
-                    t.temperature_scale[k] = -t.temperature_scale_quadratic[k] * warmup_c;
+                for (linear, quadratic) in [
+                    (&mut t.temperature_bias[k], &mut t.temperature_bias_quadratic[k]),
+                    (&mut t.temperature_scale[k], &mut t.temperature_scale_quadratic[k]),
+                ] {
+                    if *quadratic != 0.0 {
+                        // q (span/2)² = |linear| · span, vertex where q (ΔT − vertex)² is least.
+                        *quadratic = quadratic.signum() * 4.0 * linear.abs() / span;
+                        *linear = -2.0 * *quadratic * vertex;
+                    }
                 }
             }
         }
