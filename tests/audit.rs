@@ -8,7 +8,7 @@
 //! refuse bad input with clear errors.
 
 use tumble::audit::trials::{run_trial, Case, Expect, NoiseMode};
-use tumble::audit::{audit, Audit, AuditOptions, Effect};
+use tumble::audit::{audit, audit_with_progress, Audit, AuditOptions, Effect};
 use tumble::calib::{calibrate, CalibOptions, ImuCalibration};
 use tumble::sim::{hide_effect, simulate, Scenario, SimConfig};
 use tumble::vio::ImuNoise;
@@ -132,8 +132,15 @@ fn estimates_the_bias_random_walk_from_the_recording() {
         let sim = simulate(Scenario::Tumble, &cfg, seed).unwrap();
         let rec = sim.imu.to_recording();
         let cal = calibrate(&rec, &CalibOptions { gravity: cfg.gravity, ..Default::default() }).unwrap();
-        let a = audit(&rec, &cal.calibration, &AuditOptions::default()).unwrap();
+        let mut lines = Vec::new();
+        let a =
+            audit_with_progress(&rec, &cal.calibration, &AuditOptions::default(), &mut |m| lines.push(m.to_string()))
+                .unwrap();
         assert!(a.walks_estimated);
+        // Progress as each stage starts: the walks, every round, the structure.
+        assert!(lines[0].starts_with("estimating the bias random walks"), "{lines:?}");
+        assert!(lines.iter().any(|l| l.starts_with("round 1: fitting")), "{lines:?}");
+        assert_eq!(lines.last().map(String::as_str), Some("testing the residuals left for structure"));
         let axes = ImuNoise::from_model(&cfg.imu).axes.unwrap();
         let pooled = |v: [f64; 3]| (v.iter().map(|x| x * x).sum::<f64>() / 3.0).sqrt();
         let g = a.random_walk().0 / cal.calibration.gyro.mean_scale();

@@ -318,6 +318,18 @@ impl std::error::Error for AuditError {}
 
 /// Run the audit of a calibration recording against `calibration`.
 pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptions) -> Result<Audit, AuditError> {
+    audit_with_progress(rec, calibration, opts, &mut |_| {})
+}
+
+/// [`audit`], with a line to `progress` as each stage starts and each round
+/// ends (an audit of a long recording without a noise file takes tens of
+/// seconds).
+pub fn audit_with_progress(
+    rec: &ImuRecording,
+    calibration: &ImuCalibration,
+    opts: &AuditOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Audit, AuditError> {
     let fail = |m: String| AuditError(format!("{}: {m}", rec.source_name()));
     opts.validate().map_err(|e| fail(e.to_string()))?;
     let (accel, gyro, gyro_bias) = calibration.inverse_params().map_err(|e| fail(e.to_string()))?;
@@ -378,6 +390,10 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
         // model so that none of them can hide in the walk.
         // Richest first; a model the recording cannot support (a singular
         // information matrix) gives way to a smaller one.
+        progress(&format!(
+            "estimating the bias random walks from the recording ({} static intervals; no noise file)",
+            data.statics.len()
+        ));
         let mut tried = Vec::new();
         let mut result = None;
         for layout in saturated(&candidates) {
@@ -416,6 +432,7 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
             break;
         }
         let threshold = opts.alpha / remaining.len() as f64;
+        progress(&format!("round {}: fitting {} candidates", iterations.len() + 1, remaining.len()));
         let fits: Vec<(Effect, Result<Fit, AuditError>)> = remaining
             .par_iter()
             .map(|&e| {
@@ -447,6 +464,13 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
             break;
         };
         let effect = Effect::from_id(&s.effect).expect("scored effects come from the vocabulary");
+        progress(&format!(
+            "round {}: {} is the most significant (gap {:.3} → {:.3})",
+            iterations.len() + 1,
+            effect,
+            current.gap(),
+            f.gap()
+        ));
         let other_forms = scores
             .iter()
             .filter_map(|c| Effect::from_id(&c.effect).map(|e| (e, c.delta_bic)))
@@ -465,6 +489,7 @@ pub fn audit(rec: &ImuRecording, calibration: &ImuCalibration, opts: &AuditOptio
         current = f;
     }
     mark_confounded(&mut iterations, &rounds);
+    progress("testing the residuals left for structure");
     let structure = structure::test(&data, &noise, &current).map_err(|e| fail(e.to_string()))?;
     let calibration = calibrated(calibration, &data, &noise, &current).map_err(|e| fail(e.to_string()))?;
     Ok(Audit {

@@ -76,7 +76,7 @@ impl AuditArgs {
             eprintln!("warning: {w}");
         }
         let t = std::time::Instant::now();
-        let result = tumble::audit::audit(&rec, &cal, &opts)?;
+        let result = tumble::audit::audit_with_progress(&rec, &cal, &opts, &mut |m| eprintln!("{m}"))?;
         print!("{}", tumble::audit::report::summary_table(&result));
         for n in &result.notes {
             eprintln!("note: {n}");
