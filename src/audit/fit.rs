@@ -266,8 +266,10 @@ const WALK_ITERATIONS: usize = 60;
 /// converges to REML) alternates a solve with `σ² ← σ² · χ²_axis / r_axis`,
 /// `r_axis` the redundancy of that axis's walk residuals (their count minus
 /// the trace of their part of the hat matrix), so the walk is what the bias
-/// changes left by this model imply. `floor` is the smallest walk \[raw
-/// units/√s\] (gyro, accelerometer).
+/// changes left by this model imply; every three iterates an Aitken Δ² step
+/// ([`aitken`]) extrapolates the slow, linear convergence. It stops when no
+/// walk moves by 1 %. `floor` is the smallest walk \[raw units/√s\] (gyro,
+/// accelerometer).
 pub fn solve_walks(
     data: &AuditData,
     noise: &Noise,
@@ -281,6 +283,11 @@ pub fn solve_walks(
     if !estimate {
         return Ok((fit, noise));
     }
+    // The last plain iterates of ln w per axis (gyro x y z, accel x y z), for
+    // Aitken's Δ² step. The iteration converges linearly, at a rate near 1
+    // where the data say little about a walk: steps of 1 % can then be far
+    // from the limit, which three iterates extrapolate to.
+    let mut history: Vec<[f64; 6]> = Vec::new();
     for _ in 0..WALK_ITERATIONS {
         let (chi2, r) = walk_components(data, &noise, &fit)?;
         let mut change: f64 = 0.0;
@@ -297,6 +304,13 @@ pub fn solve_walks(
         let mut walks = noise.walks;
         update(&mut walks.0, &chi2.0, &r.0, floor.0);
         update(&mut walks.1, &chi2.1, &r.1, floor.1);
+        if change >= 0.01 {
+            history.push(log_walks(&walks));
+            if history.len() == 3 {
+                walks = aitken(&history, walks, floor);
+                history.clear();
+            }
+        }
         noise = noise.with_walks(walks);
         fit = solve(data, &noise, layout, &fit.values)?;
         if change < 0.01 {
@@ -304,6 +318,29 @@ pub fn solve_walks(
         }
     }
     Ok((fit, noise))
+}
+
+/// ln w per axis: gyro x, y, z, accelerometer x, y, z.
+fn log_walks(w: &Walks) -> [f64; 6] {
+    [w.0[0].ln(), w.0[1].ln(), w.0[2].ln(), w.1[0].ln(), w.1[1].ln(), w.1[2].ln()]
+}
+
+/// Aitken's Δ² extrapolation of three consecutive iterates `h` of ln w per
+/// axis (`x* = x₂ − (x₂ − x₁)² / (x₂ − 2x₁ + x₀)`) where they converge
+/// monotonically (two steps of one sign, the second shorter); the jump is at
+/// most a factor 10 and the walk not below `floor`; other axes keep `walks`.
+fn aitken(h: &[[f64; 6]], walks: Walks, floor: (f64, f64)) -> Walks {
+    let mut out = walks;
+    let slots = out.0.iter_mut().map(|w| (w, floor.0)).chain(out.1.iter_mut().map(|w| (w, floor.1)));
+    for (i, (w, lo)) in slots.enumerate() {
+        let (d1, d2) = (h[1][i] - h[0][i], h[2][i] - h[1][i]);
+        if d1 * d2 <= 0.0 || d2.abs() >= d1.abs() {
+            continue;
+        }
+        let jump = (-d2 * d2 / (d2 - d1)).clamp(-10f64.ln(), 10f64.ln());
+        *w = (h[2][i] + jump).exp().max(lo);
+    }
+    out
 }
 
 /// Per axis, the χ² of the gyro and accelerometer walk residuals at `fit` and
@@ -435,4 +472,29 @@ fn whitened_entry(entry: &tumble_solvers::FactorEntry, values: &Values) -> Resul
     let vars: Vec<&dyn tumble_solvers::DynVariable> =
         entry.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
     Ok(entry.evaluate(Vars::new(&vars)).map_err(|e| e.to_string())?.0)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A geometric approach `ln w = L + c ρⁿ` is extrapolated to its limit L;
+    /// an axis that turns back, or one whose steps grow, is left alone; the
+    /// floor holds.
+    #[test]
+    fn aitken_jumps_to_the_limit_of_a_geometric_approach() {
+        let (limit, c, rho) = (-12.0f64, 1.5f64, 0.9f64);
+        let x = |n: i32| limit + c * rho.powi(n);
+        let mut h = [[0.0; 6]; 3];
+        for (n, row) in h.iter_mut().enumerate() {
+            let n = n as i32;
+            *row = [x(n), x(n), 1.0 + [0.0, 0.1, 0.05][n as usize], x(n), -5.0 - [0.0, 0.1, 0.3][n as usize], x(n)];
+        }
+        let walks = ([x(2).exp(), x(2).exp(), 7.0], [x(2).exp(), 9.0, x(2).exp()]);
+        let out = aitken(&h, walks, (1e-300, (limit + 0.5).exp()));
+        assert!((out.0[0].ln() - limit).abs() < 1e-9, "{}", out.0[0].ln());
+        assert_eq!(out.0[2], 7.0, "a step that turns back");
+        assert_eq!(out.1[1], 9.0, "steps that grow");
+        assert_eq!(out.1[0], (limit + 0.5).exp(), "the floor");
+    }
 }
