@@ -267,8 +267,8 @@ const WALK_ITERATIONS: usize = 60;
 /// `r_axis` the redundancy of that axis's walk residuals (their count minus
 /// the trace of their part of the hat matrix), so the walk is what the bias
 /// changes left by this model imply; every three iterates an Aitken Δ² step
-/// ([`aitken`]) extrapolates the slow, linear convergence. It stops when no
-/// walk moves by 1 %. `floor` is the smallest walk \[raw units/√s\] (gyro,
+/// extrapolates the slow, linear convergence. It stops when no walk moves by
+/// 1 %. `floor` is the smallest walk \[raw units/√s\] (gyro,
 /// accelerometer).
 pub fn solve_walks(
     data: &AuditData,
