@@ -230,29 +230,9 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
     if !(strength.is_finite() && strength >= 0.0) {
         return Err(format!("effect strength must be ≥ 0, found {strength}").into());
     }
-    // Only the named effect's coefficients are scaled, so that effects hidden
-    // one after the other each keep their own strength.
-    let m = &mut config.imu;
+    // Each arm below scales only the named effect's coefficients, so that
+    // effects hidden one after the other keep their own strengths.
     let scale3 = |v: &mut [f64; 3]| v.iter_mut().for_each(|x| *x *= strength);
-    let temperature = |t: &mut model::TriadModel, scale: bool| {
-        if scale {
-            scale3(&mut t.temperature_scale);
-            scale3(&mut t.temperature_scale_quadratic);
-        } else {
-            scale3(&mut t.temperature_bias);
-            scale3(&mut t.temperature_bias_quadratic);
-        }
-    };
-    match effect {
-        "g_sensitivity" => m.g_sensitivity.iter_mut().for_each(scale3),
-        "gyro_nonlinearity" => scale3(&mut m.gyro.nonlinearity),
-        "accel_nonlinearity" => scale3(&mut m.accel.nonlinearity),
-        "bias_drift" => [&mut m.gyro, &mut m.accel].into_iter().for_each(|t| scale3(&mut t.bias_drift)),
-        e if e.starts_with("temperature_") => {
-            [&mut m.gyro, &mut m.accel].into_iter().for_each(|t| temperature(t, e.starts_with("temperature_scale")))
-        }
-        _ => {}
-    }
     let warm = |c: &mut SimConfig| {
         c.imu.temperature = TemperatureTrace {
             start: 10.0,
@@ -289,31 +269,45 @@ pub fn hide_effect(config: &mut SimConfig, effect: &str, strength: f64) -> Resul
         config.imu.effects.nonlinearity = true;
         return Ok(());
     }
-    let e = &mut config.imu.effects;
+    let m = &mut config.imu;
     // Which temperature terms stay: bias or scale, linear or linear + quadratic.
     let scale_only = effect.starts_with("temperature_scale");
     let linear_only = !effect.ends_with("_quadratic");
     match effect {
         "none" => {}
-        "g_sensitivity" => e.g_sensitivity = true,
+        "g_sensitivity" => {
+            m.g_sensitivity.iter_mut().for_each(scale3);
+            m.effects.g_sensitivity = true;
+        }
         "gyro_nonlinearity" => {
-            e.nonlinearity = true;
-            zero(&mut config.imu.accel.nonlinearity);
+            scale3(&mut m.gyro.nonlinearity);
+            m.effects.nonlinearity = true;
+            zero(&mut m.accel.nonlinearity);
         }
         "accel_nonlinearity" => {
-            e.nonlinearity = true;
-            zero(&mut config.imu.gyro.nonlinearity);
+            scale3(&mut m.accel.nonlinearity);
+            m.effects.nonlinearity = true;
+            zero(&mut m.gyro.nonlinearity);
         }
-        "bias_drift" => e.bias_drift = true,
+        "bias_drift" => {
+            for t in [&mut m.gyro, &mut m.accel] {
+                scale3(&mut t.bias_drift);
+            }
+            m.effects.bias_drift = true;
+        }
         "camera_imu_time_offset" => config.camera.time_offset_s = CAMERA_IMU_TIME_OFFSET_S * strength,
         "accel_gyro_time_offset" => config.imu.accel_time_offset_s = ACCEL_GYRO_TIME_OFFSET_S * strength,
         "temperature_bias" | "temperature_bias_quadratic" | "temperature_scale" | "temperature_scale_quadratic" => {
-            e.temperature = true;
-            for t in [&mut config.imu.accel, &mut config.imu.gyro] {
+            m.effects.temperature = true;
+            for t in [&mut m.accel, &mut m.gyro] {
                 if scale_only {
+                    scale3(&mut t.temperature_scale);
+                    scale3(&mut t.temperature_scale_quadratic);
                     zero(&mut t.temperature_bias);
                     zero(&mut t.temperature_bias_quadratic);
                 } else {
+                    scale3(&mut t.temperature_bias);
+                    scale3(&mut t.temperature_bias_quadratic);
                     zero(&mut t.temperature_scale);
                     zero(&mut t.temperature_scale_quadratic);
                 }
