@@ -40,12 +40,18 @@ pub fn quietest(score: &[f64]) -> Option<f64> {
 
 /// Norm of the per-axis variance over a window of `w` samples (odd) centred
 /// on each sample; `f64::INFINITY` where the window does not fit.
-/// Running sums about the first sample keep raw counts (≈ 3·10⁴) exact enough.
 pub fn sliding_variance_norm(x: &[[f64; 3]], w: usize) -> Vec<f64> {
+    sliding_variance(x, w).iter().map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt()).collect()
+}
+
+/// Per-axis variance over a window of `w` samples (odd) centred on each
+/// sample; `f64::INFINITY` where the window does not fit.
+/// Running sums about the first sample keep raw counts (≈ 3·10⁴) exact enough.
+pub fn sliding_variance(x: &[[f64; 3]], w: usize) -> Vec<[f64; 3]> {
     let n = x.len();
     let h = w / 2;
     let w = 2 * h + 1;
-    let mut out = vec![f64::INFINITY; n];
+    let mut out = vec![[f64::INFINITY; 3]; n];
     if n < w {
         return out;
     }
@@ -68,14 +74,38 @@ pub fn sliding_variance_norm(x: &[[f64; 3]], w: usize) -> Vec<f64> {
             add(&mut s, &mut s2, &x[c + h], 1.0);
             add(&mut s, &mut s2, &x[c - h - 1], -1.0);
         }
-        let mut q = 0.0;
-        for k in 0..3 {
-            let var = (s2[k] / wf - (s[k] / wf).powi(2)).max(0.0);
-            q += var * var;
-        }
-        out[c] = q.sqrt();
+        out[c] = std::array::from_fn(|k| (s2[k] / wf - (s[k] / wf).powi(2)).max(0.0));
     }
     out
+}
+
+/// Each axis's noise variance at rest: the variance of `rest` per axis, at
+/// least the quantization's `q²/12` (`q` the axis's smallest step between
+/// consecutive samples), so that an axis whose reading sits on one count does
+/// not divide by zero. An axis that never changes falls back to the largest
+/// axis's variance.
+pub fn axis_noise(rest: &[[f64; 3]]) -> [f64; 3] {
+    let var = var3(rest);
+    let step = |k: usize| {
+        rest.windows(2).map(|p| (p[1][k] - p[0][k]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min)
+    };
+    let largest = var.iter().copied().fold(0.0, f64::max);
+    std::array::from_fn(|k| {
+        let q = step(k);
+        if q.is_finite() {
+            var[k].max(q * q / 12.0)
+        } else {
+            largest
+        }
+    })
+}
+
+/// Detection score per sample: the windowed variance whitened by the noise at
+/// rest, `(1/3) Σ_k var_k / noise_k` (1 at rest). Each axis counts in units of
+/// its own noise: the norm of the variances is ruled by the noisiest axis,
+/// under whose noise a slow turn that the quieter axes see hides.
+pub fn axis_ratio(var: &[[f64; 3]], noise: &[f64; 3]) -> Vec<f64> {
+    var.iter().map(|v| (0..3).map(|k| v[k] / noise[k].max(1e-300)).sum::<f64>() / 3.0).collect()
 }
 
 /// Per-axis mean over a window of `w` samples (odd) centred on each sample;

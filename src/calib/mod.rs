@@ -42,5 +42,7 @@ pub use apply::write_like_input;
 pub(crate) use fit::{accel_triad, gyro_triad};
 pub use gravity::{local_gravity, normal_gravity, LocalGravity};
 pub use model::{Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
-pub use solve::{calibrate, parse_multipliers, CalibError, CalibOptions, CalibrationResult, RECORDING_ADVICE};
+pub use solve::{
+    calibrate, parse_multipliers, CalibError, CalibOptions, CalibrationResult, DetectionThresholds, RECORDING_ADVICE,
+};
 pub use verdict::{Assessment, Verdict};

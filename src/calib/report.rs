@@ -4,7 +4,8 @@
 
 use super::model::{imu_tk_calib_text, CalibrationFile, Triad};
 use super::solve::{
-    CalibOptions, CalibrationResult, FitStats, InitialRestReport, RotationResidual, StaticInterval, SweepEntry,
+    CalibOptions, CalibrationResult, DetectionThresholds, FitStats, InitialRestReport, RotationResidual,
+    StaticInterval, SweepEntry,
 };
 use super::verdict::{Assessment, Verdict};
 use crate::error::OutputError;
@@ -24,7 +25,7 @@ struct Residuals<'a> {
 #[derive(Serialize)]
 struct Detection<'a> {
     multiplier: f64,
-    threshold: f64,
+    thresholds: &'a DetectionThresholds,
     initial_rest: &'a InitialRestReport,
     window_s: f64,
     min_interval_s: f64,
@@ -77,7 +78,7 @@ impl CalibrationResult {
             residuals: Residuals { accel: &self.accel_fit, gyro: &self.gyro_fit, rotations: &self.rotations },
             detection: Detection {
                 multiplier: self.multiplier,
-                threshold: self.threshold,
+                thresholds: &self.thresholds,
                 initial_rest: &self.initial_rest,
                 window_s: opts.window_s,
                 min_interval_s: opts.min_interval_s,

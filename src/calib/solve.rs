@@ -4,7 +4,8 @@
 //! the estimates and their covariances into the paper's convention.
 
 use super::detect::{
-    find_initial_rest, intervals_below, mean3, quietest, sliding_variance_norm, var3, InitialRest, Interval,
+    axis_noise, axis_ratio, find_initial_rest, intervals_below, mean3, quietest, sliding_mean, sliding_variance, var3,
+    InitialRest, Interval,
 };
 use super::fit::*;
 use super::model::{ImuCalibration, Units};
@@ -258,6 +259,18 @@ pub struct RotationResidual {
     pub error_rad: f64,
 }
 
+/// What the kept multiplier `k` makes of the detector's rules, per axis x y z.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct DetectionThresholds {
+    /// `k` × each accelerometer axis's variance in the initial rest \[raw units²\].
+    pub accel_variance: [f64; 3],
+    /// `k` × each gyro axis's variance in the initial rest \[raw units²\].
+    pub gyro_variance: [f64; 3],
+    /// Largest offset of a window's mean rate from the initial rest's \[raw units\]
+    /// (`None` without the gyro in the detection).
+    pub window_rate: Option<[f64; 3]>,
+}
+
 /// Everything [`calibrate`] found.
 #[derive(Debug, Clone)]
 pub struct CalibrationResult {
@@ -265,10 +278,10 @@ pub struct CalibrationResult {
     pub calibration: ImuCalibration,
     /// The initial static period used.
     pub initial_rest: InitialRestReport,
-    /// The multiplier `k` kept and the variance threshold it gives \[raw units²\].
+    /// The multiplier `k` kept.
     pub multiplier: f64,
-    /// See `multiplier`.
-    pub threshold: f64,
+    /// The thresholds it gives.
+    pub thresholds: DetectionThresholds,
     /// The static intervals used (sample indices).
     pub intervals: Vec<Interval>,
     /// The same intervals with times and residuals.
@@ -283,9 +296,11 @@ pub struct CalibrationResult {
     pub rotations: Vec<RotationResidual>,
     /// Sliding accelerometer variance norm per sample \[raw units²\] (∞ where the window does not fit).
     pub score: Vec<f64>,
-    /// Detection score per sample: windowed variance over the initial period's, the
-    /// larger of accelerometer and gyro (accelerometer only without `detect_with_gyro`);
-    /// static where below the multiplier.
+    /// Detection score per sample: the largest ratio of an axis's windowed variance
+    /// to its variance in the initial rest, over the accelerometer's and the gyro's
+    /// axes (accelerometer only without `detect_with_gyro`), ∞ where the window's mean
+    /// rate is beyond [`DetectionThresholds::window_rate`]; static where below the
+    /// multiplier.
     pub ratio: Vec<f64>,
     /// Problems that did not stop the calibration.
     pub warnings: Vec<String>,
@@ -339,8 +354,10 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     let w = 2 * half + 1;
     let min_len = ((opts.min_interval_s / period).round() as usize).max(3);
 
-    let score = sliding_variance_norm(&rec.accel, w);
-    let gyro_score = sliding_variance_norm(&rec.gyro, w);
+    let (accel_var, gyro_var) = (sliding_variance(&rec.accel, w), sliding_variance(&rec.gyro, w));
+    let norms =
+        |v: &[[f64; 3]]| -> Vec<f64> { v.iter().map(|x| x.iter().map(|y| y * y).sum::<f64>().sqrt()).collect() };
+    let (score, gyro_score) = (norms(&accel_var), norms(&gyro_var));
     let min_rest = ((MIN_INITIAL_REST_S / period).round() as usize).max(2 * w);
     let rest = match opts.init_static_s {
         Some(t) => InitialRest::given(rec.t.partition_point(|&x| x < t)),
@@ -385,22 +402,27 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
             initial_rest.end_s - initial_rest.start_s
         ));
     }
-    let base = var_init.max(1e-300);
-    // Detection score: windowed variance relative to the initial period's, the larger of
-    // accelerometer and gyro (the gyro catches slow turns the accelerometer hardly sees).
-    let mut ratio: Vec<f64> = score.iter().map(|s| s / base).collect();
-    if opts.detect_with_gyro {
-        let gyro_base = norm(&var_g).max(1e-300);
-        for (r, g) in ratio.iter_mut().zip(&gyro_score) {
-            *r = r.max(g / gyro_base);
-        }
-    }
-
-    // A steady turn about gravity keeps both windowed variances low: an interval whose
+    // Detection score: each axis's windowed variance over its own variance in the
+    // initial rest, the largest over the accelerometer's axes and the gyro's (the
+    // gyro catches slow turns the accelerometer hardly sees).
+    let (noise_a, noise_g) = (axis_noise(&init_accel), axis_noise(&init_gyro));
+    let mut ratio = axis_ratio(&accel_var, &noise_a);
+    // A steady turn keeps the windowed variances low: an interval or a window whose
     // mean rate is far above the initial period's noise is a turn, not a pose.
     let b_init = Vector3::from(mean3(&init_gyro));
     let floor = if rec.gyro_units == Stored::RawCounts { 0.0 } else { MIN_TURN_RATE };
     let turn_limit = Vector3::from(var_g.map(|v| (TURN_SIGMAS * v.sqrt()).max(floor)));
+    let window_limit = window_rate_limit(&noise_g, w, rec.gyro_units == Stored::RawCounts);
+    if opts.detect_with_gyro {
+        let rate = sliding_mean(&rec.gyro, w);
+        for ((r, g), m) in ratio.iter_mut().zip(axis_ratio(&gyro_var, &noise_g)).zip(&rate) {
+            *r = r.max(g);
+            if (0..3).any(|k| (m[k] - b_init[k]).abs() > window_limit[k]) {
+                *r = f64::INFINITY;
+            }
+        }
+    }
+
     // Threshold sweep: one calibration per multiplier; the most certain one is kept
     // (smallest ln det of the inflated accelerometer and gyro covariances): a strict
     // threshold drops poses and widens σ, a loose one lets the slow start and end of
@@ -532,7 +554,11 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         },
         initial_rest,
         multiplier,
-        threshold: multiplier * base,
+        thresholds: DetectionThresholds {
+            accel_variance: noise_a.map(|v| multiplier * v),
+            gyro_variance: noise_g.map(|v| multiplier * v),
+            window_rate: opts.detect_with_gyro.then_some(window_limit),
+        },
         ratio,
         intervals,
         static_intervals,
@@ -562,6 +588,22 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
 const TURN_SIGMAS: f64 = 30.0;
 /// Smallest such difference per axis \[rad/s\] for gyros read in SI units (3 °/s).
 const MIN_TURN_RATE: f64 = 0.05;
+
+/// Largest offset of a window's mean rate from the initial rest's per axis,
+/// from each axis's noise variance at rest (raw units²) and the window's
+/// length: [`TURN_SIGMAS`] standard errors of the window's mean, at least
+/// [`MIN_TURN_RATE`] for a gyro read in rad/s (the bias may move that much
+/// with temperature over a recording). A raw-count gyro, whose units are not
+/// known yet, keeps the interval's rule (`TURN_SIGMAS` per-sample σ).
+fn window_rate_limit(noise: &[f64; 3], w: usize, raw_counts: bool) -> [f64; 3] {
+    noise.map(|v| {
+        if raw_counts {
+            TURN_SIGMAS * v.sqrt()
+        } else {
+            (TURN_SIGMAS * (v / w as f64).sqrt()).max(MIN_TURN_RATE)
+        }
+    })
+}
 
 /// `intervals` without the steady turns (see [`TURN_SIGMAS`]).
 fn not_turning(
