@@ -150,6 +150,10 @@ pub struct Fit {
     pub parameters: usize,
     /// Per-parameter standard deviation of each effect (from the marginal covariance, scaled by max(1, χ²/dof)).
     pub effect_std: Vec<Vec<f64>>,
+    /// Wald statistic `θᵀ C⁻¹ θ` of each effect's parameters θ with their
+    /// marginal covariance C (not inflated): what the χ² drop on adding the
+    /// effect would be if the model were linear in it around the solution.
+    pub effect_wald: Vec<f64>,
     /// Bias random walks the fit was whitened with \[raw units/√s\].
     pub walks: Walks,
 }
@@ -234,6 +238,7 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
         dims,
         parameters,
         effect_std: Vec::new(),
+        effect_wald: Vec::new(),
         walks: noise.walks,
     };
     let inflation = (fit.chi2() / fit.dof() as f64).max(1.0);
@@ -246,6 +251,17 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
                 cov.get(*k)
                     .map(|c| (0..c.nrows()).map(|i| (c[(i, i)] * inflation).max(0.0).sqrt()).collect())
                     .unwrap_or_default()
+            })
+            .collect();
+        fit.effect_wald = keys
+            .iter()
+            .enumerate()
+            .map(|(j, k)| {
+                let theta = nalgebra::DVector::from_vec(fit.effect(j));
+                cov.get(*k)
+                    .and_then(|c| c.clone().pseudo_inverse(1e-300).ok())
+                    .map(|ci| (theta.transpose() * ci * &theta)[(0, 0)])
+                    .unwrap_or(f64::INFINITY)
             })
             .collect();
     }

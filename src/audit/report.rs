@@ -93,18 +93,29 @@ pub fn summary_table(a: &Audit) -> String {
     );
     let round = |s: &mut String, scores: &[super::CandidateScore]| {
         let w = scores.iter().map(|c| c.effect.len()).max().unwrap_or(0).max("candidate".len());
-        let _ = writeln!(s, "  {:<w$} {:>4} {:>10} {:>10} {:>10} {:>8}", "candidate", "dof", "Δχ²", "ΔBIC", "p", "gap");
+        let _ = writeln!(
+            s,
+            "  {:<w$} {:>4} {:>10} {:>10} {:>10} {:>10} {:>8}",
+            "candidate", "dof", "Δχ²", "Wald", "ΔBIC", "p", "gap"
+        );
         for c in scores {
             let _ = writeln!(
                 s,
-                "  {:<w$} {:>4} {:>10.1} {:>10.1} {:>10.2e} {:>8.3}{}",
+                "  {:<w$} {:>4} {:>10.1} {:>10.1} {:>10.1} {:>10.2e} {:>8.3}{}",
                 c.effect,
                 c.dof_added,
                 c.delta_chi2,
+                c.wald,
                 c.delta_bic,
                 c.p_value,
                 c.gap,
-                if c.significant { "  *" } else { "" }
+                if c.significant {
+                    "  *"
+                } else if !c.testable {
+                    "  (not testable: Δχ² and Wald disagree)"
+                } else {
+                    ""
+                }
             );
         }
     };

@@ -367,6 +367,8 @@ fn offset_score(e: Effect, m: &Minimum, threshold: f64) -> CandidateScore {
         delta_bic,
         gap: m.tally.gap(),
         significant: p_value < threshold && delta_bic > 0.0,
+        wald: m.t * m.t,
+        testable: true,
     }
 }
 
