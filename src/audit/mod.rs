@@ -498,7 +498,7 @@ pub fn audit_with_progress(
         }
         scores.sort_by(|a, b| b.delta_bic.total_cmp(&a.delta_bic));
         for c in scores.iter().filter(|c| !c.testable) {
-            let would = if c.effect.contains("_scale_") {
+            let would = if Effect::from_id(&c.effect).and_then(|e| e.nonlinearity()).is_some() {
                 "turns of different sizes and speeds, about other axes than the body's, would"
             } else {
                 "more varied poses and turns might"

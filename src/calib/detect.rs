@@ -41,7 +41,12 @@ pub fn quietest(score: &[f64]) -> Option<f64> {
 /// Norm of the per-axis variance over a window of `w` samples (odd) centred
 /// on each sample; `f64::INFINITY` where the window does not fit.
 pub fn sliding_variance_norm(x: &[[f64; 3]], w: usize) -> Vec<f64> {
-    sliding_variance(x, w).iter().map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt()).collect()
+    norms(&sliding_variance(x, w))
+}
+
+/// Norm of each per-axis variance of [`sliding_variance`] (∞ stays ∞).
+pub fn norms(var: &[[f64; 3]]) -> Vec<f64> {
+    var.iter().map(|v| v.iter().map(|x| x * x).sum::<f64>().sqrt()).collect()
 }
 
 /// Per-axis variance over a window of `w` samples (odd) centred on each

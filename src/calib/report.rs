@@ -266,7 +266,7 @@ impl CalibrationResult {
         let hi = pts.iter().map(|p| p.1).fold(f64::MIN, f64::max).max(th) + 0.2;
         let mut chart = ChartBuilder::on(&bottom)
             .caption(
-                format!("Windowed variance / initial variance; static below k = {}", self.multiplier),
+                format!("Windowed variance / rest variance, mean over axes; static below k = {}", self.multiplier),
                 ("sans-serif", 20),
             )
             .margin(12)

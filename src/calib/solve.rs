@@ -4,8 +4,8 @@
 //! the estimates and their covariances into the paper's convention.
 
 use super::detect::{
-    axis_noise, axis_ratio, find_initial_rest, intervals_below, mean3, quietest, sliding_mean, sliding_variance, var3,
-    InitialRest, Interval,
+    axis_noise, axis_ratio, find_initial_rest, intervals_below, mean3, norms, quietest, sliding_mean, sliding_variance,
+    var3, InitialRest, Interval,
 };
 use super::fit::*;
 use super::model::{ImuCalibration, Units};
@@ -45,8 +45,9 @@ pub struct CalibOptions {
     /// Fewest static intervals accepted (imu_tk: 12).
     pub min_intervals: usize,
     /// Require the gyro to be as still as the accelerometer (windowed variance
-    /// below `k` × its initial variance too). imu_tk uses the accelerometer only,
-    /// which counts the slow start and end of a turn as static.
+    /// below `k` × its initial variance too, and the window's mean rate near the
+    /// rest's). imu_tk uses the accelerometer only, which counts the slow start
+    /// and end of a turn as static.
     pub detect_with_gyro: bool,
 }
 
@@ -296,11 +297,11 @@ pub struct CalibrationResult {
     pub rotations: Vec<RotationResidual>,
     /// Sliding accelerometer variance norm per sample \[raw units²\] (∞ where the window does not fit).
     pub score: Vec<f64>,
-    /// Detection score per sample: the largest ratio of an axis's windowed variance
-    /// to its variance in the initial rest, over the accelerometer's and the gyro's
-    /// axes (accelerometer only without `detect_with_gyro`), ∞ where the window's mean
-    /// rate is beyond [`DetectionThresholds::window_rate`]; static where below the
-    /// multiplier.
+    /// Detection score per sample: each axis's windowed variance over its variance
+    /// in the initial rest, averaged over a triad's axes ([`super::detect::axis_ratio`]),
+    /// the larger of accelerometer and gyro (accelerometer only without
+    /// `detect_with_gyro`), ∞ where the window's mean rate is beyond
+    /// [`DetectionThresholds::window_rate`]; static where below the multiplier.
     pub ratio: Vec<f64>,
     /// Problems that did not stop the calibration.
     pub warnings: Vec<String>,
@@ -355,8 +356,6 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     let min_len = ((opts.min_interval_s / period).round() as usize).max(3);
 
     let (accel_var, gyro_var) = (sliding_variance(&rec.accel, w), sliding_variance(&rec.gyro, w));
-    let norms =
-        |v: &[[f64; 3]]| -> Vec<f64> { v.iter().map(|x| x.iter().map(|y| y * y).sum::<f64>().sqrt()).collect() };
     let (score, gyro_score) = (norms(&accel_var), norms(&gyro_var));
     let min_rest = ((MIN_INITIAL_REST_S / period).round() as usize).max(2 * w);
     let rest = match opts.init_static_s {
@@ -403,8 +402,8 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         ));
     }
     // Detection score: each axis's windowed variance over its own variance in the
-    // initial rest, the largest over the accelerometer's axes and the gyro's (the
-    // gyro catches slow turns the accelerometer hardly sees).
+    // initial rest, averaged over the triad's axes; the larger of accelerometer and
+    // gyro (the gyro catches slow turns the accelerometer hardly sees).
     let (noise_a, noise_g) = (axis_noise(&init_accel), axis_noise(&init_gyro));
     let mut ratio = axis_ratio(&accel_var, &noise_a);
     // A steady turn keeps the windowed variances low: an interval or a window whose
