@@ -7,6 +7,8 @@
 //! monotone warm-up; report structure it cannot name; estimate the walk; and
 //! refuse bad input with clear errors.
 
+mod common;
+
 use tumble::audit::trials::{run_trial, Case, Expect, NoiseMode};
 use tumble::audit::{audit, audit_with_progress, Audit, AuditOptions, Effect};
 use tumble::calib::{calibrate, CalibOptions, ImuCalibration};
@@ -329,4 +331,24 @@ fn demo_chain_finds_the_hidden_effect() {
     let flight = tumble::demo::DemoOptions { walk: tumble::sim::Scenario::Flight, ..opts };
     let e = tumble::demo::run(&flight, &dir, &mut |_| {}).expect_err("a flight is no walk").to_string();
     assert!(e.contains("room or a corridor"), "{e}");
+}
+
+/// imu_tk's Xsens sample (if the shared data is there): the g-sensitivity is
+/// found, and the accelerometer — whose readings drift inside the static
+/// intervals — is named where the gap left is reported, the gyro not.
+#[test]
+fn xsens_accelerometer_moves_inside_its_intervals() {
+    use tumble::audit::data::unsettled;
+    use tumble::io::recording::{Declared, RecordingSource};
+    let Some(dir) = common::shared("imu_tk_xsens") else { return };
+    let pair = Some((dir.join("xsens_acc.mat"), dir.join("xsens_gyro.mat")));
+    let rec = RecordingSource::new(None, pair, true, Default::default(), Declared::default()).unwrap().open().unwrap();
+    let cal = calibrate(&rec, &CalibOptions { gravity: 9.81744, ..Default::default() }).unwrap().calibration;
+    let a = audit(&rec, &cal, &AuditOptions::default()).unwrap();
+    assert_eq!(a.effects_added(), vec![Effect::GyroGSensitivity], "{}", a.verdict());
+    let found: Vec<&str> = unsettled(&a.data.within, a.alpha).iter().map(|w| w.reading.as_str()).collect();
+    eprintln!("{}", a.verdict());
+    assert!(found.contains(&"accel z") && found.contains(&"|accel|"), "{found:?}");
+    assert!(!found.iter().any(|r| r.starts_with("gyro")), "{found:?}");
+    assert!(a.verdict().contains("inside the static intervals the accel"), "{}", a.verdict());
 }

@@ -327,12 +327,30 @@ impl Audit {
                 excess(a).total_cmp(&excess(b))
             })
             .unwrap_or(0);
-        format!(
+        let head = format!(
             "it lies mostly in the {} residuals (χ²/n {:.2}) without structure against time, temperature, orientation \
-             or rate: noise above what the static intervals show (vibration, timing), or an effect outside the vocabulary",
+             or rate",
             names[worst],
             f.chi2_groups[worst] / f.dims[worst].max(1) as f64
-        )
+        );
+        // The readings whose restlessness inside the intervals reaches that group.
+        let reaches = |r: &str| match worst {
+            0 => r.starts_with("accel") || r.starts_with("|accel|"),
+            1 => r.starts_with("gyro"),
+            2 => !r.starts_with("|accel|"),
+            _ => true,
+        };
+        let unsettled: Vec<&data::WithinInterval> =
+            data::unsettled(&self.data.within, self.alpha).into_iter().filter(|w| reaches(&w.reading)).collect();
+        if unsettled.is_empty() {
+            format!("{head}: noise above what the static intervals show (vibration, timing), or an effect outside the vocabulary")
+        } else {
+            format!(
+                "{head}; inside the static intervals {}: the sensor settles after each turn, an interval is not quite \
+                 at rest, or its noise is not white over seconds",
+                data::describe(&unsettled)
+            )
+        }
     }
 }
 
@@ -385,6 +403,15 @@ pub fn audit_with_progress(
     let mut notes = Vec::new();
     let intervals = still_intervals(rec, &detected.intervals, &gyro, &gyro_bias, 0.5 * detection.window_s, &mut notes);
     let data = AuditData::new(rec, &intervals, calibration.gravity).map_err(|e| fail(e.to_string()))?;
+    let unsettled = data::unsettled(&data.within, opts.alpha);
+    if !unsettled.is_empty() {
+        notes.push(format!(
+            "inside the static intervals {} (the halves' means differ by that many times the variance the white \
+             noise gives): the sensor settles after each turn, an interval is not quite at rest, or its noise is \
+             not white over seconds; the intervals' means carry it as noise the model does not have",
+            data::describe(&unsettled)
+        ));
+    }
     // Random walks in raw units: physical ones times the sensor scale (raw per physical unit).
     let estimate = opts.noise.is_none();
     // Per axis when the noise file has them (tumble's `axes` block), else its one figure.

@@ -67,6 +67,7 @@ pub fn json(a: &Audit) -> serde_json::Value {
         "final_chi2_per_dof": fit.chi2() / fit.dof() as f64,
         "final_gap_p_value": fit.p_value(),
         "structure": a.structure,
+        "within_intervals": a.data.within,
         "random_walk_estimated": a.walks_estimated,
         "final_groups": groups,
         "last_round": a.last_round,
@@ -147,6 +148,20 @@ pub fn summary_table(a: &Audit) -> String {
             t.p_value,
             100.0 * t.share_of_gap,
             if t.significant { "  *" } else { "" }
+        );
+    }
+    let unsettled = super::data::unsettled(&a.data.within, a.alpha);
+    for w in &a.data.within {
+        let _ = writeln!(
+            s,
+            "  {:<18} {:<20} {:>5} {:>9.1} {:>10.2e} {:>8}{}",
+            w.reading,
+            "halves of intervals",
+            w.intervals,
+            w.ratio * w.intervals as f64,
+            w.p_value,
+            "",
+            if unsettled.contains(&w) { "  *" } else { "" }
         );
     }
     s
