@@ -127,8 +127,60 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "  white + walk fitted over τ ≥ {FIT_FROM_S} s (rad/s/√Hz, rad/s²/√Hz): x {}; y {}; z {}",
             fits[0], fits[1], fits[2]
         );
+        // Scale and misalignment: the error's means over 0.5 s blocks against
+        // the truth's rate (and a constant), per axis.
+        let (sm, rms) = scale_misalignment(&residual, &ds.imu.t, from, to, &mid, &rate);
+        println!(
+            "  error against the truth's rate (0.5 s means), scale x y z {:+.3} {:+.3} {:+.3} %, \
+             largest misalignment {:.3} %; RMS {:.1e} → {:.1e} rad/s",
+            100.0 * sm[(0, 0)],
+            100.0 * sm[(1, 1)],
+            100.0 * sm[(2, 2)],
+            100.0 * (0..9).filter(|i| i % 4 != 0).map(|i| sm[(i / 3, i % 3)].abs()).fold(0.0, f64::max),
+            rms.0,
+            rms.1
+        );
     }
     Ok(())
+}
+
+/// The gyro error `residual` (per axis, at the IMU stamps `t` within
+/// `[from, to]`) averaged over 0.5 s blocks and fitted as `M ω + c` against
+/// the truth's rate (`rate` at `mid`): `M` (scale on the diagonal,
+/// misalignment off it) and the blocks' RMS error before and after.
+fn scale_misalignment(
+    residual: &[Vec<f64>; 3],
+    t: &[f64],
+    from: f64,
+    to: f64,
+    mid: &[f64],
+    rate: &[[f64; 3]],
+) -> (nalgebra::Matrix3<f64>, (f64, f64)) {
+    let ts: Vec<f64> =
+        t.iter().copied().filter(|s| *s >= from.max(mid[0]) && *s <= to.min(mid[mid.len() - 1])).collect();
+    let per_block = ((0.5 / ((ts[ts.len() - 1] - ts[0]) / (ts.len() - 1) as f64)).round() as usize).max(1);
+    let mut rows: Vec<([f64; 4], [f64; 3])> = Vec::new();
+    for (b, chunk) in ts.chunks(per_block).enumerate().filter(|(_, c)| c.len() == per_block) {
+        let i0 = b * per_block;
+        let mean = |f: &dyn Fn(usize) -> f64| (0..chunk.len()).map(f).sum::<f64>() / chunk.len() as f64;
+        let w: [f64; 3] = std::array::from_fn(|a| mean(&|k| interp(mid, rate, chunk[k], a)));
+        let e: [f64; 3] = std::array::from_fn(|a| mean(&|k| residual[a][i0 + k]));
+        rows.push(([w[0], w[1], w[2], 1.0], e));
+    }
+    let x = nalgebra::DMatrix::from_fn(rows.len(), 4, |i, j| rows[i].0[j]);
+    let mut m = nalgebra::Matrix3::zeros();
+    let (mut before, mut after) = (0.0, 0.0);
+    for a in 0..3 {
+        let y = nalgebra::DVector::from_fn(rows.len(), |i, _| rows[i].1[a]);
+        let beta = x.clone().svd(true, true).solve(&y, 1e-12).unwrap_or_else(|_| nalgebra::DVector::zeros(4));
+        for c in 0..3 {
+            m[(a, c)] = beta[c];
+        }
+        before += y.norm_squared();
+        after += (&y - &x * &beta).norm_squared();
+    }
+    let n = (3 * rows.len()).max(1) as f64;
+    (m, ((before / n).sqrt(), (after / n).sqrt()))
 }
 
 /// The fit on a simulated series of known white density and walk (10 min
