@@ -11,7 +11,7 @@
 //! [--walk-scale G[,A]] [--only TEXT] [--out DIR] [--markdown]`
 //!
 //! `--only` runs the cases whose name contains TEXT; `--out` writes each
-//! case's files and figures (as `tumble vio` does) into DIR/<case>/.
+//! case's files and figures (as `tumble vio` does) into `DIR/<case>/`.
 //!
 //! Columns: ATE (position + yaw aligned), RPE over ~10 % of the path (mean
 //! translation error in % of the distance, rotation in degrees), rotation
