@@ -7,7 +7,7 @@
 
 use super::geometry::{parts, pose, preintegrate};
 use super::keyframe::{is_keyframe, FeatureMotion, FrameObs};
-use super::landmarks::{observation_factors, pixel_noise, Landmarks};
+use super::landmarks::{observation_factors, pixel_noise, Added, Landmarks};
 use super::marginalization::{marginalize_oldest, window_graph, ResidualTally};
 use super::noise_meter::{NoiseMeter, NoiseReport};
 use super::online_calib::{CameraEstimate, CameraPrior, EXTRINSIC, TIME_OFFSET};
@@ -289,9 +289,9 @@ impl<'a> Estimator<'a> {
         let zero_velocity = rest_since.is_some();
         let kf_t = self.window.states.last().map_or(t, |s| s.t);
         let keyframe = is_keyframe(&self.opts.window, par_kf, t - kf_t, common_kf, self.keyframe_obs.len());
-        self.watch_blindness(t, obs.len());
         self.window.push(State { sid, t, rest_since }, (predicted, vj, bl), (pim, scale));
-        self.add_observations(index, &obs);
+        let added = self.add_observations(index, &obs);
+        self.watch_blindness(t, obs.len(), added);
         self.rest.push(t, &obs, rj, &self.opts);
         // A frame at rest or a window with few landmarks still gets the full
         // solve: its zero-velocity prior or its IMU link is what holds the
@@ -388,15 +388,29 @@ impl<'a> Estimator<'a> {
         }
     }
 
-    /// Follow blind frames (fewer than [`BLIND_FEATURES`] features at time
-    /// `t`): a warning when vision is lost, the span when it returns.
-    fn watch_blindness(&mut self, t: f64, features: usize) {
-        match (&mut self.blind_since, features < BLIND_FEATURES) {
+    /// Follow blind frames at time `t`: fewer than [`BLIND_FEATURES`]
+    /// `features`, or as many observations of the window's landmarks of which
+    /// most, and all but fewer than that, disagree with the IMU's prediction
+    /// (`added`: the prediction gate kept them out; tracks not yet
+    /// triangulated do not place the frame). A warning when vision is lost,
+    /// the span when it returns.
+    fn watch_blindness(&mut self, t: f64, features: usize, added: Added) {
+        let kept_out = added.landmarks_seen - added.landmarks;
+        let rejected =
+            added.landmarks_seen >= BLIND_FEATURES && added.landmarks < BLIND_FEATURES && kept_out > added.landmarks;
+        match (&mut self.blind_since, features < BLIND_FEATURES || rejected) {
             (None, true) => {
                 self.blind_since = Some((t, 1));
-                self.warn(format!(
-                    "vision lost at {t:.3} s ({features} features, fewer than {BLIND_FEATURES}): IMU only until features return"
-                ));
+                let why = if features < BLIND_FEATURES {
+                    format!("{features} features, fewer than {BLIND_FEATURES}")
+                } else {
+                    format!(
+                        "{} of its {} observations of the window's landmarks lie beyond the {:.0} px prediction \
+                         gate: the IMU's prediction is off",
+                        kept_out, added.landmarks_seen, self.opts.gates.prediction_px
+                    )
+                };
+                self.warn(format!("vision lost at {t:.3} s ({why}): IMU only until features return"));
             }
             (Some((_, n)), true) => *n += 1,
             (Some(_), false) => {
@@ -600,9 +614,9 @@ impl<'a> Estimator<'a> {
     }
 
     /// Add frame `index`'s observations to the newest state.
-    fn add_observations(&mut self, index: usize, obs: &FrameObs) {
+    fn add_observations(&mut self, index: usize, obs: &FrameObs) -> Added {
         let sid = self.window.states.last().expect("state").sid;
-        self.landmarks.add_observations(self.input, index, sid, obs, &self.window.values, &self.opts);
+        self.landmarks.add_observations(self.input, index, sid, obs, &self.window.values, &self.opts)
     }
 
     /// The estimate of state `sid`; its σ from `covariances` (of the frame's

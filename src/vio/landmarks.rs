@@ -42,6 +42,17 @@ pub(crate) struct Track {
     pub landmark: Option<(u64, u64)>,
 }
 
+/// What [`Landmarks::add_observations`] did with a frame's features.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Added {
+    /// Observations of the window's landmarks in the frame.
+    pub landmarks_seen: usize,
+    /// Of those, added (within the prediction gate).
+    pub landmarks: usize,
+    /// Observations of tracks not yet triangulated, added.
+    pub tracks: usize,
+}
+
 /// The tracks of the window, by track id.
 #[derive(Debug, Default)]
 pub(crate) struct Landmarks {
@@ -206,7 +217,7 @@ impl Landmarks {
     /// landmark the predicted pose would see behind the camera, or farther
     /// than [`super::GateOptions::prediction_px`] from where it projects (a
     /// gross outlier, kept out of the solve), is skipped. Tracks no longer
-    /// seen and without a landmark are forgotten.
+    /// seen and without a landmark are forgotten. Returns what was added.
     pub fn add_observations(
         &mut self,
         input: &VioInput,
@@ -215,7 +226,7 @@ impl Landmarks {
         obs: &HashMap<u64, [f64; 2]>,
         values: &Values,
         opts: &VioOptions,
-    ) {
+    ) -> Added {
         // The second camera's matches in this frame that it can undistort,
         // when they go into the window.
         let stereo: HashMap<u64, [f64; 2]> = match (&input.stereo, opts.window.stereo) {
@@ -234,10 +245,12 @@ impl Landmarks {
             }
             _ => ExposureMotion::default(),
         };
+        let mut added = Added::default();
         for (id, uv) in &input.frames[index].features {
             let Some(&xy) = obs.get(id) else { continue };
             let tr = self.tracks.entry(*id).or_default();
             if tr.landmark.is_some() {
+                added.landmarks_seen += 1;
                 let Some(pw) = landmark_world(values, &body_from_camera, tr) else {
                     continue;
                 };
@@ -251,11 +264,17 @@ impl Landmarks {
                     _ => continue,
                 }
             }
+            if tr.landmark.is_some() {
+                added.landmarks += 1;
+            } else {
+                added.tracks += 1;
+            }
             let uv1 = stereo.get(id).copied();
             tr.obs.push(Obs { sid, uv: *uv, xy, uv1, motion });
         }
         let seen: HashSet<u64> = input.frames[index].features.iter().map(|f| f.0).collect();
         self.tracks.retain(|id, t| seen.contains(id) || t.landmark.is_some());
+        added
     }
 
     /// Triangulate tracks seen from two or more of the window's `states`
