@@ -338,7 +338,7 @@ fn demo_chain_finds_the_hidden_effect() {
 /// intervals — is named where the gap left is reported, the gyro not.
 #[test]
 fn xsens_accelerometer_moves_inside_its_intervals() {
-    use tumble::audit::data::unsettled;
+    use tumble::calib::detect::unsettled;
     use tumble::io::recording::{Declared, RecordingSource};
     let Some(dir) = common::shared("imu_tk_xsens") else { return };
     let pair = Some((dir.join("xsens_acc.mat"), dir.join("xsens_gyro.mat")));

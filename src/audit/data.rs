@@ -2,7 +2,7 @@
 //! of a calibration recording, with the temperature and time of every sample.
 
 use super::AuditError;
-use crate::calib::detect::{axis_noise, mean3, var3, Interval};
+use crate::calib::detect::{mean3, var3, Interval, WithinInterval};
 use crate::io::ImuRecording;
 use nalgebra::Vector3;
 use tumble_factors::imu_effects::{Context, MotionSamples};
@@ -121,129 +121,5 @@ impl AuditData {
             reference_temperature,
             reference_time,
         })
-    }
-}
-
-/// Whether a reading stays put inside the static intervals: its two halves'
-/// means against the white noise of its samples.
-///
-/// The audit weighs each interval's mean as `σ²/n`, white noise over `n`
-/// samples, and compares the means across intervals, where every candidate
-/// effect shows. Inside an interval no candidate varies, so a difference
-/// between the halves beyond the noise is something else: a sensor settling
-/// after the turn before, an interval not quite at rest, noise that is not
-/// white over seconds (flicker, a table that shakes). Its interval means then
-/// scatter more than `σ²/n`, a gap no effect in the vocabulary can explain.
-/// Per interval the halves of `h` samples differ by `d`, of variance `2σ²/h`
-/// under white noise; `T = Σ d²/(2σ²/h)` is χ² with one degree of freedom
-/// per interval. Each interval contributes its central stretch of the median
-/// interval's length (a long initial rest would otherwise measure the bias
-/// walk over tens of seconds), with `σ²` from [`axis_noise`] of that stretch
-/// (at least the quantization's).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
-pub struct WithinInterval {
-    /// What was measured: `gyro x`, `accel z`, `|accel|`.
-    pub reading: String,
-    /// `T / m`: how many times the white noise's variance the halves differ by (1 for white noise).
-    pub ratio: f64,
-    /// Intervals measured (`m`, the degrees of freedom).
-    pub intervals: usize,
-    /// Probability of a `T` at least this large under white noise.
-    pub p_value: f64,
-}
-
-impl WithinInterval {
-    /// The test on column `k` of `x` over `intervals`; `None` with fewer than
-    /// 8 intervals of 8 samples.
-    pub fn measure(reading: String, x: &[[f64; 3]], k: usize, intervals: &[Interval]) -> Option<WithinInterval> {
-        use statrs::distribution::{ChiSquared, ContinuousCDF};
-        let mut lens: Vec<usize> = intervals.iter().map(|iv| iv.len()).collect();
-        lens.sort_unstable();
-        let typical = lens.get(lens.len() / 2).copied().unwrap_or(0);
-        let (mut t, mut m) = (0.0, 0usize);
-        for iv in intervals {
-            let len = iv.len().min(typical) & !1;
-            if len < 8 {
-                continue;
-            }
-            let start = iv.start + (iv.len() - len) / 2;
-            let s = &x[start..start + len];
-            let h = len / 2;
-            let d = mean3(&s[..h])[k] - mean3(&s[h..])[k];
-            t += d * d / (2.0 * axis_noise(s)[k].max(1e-300) / h as f64);
-            m += 1;
-        }
-        (m >= 8).then(|| WithinInterval {
-            reading,
-            ratio: t / m as f64,
-            intervals: m,
-            p_value: ChiSquared::new(m as f64).map(|c| c.sf(t)).unwrap_or(1.0),
-        })
-    }
-}
-
-/// The tests of `within` significant at `alpha` after Bonferroni's correction
-/// over all of them.
-pub fn unsettled(within: &[WithinInterval], alpha: f64) -> Vec<&WithinInterval> {
-    let n = within.len().max(1) as f64;
-    within.iter().filter(|w| w.p_value < alpha / n).collect()
-}
-
-/// "the accel z moves 16.2× (p 1e-40), …" for a verdict or a note.
-pub fn describe(tests: &[&WithinInterval]) -> String {
-    let parts: Vec<String> =
-        tests.iter().map(|w| format!("the {} moves {:.1}× (p {:.1e})", w.reading, w.ratio, w.p_value)).collect();
-    parts.join(", ")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, StandardNormal};
-
-    /// 40 intervals of 300–700 samples of white noise (σ 2 on x), 50 samples of turn between them.
-    fn recording(seed: u64, drift: f64) -> (Vec<[f64; 3]>, Vec<Interval>) {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        let (mut x, mut intervals) = (Vec::new(), Vec::new());
-        for k in 0..40 {
-            let n = 300 + (k * 37) % 400;
-            let start = x.len();
-            for i in 0..n {
-                // A settling after the turn: an exponential of 2 s (200 samples) on x.
-                let settle = drift * (-(i as f64) / 200.0).exp() * if k % 2 == 0 { 1.0 } else { -1.0 };
-                let (e, f): (f64, f64) = (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
-                x.push([2.0 * e + settle, 0.5 * f, 1.0]);
-            }
-            intervals.push(Interval { start, end: x.len() });
-            x.extend((0..50).map(|_| [100.0, 100.0, 100.0]));
-        }
-        (x, intervals)
-    }
-
-    #[test]
-    fn white_noise_stays_put_and_a_settling_does_not() {
-        let mut rejected = 0;
-        for seed in 0..40 {
-            let (x, iv) = recording(seed, 0.0);
-            let t: Vec<WithinInterval> =
-                (0..2).filter_map(|k| WithinInterval::measure(format!("axis {k}"), &x, k, &iv)).collect();
-            assert_eq!(t.len(), 2);
-            assert!(t.iter().all(|w| w.intervals == 40 && (0.4..2.0).contains(&w.ratio)), "{t:?}");
-            rejected += unsettled(&t, 1e-2).len();
-            // A constant axis (one quantization step) is not flagged either.
-            let c = WithinInterval::measure("constant".into(), &x, 2, &iv).unwrap();
-            assert!(c.ratio == 0.0 && c.p_value == 1.0, "{c:?}");
-        }
-        // 80 tests at a 0.5 % level each (1 % over two): about 0.4 expected.
-        assert!(rejected <= 3, "{rejected} of 80 white-noise axes flagged");
-        // A settling of 0.5 σ at the start of each interval is found on x alone.
-        let (x, iv) = recording(1, 1.0);
-        let t: Vec<WithinInterval> =
-            (0..2).filter_map(|k| WithinInterval::measure(format!("axis {k}"), &x, k, &iv)).collect();
-        let found = unsettled(&t, 1e-3);
-        assert_eq!(found.len(), 1, "{t:?}");
-        assert_eq!(found[0].reading, "axis 0");
-        assert!(describe(&found).starts_with("the axis 0 moves"), "{}", describe(&found));
     }
 }

@@ -340,15 +340,18 @@ impl Audit {
             2 => !r.starts_with("|accel|"),
             _ => true,
         };
-        let unsettled: Vec<&data::WithinInterval> =
-            data::unsettled(&self.data.within, self.alpha).into_iter().filter(|w| reaches(&w.reading)).collect();
+        let unsettled: Vec<&crate::calib::detect::WithinInterval> =
+            crate::calib::detect::unsettled(&self.data.within, self.alpha)
+                .into_iter()
+                .filter(|w| reaches(&w.reading))
+                .collect();
         if unsettled.is_empty() {
             format!("{head}: noise above what the static intervals show (vibration, timing), or an effect outside the vocabulary")
         } else {
             format!(
                 "{head}; inside the static intervals {}: the sensor settles after each turn, an interval is not quite \
                  at rest, or its noise is not white over seconds",
-                data::describe(&unsettled)
+                crate::calib::detect::describe(&unsettled)
             )
         }
     }
@@ -403,13 +406,13 @@ pub fn audit_with_progress(
     let mut notes = Vec::new();
     let intervals = still_intervals(rec, &detected.intervals, &gyro, &gyro_bias, 0.5 * detection.window_s, &mut notes);
     let data = AuditData::new(rec, &intervals, calibration.gravity).map_err(|e| fail(e.to_string()))?;
-    let unsettled = data::unsettled(&data.within, opts.alpha);
+    let unsettled = crate::calib::detect::unsettled(&data.within, opts.alpha);
     if !unsettled.is_empty() {
         notes.push(format!(
             "inside the static intervals {} (the halves' means differ by that many times the variance the white \
              noise gives): the sensor settles after each turn, an interval is not quite at rest, or its noise is \
              not white over seconds; the intervals' means carry it as noise the model does not have",
-            data::describe(&unsettled)
+            crate::calib::detect::describe(&unsettled)
         ));
     }
     // Random walks in raw units: physical ones times the sensor scale (raw per physical unit).

@@ -150,7 +150,7 @@ pub fn summary_table(a: &Audit) -> String {
             if t.significant { "  *" } else { "" }
         );
     }
-    let unsettled = super::data::unsettled(&a.data.within, a.alpha);
+    let unsettled = crate::calib::detect::unsettled(&a.data.within, a.alpha);
     for w in &a.data.within {
         let _ = writeln!(
             s,

@@ -540,6 +540,16 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
             holds[holds.len() / 2]
         ));
     }
+    let stillness = super::detect::WithinInterval::measure_all(&rec.accel, &rec.gyro, &intervals);
+    let moving = super::detect::unsettled(&stillness, super::detect::STILLNESS_ALPHA);
+    if !moving.is_empty() {
+        warnings.push(format!(
+            "inside the static poses {} (the halves' means differ by that many times the variance the white noise \
+             gives): a pose not held still, or the sensor settling after each turn; the fits' χ²/dof, and so the σ, \
+             carry it",
+            super::detect::describe(&moving)
+        ));
+    }
     let not_determined =
         [names("accelerometer", &accel.not_determined), names("gyroscope", &gyro.not_determined)].concat();
     let mut result = CalibrationResult {
