@@ -102,14 +102,7 @@ impl AuditData {
                 v[v.len() / 2]
             })
         };
-        let norm: Vec<[f64; 3]> = rec.accel.iter().map(|a| [Vector3::from(*a).norm(), 0.0, 0.0]).collect::<Vec<_>>();
-        let mut within = Vec::new();
-        for (triad, x) in [("gyro", &rec.gyro), ("accel", &rec.accel)] {
-            for (k, axis) in ["x", "y", "z"].into_iter().enumerate() {
-                within.extend(WithinInterval::measure(format!("{triad} {axis}"), x, k, intervals));
-            }
-        }
-        within.extend(WithinInterval::measure("|accel|".into(), &norm, 0, intervals));
+        let within = WithinInterval::measure_all(&rec.accel, &rec.gyro, intervals);
         Ok(AuditData {
             gravity,
             statics,

@@ -1,7 +1,7 @@
-//! Static-interval detection (imu_tk's detector): a sample is static when the
-//! variance of the accelerometer over a window centred on it is below
-//! `k · σ²_init`, where `σ²_init` is the variance of the initial static period
-//! (both as the norm of the per-axis variance vector, in raw units²).
+//! Static-interval detection (after imu_tk's detector): a sample is static
+//! when the variance over a window centred on it, each axis in units of its
+//! own variance at rest ([`axis_noise`], [`axis_ratio`]), is below `k` times
+//! the rest's; and whether the intervals found were still ([`WithinInterval`]).
 
 /// A run of samples `[start, end)` (indices into the recording).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -269,56 +269,6 @@ pub fn find_initial_rest(
         .max_by_key(InitialRest::samples)
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn sliding_matches_direct() {
-        let x: Vec<[f64; 3]> =
-            (0..200).map(|i| [(i as f64 * 0.37).sin() * 5.0 + 3e4, (i as f64).sqrt(), (i % 7) as f64]).collect();
-        let s = sliding_variance_norm(&x, 11);
-        for c in 5..195 {
-            let d = variance_norm(&x[c - 5..=c + 5]);
-            assert!((s[c] - d).abs() < 1e-6 * d.max(1.0), "{c}: {} vs {d}", s[c]);
-        }
-        assert!(s[4].is_infinite() && s[195].is_infinite());
-    }
-
-    fn still(n: usize, level: f64, seed: u64) -> Vec<[f64; 3]> {
-        let mut state = seed;
-        let mut r = move || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * level
-        };
-        (0..n).map(|_| [r(), r(), 9.81 + r()]).collect()
-    }
-
-    #[test]
-    fn initial_rest_is_found_and_bridges_a_knock() {
-        // 1.5 s still, a knock (spike, no tilt), 1.5 s still, then 21 s of turning.
-        let mut a = still(300, 0.01, 1);
-        a[150] = [0.5, -0.4, 10.5];
-        a.extend((0..2100).map(|i| [9.81 * (i as f64 / 30.0).sin(), 0.0, 9.81]));
-        let g: Vec<[f64; 3]> = (0..a.len()).map(|i| [if i < 300 { 0.0 } else { (i as f64 / 7.0).cos() }; 3]).collect();
-        let (sa, sg) = (sliding_variance_norm(&a, 11), sliding_variance_norm(&g, 11));
-        let rest = find_initial_rest(&a, &g, &sa, &sg, 11, 100).unwrap();
-        assert!(rest.detected);
-        assert_eq!(rest.parts.len(), 2, "{rest:?}");
-        assert_eq!(rest.span().start, 0);
-        assert!((290..=300).contains(&rest.span().end), "{rest:?}");
-        // Nothing still and long enough early on.
-        assert!(find_initial_rest(&a, &g, &sa, &sg, 11, 400).is_none());
-    }
-
-    #[test]
-    fn runs() {
-        let s = [0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 5.0, 0.0];
-        assert_eq!(intervals_below(&s, 1.0, 2), vec![Interval { start: 0, end: 2 }, Interval { start: 3, end: 6 }]);
-        assert_eq!(intervals_below(&s, 1.0, 3), vec![Interval { start: 3, end: 6 }]);
-    }
-}
-
 /// Whether a reading stays put inside the static intervals: its two halves'
 /// means against the white noise of its samples.
 ///
@@ -408,6 +358,56 @@ pub fn describe(tests: &[&WithinInterval]) -> String {
     let parts: Vec<String> =
         tests.iter().map(|w| format!("the {} moves {:.1}× (p {:.1e})", w.reading, w.ratio, w.p_value)).collect();
     parts.join(", ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sliding_matches_direct() {
+        let x: Vec<[f64; 3]> =
+            (0..200).map(|i| [(i as f64 * 0.37).sin() * 5.0 + 3e4, (i as f64).sqrt(), (i % 7) as f64]).collect();
+        let s = sliding_variance_norm(&x, 11);
+        for c in 5..195 {
+            let d = variance_norm(&x[c - 5..=c + 5]);
+            assert!((s[c] - d).abs() < 1e-6 * d.max(1.0), "{c}: {} vs {d}", s[c]);
+        }
+        assert!(s[4].is_infinite() && s[195].is_infinite());
+    }
+
+    fn still(n: usize, level: f64, seed: u64) -> Vec<[f64; 3]> {
+        let mut state = seed;
+        let mut r = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * level
+        };
+        (0..n).map(|_| [r(), r(), 9.81 + r()]).collect()
+    }
+
+    #[test]
+    fn initial_rest_is_found_and_bridges_a_knock() {
+        // 1.5 s still, a knock (spike, no tilt), 1.5 s still, then 21 s of turning.
+        let mut a = still(300, 0.01, 1);
+        a[150] = [0.5, -0.4, 10.5];
+        a.extend((0..2100).map(|i| [9.81 * (i as f64 / 30.0).sin(), 0.0, 9.81]));
+        let g: Vec<[f64; 3]> = (0..a.len()).map(|i| [if i < 300 { 0.0 } else { (i as f64 / 7.0).cos() }; 3]).collect();
+        let (sa, sg) = (sliding_variance_norm(&a, 11), sliding_variance_norm(&g, 11));
+        let rest = find_initial_rest(&a, &g, &sa, &sg, 11, 100).unwrap();
+        assert!(rest.detected);
+        assert_eq!(rest.parts.len(), 2, "{rest:?}");
+        assert_eq!(rest.span().start, 0);
+        assert!((290..=300).contains(&rest.span().end), "{rest:?}");
+        // Nothing still and long enough early on.
+        assert!(find_initial_rest(&a, &g, &sa, &sg, 11, 400).is_none());
+    }
+
+    #[test]
+    fn runs() {
+        let s = [0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 5.0, 0.0];
+        assert_eq!(intervals_below(&s, 1.0, 2), vec![Interval { start: 0, end: 2 }, Interval { start: 3, end: 6 }]);
+        assert_eq!(intervals_below(&s, 1.0, 3), vec![Interval { start: 3, end: 6 }]);
+    }
 }
 
 #[cfg(test)]

@@ -49,8 +49,6 @@ pub(crate) struct Added {
     pub landmarks_seen: usize,
     /// Of those, added (within the prediction gate).
     pub landmarks: usize,
-    /// Observations of tracks not yet triangulated, added.
-    pub tracks: usize,
 }
 
 /// The tracks of the window, by track id.
@@ -266,8 +264,6 @@ impl Landmarks {
             }
             if tr.landmark.is_some() {
                 added.landmarks += 1;
-            } else {
-                added.tracks += 1;
             }
             let uv1 = stereo.get(id).copied();
             tr.obs.push(Obs { sid, uv: *uv, xy, uv1, motion });
