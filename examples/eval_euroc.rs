@@ -255,6 +255,7 @@ fn print_table(rows: &[(String, Summary)], markdown: bool) {
         "RPE %",
         "RPE °",
         "rot RMSE °",
+        "rot RMSE ° (orientations aligned)",
         "bias RMSE g, a",
         "÷ floor g, a",
         "NEES gyro x y z",
@@ -276,6 +277,7 @@ fn print_table(rows: &[(String, Summary)], markdown: bool) {
                 rpe.map_or("—".into(), |r| format!("{:.2}", r.trans_mean_percent)),
                 rpe.map_or("—".into(), |r| format!("{:.2}", r.rot_mean_deg)),
                 m.map_or("—".into(), |m| format!("{:.2}", m.rotation_rmse_deg)),
+                m.map_or("—".into(), |m| format!("{:.2}", m.rotation_rmse_oriented_deg)),
                 match (s.bias_rmse_gyro, s.bias_rmse_accel) {
                     (Some(g), Some(a)) => format!("{g:.1e}, {a:.3}"),
                     _ => "—".into(),

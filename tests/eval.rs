@@ -125,6 +125,28 @@ fn ate_equals_the_noise_put_in_and_rpe_sees_scale() {
     assert!(sim3.metrics.rpe.iter().all(|r| r.trans_rmse_m < 1e-9));
 }
 
+/// The rotation RMSE with the alignment's rotation from the orientations
+/// holds no alignment error: exact orientations under noisy positions give 0
+/// there, while the positions' alignment turns them by its own error.
+#[test]
+fn the_rotation_aligned_by_the_orientations_holds_no_alignment_error() {
+    let gt = groundtruth();
+    for (kind, r) in [
+        (Alignment::Se3, Rotation3::from_euler_angles(0.3, -0.2, 1.1)),
+        (Alignment::PosYaw, Rotation3::from_euler_angles(0.0, 0.0, -0.8)),
+    ] {
+        let est = moved(&gt, r, Vector3::new(1.0, 2.0, 0.0), 1.0, 0.3, 3);
+        let e = evaluate(&est, None, &gt, &EvalOptions { alignment: kind, ..Default::default() }).unwrap();
+        let m = &e.metrics;
+        println!(
+            "{kind:?}: rotation RMSE {:.4}°, aligned by the orientations {:.2e}°",
+            m.rotation_rmse_deg, m.rotation_rmse_oriented_deg
+        );
+        assert!(m.rotation_rmse_oriented_deg < 1e-6, "{kind:?}: {}", m.rotation_rmse_oriented_deg);
+        assert!(m.rotation_rmse_deg > 1e-3, "{kind:?}: {}", m.rotation_rmse_deg);
+    }
+}
+
 #[test]
 fn bias_errors_against_the_ground_truth_columns() {
     let gt = groundtruth();
