@@ -108,39 +108,33 @@ pub fn align(est: &[Vector3<f64>], gt: &[Vector3<f64>], kind: Alignment) -> Resu
     let (ce, cg) = (centroid(est), centroid(gt));
     let n = est.len() as f64;
     let extent = est.iter().map(|p| (p - ce).norm()).fold(0.0, f64::max);
+    let mut cov = Matrix3::zeros();
+    let (mut var_e, mut horizontal) = (0.0, 0.0f64);
+    for (e, g) in est.iter().zip(gt) {
+        let (e, g) = (e - ce, g - cg);
+        cov += g * e.transpose();
+        var_e += e.norm_squared();
+        horizontal = horizontal.max(e.xy().norm());
+    }
+    cov /= n;
+    var_e /= n;
     if kind == Alignment::PosYaw {
-        let (mut s, mut c, mut horizontal) = (0.0, 0.0, 0.0f64);
-        for (e, g) in est.iter().zip(gt) {
-            let (e, g) = (e - ce, g - cg);
-            s += e.x * g.y - e.y * g.x;
-            c += e.x * g.x + e.y * g.y;
-            horizontal = horizontal.max(e.xy().norm());
-        }
+        // The sine and cosine sums of the yaw ([`best_yaw`]).
+        let (s, c) = (cov[(1, 0)] - cov[(0, 1)], cov[(0, 0)] + cov[(1, 1)]);
         if horizontal <= 1e-9 * extent.max(1e-3) || (s == 0.0 && c == 0.0) {
             return Err("degenerate geometry: the estimate does not move horizontally, its yaw cannot be aligned \
                         (use --align none)"
                 .into());
         }
-        let rotation = Rotation3::from_axis_angle(&Vector3::z_axis(), s.atan2(c));
+        let rotation = Rotation3::from_axis_angle(&Vector3::z_axis(), best_yaw(&cov));
         return Ok(Similarity { rotation, translation: cg - rotation * ce, scale: 1.0 });
     }
-    let mut cov = Matrix3::zeros();
-    let mut var_e = 0.0;
-    for (e, g) in est.iter().zip(gt) {
-        let (e, g) = (e - ce, g - cg);
-        cov += g * e.transpose();
-        var_e += e.norm_squared();
-    }
-    cov /= n;
-    var_e /= n;
-    let svd = cov.svd(true, true);
-    let (u, v_t) = match (svd.u, svd.v_t) {
-        (Some(u), Some(v_t)) => (u, v_t),
-        _ => return Err("alignment: SVD did not converge".into()),
+    let Some((rotation, singular, d)) = best_rotation(&cov) else {
+        return Err("alignment: SVD did not converge".into());
     };
-    let mut sv: Vec<(usize, f64)> = svd.singular_values.iter().copied().enumerate().collect();
-    sv.sort_by(|a, b| b.1.total_cmp(&a.1));
-    if sv[0].1.is_nan() || sv[0].1 <= 0.0 || sv[1].1 <= 1e-10 * sv[0].1 {
+    let mut sv: Vec<f64> = singular.iter().copied().collect();
+    sv.sort_by(|a, b| b.total_cmp(a));
+    if sv[0].is_nan() || sv[0] <= 0.0 || sv[1] <= 1e-10 * sv[0] {
         return Err(format!(
             "degenerate geometry: the positions are (nearly) collinear, so a {} alignment is not determined \
              (use --align posyaw or none)",
@@ -148,19 +142,35 @@ pub fn align(est: &[Vector3<f64>], gt: &[Vector3<f64>], kind: Alignment) -> Resu
         )
         .into());
     }
-    let mut d = Matrix3::identity();
-    if (u.determinant() * v_t.determinant()) < 0.0 {
-        // Flip the axis of the smallest singular value.
-        d[(sv[2].0, sv[2].0)] = -1.0;
-    }
-    let rotation = Rotation3::from_matrix_unchecked(u * d * v_t);
     let scale = if kind == Alignment::Sim3 {
         if var_e <= 1e-18 {
             return Err("degenerate geometry: the estimate does not move, its scale is not determined".into());
         }
-        (svd.singular_values.component_mul(&d.diagonal())).sum() / var_e
+        singular.component_mul(&d).sum() / var_e
     } else {
         1.0
     };
     Ok(Similarity { rotation, translation: cg - rotation * ce * scale, scale })
+}
+
+/// The rotation `R` that maximizes `tr(Rᵀ M)` (Wahba's problem; Kabsch,
+/// Umeyama): `U D Vᵀ` from the SVD `M = U Σ Vᵀ`, where `D` flips the axis of
+/// the smallest singular value when `det(U Vᵀ) < 0`. Also `Σ` and `D`'s
+/// diagonal (Umeyama's scale is `Σ·D` over the variance); None when the SVD
+/// does not converge.
+pub fn best_rotation(m: &Matrix3<f64>) -> Option<(Rotation3<f64>, Vector3<f64>, Vector3<f64>)> {
+    let svd = m.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut d = Vector3::repeat(1.0);
+    if (u.determinant() * v_t.determinant()) < 0.0 {
+        d[svd.singular_values.imin()] = -1.0;
+    }
+    let rotation = Rotation3::from_matrix_unchecked(u * Matrix3::from_diagonal(&d) * v_t);
+    Some((rotation, svd.singular_values, d))
+}
+
+/// The angle \[rad\] of the rotation about the vertical that maximizes
+/// `tr(Rᵀ M)`: `atan2(M₁₀ − M₀₁, M₀₀ + M₁₁)`.
+pub fn best_yaw(m: &Matrix3<f64>) -> f64 {
+    (m[(1, 0)] - m[(0, 1)]).atan2(m[(0, 0)] + m[(1, 1)])
 }

@@ -30,7 +30,7 @@
 mod align;
 mod report;
 
-pub use align::{align, Alignment, Similarity};
+pub use align::{align, best_rotation, best_yaw, Alignment, Similarity};
 pub use report::write_report;
 
 use crate::io::biases::BiasTrack;
@@ -435,31 +435,18 @@ fn compare_biases(
 }
 
 /// The rotation (ground truth ← estimate) that best aligns the paired
-/// orientations in the chordal sense, `argmax_A tr(Aᵀ Σ R_gt R_estᵀ)`: the
-/// nearest rotation to that sum (SVD); about the vertical alone for
-/// [`Alignment::PosYaw`] (the angle `atan2(M₁₀ − M₀₁, M₀₀ + M₁₁)`); the
-/// identity for [`Alignment::None`].
+/// orientations in the chordal sense, `argmax_A tr(Aᵀ Σ R_gt R_estᵀ)`
+/// ([`best_rotation`]); about the vertical alone for
+/// [`Alignment::PosYaw`] ([`best_yaw`]); the identity for
+/// [`Alignment::None`] or when the SVD does not converge.
 pub fn orientation_alignment(pairs: &[Pair], kind: Alignment) -> UnitQuaternion<f64> {
     let m: nalgebra::Matrix3<f64> =
         pairs.iter().map(|p| (p.gt.rotation * p.est.rotation.inverse()).to_rotation_matrix().into_inner()).sum();
     match kind {
         Alignment::None => UnitQuaternion::identity(),
-        Alignment::PosYaw => {
-            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), (m[(1, 0)] - m[(0, 1)]).atan2(m[(0, 0)] + m[(1, 1)]))
-        }
-        Alignment::Se3 | Alignment::Sim3 => {
-            let svd = m.svd(true, true);
-            match (svd.u, svd.v_t) {
-                (Some(u), Some(v_t)) => {
-                    let mut d = nalgebra::Matrix3::identity();
-                    if (u * v_t).determinant() < 0.0 {
-                        d[(2, 2)] = -1.0;
-                    }
-                    UnitQuaternion::from_matrix(&(u * d * v_t))
-                }
-                _ => UnitQuaternion::identity(),
-            }
-        }
+        Alignment::PosYaw => UnitQuaternion::from_axis_angle(&Vector3::z_axis(), align::best_yaw(&m)),
+        Alignment::Se3 | Alignment::Sim3 => align::best_rotation(&m)
+            .map_or_else(UnitQuaternion::identity, |(r, _, _)| UnitQuaternion::from_rotation_matrix(&r)),
     }
 }
 

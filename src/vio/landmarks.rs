@@ -261,8 +261,6 @@ impl Landmarks {
                     Some(p) if (p[0] - uv[0]).hypot(p[1] - uv[1]) <= gate => {}
                     _ => continue,
                 }
-            }
-            if tr.landmark.is_some() {
                 added.landmarks += 1;
             }
             let uv1 = stereo.get(id).copied();
