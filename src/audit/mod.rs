@@ -349,9 +349,9 @@ impl Audit {
             format!("{head}: noise above what the static intervals show (vibration, timing), or an effect outside the vocabulary")
         } else {
             format!(
-                "{head}; inside the static intervals {}: the sensor settles after each turn, an interval is not quite \
-                 at rest, or its noise is not white over seconds",
-                crate::calib::detect::describe(&unsettled)
+                "{head}; inside the static intervals {}: {}",
+                crate::calib::detect::describe(&unsettled),
+                crate::calib::detect::UNSETTLED_CAUSES
             )
         }
     }
@@ -410,9 +410,9 @@ pub fn audit_with_progress(
     if !unsettled.is_empty() {
         notes.push(format!(
             "inside the static intervals {} (the halves' means differ by that many times the variance the white \
-             noise gives): the sensor settles after each turn, an interval is not quite at rest, or its noise is \
-             not white over seconds; the intervals' means carry it as noise the model does not have",
-            crate::calib::detect::describe(&unsettled)
+             noise gives): {}; the intervals' means carry it as noise the model does not have",
+            crate::calib::detect::describe(&unsettled),
+            crate::calib::detect::UNSETTLED_CAUSES
         ));
     }
     // Random walks in raw units: physical ones times the sensor scale (raw per physical unit).

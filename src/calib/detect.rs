@@ -342,6 +342,10 @@ impl WithinInterval {
     }
 }
 
+/// What a significant [`WithinInterval`] test means, for a warning or a verdict.
+pub const UNSETTLED_CAUSES: &str =
+    "the sensor settles after each turn, a pose is not quite still, or its noise is not white over seconds";
+
 /// The level at which `tumble calibrate` reports poses that were not still
 /// (the audit's default `--alpha`).
 pub const STILLNESS_ALPHA: f64 = 1e-3;

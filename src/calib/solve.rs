@@ -545,9 +545,9 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     if !moving.is_empty() {
         warnings.push(format!(
             "inside the static poses {} (the halves' means differ by that many times the variance the white noise \
-             gives): a pose not held still, or the sensor settling after each turn; the fits' χ²/dof, and so the σ, \
-             carry it",
-            super::detect::describe(&moving)
+             gives): {}; the fits' χ²/dof, and so the σ, carry it",
+            super::detect::describe(&moving),
+            super::detect::UNSETTLED_CAUSES
         ));
     }
     let not_determined =
