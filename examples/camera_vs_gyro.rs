@@ -28,16 +28,16 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use std::path::PathBuf;
+use tumble::aid::{TARGET_TRUTH_MAX_RMS_PX, TARGET_TRUTH_MIN_CORNERS};
 use tumble::rig::init::refine_view_pose;
 use tumble::rig::input::View;
 use tumble::rig::{calibrate_rig, RigInput, RigOptions};
 use tumble_factors::camera::CameraModel;
 
-/// Largest RMS reprojection of a frame's PnP pose \[px\] (as the PnP ground truth of `eval_euroc`).
-const MAX_RMS_PX: f64 = 2.0;
-
-/// Fewest corners for a frame's PnP pose.
-const MIN_CORNERS: usize = 20;
+/// Largest RMS reprojection of a frame's PnP pose \[px\]: twice the PnP
+/// ground truth's ([`TARGET_TRUTH_MAX_RMS_PX`]), so that a camera model that
+/// is off, whose residuals are larger, still gets its frames posed.
+const MAX_RMS_PX: f64 = 2.0 * TARGET_TRUTH_MAX_RMS_PX;
 
 /// Time between a pair's two frames \[s\]: the rotation grows with it while
 /// the frames' PnP errors do not (the gyro's over it stays far below them).
@@ -110,7 +110,7 @@ fn fit(
 ) -> Result<Fit, Box<dyn std::error::Error>> {
     // Body orientation (target ← body) per posed frame, by time [s on the IMU's axis].
     let mut posed: Vec<(f64, UnitQuaternion<f64>)> = Vec::new();
-    for v in views.iter().filter(|v| v.corners.len() >= MIN_CORNERS) {
+    for v in views.iter().filter(|v| v.corners.len() >= TARGET_TRUTH_MIN_CORNERS) {
         let Some((t_ct, rms)) = refine_view_pose(v, model) else { continue };
         if rms > MAX_RMS_PX {
             continue;
