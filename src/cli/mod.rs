@@ -210,6 +210,8 @@ mod tests {
                 "--estimate-extrinsics",
                 "--estimate-time-offset",
             ],
+            &["vio", "v", "--out", "o", "--estimate-extrinsics", "auto", "--estimate-time-offset", "off"],
+            &["vio", "v", "--estimate-time-offset", "--out", "o"],
             &["vio", "v", "--out", "o", "--rig", "rig/"],
             &["vio", "--print-config"],
             &["track", "v", "--out", "o", "--stereo"],

@@ -4,7 +4,7 @@ use super::common::{open_vio, paths, progress_bar, FrontendArgs};
 use super::CliResult;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
-use tumble::vio::{ImuNoise, Init, NoiseSource, VioOptions};
+use tumble::vio::{Estimate, ImuNoise, Init, NoiseSource, VioOptions};
 
 /// `tumble vio --init`: how the first state is found.
 #[derive(Clone, Copy, ValueEnum)]
@@ -23,6 +23,28 @@ impl From<InitArg> for Init {
             InitArg::Auto => Init::Auto,
             InitArg::Static => Init::Static,
             InitArg::Motion => Init::Motion,
+        }
+    }
+}
+
+/// `tumble vio --estimate-extrinsics` / `--estimate-time-offset`: how.
+#[derive(Clone, Copy, ValueEnum)]
+pub enum EstimateArg {
+    /// Held at the given value.
+    Off,
+    /// Estimated in the window (held for its first window's length).
+    On,
+    /// Estimated once the motion determines it (σ below half its prior's);
+    /// held at the given value until then, and said so if never.
+    Auto,
+}
+
+impl From<EstimateArg> for Estimate {
+    fn from(a: EstimateArg) -> Estimate {
+        match a {
+            EstimateArg::Off => Estimate::Off,
+            EstimateArg::On => Estimate::On,
+            EstimateArg::Auto => Estimate::Auto,
         }
     }
 }
@@ -92,13 +114,16 @@ pub struct EstimatorArgs {
     /// Estimate cam0's pose in the IMU frame (T_BC) in the window, starting
     /// from the given one under a prior of camera.rotation_sigma_deg (5°) and
     /// camera.translation_sigma_m (5 cm); needs rotation about several axes.
-    /// Held until a window's length of keyframes has left the window.
-    #[arg(long)]
-    pub estimate_extrinsics: bool,
+    /// Held until a window's length of keyframes has left the window; with
+    /// `auto`, until the motion determines it (see docs/vio.md). The flag
+    /// alone means `on`.
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "on", value_name = "on|auto|off")]
+    pub estimate_extrinsics: Option<EstimateArg>,
     /// Estimate the camera–IMU time offset (t_imu = t_cam + td) in the
-    /// window, from 0 under a prior of camera.time_offset_sigma_s (20 ms).
-    #[arg(long)]
-    pub estimate_time_offset: bool,
+    /// window, from 0 under a prior of camera.time_offset_sigma_s (20 ms);
+    /// `auto` as for `--estimate-extrinsics`. The flag alone means `on`.
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "on", value_name = "on|auto|off")]
+    pub estimate_time_offset: Option<EstimateArg>,
 }
 
 impl EstimatorArgs {
@@ -123,11 +148,11 @@ impl EstimatorArgs {
         o.window.stereo |= self.stereo_window;
         o.noise.from_static |= self.noise_from_static;
         o.noise.measure_in_motion &= !self.fixed_noise;
-        if self.estimate_extrinsics {
-            o.camera.extrinsics = tumble::vio::Estimate::On;
+        if let Some(e) = self.estimate_extrinsics {
+            o.camera.extrinsics = e.into();
         }
-        if self.estimate_time_offset {
-            o.camera.time_offset = tumble::vio::Estimate::On;
+        if let Some(e) = self.estimate_time_offset {
+            o.camera.time_offset = e.into();
         }
         if self.zoh {
             o.noise.imu.scheme = tumble::factors::imu_preint::Scheme::ZeroOrderHold;

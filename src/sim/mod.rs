@@ -365,6 +365,27 @@ pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Sim
     simulate_with(scenario, config, seed, &mut |_, _| {})
 }
 
+/// A motion of one's own (`motion`, e.g. [`Loop::planar`]) through `scene`,
+/// recorded by `config`'s IMU and camera as a scenario's would be: its
+/// ground truth at the IMU's rate over 2 (as the walk's), no still
+/// intervals. `scenario` only labels it. Deterministic in `seed`.
+pub fn simulate_motion(
+    scenario: Scenario,
+    motion: Box<dyn Motion>,
+    scene: Scene,
+    config: &SimConfig,
+    seed: u64,
+) -> Result<Simulation, SimError> {
+    config.check()?;
+    let imu = simulate_imu(motion.as_ref(), &config.imu, config.gravity, seed, 2);
+    let tracks = Some(camera::simulate_tracks(motion.as_ref(), &config.camera, &scene, seed));
+    let centre = match scene {
+        Scene::Room(c) => c,
+        Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
+    };
+    Ok(Simulation { scenario, seed, config: config.clone(), motion, centre, imu, tracks, static_intervals: Vec::new() })
+}
+
 /// Largest acceleration a walk or flight may reach \[m/s²\] (4 g): the loops
 /// are time-scaled to their duration, so a short one shakes harder, and beyond
 /// this it is no longer a hand-held or flying motion.

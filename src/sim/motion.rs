@@ -335,6 +335,13 @@ impl Loop {
         let rot = Harmonics::random(&mut rng, period, &cycles(1.1), rotation);
         Loop { duration, rest_s: 3.0, ramp_s: 2.0, centre: Vector3::zeros(), r0: Matrix3::identity(), pos, rot }
     }
+    /// A ground robot's motion: [`Loop::target_wave_with`] within ±0.6 m in
+    /// the horizontal plane, turning about the vertical only (up to about
+    /// ±1 rad), at a fixed height. A camera–IMU translation along the
+    /// vertical is unobservable from it.
+    pub fn planar(duration: f64, seed: u64) -> Loop {
+        Loop::target_wave_with(duration, seed, Vector3::new(0.6, 0.6, 0.0), Vector3::new(0.0, 0.0, 1.0))
+    }
     /// An EuRoC-like flight: a few metres in a room, faster and with larger yaw.
     pub fn flight(duration: f64, seed: u64) -> Loop {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x666c7900);

@@ -314,7 +314,7 @@ impl<'a> Estimator<'a> {
         if let Some(c) = &self.window.camera {
             c.free(&mut self.window.values, free_camera);
         }
-        let graph = window_graph(&self.window, &self.landmarks, self.input, &self.opts);
+        let mut graph = window_graph(&self.window, &self.landmarks, self.input, &self.opts);
         // The σ of the new state, from the solve's own last linearization;
         // and of the states of the link that leaves the window, to measure the noise.
         let leaving = keyframe && self.window.states.len() > self.opts.window.size;
@@ -356,6 +356,9 @@ impl<'a> Estimator<'a> {
         if let Some(why) = failure {
             return self.recover(index, &why, (predicted, vj, bl), obs, t_start);
         }
+        if keyframe && free_camera {
+            self.probe_camera(t, &mut graph);
+        }
         self.window.reintegrate_if_needed();
         self.landmarks.reject_outliers(self.input, &mut self.window.values, &self.opts);
         let est = self.estimate(sid, keyframe, t_start, covariances.as_ref());
@@ -377,6 +380,18 @@ impl<'a> Estimator<'a> {
             self.drop_newest();
         }
         Some(est)
+    }
+
+    /// Whether the keyframe solved at time `t` (its window's `graph`, whose
+    /// calibration priors the probe replaces)
+    /// determines the calibration parameters estimated `auto` that are still
+    /// held: those it does are freed from the next keyframe on (the summary's
+    /// camera line says when).
+    fn probe_camera(&mut self, t: f64, graph: &mut Graph) {
+        let Some(c) = self.window.camera.as_mut() else { return };
+        if let Err(e) = c.probe(t, graph, &self.window.values) {
+            self.warn(format!("at {t:.3} s the camera calibration's covariance was not recovered ({e})"));
+        }
     }
 
     /// Marginalize the oldest state; on failure, warn and restart the window from its newest state.

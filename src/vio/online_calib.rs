@@ -10,14 +10,16 @@
 //! length of keyframes is in the prior, and after an estimate that
 //! `CameraPrior::implausible` rejects.
 
+use super::auto_calib::HeldDirections;
 use super::geometry::{parts, pose};
 use super::ImuData;
 use super::{Estimate, VioInput, VioOptions};
-use nalgebra::{Matrix3, Vector1, Vector3, Vector6};
+use crate::calib::observability::DETERMINED_FRACTION;
+use nalgebra::{DMatrix, Matrix3, Vector1, Vector3, Vector6};
 use tumble_factors::reprojection::ExposureMotion;
 use tumble_factors::PriorFactor;
 use tumble_solvers::sophus_lie::Isometry3F64;
-use tumble_solvers::{Covariances, Graph, Key, NoiseModel, Values};
+use tumble_solvers::{Covariances, Graph, Key, NoiseModel, SolveError, Values};
 
 /// Key of the first camera's pose in the IMU frame `T_BC` (SE(3)).
 pub(crate) const EXTRINSIC: Key = Key::new('c', 0);
@@ -43,10 +45,53 @@ pub struct CameraEstimate {
     pub rotation_change_deg: f64,
     /// Distance from the given `T_BC`'s translation to the estimate's \[m\].
     pub translation_change_m: f64,
-    /// Whether `T_BC` was estimated.
+    /// Whether `T_BC` was estimated (`on`, or `auto` once determined).
     pub extrinsics_estimated: bool,
-    /// Whether `td` was estimated.
+    /// Whether `td` was estimated (as above).
     pub time_offset_estimated: bool,
+    /// With `auto`: whether and when the motion determined `T_BC`.
+    pub extrinsics_auto: Option<AutoOutcome>,
+    /// With `auto`: whether and when the motion determined `td`.
+    pub time_offset_auto: Option<AutoOutcome>,
+}
+
+/// What `auto` ([`Estimate::Auto`]) decided for one online parameter.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AutoOutcome {
+    /// When the motion first determined a direction of it \[s\] (estimated
+    /// from then on); None: never, it was held at the given value throughout.
+    pub freed_at_s: Option<f64>,
+    /// When every direction was determined \[s\].
+    pub determined_at_s: Option<f64>,
+    /// The directions still not determined at the end, held at the given
+    /// value: each named by its largest components (rotation about the
+    /// camera's axes, translation along them, in the prior's σ units) with
+    /// the σ the data and the prior give it, as a fraction of the prior's.
+    pub held: Vec<(String, f64)>,
+}
+
+impl AutoOutcome {
+    /// What stayed held, for the terminal; None when nothing did.
+    fn held(&self, what: &str) -> Option<String> {
+        if self.held.is_empty() {
+            return None;
+        }
+        let list: Vec<String> = self.held.iter().map(|(d, f)| format!("{d} (σ {f:.2} of its prior's)")).collect();
+        Some(format!(
+            "{what} not determined by this motion along {}, where a σ below {DETERMINED_FRACTION:.2} of the prior's is \
+             needed: held at the given value there",
+            list.join(", ")
+        ))
+    }
+
+    /// When it was estimated, for the terminal.
+    fn when(&self) -> String {
+        match (self.freed_at_s, self.determined_at_s) {
+            (_, Some(t)) => format!(" (auto: determined at {t:.2} s)"),
+            (Some(t), None) => format!(" (auto: partly determined from {t:.2} s)"),
+            _ => String::new(),
+        }
+    }
 }
 
 impl CameraEstimate {
@@ -63,25 +108,30 @@ impl CameraEstimate {
     /// One line for the terminal: what was estimated, its σ and how far it moved from the given values.
     pub fn line(&self) -> String {
         let mut parts = Vec::new();
+        let auto = |o: &Option<AutoOutcome>| o.as_ref().map_or(String::new(), AutoOutcome::when);
+        parts.extend(self.extrinsics_auto.as_ref().and_then(|o| o.held("T_BC")));
+        parts.extend(self.time_offset_auto.as_ref().and_then(|o| o.held("the time offset")));
         if self.extrinsics_estimated {
             let [a, b, c] = self.rotation_sigma_deg;
             let [x, y, z] = self.translation_sigma_m.map(|s| s * 1e3);
             let t = self.translation;
             parts.push(format!(
                 "T_BC translation [{:.4}, {:.4}, {:.4}] m (σ {x:.1} {y:.1} {z:.1} mm), rotation σ {a:.3} {b:.3} {c:.3}°; \
-                 moved {:.3}° and {:.1} mm from the given",
+                 moved {:.3}° and {:.1} mm from the given{}",
                 t[0],
                 t[1],
                 t[2],
                 self.rotation_change_deg,
-                self.translation_change_m * 1e3
+                self.translation_change_m * 1e3,
+                auto(&self.extrinsics_auto)
             ));
         }
         if self.time_offset_estimated {
             parts.push(format!(
-                "time offset {:.2} ms (σ {:.2} ms, t_imu = t_cam + offset)",
+                "time offset {:.2} ms (σ {:.2} ms, t_imu = t_cam + offset){}",
                 self.time_offset_s * 1e3,
-                self.time_offset_sigma_s * 1e3
+                self.time_offset_sigma_s * 1e3,
+                auto(&self.time_offset_auto)
             ));
         }
         format!(
@@ -91,15 +141,21 @@ impl CameraEstimate {
     }
 }
 
-/// The prior of the online calibration: the given values and their σ.
+/// The prior of the online calibration: the given values and their σ, and,
+/// for a parameter estimated `auto`, when the recording was found to determine it.
 #[derive(Debug, Clone)]
 pub(crate) struct CameraPrior {
     body_from_camera: Isometry3F64,
     pose_sigma: [f64; 6],
     td_sigma: f64,
-    extrinsics: bool,
-    time_offset: bool,
+    /// How `T_BC` and `td` are estimated (in the order of [`GROUPS`]).
+    modes: [Estimate; 2],
+    /// `auto`: the directions of each the recording has not determined yet.
+    auto: [Option<HeldDirections>; 2],
 }
+
+/// The online parameters' keys: `T_BC`, then `td`.
+const GROUPS: [Key; 2] = [EXTRINSIC, TIME_OFFSET];
 
 impl CameraPrior {
     /// The prior for `input` under `opts`; None when nothing is estimated.
@@ -114,9 +170,54 @@ impl CameraPrior {
             body_from_camera: input.body_from_camera,
             pose_sigma: [r, r, r, t, t, t],
             td_sigma: c.time_offset_sigma_s,
-            extrinsics: c.extrinsics == Estimate::On,
-            time_offset: c.time_offset == Estimate::On,
+            modes: [c.extrinsics, c.time_offset],
+            auto: [(c.extrinsics, 6), (c.time_offset, 1)]
+                .map(|(m, dim)| (m == Estimate::Auto).then(|| HeldDirections::all(dim))),
         })
+    }
+
+    /// Whether group `g` of [`GROUPS`] is estimated (`on` or `auto`).
+    fn estimated(&self, g: usize) -> bool {
+        self.modes[g] != Estimate::Off
+    }
+
+    /// Whether group `g` is free when the estimator frees the calibration
+    /// (`on`, or `auto` once determined).
+    fn freed(&self, g: usize) -> bool {
+        match self.modes[g] {
+            Estimate::Off => false,
+            Estimate::On => true,
+            Estimate::Auto => self.auto[g].as_ref().is_some_and(HeldDirections::freed),
+        }
+    }
+
+    /// The prior σ of group `g` \[rad, m or s\].
+    fn sigma(&self, g: usize) -> &[f64] {
+        if g == 0 {
+            &self.pose_sigma
+        } else {
+            std::slice::from_ref(&self.td_sigma)
+        }
+    }
+
+    /// The noise of group `g`'s prior: its σ, with the directions `auto`
+    /// holds held once it is free.
+    fn prior_noise(&self, g: usize) -> NoiseModel {
+        let sigma = self.sigma(g);
+        let Some(h) = self.auto[g].as_ref().filter(|h| h.freed() && h.held.ncols() > 0) else {
+            return NoiseModel::diagonal(sigma).expect("validated positive σ");
+        };
+        let whitened = h.prior_information();
+        let info = DMatrix::from_fn(sigma.len(), sigma.len(), |r, c| whitened[(r, c)] / (sigma[r] * sigma[c]));
+        NoiseModel::from_information(&info).expect("validated positive σ")
+    }
+
+    /// What `auto` decided for group `g` so far (None unless it is `auto`).
+    fn auto_outcome(&self, g: usize) -> Option<AutoOutcome> {
+        let h = self.auto[g].as_ref()?;
+        let names: &[&str] = if g == 0 { &EXTRINSIC_DIRECTIONS } else { &["time offset"] };
+        let held = (0..h.held.ncols()).map(|c| (direction_name(h.held.column(c).as_slice(), names), h.fractions[c]));
+        Some(AutoOutcome { freed_at_s: h.freed_at, determined_at_s: h.determined_at, held: held.collect() })
     }
 
     /// Put the variables into `values` at `current` (`T_BC`, `td`) or, without
@@ -128,44 +229,86 @@ impl CameraPrior {
         self.free(values, false);
     }
 
-    /// Free the estimated parameters in `values` (`free`), or hold them at
-    /// their values (the estimator decides when).
+    /// Free the estimated parameters in `values` (`free`; an `auto` one only
+    /// once it was found determined), or hold them at their values (the
+    /// estimator decides when).
     pub fn free(&self, values: &mut Values, free: bool) {
-        values.set_constant(EXTRINSIC, !(free && self.extrinsics));
-        values.set_constant(TIME_OFFSET, !(free && self.time_offset));
+        for (g, key) in GROUPS.into_iter().enumerate() {
+            values.set_constant(key, !(free && self.freed(g)));
+        }
+    }
+
+    /// For each `auto` parameter with directions still held: its covariance
+    /// in the window's `graph` at `solved` (the keyframe's solution) as if it
+    /// were free and under its plain prior (the graph's priors on it are
+    /// replaced: subtracting a hold's information from the covariance's
+    /// inverse would lose the data's to rounding), whitened by the prior's σ,
+    /// from which [`HeldDirections::update`] releases the directions the data
+    /// now determine (time `t` \[s\]).
+    pub fn probe(&mut self, t: f64, graph: &mut Graph, solved: &Values) -> Result<(), SolveError> {
+        let pending: Vec<usize> =
+            (0..2).filter(|&g| self.auto[g].as_ref().is_some_and(|h| h.held.ncols() > 0)).collect();
+        if pending.is_empty() {
+            return Ok(());
+        }
+        let mut values = solved.clone();
+        let keys: Vec<Key> = pending.iter().map(|&g| GROUPS[g]).collect();
+        let priors: Vec<usize> =
+            (0..graph.len()).filter(|&i| keys.iter().any(|&k| graph.entries()[i].factor.keys() == [k])).collect();
+        graph.remove(&priors);
+        for &g in &pending {
+            values.set_constant(GROUPS[g], false);
+            self.add_prior(graph, g, NoiseModel::diagonal(self.sigma(g)).expect("validated positive σ"));
+        }
+        let cov = tumble_solvers::covariances_eliminating(graph, &values, &keys, &['l'])?;
+        for g in pending {
+            let sigma = self.sigma(g).to_vec();
+            let Some(block) = cov.get(GROUPS[g]).filter(|b| b.nrows() == sigma.len()) else { continue };
+            let whitened = DMatrix::from_fn(sigma.len(), sigma.len(), |r, c| block[(r, c)] / (sigma[r] * sigma[c]));
+            if let Some(h) = self.auto[g].as_mut() {
+                h.update(t, &whitened).ok_or_else(|| SolveError::Config("a singular calibration covariance".into()))?;
+            }
+        }
+        Ok(())
     }
 
     /// Add the priors of the estimated parameters to `g`.
     pub fn add_factors(&self, g: &mut Graph) {
-        if self.extrinsics {
-            let n = NoiseModel::diagonal(&self.pose_sigma).expect("validated positive σ");
-            g.add(PriorFactor::new(EXTRINSIC, self.body_from_camera), n);
+        for k in (0..2).filter(|&k| self.estimated(k)) {
+            self.add_prior(g, k, self.prior_noise(k));
         }
-        if self.time_offset {
-            let n = NoiseModel::isotropic(1, self.td_sigma).expect("validated positive σ");
-            g.add(PriorFactor::new(TIME_OFFSET, Vector1::new(0.0)), n);
+    }
+
+    /// Add group `k`'s prior at the given value with `noise` to `g`.
+    fn add_prior(&self, g: &mut Graph, k: usize, noise: NoiseModel) {
+        if k == 0 {
+            g.add(PriorFactor::new(EXTRINSIC, self.body_from_camera), noise);
+        } else {
+            g.add(PriorFactor::new(TIME_OFFSET, Vector1::new(0.0)), noise);
         }
     }
 
     /// Why the calibration in `values` cannot be right, or None: its distance
     /// from the given values, normalized by the prior's σ, beyond the 99.9 %
-    /// quantile of χ² with as many degrees of freedom as are estimated (a
-    /// wrong minimum of the window's solve, or a prior that does not hold).
+    /// quantile of χ² with as many degrees of freedom as are free in
+    /// `values` (a wrong minimum of the window's solve, or a prior that does
+    /// not hold).
     pub fn implausible(&self, values: &Values) -> Option<String> {
         let (x, td) = current(values)?;
         let (rot, t) = deviation(&self.body_from_camera, &x);
         let mut d2 = 0.0;
         let mut dof = 0;
-        if self.extrinsics {
+        if !values.is_constant(EXTRINSIC) {
             d2 += (rot / self.pose_sigma[0]).norm_squared() + (t / self.pose_sigma[3]).norm_squared();
             dof += 6;
         }
-        if self.time_offset {
+        if !values.is_constant(TIME_OFFSET) {
             d2 += (td / self.td_sigma).powi(2);
             dof += 1;
         }
         // χ² quantiles at 0.999 for 1, 6 and 7 degrees of freedom.
         let limit = match dof {
+            0 => return None,
             1 => 10.83,
             6 => 22.46,
             _ => 24.32,
@@ -187,28 +330,71 @@ impl CameraPrior {
         [EXTRINSIC, TIME_OFFSET].into_iter().filter(|&k| values.contains(k) && !values.is_constant(k)).collect()
     }
 
+    /// The σ of group `g`'s coordinates from the window's `covariances` (NaN
+    /// where it is not free or they are not given). Along the directions
+    /// `auto` holds, the window's σ is the hold's, not the given value's: the
+    /// σ the data and the plain prior leave there is added back.
+    fn sigmas(&self, g: usize, covariances: Option<&Covariances>) -> Vec<f64> {
+        let n = self.sigma(g).len();
+        let Some(mut cov) = covariances.filter(|_| self.estimated(g)).and_then(|c| c.get(GROUPS[g])) else {
+            return vec![f64::NAN; n];
+        };
+        if let Some(h) = &self.auto[g] {
+            let d = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(self.sigma(g)));
+            let f2 = DMatrix::from_diagonal(&nalgebra::DVector::from_iterator(
+                h.fractions.len(),
+                h.fractions.iter().map(|f| f * f),
+            ));
+            cov += &d * &h.held * f2 * h.held.transpose() * &d;
+        }
+        (0..n).map(|i| cov[(i, i)].max(0.0).sqrt()).collect()
+    }
+
     /// The estimate in `values`, its σ from `covariances` when given.
     pub fn estimate(&self, values: &Values, covariances: Option<&Covariances>) -> CameraEstimate {
         let x = current(values).map_or(self.body_from_camera, |c| c.0);
         let (r, t) = parts(&x);
         let q = nalgebra::UnitQuaternion::from_matrix(&r);
-        let std = |k: Key, i: usize, estimated: bool| {
-            covariances.filter(|_| estimated).and_then(|c| c.sigma(k, i)).unwrap_or(f64::NAN)
-        };
+        let sigmas = |g: usize| self.sigmas(g, covariances);
+        let (pose_sigma, td_sigma) = (sigmas(0), sigmas(1));
         let (change_rot, change_t) = deviation(&self.body_from_camera, &x);
         CameraEstimate {
             rotation: [q.w, q.i, q.j, q.k],
             translation: [t.x, t.y, t.z],
             time_offset_s: time_offset(values),
-            rotation_sigma_deg: [0, 1, 2].map(|i| std(EXTRINSIC, i, self.extrinsics).to_degrees()),
-            translation_sigma_m: [3, 4, 5].map(|i| std(EXTRINSIC, i, self.extrinsics)),
-            time_offset_sigma_s: std(TIME_OFFSET, 0, self.time_offset),
+            rotation_sigma_deg: [0, 1, 2].map(|i| pose_sigma[i].to_degrees()),
+            translation_sigma_m: [3, 4, 5].map(|i| pose_sigma[i]),
+            time_offset_sigma_s: td_sigma[0],
             rotation_change_deg: change_rot.norm().to_degrees(),
             translation_change_m: change_t.norm(),
-            extrinsics_estimated: self.extrinsics,
-            time_offset_estimated: self.time_offset,
+            extrinsics_estimated: self.freed(0),
+            time_offset_estimated: self.freed(1),
+            extrinsics_auto: self.auto_outcome(0),
+            time_offset_auto: self.auto_outcome(1),
         }
     }
+}
+
+/// The directions of `T_BC`'s tangent `[ω, ν]`, camera frame.
+const EXTRINSIC_DIRECTIONS: [&str; 6] = [
+    "rotation about x",
+    "rotation about y",
+    "rotation about z",
+    "translation along x",
+    "translation along y",
+    "translation along z",
+];
+
+/// A unit direction `v` over the coordinates `names`: the one name whose
+/// component carries at least 90 % of it, else the components above 30 %
+/// with their signed weights.
+fn direction_name(v: &[f64], names: &[&str]) -> String {
+    if let Some(i) = (0..v.len()).find(|&i| v[i] * v[i] >= 0.9) {
+        return names[i].to_string();
+    }
+    let parts: Vec<String> =
+        (0..v.len()).filter(|&i| v[i] * v[i] >= 0.09).map(|i| format!("{:+.2} {}", v[i], names[i])).collect();
+    format!("({})", parts.join(" "))
 }
 
 /// From `from` to `to` (two `T_BC`): the rotation vector `log(R_fromᵀ R_to)`
@@ -310,9 +496,12 @@ mod tests {
             pose(nalgebra::Rotation3::from_euler_angles(deg.to_radians(), 0.0, 0.0).matrix(), &Vector3::zeros())
         };
         prior.insert(&mut values, Some((input.body_from_camera * turned(10.0), 0.005)));
+        prior.free(&mut values, true);
         assert!(prior.implausible(&values).is_none());
-        // 50° (10 σ): a wrong minimum.
+        // 50° (10 σ): a wrong minimum — of a free calibration; held, it is the estimator's own choice.
         prior.insert(&mut values, Some((input.body_from_camera * turned(50.0), 0.0)));
+        assert!(prior.implausible(&values).is_none());
+        prior.free(&mut values, true);
         let why = prior.implausible(&values).expect("implausible");
         assert!(why.contains("50.0°"), "{why}");
     }

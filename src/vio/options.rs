@@ -176,6 +176,21 @@ pub enum Estimate {
     /// until a window's length of keyframes has left the window, and after an
     /// estimate beyond its prior's 99.9 % χ² quantile (rejected, with a warning).
     On,
+    /// As `On`, but only along the directions the recording determines
+    /// (docs/vio.md, "`auto`"): at each keyframe, from the time `On`
+    /// would free it, the window's covariance of the parameter — as if it
+    /// were free under its plain prior — is compared with the prior's; a
+    /// direction is determined when its σ there is below
+    /// [`DETERMINED_FRACTION`](crate::calib::observability::DETERMINED_FRACTION)
+    /// of the prior's (the data carry at least 3× the prior's information,
+    /// the rule of the IMU calibration's misalignments). The parameter is
+    /// free once one direction is; the others stay at the given value under
+    /// a prior 10⁶ times as informative until they are determined too. The
+    /// summary names what stayed held. Motions that leave a direction
+    /// unobservable (rotation about one axis only leaves the translation
+    /// along it; no rotation, the time offset) would otherwise let it drift
+    /// within its prior and take up other errors.
+    Auto,
 }
 
 /// Online calibration of the camera against the IMU (VINS-Mono's
@@ -214,9 +229,9 @@ impl Default for CameraCalibrationOptions {
 }
 
 impl CameraCalibrationOptions {
-    /// Whether anything is estimated.
+    /// Whether anything is estimated (`on` or `auto`).
     pub fn online(&self) -> bool {
-        self.extrinsics == Estimate::On || self.time_offset == Estimate::On
+        self.extrinsics != Estimate::Off || self.time_offset != Estimate::Off
     }
 }
 
