@@ -8,7 +8,7 @@
 //! as the target's tilt against gravity is known only to the accelerometer's bias).
 //!
 //! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--seed N]
-//! [--walk-scale G[,A]] [--online on|auto] [--only TEXT] [--out DIR] [--markdown]`
+//! [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--only TEXT] [--out DIR] [--markdown]`
 //!
 //! `--only` runs the cases whose name contains TEXT; `--out` writes each
 //! case's files and figures (as `tumble vio` does) into `DIR/<case>/`.
@@ -24,7 +24,10 @@
 //! noise in motion, `--walk-scale G,A` multiplies the bias random walks given
 //! (gyro, accelerometer; `docs/vio.md`, "The bias random walk in flight"),
 //! `--online auto` estimates imu_april's camera calibration online in the
-//! `auto` mode instead of `on` (freed once the motion determines it).
+//! `auto` mode instead of `on` (freed once the motion determines it), and
+//! `--blackout FROM,SECONDS` removes every feature over that span of each
+//! case and says, per case, what was reported and how the estimate fares
+//! from 2 s after the features return (aligned by itself).
 
 use std::path::{Path, PathBuf};
 use tumble::eval::{Alignment, EvalOptions};
@@ -50,7 +53,12 @@ fn main() {
                 | "--out"
                 | "--walk-scale"
                 | "--online"
-        ) || (i > 0 && matches!(args[i - 1].as_str(), "--seed" | "--only" | "--out" | "--walk-scale" | "--online"))
+                | "--blackout"
+        ) || (i > 0
+            && matches!(
+                args[i - 1].as_str(),
+                "--seed" | "--only" | "--out" | "--walk-scale" | "--online" | "--blackout"
+            ))
     };
     if let Some((_, bad)) = args.iter().enumerate().find(|(i, a)| !known(*i, a)) {
         eprintln!("unknown argument {bad}; see the example's doc comment");
@@ -60,6 +68,13 @@ fn main() {
         Ok(w) => w.unwrap_or([1.0, 1.0]),
         Err(e) => {
             eprintln!("--walk-scale: {e}");
+            std::process::exit(2);
+        }
+    };
+    let blackout = match value("--blackout").map(|v| parse_blackout(&v)).transpose() {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("--blackout: {e}");
             std::process::exit(2);
         }
     };
@@ -123,7 +138,7 @@ fn main() {
         }
         eprintln!("running {name} …");
         let dir = out.as_ref().map(|d| d.join(name.split(' ').next().unwrap_or("case")));
-        match evaluate(case, o, walk_scale, &data, dir.as_deref()) {
+        match evaluate(case, o, walk_scale, blackout, &data, dir.as_deref()) {
             Ok((s, note)) => {
                 notes.extend(note.map(|n| format!("{name}: {n}")));
                 rows.push((name.clone(), s));
@@ -156,6 +171,19 @@ fn parse_walk_scale(v: &str) -> Result<[f64; 2], String> {
         [g] => Ok([num(g)?, num(g)?]),
         [g, a] => Ok([num(g)?, num(a)?]),
         _ => Err(format!("`{v}`: expected G or G,A")),
+    }
+}
+
+/// `FROM,SECONDS`: the blackout's start and length \[s\], finite, the length positive.
+fn parse_blackout(v: &str) -> Result<[f64; 2], String> {
+    let parts: Vec<f64> = v
+        .split(',')
+        .map(|s| s.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("`{v}`: expected FROM,SECONDS (numbers)"))?;
+    match parts[..] {
+        [from, len] if from.is_finite() && len.is_finite() && len > 0.0 => Ok([from, len]),
+        _ => Err(format!("`{v}`: expected FROM,SECONDS with a finite start and a positive length")),
     }
 }
 
@@ -193,12 +221,13 @@ fn evaluate(
     case: &Case,
     opts: &VioOptions,
     walk_scale: [f64; 2],
+    blackout: Option<[f64; 2]>,
     data: &Path,
     out: Option<&Path>,
 ) -> Result<(Summary, Option<String>), String> {
     let mut opts = opts.clone();
     let mut correct = None;
-    let input = match case {
+    let mut input = match case {
         Case::Source(path, source) => open_vio(path, source, &mut |_, _| {}).map_err(|e| e.to_string())?.input,
         Case::Target(dir, perturbed) => {
             let cameras = data.join("V1_01_easy_micro");
@@ -220,6 +249,11 @@ fn evaluate(
             }
         }
     };
+    if let Some([from, len]) = blackout {
+        for f in input.frames.iter_mut().filter(|f| f.t > from && f.t < from + len) {
+            f.features.clear();
+        }
+    }
     input.apply_noise(None, &mut opts.noise.imu);
     scale_walks(&mut opts.noise.imu, walk_scale);
     let result = run(&input, &opts, None).map_err(|e| e.to_string())?;
@@ -240,6 +274,35 @@ fn evaluate(
     if let Some(dir) = out {
         tumble::vio::write_outputs(dir, &input, &result, &summary).map_err(|e| e.to_string())?;
     }
+    let alignment = match case {
+        Case::Target(..) => Alignment::Se3,
+        Case::Source(..) => EvalOptions::default().alignment,
+    };
+    let blackout_note = blackout.map(|[from, len]| {
+        let after = from + len + 2.0;
+        let mut late = result.clone();
+        late.estimates.retain(|e| e.t > after);
+        let eval_opts = EvalOptions { alignment, ..EvalOptions::default() };
+        let ev = input
+            .groundtruth
+            .as_ref()
+            .map(|gt| tumble::eval::evaluate(&trajectory(&input, &late), None, gt, &eval_opts));
+        let spans: Vec<String> = result.blind_spans.iter().map(|[a, b]| format!("{a:.2}–{b:.2} s")).collect();
+        format!(
+            "blackout {from}–{} s: blind spans reported {}, resets {}; from {after} s (aligned by itself): {}",
+            from + len,
+            if spans.is_empty() { "none".into() } else { spans.join(", ") },
+            result.resets,
+            match ev {
+                Some(Ok(ev)) => format!(
+                    "ATE {:.3} m, rotation RMSE {:.2}° ({:.2}° with the orientations aligned)",
+                    ev.metrics.ate_rmse_m, ev.metrics.rotation_rmse_deg, ev.metrics.rotation_rmse_oriented_deg
+                ),
+                Some(Err(e)) => format!("not evaluated ({e})"),
+                None => "no ground truth".into(),
+            }
+        )
+    });
     let note = correct.zip(result.camera.as_ref()).map(|((c, shift), est)| {
         let (dr, dt) = est.difference(&c);
         // The first seconds are flown with the wrong calibration (held until
@@ -257,6 +320,10 @@ fn evaluate(
             ate.as_ref().map_or("—".into(), |e| format!("{:.2}°", e.metrics.rotation_rmse_deg)),
         )
     });
+    let note = match (note, blackout_note) {
+        (Some(a), Some(b)) => Some(format!("{a}\n  {b}")),
+        (a, b) => a.or(b),
+    };
     Ok((summary, note))
 }
 

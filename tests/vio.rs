@@ -637,6 +637,51 @@ fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
     assert!(s.ate_rmse_m.unwrap() < 0.08, "ATE {:?}", s.ate_rmse_m);
 }
 
+/// A blackout in a real flight (V1_02's IMU, the simulated camera's features
+/// removed for 3 s from 30 s on): reported where it starts and ends, flown on
+/// the IMU alone without a reset, and once the features return the estimate
+/// is as good as without the blackout. Measured: blind 30.05–33.0 s; from
+/// 35 s on (aligned by itself) ATE 0.022 m against 0.022 m without the
+/// blackout; orientation error over 30–35 s 0.21° RMS once aligned by the
+/// orientations. With 10 s blind (not tested here): 0 resets on V1_02,
+/// V1_03 and V2_01 too, ATE from 2 s after the return 0.08–0.16 m (the
+/// window converges again over 10–20 s; docs/vio.md).
+#[test]
+fn a_blackout_in_a_real_flight_is_reported_and_survived() {
+    let Some(seq) = common::shared("euroc/full_imu/V1_02_medium") else { return };
+    let source = tumble::inputs::VioSource { simulate_camera: Some(1), ..Default::default() };
+    let mut input = tumble::inputs::open_vio(&seq, &source, &mut |_, _| {}).unwrap().input;
+    for f in input.frames.iter_mut().filter(|f| f.t > 30.0 && f.t < 33.0) {
+        f.features.clear();
+    }
+    let mut opts = VioOptions::default();
+    input.apply_noise(None, &mut opts.noise.imu);
+    let out = run(&input, &opts, None).unwrap();
+    assert_eq!(out.resets, 0, "{:?}", out.warnings);
+    assert!(out.warnings.iter().any(|w| w.starts_with("vision lost at 30.0")), "{:?}", out.warnings);
+    assert!(out.warnings.iter().any(|w| w.starts_with("features back at 33.0")), "{:?}", out.warnings);
+    assert!(
+        matches!(out.blind_spans[..], [[a, b]] if (a - 30.0).abs() < 0.1 && (b - 33.0).abs() < 0.1),
+        "{:?}",
+        out.blind_spans
+    );
+    let gt = input.groundtruth.as_ref().unwrap();
+    let segment = |from: f64, to: f64| {
+        let mut part = out.clone();
+        part.estimates.retain(|e| e.t > from && e.t <= to);
+        let traj = tumble::vio::trajectory(&input, &part);
+        tumble::eval::evaluate(&traj, None, gt, &tumble::eval::EvalOptions::default()).unwrap().metrics
+    };
+    let blind = segment(30.0, 35.0);
+    let after = segment(35.0, f64::INFINITY);
+    println!(
+        "30-35 s: ATE {:.3} m, rotation {:.2}° (orientations aligned); from 35 s: ATE {:.3} m",
+        blind.ate_rmse_m, blind.rotation_rmse_oriented_deg, after.ate_rmse_m
+    );
+    assert!(blind.rotation_rmse_oriented_deg < 1.0, "{blind:?}");
+    assert!(after.ate_rmse_m < 0.04, "ATE after the blackout {} m", after.ate_rmse_m);
+}
+
 /// The camera's `T_BC` and time offset estimated online from a wrong start
 /// (2° about an oblique axis, 3 cm, stamps 8 ms late) on a simulated walk
 /// with known truth (4 rad/s RMS, which needs the IMU's motion over the
