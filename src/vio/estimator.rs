@@ -293,13 +293,19 @@ impl<'a> Estimator<'a> {
         let added = self.add_observations(index, &obs);
         self.watch_blindness(t, obs.len(), added);
         self.rest.push(t, &obs, rj, &self.opts);
-        // A frame at rest or a window with few landmarks still gets the full
-        // solve: its zero-velocity prior or its IMU link is what holds the
-        // window's velocities and biases then.
+        // A frame at rest, a window with few landmarks or a frame that fewer
+        // than BLIND_FEATURES of them can place still gets the full solve: its
+        // zero-velocity prior or its IMU link is what holds the window's
+        // velocities and biases then. (Without the last condition the frames
+        // after a start in motion — whose landmarks are seen by the first
+        // state alone — were tracked by nothing, so they were the IMU's
+        // prediction from a bias of 0. On imu_april that was 38 px off by the
+        // first keyframe, and the prediction gate then refused every landmark.)
         if !keyframe
             && !zero_velocity
             && !self.opts.window.solve_every_frame
             && self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK
+            && self.landmarks.placing(sid, MIN_TRACK_OBSERVATIONS) >= BLIND_FEATURES
         {
             // Not triangulated from here: this frame's pose is only the IMU's
             // prediction now, and the landmark's depth would stay fixed.
@@ -519,14 +525,8 @@ impl<'a> Estimator<'a> {
         }
         let (noise, huber) = pixel_noise(&self.opts);
         for tr in self.landmarks.tracks().values() {
-            let Some((lid, anchor)) = tr.landmark else { continue };
-            if anchor == sid || tr.obs.len() < MIN_TRACK_OBSERVATIONS {
-                continue;
-            }
-            let (Some(a), Some(o)) = (tr.obs.iter().find(|o| o.sid == anchor), tr.obs.iter().find(|o| o.sid == sid))
-            else {
-                continue;
-            };
+            let Some((lid, a, o)) = tr.places(sid, MIN_TRACK_OBSERVATIONS) else { continue };
+            let anchor = a.sid;
             copy(&mut values, X(anchor), true);
             copy(&mut values, L(lid), true);
             if self.opts.camera.online() {

@@ -42,6 +42,23 @@ pub(crate) struct Track {
     pub landmark: Option<(u64, u64)>,
 }
 
+impl Track {
+    /// The landmark id, the anchor's observation and state `sid`'s, when this
+    /// track's landmark can place state `sid` with the window held fixed:
+    /// triangulated, anchored in another state, seen at `sid`, and seen at
+    /// least `min_observations` times in the window (its depth rests on more
+    /// than the anchor and one other view).
+    pub fn places(&self, sid: u64, min_observations: usize) -> Option<(u64, &Obs, &Obs)> {
+        let (lid, anchor) = self.landmark?;
+        if anchor == sid || self.obs.len() < min_observations {
+            return None;
+        }
+        let a = self.obs.iter().find(|o| o.sid == anchor)?;
+        let o = self.obs.iter().find(|o| o.sid == sid)?;
+        Some((lid, a, o))
+    }
+}
+
 /// What [`Landmarks::add_observations`] did with a frame's features.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub(crate) struct Added {
@@ -184,6 +201,12 @@ impl Landmarks {
     /// Number of triangulated landmarks.
     pub fn count(&self) -> usize {
         self.tracks.values().filter(|t| t.landmark.is_some()).count()
+    }
+
+    /// How many landmarks can place state `sid` with the window held fixed
+    /// ([`Track::places`]).
+    pub fn placing(&self, sid: u64, min_observations: usize) -> usize {
+        self.tracks.values().filter(|t| t.places(sid, min_observations).is_some()).count()
     }
 
     /// The landmarks in the world frame \[m\], by track id (`input`'s camera,
