@@ -366,9 +366,9 @@ pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Sim
 }
 
 /// A motion of one's own (`motion`, e.g. [`Loop::planar`]) through `scene`,
-/// recorded by `config`'s IMU and camera as a scenario's would be: its
-/// ground truth at the IMU's rate over 2 (as the walk's), no still
-/// intervals. `scenario` only labels it. Deterministic in `seed`.
+/// recorded by `config`'s IMU and camera as `scenario`'s would be (its
+/// ground-truth rate, [`groundtruth_rate`]), with no still intervals.
+/// `scenario` only labels it otherwise. Deterministic in `seed`.
 pub fn simulate_motion(
     scenario: Scenario,
     motion: Box<dyn Motion>,
@@ -377,7 +377,8 @@ pub fn simulate_motion(
     seed: u64,
 ) -> Result<Simulation, SimError> {
     config.check()?;
-    let imu = simulate_imu(motion.as_ref(), &config.imu, config.gravity, seed, 2);
+    let bias_every = ((config.imu.rate_hz / groundtruth_rate(scenario, config)).round() as usize).max(1);
+    let imu = simulate_imu(motion.as_ref(), &config.imu, config.gravity, seed, bias_every);
     let tracks = Some(camera::simulate_tracks(motion.as_ref(), &config.camera, &scene, seed));
     let centre = match scene {
         Scene::Room(c) => c,

@@ -389,10 +389,9 @@ impl<'a> Estimator<'a> {
     }
 
     /// Whether the keyframe solved at time `t` (its window's `graph`, whose
-    /// calibration priors the probe replaces)
-    /// determines the calibration parameters estimated `auto` that are still
-    /// held: those it does are freed from the next keyframe on (the summary's
-    /// camera line says when).
+    /// calibration priors the probe replaces) determines the calibration
+    /// parameters estimated `auto` that are still held: those it does are
+    /// freed from the next keyframe on (the summary's camera line says when).
     fn probe_camera(&mut self, t: f64, graph: &mut Graph) {
         let Some(c) = self.window.camera.as_mut() else { return };
         if let Err(e) = c.probe(t, graph, &self.window.values) {

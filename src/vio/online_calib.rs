@@ -8,7 +8,9 @@
 //! nothing is counted twice. A parameter that is not estimated is held
 //! constant at its value; the estimator also holds them until a window's
 //! length of keyframes is in the prior, and after an estimate that
-//! `CameraPrior::implausible` rejects.
+//! `CameraPrior::implausible` rejects. A parameter estimated `auto` is
+//! estimated along the directions the window determines and held along the
+//! others (`super::auto_calib`).
 
 use super::auto_calib::HeldDirections;
 use super::geometry::{parts, pose};
