@@ -106,8 +106,7 @@ fn main() {
     }
     if let (Some(correct), Some(c)) = (correct, &out.camera) {
         let (rotation_deg, _) = c.difference(&correct);
-        let (r, t0) = tumble::vio::geometry::parts(&correct);
-        let t = r.transpose() * (Vector3::from(c.translation) - t0) * 1e3;
+        let t = c.translation_error(&correct) * 1e3;
         println!(
             "online calibration errors: rotation {rotation_deg:.3}°, translation [{:.1} {:.1} {:.1}] mm (camera axes), \
              time offset {:.3} ms",

@@ -775,8 +775,7 @@ fn calibrate_online_as(
     assert_eq!(out.resets, 0, "{:?}", out.warnings);
     let c = out.camera.clone().expect("an online estimate");
     let (rotation_deg, _) = c.difference(&correct);
-    let (r, t0) = tumble::vio::geometry::parts(&correct);
-    let translation = r.transpose() * (Vector3::from(c.translation) - t0);
+    let translation = c.translation_error(&correct);
     let td_error = c.time_offset_s + shift;
     println!(
         "{}\nerror: {rotation_deg:.3}°, [{:.1} {:.1} {:.1}] mm (camera axes), {:.3} ms",

@@ -107,6 +107,13 @@ impl CameraEstimate {
         (rot.norm().to_degrees(), t.norm())
     }
 
+    /// This estimate's translation minus `body_from_camera`'s (a reference
+    /// `T_BC`), along the reference camera's axes \[m\].
+    pub fn translation_error(&self, body_from_camera: &Isometry3F64) -> Vector3<f64> {
+        let (r, t) = parts(body_from_camera);
+        r.transpose() * (Vector3::from(self.translation) - t)
+    }
+
     /// One line for the terminal: what was estimated, its σ and how far it moved from the given values.
     pub fn line(&self) -> String {
         let mut parts = Vec::new();
@@ -207,11 +214,14 @@ impl CameraPrior {
     fn prior_noise(&self, g: usize) -> NoiseModel {
         let sigma = self.sigma(g);
         let Some(h) = self.auto[g].as_ref().filter(|h| h.freed() && h.held.ncols() > 0) else {
-            return NoiseModel::diagonal(sigma).expect("validated positive σ");
+            return self.plain_noise(g);
         };
-        let whitened = h.prior_information();
-        let info = DMatrix::from_fn(sigma.len(), sigma.len(), |r, c| whitened[(r, c)] / (sigma[r] * sigma[c]));
-        NoiseModel::from_information(&info).expect("validated positive σ")
+        NoiseModel::from_information(&over_sigmas(&h.prior_information(), sigma)).expect("validated positive σ")
+    }
+
+    /// The noise of group `g`'s prior as given: its σ, nothing held.
+    fn plain_noise(&self, g: usize) -> NoiseModel {
+        NoiseModel::diagonal(self.sigma(g)).expect("validated positive σ")
     }
 
     /// What `auto` decided for group `g` so far (None unless it is `auto`).
@@ -260,13 +270,12 @@ impl CameraPrior {
         graph.remove(&priors);
         for &g in &pending {
             values.set_constant(GROUPS[g], false);
-            self.add_prior(graph, g, NoiseModel::diagonal(self.sigma(g)).expect("validated positive σ"));
+            self.add_prior(graph, g, self.plain_noise(g));
         }
         let cov = tumble_solvers::covariances_eliminating(graph, &values, &keys, &['l'])?;
         for g in pending {
-            let sigma = self.sigma(g).to_vec();
-            let Some(block) = cov.get(GROUPS[g]).filter(|b| b.nrows() == sigma.len()) else { continue };
-            let whitened = DMatrix::from_fn(sigma.len(), sigma.len(), |r, c| block[(r, c)] / (sigma[r] * sigma[c]));
+            let Some(block) = cov.get(GROUPS[g]).filter(|b| b.nrows() == self.sigma(g).len()) else { continue };
+            let whitened = over_sigmas(&block, self.sigma(g));
             if let Some(h) = self.auto[g].as_mut() {
                 h.update(t, &whitened).ok_or_else(|| SolveError::Config("a singular calibration covariance".into()))?;
             }
@@ -375,6 +384,13 @@ impl CameraPrior {
             time_offset_auto: self.auto_outcome(1),
         }
     }
+}
+
+/// `m` with each element `(r, c)` divided by `sigma[r] · sigma[c]`: a
+/// covariance into the prior's whitened coordinates, or a whitened
+/// information out of them.
+fn over_sigmas(m: &DMatrix<f64>, sigma: &[f64]) -> DMatrix<f64> {
+    DMatrix::from_fn(m.nrows(), m.ncols(), |r, c| m[(r, c)] / (sigma[r] * sigma[c]))
 }
 
 /// The directions of `T_BC`'s tangent `[ω, ν]`, camera frame.
