@@ -184,7 +184,7 @@ impl<'a> Estimator<'a> {
         let (x, v, b) = self.last_good.expect("initialized");
         let t = self.window.states.last().map_or(0.0, |s| s.t);
         self.resets += 1;
-        self.start(t, InitState { x, v, b, v_sigma: 0.5, tilt_sigma: None, gyro_bias_sigma: None });
+        self.start(t, InitState { x, v, b, v_sigma: 0.5, tilt_sigma: None, gyro_bias_sigma: None, in_motion: true });
         if let Some(p) = self.window.init_prior.as_mut() {
             // Position and yaw stay the gauge; roll, pitch and biases loosen.
             p.b_sigma = [0.2, 0.2, 0.2, 0.02, 0.02, 0.02];
@@ -293,6 +293,13 @@ impl<'a> Estimator<'a> {
         let added = self.add_observations(index, &obs);
         self.watch_blindness(t, obs.len(), added);
         self.rest.push(t, &obs, rj, &self.opts);
+        // A frame the window's landmarks cannot place while a start in motion
+        // fills the window stays in it (Window::filling).
+        let placed = self.landmarks.placing(sid, MIN_TRACK_OBSERVATIONS) >= BLIND_FEATURES;
+        let keyframe = keyframe
+            || (!placed
+                && self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK
+                && self.window.filling(self.opts.window.size));
         // A frame at rest, a window with few landmarks or a frame that fewer
         // than BLIND_FEATURES of them can place still gets the full solve: its
         // zero-velocity prior or its IMU link is what holds the window's
@@ -305,7 +312,7 @@ impl<'a> Estimator<'a> {
             && !zero_velocity
             && !self.opts.window.solve_every_frame
             && self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK
-            && self.landmarks.placing(sid, MIN_TRACK_OBSERVATIONS) >= BLIND_FEATURES
+            && placed
         {
             // Not triangulated from here: this frame's pose is only the IMU's
             // prediction now, and the landmark's depth would stay fixed.

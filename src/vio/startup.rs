@@ -128,6 +128,7 @@ impl Startup {
                         // The features' estimate when they determined it,
                         // else nothing is known of a raw gyro's bias.
                         gyro_bias_sigma: m.bias_gyro.is_none().then_some(MOTION_GYRO_BIAS_SIGMA),
+                        in_motion: true,
                     });
                 }
                 Err(why) => failure = Some(format!("at {t:.3} s over {span:.1} s: {why}")),
