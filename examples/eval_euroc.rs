@@ -8,7 +8,8 @@
 //! as the target's tilt against gravity is known only to the accelerometer's bias).
 //!
 //! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--seed N]
-//! [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--only TEXT] [--out DIR] [--markdown]`
+//! [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--from SECONDS] [--only TEXT] [--out DIR]
+//! [--markdown]`
 //!
 //! `--only` runs the cases whose name contains TEXT; `--out` writes each
 //! case's files and figures (as `tumble vio` does) into `DIR/<case>/`.
@@ -27,7 +28,9 @@
 //! `auto` mode instead of `on` (freed once the motion determines it), and
 //! `--blackout FROM,SECONDS` removes every feature over that span of each
 //! case and says, per case, what was reported and how the estimate fares
-//! from 2 s after the features return (aligned by itself).
+//! from 2 s after the features return (aligned by itself). `--from SECONDS`
+//! cuts every recording before that time, so that each starts in motion
+//! wherever it is then (the start's warnings are printed).
 
 use std::path::{Path, PathBuf};
 use tumble::eval::{Alignment, EvalOptions};
@@ -54,10 +57,11 @@ fn main() {
                 | "--walk-scale"
                 | "--online"
                 | "--blackout"
+                | "--from"
         ) || (i > 0
             && matches!(
                 args[i - 1].as_str(),
-                "--seed" | "--only" | "--out" | "--walk-scale" | "--online" | "--blackout"
+                "--seed" | "--only" | "--out" | "--walk-scale" | "--online" | "--blackout" | "--from"
             ))
     };
     if let Some((_, bad)) = args.iter().enumerate().find(|(i, a)| !known(*i, a)) {
@@ -78,6 +82,14 @@ fn main() {
             std::process::exit(2);
         }
     };
+    let from = match value("--from").map(|v| v.parse::<f64>()).transpose() {
+        Ok(f) if f.is_none_or(|f| f.is_finite() && f >= 0.0) => f,
+        _ => {
+            eprintln!("--from: expected a time in seconds (≥ 0)");
+            std::process::exit(2);
+        }
+    };
+    let cuts = Cuts { blackout, from };
     let online = match value("--online").as_deref() {
         None | Some("on") => tumble::vio::Estimate::On,
         Some("auto") => tumble::vio::Estimate::Auto,
@@ -138,11 +150,12 @@ fn main() {
         }
         eprintln!("running {name} …");
         let dir = out.as_ref().map(|d| d.join(name.split(' ').next().unwrap_or("case")));
-        match evaluate(case, o, walk_scale, blackout, &data, dir.as_deref()) {
-            Ok((s, note)) => {
+        match evaluate(case, o, walk_scale, &cuts, &data, dir.as_deref()) {
+            Ok(Some((s, note))) => {
                 notes.extend(note.map(|n| format!("{name}: {n}")));
                 rows.push((name.clone(), s));
             }
+            Ok(None) => notes.push(format!("{name}: ends before {} s (--from): not run", cuts.from.unwrap_or(0.0))),
             Err(e) => {
                 eprintln!("{name}: {e}");
                 std::process::exit(1);
@@ -197,6 +210,14 @@ fn scale_walks(p: &mut tumble_factors::imu_preint::PreintegrationParams, [g, a]:
     }
 }
 
+/// What is taken out of every case's recording.
+struct Cuts {
+    /// Every feature over `[from, from + seconds]` (`--blackout`).
+    blackout: Option<[f64; 2]>,
+    /// Everything before this time \[s\] (`--from`).
+    from: Option<f64>,
+}
+
 /// What a row of the table runs on.
 enum Case {
     /// An input `tumble vio` opens (a path and how).
@@ -216,15 +237,15 @@ const LATE_S: f64 = 15.0;
 
 /// Run one case as `tumble vio` does and summarize it against its ground
 /// truth; with an online camera calibration, also a line on how far it
-/// landed from EuRoC's.
+/// landed from EuRoC's. None when `--from` leaves nothing of it.
 fn evaluate(
     case: &Case,
     opts: &VioOptions,
     walk_scale: [f64; 2],
-    blackout: Option<[f64; 2]>,
+    cuts: &Cuts,
     data: &Path,
     out: Option<&Path>,
-) -> Result<(Summary, Option<String>), String> {
+) -> Result<Option<(Summary, Option<String>)>, String> {
     let mut opts = opts.clone();
     let mut correct = None;
     let mut input = match case {
@@ -249,6 +270,17 @@ fn evaluate(
             }
         }
     };
+    if let Some(from) = cuts.from {
+        let k = input.imu.t.partition_point(|&t| t < from);
+        input.imu.t.drain(..k);
+        input.imu.gyro.drain(..k);
+        input.imu.acc.drain(..k);
+        input.frames.retain(|f| f.t > from);
+        if input.frames.len() < 2 || input.imu.t.len() < 2 {
+            return Ok(None);
+        }
+    }
+    let blackout = cuts.blackout;
     if let Some([from, len]) = blackout {
         for f in input.frames.iter_mut().filter(|f| f.t > from && f.t < from + len) {
             f.features.clear();
@@ -320,11 +352,18 @@ fn evaluate(
             ate.as_ref().map_or("—".into(), |e| format!("{:.2}°", e.metrics.rotation_rmse_deg)),
         )
     });
-    let note = match (note, blackout_note) {
-        (Some(a), Some(b)) => Some(format!("{a}\n  {b}")),
-        (a, b) => a.or(b),
-    };
-    Ok((summary, note))
+    let start_note = cuts.from.map(|from| {
+        let starts: Vec<&str> = result
+            .warnings
+            .iter()
+            .filter(|w| w.starts_with("initialized") || w.contains("contradicted by the features"))
+            .map(|w| w.as_str())
+            .collect();
+        format!("from {from} s: {}", starts.join("; "))
+    });
+    let note = [note, blackout_note, start_note].into_iter().flatten().collect::<Vec<_>>();
+    let note = (!note.is_empty()).then(|| note.join("\n  "));
+    Ok(Some((summary, note)))
 }
 
 fn print_table(rows: &[(String, Summary)], markdown: bool) {

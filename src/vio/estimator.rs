@@ -114,6 +114,9 @@ pub struct Estimator<'a> {
     camera_track: Vec<(f64, CameraEstimate)>,
     /// Keyframes for which the camera's calibration stays held after an implausible estimate.
     camera_held: usize,
+    /// The start of a segment whose estimates are withdrawn (a start the
+    /// features contradicted), until `run` has taken them out.
+    discarded_from: Option<f64>,
 }
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
@@ -154,6 +157,7 @@ impl<'a> Estimator<'a> {
             noise: None,
             camera_track: Vec::new(),
             camera_held: 0,
+            discarded_from: None,
         }
     }
 
@@ -319,6 +323,18 @@ impl<'a> Estimator<'a> {
             return self.track_frame(index, sid, &predicted, vj, bl, obs, t_start);
         }
         self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
+        self.window.most_landmarks = self.window.most_landmarks.max(self.landmarks.count());
+        if let Some(why) = self.window.contradicted_start(t, obs.len(), BLIND_FEATURES, &self.opts) {
+            // Initialized again from the next frame on: a new start, at the
+            // origin; the estimates since the contradicted one are withdrawn.
+            self.warn(format!("{why}; its estimates are withdrawn and the estimator initializes again"));
+            self.discarded_from = Some(self.window.started_at());
+            self.resets += 1;
+            self.window.clear();
+            self.landmarks.clear();
+            self.last_tracked = None;
+            return None;
+        }
         // Freed once a window's length of keyframes has left into the prior:
         // its first estimate then rests on two windows of frames (a first
         // window of a couple of seconds cannot determine seven more unknowns,
@@ -706,6 +722,9 @@ pub fn run_observed(
         if let Some(e) = est.process(i) {
             observe(&est, i, &e);
             out.estimates.push(e);
+        }
+        if let Some(t0) = est.discarded_from.take() {
+            out.estimates.retain(|e| e.t < t0);
         }
         if let Some(p) = progress.as_mut() {
             p(i + 1, input.frames.len());
