@@ -271,11 +271,7 @@ fn evaluate(
         }
     };
     if let Some(from) = cuts.from {
-        let k = input.imu.t.partition_point(|&t| t < from);
-        input.imu.t.drain(..k);
-        input.imu.gyro.drain(..k);
-        input.imu.acc.drain(..k);
-        input.frames.retain(|f| f.t > from);
+        input.drop_before(from);
         if input.frames.len() < 2 || input.imu.t.len() < 2 {
             return Ok(None);
         }

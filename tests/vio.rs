@@ -252,11 +252,7 @@ fn pure_rotation_triangulates_nothing_and_stays_finite() {
 /// simulated walk rests 3 s, then ramps up over 2 s).
 fn walk_started_in_motion(duration: f64, seed: u64, skip: f64) -> (VioInput, VioOptions) {
     let (mut input, opts) = walk(duration, seed);
-    let k = input.imu.t.partition_point(|&t| t < skip);
-    input.imu.t.drain(..k);
-    input.imu.gyro.drain(..k);
-    input.imu.acc.drain(..k);
-    input.frames.retain(|f| f.t > skip);
+    input.drop_before(skip);
     (input, opts)
 }
 
@@ -835,11 +831,7 @@ fn a_start_in_motion_the_features_contradict_is_made_again() {
     let Some(seq) = common::shared("euroc/full_imu/V2_01_easy") else { return };
     let source = tumble::inputs::VioSource { simulate_camera: Some(1), ..Default::default() };
     let mut input = tumble::inputs::open_vio(&seq, &source, &mut |_, _| {}).unwrap().input;
-    let k = input.imu.t.partition_point(|&t| t < 40.0);
-    input.imu.t.drain(..k);
-    input.imu.gyro.drain(..k);
-    input.imu.acc.drain(..k);
-    input.frames.retain(|f| f.t > 40.0);
+    input.drop_before(40.0);
     let mut opts = VioOptions::default();
     input.apply_noise(None, &mut opts.noise.imu);
     let out = run(&input, &opts, None).unwrap();

@@ -101,6 +101,21 @@ pub struct VioInput {
 }
 
 impl VioInput {
+    /// Drop the IMU samples before time `t` \[s\] and the frames up to it
+    /// (with the second camera's matches in them), as if the recording began
+    /// there (to start it in motion, say); the ground truth is kept.
+    pub fn drop_before(&mut self, t: f64) {
+        let k = self.imu.t.partition_point(|&s| s < t);
+        self.imu.t.drain(..k);
+        self.imu.gyro.drain(..k);
+        self.imu.acc.drain(..k);
+        let n = self.frames.partition_point(|f| f.t <= t);
+        self.frames.drain(..n);
+        if let Some(st) = self.stereo.as_mut() {
+            st.features.drain(..n.min(st.features.len()));
+        }
+    }
+
     /// Keep only the frames the IMU covers: frames before the first or after
     /// the last IMU sample cannot be propagated to. Returns a warning naming
     /// what was dropped; refuses when camera and IMU do not overlap at all

@@ -54,8 +54,9 @@ pub(crate) struct InitState {
     /// Gyro-bias prior σ \[rad/s\]; default [`START_GYRO_BIAS_SIGMA`] (a bias
     /// measured at rest, or given).
     pub gyro_bias_sigma: Option<f64>,
-    /// A start in motion (or a restart): the window then keeps every frame
-    /// until it is full ([`Window::filling`]).
+    /// A start in motion (or a restart): the window then fills
+    /// ([`Window::filling`]), and a start its features contradict is made
+    /// again ([`Window::contradicted_start`]).
     pub in_motion: bool,
 }
 
