@@ -841,8 +841,7 @@ fn a_start_in_motion_the_features_contradict_is_made_again() {
     assert_eq!(out.resets, restarts.len(), "{:?}", out.warnings);
     // The contradicted starts' estimates are withdrawn: what remains begins
     // at the last start and never flies off.
-    let last = out.warnings.iter().rev().find(|w| w.starts_with("initialized in motion at")).unwrap();
-    let t_last: f64 = last["initialized in motion at ".len()..].split(' ').next().unwrap().parse().unwrap();
+    let t_last = out.init_time.expect("initialized");
     assert!((out.estimates[0].t - t_last).abs() < 1e-6, "first estimate at {} s", out.estimates[0].t);
     let fastest = out.estimates.iter().map(|e| nalgebra::Vector3::from(e.velocity).norm()).fold(0.0, f64::max);
     let s = summarize(&input, &opts, &out, 10.0);

@@ -299,11 +299,9 @@ impl<'a> Estimator<'a> {
         self.rest.push(t, &obs, rj, &self.opts);
         // A frame the window's landmarks cannot place while a start in motion
         // fills the window stays in it (Window::filling).
-        let placed = self.landmarks.placing(sid, MIN_TRACK_OBSERVATIONS) >= BLIND_FEATURES;
-        let keyframe = keyframe
-            || (!placed
-                && self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK
-                && self.window.filling(self.opts.window.size));
+        let enough_landmarks = self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK;
+        let placed = enough_landmarks && self.landmarks.placing(sid, MIN_TRACK_OBSERVATIONS) >= BLIND_FEATURES;
+        let keyframe = keyframe || (enough_landmarks && !placed && self.window.filling(self.opts.window.size));
         // A frame at rest, a window with few landmarks or a frame that fewer
         // than BLIND_FEATURES of them can place still gets the full solve: its
         // zero-velocity prior or its IMU link is what holds the window's
@@ -312,12 +310,7 @@ impl<'a> Estimator<'a> {
         // state alone — were tracked by nothing, so they were the IMU's
         // prediction from a bias of 0. On imu_april that was 38 px off by the
         // first keyframe, and the prediction gate then refused every landmark.)
-        if !keyframe
-            && !zero_velocity
-            && !self.opts.window.solve_every_frame
-            && self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK
-            && placed
-        {
+        if !keyframe && !zero_velocity && !self.opts.window.solve_every_frame && placed {
             // Not triangulated from here: this frame's pose is only the IMU's
             // prediction now, and the landmark's depth would stay fixed.
             return self.track_frame(index, sid, &predicted, vj, bl, obs, t_start);
