@@ -295,7 +295,15 @@ impl<'a> Estimator<'a> {
         let keyframe = is_keyframe(&self.opts.window, par_kf, t - kf_t, common_kf, self.keyframe_obs.len());
         self.window.push(State { sid, t, rest_since }, (predicted, vj, bl), (pim, scale));
         let added = self.add_observations(index, &obs);
-        self.watch_blindness(t, obs.len(), added);
+        if let Some(gated) = self.watch_blindness(t, obs.len(), added) {
+            // The prediction from a start nothing has confirmed put the
+            // features beyond the gate: the start, not the frame, is off.
+            self.withdraw_start(format!(
+                "the start in motion at {:.3} s is contradicted by the features: at {t:.3} s {gated}",
+                self.window.started_at()
+            ));
+            return None;
+        }
         self.rest.push(t, &obs, rj, &self.opts);
         // A frame the window's landmarks cannot place while a start in motion
         // fills the window stays in it (Window::filling).
@@ -318,14 +326,7 @@ impl<'a> Estimator<'a> {
         self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
         self.window.most_landmarks = self.window.most_landmarks.max(self.landmarks.count());
         if let Some(why) = self.window.contradicted_start(t, obs.len(), BLIND_FEATURES, &self.opts) {
-            // Initialized again from the next frame on: a new start, at the
-            // origin; the estimates since the contradicted one are withdrawn.
-            self.warn(format!("{why}; its estimates are withdrawn and the estimator initializes again"));
-            self.discarded_from = Some(self.window.started_at());
-            self.resets += 1;
-            self.window.clear();
-            self.landmarks.clear();
-            self.last_tracked = None;
+            self.withdraw_start(why);
             return None;
         }
         // Freed once a window's length of keyframes has left into the prior:
@@ -430,21 +431,26 @@ impl<'a> Estimator<'a> {
     /// (`added`: the prediction gate kept them out; tracks not yet
     /// triangulated do not place the frame). A warning when vision is lost,
     /// the span when it returns.
-    fn watch_blindness(&mut self, t: f64, features: usize, added: Added) {
+    fn watch_blindness(&mut self, t: f64, features: usize, added: Added) -> Option<String> {
         let kept_out = added.landmarks_seen - added.landmarks;
         let rejected =
             added.landmarks_seen >= BLIND_FEATURES && added.landmarks < BLIND_FEATURES && kept_out > added.landmarks;
+        let gated = || {
+            format!(
+                "{kept_out} of its {} observations of the window's landmarks lie beyond the {:.0} px prediction gate",
+                added.landmarks_seen, self.opts.gates.prediction_px
+            )
+        };
+        if rejected && self.window.unconfirmed(self.opts.window.size) {
+            return Some(gated());
+        }
         match (&mut self.blind_since, features < BLIND_FEATURES || rejected) {
             (None, true) => {
                 self.blind_since = Some((t, 1));
                 let why = if features < BLIND_FEATURES {
                     format!("{features} features, fewer than {BLIND_FEATURES}")
                 } else {
-                    format!(
-                        "{} of its {} observations of the window's landmarks lie beyond the {:.0} px prediction \
-                         gate: the IMU's prediction is off",
-                        kept_out, added.landmarks_seen, self.opts.gates.prediction_px
-                    )
+                    format!("{}: the IMU's prediction is off", gated())
                 };
                 self.warn(format!("vision lost at {t:.3} s ({why}): IMU only until features return"));
             }
@@ -459,6 +465,7 @@ impl<'a> Estimator<'a> {
             }
             (None, false) => {}
         }
+        None
     }
 
     /// Close a blind span still open at the last frame `t`.
@@ -618,6 +625,23 @@ impl<'a> Estimator<'a> {
         (solved, covariances)
     }
 
+    /// Withdraw the window's start, for `why`: a warning, its estimates leave
+    /// the output ([`run_observed`]), it counts as a reset, and the estimator
+    /// initializes again from the next frame on (a new start, at the origin).
+    fn withdraw_start(&mut self, why: String) {
+        self.warn(format!("{why}; its estimates are withdrawn and the estimator initializes again"));
+        if let Some((t0, n)) = self.blind_since.take() {
+            let t = self.window.states.last().map_or(t0, |s| s.t);
+            self.blind_spans.push([t0, t]);
+            self.warn(format!("blind from {t0:.3} s until that start was withdrawn at {t:.3} s ({n} frames)"));
+        }
+        self.discarded_from = Some(self.window.started_at());
+        self.resets += 1;
+        self.window.clear();
+        self.landmarks.clear();
+        self.last_tracked = None;
+    }
+
     /// After a failed solve at frame `index`: warn, restart the window from
     /// `last_good` (the frame's predicted state), and report that start.
     fn recover(
@@ -629,6 +653,16 @@ impl<'a> Estimator<'a> {
         t_start: Instant,
     ) -> Option<FrameEstimate> {
         let t = self.input.frames[index].t;
+        if self.window.unconfirmed(self.opts.window.size) {
+            // The last good state descends from a start nothing has confirmed:
+            // restarting from it carries the start's error on (each restart
+            // again unconfirmed), so the start goes.
+            self.withdraw_start(format!(
+                "failure at {t:.3} s ({why}) before the start in motion at {:.3} s was confirmed: the start was wrong",
+                self.window.started_at()
+            ));
+            return None;
+        }
         self.warn(format!("failure at {t:.3} s: {why}; reset from the last good state"));
         self.last_good = Some(last_good);
         self.reset_to_newest();

@@ -148,6 +148,15 @@ impl Window {
         self.started_in_motion && self.marginalized == 0 && self.states.len() < size
     }
 
+    /// Whether the window started in motion (or from a restart) and nothing
+    /// has confirmed that start yet: fewer than a window's length (`size`) of
+    /// its states have been marginalized, so the window and its prior rest on
+    /// the start's estimate and one window of frames (the online camera
+    /// calibration is held for as long, for the same reason).
+    pub fn unconfirmed(&self, size: usize) -> bool {
+        self.started_in_motion && self.marginalized < size
+    }
+
     /// When the window started \[s\].
     pub fn started_at(&self) -> f64 {
         self.started_at
