@@ -67,6 +67,12 @@ pub struct VioResult {
     pub resets: usize,
     /// Time at which the estimator initialized \[s\].
     pub init_time: Option<f64>,
+    /// Times \[s\] at which the estimates begin in a frame of their own: the
+    /// first initialization that kept estimates, and each later one (after a
+    /// withdrawn start). Position and yaw begin again at the origin at each,
+    /// so with more than one the trajectory is in pieces that must be
+    /// aligned or used separately (a warning says so).
+    pub starts: Vec<f64>,
     /// Wall time of the whole run \[s\].
     pub wall_s: f64,
     /// The measurement residuals at their final estimates, for the audit.
@@ -114,9 +120,11 @@ pub struct Estimator<'a> {
     camera_track: Vec<(f64, CameraEstimate)>,
     /// Keyframes for which the camera's calibration stays held after an implausible estimate.
     camera_held: usize,
-    /// The start of a segment whose estimates are withdrawn (a start the
-    /// features contradicted), until `run` has taken them out.
+    /// The start of a span whose estimates are withdrawn (a start or an
+    /// estimate the features contradicted), until [`Estimator::take_withdrawn`].
     discarded_from: Option<f64>,
+    /// The initializations so far \[s\] ([`VioResult::starts`]).
+    starts: Vec<f64>,
 }
 
 fn vec3(v: &Vector3<f64>) -> [f64; 3] {
@@ -158,6 +166,7 @@ impl<'a> Estimator<'a> {
             camera_track: Vec::new(),
             camera_held: 0,
             discarded_from: None,
+            starts: Vec::new(),
         }
     }
 
@@ -165,6 +174,16 @@ impl<'a> Estimator<'a> {
     /// is being decided), oldest first.
     pub fn window(&self) -> Vec<WindowState> {
         self.window.poses().into_iter().map(|(t, position, rotation)| WindowState { t, position, rotation }).collect()
+    }
+
+    /// The time \[s\] from which the estimates [`Estimator::process`] has
+    /// returned are withdrawn (a start or an estimate the features
+    /// contradicted: the warnings say why), once; None when nothing was.
+    /// Whoever keeps the estimates drops those at or after it, as [`run`] does.
+    pub fn take_withdrawn(&mut self) -> Option<f64> {
+        let t0 = self.discarded_from.take()?;
+        self.starts.retain(|t| *t < t0);
+        Some(t0)
     }
 
     /// The landmarks in the window now, by track id, in the world frame \[m\].
@@ -230,6 +249,7 @@ impl<'a> Estimator<'a> {
             let init = self.startup.initialize(self.input, &mut self.opts, &mut self.warnings, index, t)?;
             let x = init.x;
             self.init_time = Some(t);
+            self.starts.push(t);
             if self.opts.noise.measure_in_motion {
                 self.noise = Some(NoiseMeter::new(self.opts.noise.imu));
             }
@@ -323,10 +343,12 @@ impl<'a> Estimator<'a> {
             // prediction now, and the landmark's depth would stay fixed.
             return self.track_frame(index, sid, &predicted, vj, bl, obs, t_start);
         }
-        self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
+        let rays = self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
         self.window.most_landmarks = self.window.most_landmarks.max(self.landmarks.count());
-        if let Some(why) = self.window.contradicted_start(t, obs.len(), BLIND_FEATURES, &self.opts) {
-            self.withdraw_start(why);
+        let span = self.opts.init.motion_window_s;
+        self.window.watch_landmarks(t, self.landmarks.count(), obs.len(), rays, BLIND_FEATURES, span);
+        if let Some((since, why)) = self.window.contradicted(t, BLIND_FEATURES, &self.opts) {
+            self.withdraw(since, why);
             return None;
         }
         // Freed once a window's length of keyframes has left into the prior:
@@ -625,17 +647,23 @@ impl<'a> Estimator<'a> {
         (solved, covariances)
     }
 
-    /// Withdraw the window's start, for `why`: a warning, its estimates leave
-    /// the output ([`run_observed`]), it counts as a reset, and the estimator
-    /// initializes again from the next frame on (a new start, at the origin).
+    /// Withdraw the window's start, for `why` ([`Estimator::withdraw`]).
     fn withdraw_start(&mut self, why: String) {
+        self.withdraw(self.window.started_at(), why);
+    }
+
+    /// Withdraw the estimates from time `from` on, for `why`: a warning, they
+    /// leave the output ([`run_observed`]), it counts as a reset, and the
+    /// estimator initializes again from the next frame on (a new start, at
+    /// the origin).
+    fn withdraw(&mut self, from: f64, why: String) {
         self.warn(format!("{why}; its estimates are withdrawn and the estimator initializes again"));
         if let Some((t0, n)) = self.blind_since.take() {
             let t = self.window.states.last().map_or(t0, |s| s.t);
             self.blind_spans.push([t0, t]);
-            self.warn(format!("blind from {t0:.3} s until that start was withdrawn at {t:.3} s ({n} frames)"));
+            self.warn(format!("blind from {t0:.3} s until the estimates were withdrawn at {t:.3} s ({n} frames)"));
         }
-        self.discarded_from = Some(self.window.started_at());
+        self.discarded_from = Some(from);
         self.resets += 1;
         self.window.clear();
         self.landmarks.clear();
@@ -750,7 +778,7 @@ pub fn run_observed(
             observe(&est, i, &e);
             out.estimates.push(e);
         }
-        if let Some(t0) = est.discarded_from.take() {
+        if let Some(t0) = est.take_withdrawn() {
             out.estimates.retain(|e| e.t < t0);
         }
         if let Some(p) = progress.as_mut() {
@@ -777,7 +805,17 @@ pub fn run_observed(
     if let Some(last) = out.estimates.last() {
         est.finish_blindness(last.t);
     }
+    if est.starts.len() > 1 {
+        let at: Vec<String> = est.starts.iter().map(|t| format!("{t:.3} s")).collect();
+        est.warnings.push(format!(
+            "the trajectory is in {} pieces, each in a frame of its own (started at {}): position and yaw begin \
+             again at the origin at each start after a withdrawn one, so align or use the pieces separately",
+            at.len(),
+            at.join(", ")
+        ));
+    }
     out.warnings = est.warnings;
+    out.starts = est.starts;
     out.blind_spans = est.blind_spans;
     out.resets = est.resets;
     out.init_time = est.init_time;

@@ -68,6 +68,32 @@ pub(crate) struct Added {
     pub landmarks: usize,
 }
 
+/// How the rays of the tracks not yet landmarks met in one
+/// [`Landmarks::triangulate`] (tracks seen by two or more of the window's states).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct RayTally {
+    /// Tracks whose rays meet within the triangulation gate, in front of the
+    /// cameras (landmarks now, or waiting for parallax).
+    pub agreed: usize,
+    /// Tracks whose rays do not meet from the window's poses (beyond the gate,
+    /// or behind a camera) though they have the parallax to, even with their
+    /// worst observations dropped.
+    pub disagreed: usize,
+}
+
+impl RayTally {
+    /// Count a track whose rays did not meet: a disagreement where they had
+    /// the parallax to (`parallax`), else an agreement (nearly parallel rays
+    /// meet anywhere along their direction).
+    fn note(&mut self, parallax: bool) {
+        if parallax {
+            self.disagreed += 1;
+        } else {
+            self.agreed += 1;
+        }
+    }
+}
+
 /// The tracks of the window, by track id.
 #[derive(Debug, Default)]
 pub(crate) struct Landmarks {
@@ -296,8 +322,15 @@ impl Landmarks {
 
     /// Triangulate tracks seen from two or more of the window's `states`
     /// (their poses in `values`), inserting each new landmark's inverse depth
-    /// into `values`.
-    pub fn triangulate(&mut self, input: &VioInput, states: &[u64], values: &mut Values, opts: &VioOptions) {
+    /// into `values`; returns how the tracks' rays met.
+    pub fn triangulate(
+        &mut self,
+        input: &VioInput,
+        states: &[u64],
+        values: &mut Values,
+        opts: &VioOptions,
+    ) -> RayTally {
+        let mut tally = RayTally::default();
         let (r_bc, t_bc) = parts(&body_from_camera(input, values));
         let min_angle = opts.gates.min_triangulation_deg.to_radians();
         let stereo = input.stereo.as_ref().map(|st| (st, parts(&st.body_from_camera)));
@@ -330,7 +363,17 @@ impl Landmarks {
                 }
                 let c: Vec<_> = rays.iter().map(|r| r.centre).collect();
                 let d: Vec<_> = rays.iter().map(|r| (r.rotation * r.xy.push(1.0)).normalize()).collect();
-                let Some((pw, angle)) = triangulate(&c, &d) else { break None };
+                // Rays that miss one another contradict the poses only where
+                // they have the parallax to: nearly parallel ones (a camera at
+                // rest or turning on the spot) put their midpoint anywhere.
+                let parallax = || {
+                    let cos = d.iter().enumerate().flat_map(|(i, a)| d[i + 1..].iter().map(move |b| a.dot(b)));
+                    cos.fold(1.0f64, f64::min).clamp(-1.0, 1.0).acos()
+                };
+                let Some((pw, angle)) = triangulate(&c, &d) else {
+                    tally.note(parallax() >= min_angle);
+                    break None;
+                };
                 let error = |r: &Ray| {
                     let q = r.rotation.transpose() * (pw - r.centre);
                     if q.z <= 0.0 {
@@ -344,6 +387,7 @@ impl Landmarks {
                     break Some((pw, angle));
                 }
                 if rays.len() == 2 {
+                    tally.note(angle >= min_angle);
                     break None;
                 }
                 let (k, second) = (rays[worst].obs, rays[worst].stereo);
@@ -354,6 +398,7 @@ impl Landmarks {
                 }
             };
             let Some((pw, angle)) = agreed else { continue };
+            tally.agreed += 1;
             if angle < min_angle {
                 continue;
             }
@@ -381,6 +426,7 @@ impl Landmarks {
             values.insert(L(lid), Vector1::new(1.0 / z));
             tr.landmark = Some((lid, anchor));
         }
+        tally
     }
 
     /// After a solve: drop observations whose error exceeds

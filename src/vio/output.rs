@@ -36,6 +36,9 @@ pub struct Summary {
     pub keyframes: usize,
     /// Failure resets.
     pub resets: usize,
+    /// Times \[s\] at which the trajectory begins in a frame of its own
+    /// ([`VioResult::starts`]); more than one: it is in pieces.
+    pub starts: Vec<f64>,
     /// Median per-frame solve time \[ms\].
     pub solve_ms_median: f64,
     /// 95th percentile per-frame solve time \[ms\].
@@ -197,6 +200,7 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         frames: e.len(),
         keyframes: e.iter().filter(|x| x.keyframe).count(),
         resets: result.resets,
+        starts: result.starts.clone(),
         residuals: result.residuals,
         residual_gap: result.residuals.gap(),
         solve_ms_median: percentile(&mut solve, 0.5),
@@ -249,7 +253,7 @@ impl Summary {
             )
         });
         format!(
-            "duration {:.1} s, path {:.2} m{}, {} frames ({} keyframes), {} resets\n\
+            "duration {:.1} s, path {:.2} m{}, {} frames ({} keyframes), {} resets{}\n\
              closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
              bias RMSE after {:.1} s: gyro {}, accel {}{}\n\
@@ -260,6 +264,11 @@ impl Summary {
             self.frames,
             self.keyframes,
             self.resets,
+            if self.starts.len() > 1 {
+                format!(" (the trajectory is in {} pieces, each in a frame of its own)", self.starts.len())
+            } else {
+                String::new()
+            },
             self.closed_loop_error_m,
             self.closed_loop_percent(),
             if self.groundtruth_distance_m.is_some() { "ground-truth" } else { "estimated" },
