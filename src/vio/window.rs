@@ -233,7 +233,7 @@ impl Window {
     ///   flew on for 17 s at up to 250 m/s until a position jump reset it.
     pub fn contradicted(&self, t: f64, min_landmarks: usize, opts: &VioOptions) -> Option<(f64, String)> {
         let span = opts.init.motion_window_s;
-        if self.unconfirmed(usize::MAX) && self.most_landmarks < min_landmarks {
+        if self.started_in_motion && self.most_landmarks < min_landmarks {
             let span_now = t - self.started_at;
             return (self.few_landmarks && span_now > span).then(|| {
                 (
@@ -249,23 +249,25 @@ impl Window {
         let (t0, ..) = *self.rays.front()?;
         let (agreed, disagreed) = self.rays.iter().fold((0, 0), |(a, d), (_, _, r)| (a + r.agreed, d + r.disagreed));
         let seen = self.rays.iter().all(|(_, enough, _)| *enough);
-        if !(t - self.started_at > span && t - t0 > 0.9 * span && seen && disagreed > agreed.max(min_landmarks)) {
+        // The tallies must cover the span (to within a frame or two: a
+        // single frame's tally decides nothing) and outvote the rest, by at
+        // least the landmarks an estimate needs.
+        let covered = t - self.started_at > span && t - t0 > 0.9 * span;
+        if !(covered && seen && disagreed > agreed.max(min_landmarks)) {
             return None;
         }
         // Withdrawn from the first triangulation at which most rays missed.
         let from = self.rays.iter().find(|(_, _, r)| r.disagreed > r.agreed).map_or(t0, |(t, ..)| *t);
-        Some({
-            (
-                from,
-                format!(
-                    "the estimate is contradicted by the features from {from:.3} s on: over {:.2} s the rays of the \
-                     tracks missed one another from its poses at {disagreed} of {} tries (its velocity or attitude \
-                     is off: an IMU shock or saturation?)",
-                    t - t0,
-                    agreed + disagreed
-                ),
-            )
-        })
+        Some((
+            from,
+            format!(
+                "the estimate is contradicted by the features from {from:.3} s on: over {:.2} s the rays of the \
+                 tracks missed one another from its poses at {disagreed} of {} tries (its velocity or attitude is \
+                 off: an IMU shock or saturation?)",
+                t - t0,
+                agreed + disagreed
+            ),
+        ))
     }
 
     /// A new state id.
