@@ -344,7 +344,6 @@ impl<'a> Estimator<'a> {
             return self.track_frame(index, sid, &predicted, vj, bl, obs, t_start);
         }
         let rays = self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
-        self.window.most_landmarks = self.window.most_landmarks.max(self.landmarks.count());
         let span = self.opts.init.motion_window_s;
         self.window.watch_landmarks(t, self.landmarks.count(), obs.len(), rays, BLIND_FEATURES, span);
         if let Some((since, why)) = self.window.contradicted(t, BLIND_FEATURES, &self.opts) {
@@ -452,7 +451,9 @@ impl<'a> Estimator<'a> {
     /// most, and all but fewer than that, disagree with the IMU's prediction
     /// (`added`: the prediction gate kept them out; tracks not yet
     /// triangulated do not place the frame). A warning when vision is lost,
-    /// the span when it returns.
+    /// the span when it returns. When the gate keeps them out while the
+    /// window's start in motion is unconfirmed, the frame is not blind: the
+    /// start is refuted, and the returned text says by what.
     fn watch_blindness(&mut self, t: f64, features: usize, added: Added) -> Option<String> {
         let kept_out = added.landmarks_seen - added.landmarks;
         let rejected =

@@ -119,11 +119,8 @@ pub(crate) struct Window {
     started_in_motion: bool,
     /// When it started \[s\].
     started_at: f64,
-    /// The most landmarks it has held since.
-    pub most_landmarks: usize,
-    /// Whether the newest triangulated frame had enough features but the
-    /// window too few landmarks ([`Window::watch_landmarks`]).
-    few_landmarks: bool,
+    /// The most landmarks it has held since ([`Window::watch_landmarks`]).
+    most_landmarks: usize,
     /// The recent triangulations: time \[s\], whether the frame had enough
     /// features, how the rays met ([`Window::watch_landmarks`]).
     rays: std::collections::VecDeque<(f64, bool, RayTally)>,
@@ -183,7 +180,6 @@ impl Window {
         self.init_prior = None;
         self.marginalized = 0;
         self.most_landmarks = 0;
-        self.few_landmarks = false;
         self.rays.clear();
     }
 
@@ -200,7 +196,7 @@ impl Window {
         min_landmarks: usize,
         span: f64,
     ) {
-        self.few_landmarks = landmarks < min_landmarks && features >= min_landmarks;
+        self.most_landmarks = self.most_landmarks.max(landmarks);
         self.rays.push_back((t, features >= min_landmarks, rays));
         while self.rays.front().is_some_and(|(t0, ..)| *t0 < t - span) {
             self.rays.pop_front();
@@ -234,8 +230,11 @@ impl Window {
     pub fn contradicted(&self, t: f64, min_landmarks: usize, opts: &VioOptions) -> Option<(f64, String)> {
         let span = opts.init.motion_window_s;
         if self.started_in_motion && self.most_landmarks < min_landmarks {
+            // This frame had the features (and, as the window never held
+            // them, too few landmarks).
+            let features = self.rays.back().is_some_and(|(_, enough, _)| *enough);
             let span_now = t - self.started_at;
-            return (self.few_landmarks && span_now > span).then(|| {
+            return (features && span_now > span).then(|| {
                 (
                     self.started_at,
                     format!(
