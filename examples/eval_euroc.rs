@@ -18,7 +18,8 @@
 //! translation error in % of the distance, rotation in degrees), rotation
 //! RMSE, bias RMSE (gyro, accel) and its ratio to the floor `√(N·K)` the noise
 //! in use predicts, the bias NEES per axis (error²/σ², 1 = consistent), the
-//! IMU white noise in use at the end, resets and speed. The flags switch the
+//! IMU white noise in use at the end, resets (and the pieces, when a start
+//! was withdrawn: each piece is aligned by itself) and speed. The flags switch the
 //! estimator's choices off or on, to compare: `--noise-from-static` raises the
 //! noise to the static start's spread, `--zoh` integrates with the zero-order
 //! hold instead of the midpoint rule, `--fixed-noise` does not measure the
@@ -35,7 +36,7 @@
 use std::path::{Path, PathBuf};
 use tumble::eval::{Alignment, EvalOptions};
 use tumble::inputs::{open_vio, VioSource};
-use tumble::vio::{run, summarize, trajectory, Summary, VioInput, VioOptions};
+use tumble::vio::{piece_starts_s, run, summarize, trajectory, Summary, VioInput, VioOptions};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -149,7 +150,7 @@ fn main() {
             continue;
         }
         eprintln!("running {name} …");
-        let dir = out.as_ref().map(|d| d.join(name.split(' ').next().unwrap_or("case")));
+        let dir = out.as_ref().map(|d| d.join(folder_name(name)));
         match evaluate(case, o, walk_scale, &cuts, &data, dir.as_deref()) {
             Ok(Some((s, note))) => {
                 notes.extend(note.map(|n| format!("{name}: {n}")));
@@ -232,8 +233,24 @@ enum Case {
 /// axis, 3 cm along the camera's x, stamps 8 ms late.
 const CAMERA_ERROR: ([f64; 3], [f64; 3], f64) = ([1.0, -1.0, 1.0], [0.03, 0.0, 0.0], 0.008);
 
-/// Where the perturbed run's trajectory is evaluated again \[s\].
+/// Where the perturbed run's trajectory is evaluated again \[s after its
+/// first estimate\].
 const LATE_S: f64 = 15.0;
+
+/// A case's folder under `--out`: its name in lower case, each run of other
+/// characters than letters and digits one `_` (`imu_april, T_BC 2°…` →
+/// `imu_april_t_bc_2_…`), so that no two cases share one.
+fn folder_name(name: &str) -> String {
+    let mut s = String::new();
+    for c in name.chars() {
+        if c.is_ascii_alphanumeric() {
+            s.push(c.to_ascii_lowercase());
+        } else if !s.ends_with('_') {
+            s.push('_');
+        }
+    }
+    s.trim_matches('_').to_string()
+}
 
 /// Run one case as `tumble vio` does and summarize it against its ground
 /// truth; with an online camera calibration, also a line on how far it
@@ -291,7 +308,11 @@ fn evaluate(
     // by 0.6°: align in 6 DOF instead of position + yaw.
     let se3 = |result: &tumble::vio::VioResult| {
         let gt = input.groundtruth.as_ref().ok_or("no PnP ground truth")?;
-        let eval_opts = EvalOptions { alignment: Alignment::Se3, ..EvalOptions::default() };
+        let eval_opts = EvalOptions {
+            alignment: Alignment::Se3,
+            piece_starts_s: piece_starts_s(&input, result),
+            ..EvalOptions::default()
+        };
         tumble::eval::evaluate(&trajectory(&input, result), None, gt, &eval_opts).map_err(|e| e.to_string())
     };
     if let (Case::Target(..), Some(_)) = (case, &input.groundtruth) {
@@ -310,7 +331,8 @@ fn evaluate(
         let after = from + len + 2.0;
         let mut late = result.clone();
         late.estimates.retain(|e| e.t > after);
-        let eval_opts = EvalOptions { alignment, ..EvalOptions::default() };
+        let eval_opts =
+            EvalOptions { alignment, piece_starts_s: piece_starts_s(&input, &late), ..EvalOptions::default() };
         let ev = input
             .groundtruth
             .as_ref()
@@ -336,16 +358,20 @@ fn evaluate(
         // The first seconds are flown with the wrong calibration (held until
         // a window's length of keyframes is in the prior): the ATE after them.
         let mut late = result.clone();
-        late.estimates.retain(|e| e.t > LATE_S);
+        let first = result.estimates.first().map_or(0.0, |e| e.t);
+        late.estimates.retain(|e| e.t > first + LATE_S);
         let ate = se3(&late).ok();
         format!(
             "{}\n  from EuRoC's calibration: rotation {dr:.3}°, translation {:.1} mm, time offset {:.3} ms; \
-             after {LATE_S} s: ATE {}, rotation RMSE {}",
+             {LATE_S} s after the first estimate: ATE {}, rotation RMSE {}",
             est.line(),
             dt * 1e3,
             (est.time_offset_s + shift) * 1e3,
             ate.as_ref().map_or("—".into(), |e| format!("{:.3} m", e.metrics.ate_rmse_m)),
-            ate.as_ref().map_or("—".into(), |e| format!("{:.2}°", e.metrics.rotation_rmse_deg)),
+            ate.as_ref().map_or("—".into(), |e| format!(
+                "{:.2}° ({:.2}° with the orientations aligned)",
+                e.metrics.rotation_rmse_deg, e.metrics.rotation_rmse_oriented_deg
+            )),
         )
     });
     let start_note = cuts.from.map(|from| {
@@ -400,7 +426,10 @@ fn print_table(rows: &[(String, Summary)], markdown: bool) {
                 f3(m.and_then(|m| m.bias_nees_gyro_axes)),
                 f3(m.and_then(|m| m.bias_nees_accel_axes)),
                 s.noise.map_or("given".into(), |n| format!("{:.1e}, {:.1e}", n.in_use[0], n.in_use[1])),
-                s.resets.to_string(),
+                match s.starts.len() {
+                    0 | 1 => s.resets.to_string(),
+                    n => format!("{} ({n} pieces)", s.resets),
+                },
                 format!("{:.0}", s.realtime_factor),
             ]
         })

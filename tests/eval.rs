@@ -228,6 +228,51 @@ fn files_round_trip_and_the_report_is_written() {
     assert_eq!(json["alignment"], "posyaw");
 }
 
+/// An estimate in pieces (a run that started again in a frame of its own)
+/// is aligned piece by piece when the pieces are given: each piece's error is
+/// what was put into it, and relative errors never span two frames.
+#[test]
+fn an_estimate_in_pieces_is_aligned_piece_by_piece() {
+    let gt = groundtruth();
+    let a = moved(&gt, Rotation3::from_euler_angles(0.0, 0.0, 0.6), Vector3::new(1.0, 2.0, 0.0), 1.0, 0.01, 7);
+    let b = moved(&gt, Rotation3::from_euler_angles(0.0, 0.0, -2.0), Vector3::new(-4.0, 0.5, 0.0), 1.0, 0.01, 8);
+    let split = gt.t_ns[gt.len() / 2];
+    let mut est = Trajectory::default();
+    for (from, to) in [(&a, true), (&b, false)] {
+        for i in (0..from.len()).filter(|&i| (from.t_ns[i] < split) == to) {
+            est.t_ns.push(from.t_ns[i]);
+            est.p.push(from.p[i]);
+            est.q.push(from.q[i]);
+        }
+    }
+    let whole = evaluate(&est, None, &gt, &EvalOptions::default()).unwrap();
+    let opts = EvalOptions { piece_starts_s: vec![split as f64 * 1e-9], ..Default::default() };
+    let e = evaluate(&est, None, &gt, &opts).unwrap();
+    println!(
+        "as one: ATE {:.3} m; in pieces: ATE {:.4} m, {:?}",
+        whole.metrics.ate_rmse_m, e.metrics.ate_rmse_m, e.metrics.pieces
+    );
+    assert!(whole.metrics.ate_rmse_m > 1.0);
+    assert_eq!(e.metrics.pieces.len(), 2);
+    assert_eq!(e.similarities.len(), 2);
+    let expected = 0.01 * 3f64.sqrt();
+    for p in &e.metrics.pieces {
+        assert!((p.ate_rmse_m / expected - 1.0).abs() < 0.1, "{p:?}");
+    }
+    assert!(e.metrics.rotation_rmse_deg < 0.1 && e.metrics.rotation_rmse_oriented_deg < 0.1);
+    assert!(e.metrics.rpe.iter().all(|r| r.trans_rmse_m < 0.05), "{:?}", e.metrics.rpe);
+    assert!(e.metrics.warnings.iter().any(|w| w.contains("2 pieces")), "{:?}", e.metrics.warnings);
+    // A piece of two poses cannot be aligned: left out, counted and said.
+    let late = (est.t_ns[est.len() - 2] - 1) as f64 * 1e-9;
+    let opts = EvalOptions { piece_starts_s: vec![split as f64 * 1e-9, late], ..Default::default() };
+    let e = evaluate(&est, None, &gt, &opts).unwrap();
+    assert_eq!((e.metrics.pieces.len(), e.metrics.unmatched), (2, 2));
+    assert!(e.metrics.warnings.iter().any(|w| w.contains("left out")), "{:?}", e.metrics.warnings);
+    // Pieces out of order are refused before any work.
+    let bad = EvalOptions { piece_starts_s: vec![2.0, 1.0], ..Default::default() };
+    assert!(evaluate(&est, None, &gt, &bad).unwrap_err().to_string().contains("--pieces"));
+}
+
 #[test]
 fn bad_input_is_refused_clearly() {
     let gt = groundtruth();

@@ -30,6 +30,11 @@ pub struct EvalArgs {
     /// Largest ground-truth gap to interpolate across [s].
     #[arg(long, default_value_t = 0.1)]
     max_gap: f64,
+    /// Times [s, the estimate's clock] at which the estimate begins again in a
+    /// frame of its own, comma separated: each piece is aligned by itself.
+    /// Default: the `starts` of `tumble vio`'s summary.json beside the estimate.
+    #[arg(long, value_delimiter = ',')]
+    pieces: Option<Vec<f64>>,
     /// Output folder (default: `eval/` beside the estimate).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -37,14 +42,20 @@ pub struct EvalArgs {
 
 impl EvalArgs {
     pub fn run(self) -> CliResult {
-        let opts = EvalOptions {
+        let mut opts = EvalOptions {
             alignment: self.align,
             rpe_distances: self.rpe_distances,
             bias_after_s: self.bias_after,
             max_gap_s: self.max_gap,
+            piece_starts_s: self.pieces.clone().unwrap_or_default(),
         };
         opts.validate()?;
         let inputs = tumble::eval::EvalInputs::read(&self.estimate, &self.groundtruth, self.biases.as_deref())?;
+        if self.pieces.is_none() && !inputs.piece_starts_s.is_empty() {
+            println!("pieces: {} (summary.json beside the estimate)", inputs.piece_starts_s.len());
+            opts.piece_starts_s = inputs.piece_starts_s.clone();
+            opts.validate()?;
+        }
         if let (None, Some(b)) = (&self.biases, &inputs.biases_file) {
             println!("biases: {}", b.display());
         }

@@ -49,6 +49,11 @@ pub struct EvalOptions {
     pub bias_after_s: f64,
     /// Largest ground-truth gap to interpolate across \[s\].
     pub max_gap_s: f64,
+    /// Times on the estimate's clock \[s\] at which it begins again in a
+    /// frame of its own (a VIO run restarted: `summary.json`'s `starts`).
+    /// Each piece is aligned by itself and relative errors are measured
+    /// within pieces; empty: the estimate is one piece.
+    pub piece_starts_s: Vec<f64>,
 }
 
 impl EvalOptions {
@@ -68,6 +73,15 @@ impl EvalOptions {
         }
         if !self.bias_after_s.is_finite() {
             return Err(crate::OptionError::new("--bias-after", "must be a finite number of seconds"));
+        }
+        if let Some(t) = self.piece_starts_s.iter().find(|t| !t.is_finite()) {
+            return Err(crate::OptionError::new("--pieces", format!("must be times in seconds, got {t}")));
+        }
+        if let Some(w) = self.piece_starts_s.windows(2).find(|w| w[1] <= w[0]) {
+            return Err(crate::OptionError::new(
+                "--pieces",
+                format!("must be increasing times, got {} s after {} s", w[1], w[0]),
+            ));
         }
         Ok(())
     }
@@ -100,11 +114,16 @@ pub struct EvalInputs {
     pub biases: Option<BiasTrack>,
     /// The bias file read, when there is one.
     pub biases_file: Option<std::path::PathBuf>,
+    /// Where the estimate begins again in a frame of its own \[s, its
+    /// clock\] ([`EvalOptions::piece_starts_s`]), from `summary.json` beside
+    /// it; empty when it is one piece or there is no such file.
+    pub piece_starts_s: Vec<f64>,
 }
 
 impl EvalInputs {
     /// Read the estimate and the ground truth (TUM or ASL), and the bias track
     /// `biases` or, when not given, `biases.csv` beside the estimate when it is there.
+    /// A `summary.json` of `tumble vio` beside the estimate gives its pieces.
     pub fn read(
         estimate: &std::path::Path,
         groundtruth: &std::path::Path,
@@ -119,13 +138,43 @@ impl EvalInputs {
             None => beside.is_file().then_some(beside),
         };
         let biases = biases_file.as_deref().map(read_biases).transpose()?;
-        Ok(EvalInputs { estimate: est, groundtruth: gt, biases, biases_file })
+        let summary = estimate.with_file_name("summary.json");
+        let piece_starts_s = if summary.is_file() { read_piece_starts(&summary)? } else { Vec::new() };
+        Ok(EvalInputs { estimate: est, groundtruth: gt, biases, biases_file, piece_starts_s })
     }
+}
+
+/// The pieces a `tumble vio` summary lists: its `starts` \[s\] on the
+/// recording's clock (`clock_t0_s` + each), when there is more than one.
+fn read_piece_starts(path: &std::path::Path) -> Result<Vec<f64>, crate::InputError> {
+    use crate::InputError;
+    let text = std::fs::read_to_string(path).map_err(|e| InputError::file(path, e))?;
+    let json: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| InputError::at(path, e.line(), format!("not JSON: {e}")))?;
+    let Some(starts) = json.get("starts") else { return Ok(Vec::new()) };
+    let starts: Vec<f64> = starts
+        .as_array()
+        .and_then(|a| a.iter().map(|v| v.as_f64()).collect())
+        .ok_or_else(|| InputError::file(path, "`starts` is not a list of times in seconds"))?;
+    if starts.len() < 2 {
+        return Ok(Vec::new());
+    }
+    let t0 = json.get("clock_t0_s").and_then(|v| v.as_f64()).ok_or_else(|| {
+        InputError::file(path, format!("lists {} starts but no `clock_t0_s` to place them on", starts.len()))
+            .with_hint("written by an older tumble: run `tumble vio` again, or move the summary away")
+    })?;
+    Ok(starts.iter().map(|s| t0 + s).collect())
 }
 
 impl Default for EvalOptions {
     fn default() -> Self {
-        EvalOptions { alignment: Alignment::PosYaw, rpe_distances: Vec::new(), bias_after_s: 0.0, max_gap_s: 0.1 }
+        EvalOptions {
+            alignment: Alignment::PosYaw,
+            rpe_distances: Vec::new(),
+            bias_after_s: 0.0,
+            max_gap_s: 0.1,
+            piece_starts_s: Vec::new(),
+        }
     }
 }
 
@@ -153,11 +202,16 @@ pub struct RpeEntry {
 pub struct Metrics {
     /// Alignment used.
     pub alignment: Alignment,
-    /// Scale of the alignment (1 unless sim3).
+    /// Scale of the alignment (1 unless sim3; of the longest piece when the
+    /// estimate is in pieces).
     pub scale: f64,
+    /// The pieces of the estimate, each aligned by itself (one unless
+    /// [`EvalOptions::piece_starts_s`] splits it).
+    pub pieces: Vec<Piece>,
     /// Estimated poses paired with the ground truth.
     pub matched: usize,
-    /// Estimated poses outside the ground truth's span or in its gaps.
+    /// Estimated poses outside the ground truth's span or in its gaps, or
+    /// in a piece too short to align by itself.
     pub unmatched: usize,
     /// Time from the first to the last paired pose \[s\].
     pub duration_s: f64,
@@ -204,11 +258,29 @@ pub struct Metrics {
     pub warnings: Vec<String>,
 }
 
+/// A piece of the estimate: a span estimated in one frame, aligned by itself.
+#[derive(Debug, Clone, Serialize)]
+pub struct Piece {
+    /// Its first paired pose, seconds since the first estimated pose \[s\].
+    pub from_s: f64,
+    /// Its last paired pose \[s\].
+    pub to_s: f64,
+    /// Its poses paired with the ground truth.
+    pub matched: usize,
+    /// RMS of its aligned position errors \[m\].
+    pub ate_rmse_m: f64,
+    /// Scale of its alignment (1 unless sim3).
+    pub scale: f64,
+}
+
 /// One estimated pose paired with the ground truth.
 #[derive(Debug, Clone, Copy)]
 pub struct Pair {
     /// Seconds since the first estimated pose.
     pub t: f64,
+    /// The piece it belongs to (an index into [`Evaluation::similarities`]
+    /// and [`Metrics::pieces`]).
+    pub piece: usize,
     /// Estimated pose (world ← body), before alignment.
     pub est: Isometry3<f64>,
     /// Ground-truth pose at the same time.
@@ -222,8 +294,8 @@ pub struct Evaluation {
     pub metrics: Metrics,
     /// The paired poses.
     pub pairs: Vec<Pair>,
-    /// The alignment applied to the estimate.
-    pub similarity: Similarity,
+    /// The alignment applied to each piece of the estimate.
+    pub similarities: Vec<Similarity>,
     /// Aligned position error of each pair \[m\].
     pub position_errors: Vec<f64>,
     /// The whole ground-truth trajectory (for the top view), times in seconds since the first estimate.
@@ -307,33 +379,40 @@ fn stats(v: &[f64]) -> (f64, f64, f64, f64) {
     (rmse, mean, median, s[s.len() - 1])
 }
 
-/// Relative pose errors over `distances` (metres along the ground truth);
-/// the estimate's translations are multiplied by `scale` first.
-fn relative_errors(pairs: &[Pair], distances: &[f64], scale: f64) -> Vec<RpeEntry> {
-    let mut along = vec![0.0; pairs.len()];
-    for i in 1..pairs.len() {
-        along[i] = along[i - 1] + (pairs[i].gt.translation.vector - pairs[i - 1].gt.translation.vector).norm();
+/// Relative pose errors over `distances` (metres along the ground truth),
+/// between poses of one piece; each piece's translations are multiplied by
+/// its alignment's scale first.
+fn relative_errors(pieces: &[&[Pair]], distances: &[f64], similarities: &[Similarity]) -> Vec<RpeEntry> {
+    let mut along: Vec<Vec<f64>> = Vec::with_capacity(pieces.len());
+    for piece in pieces {
+        let mut a = vec![0.0; piece.len()];
+        for i in 1..piece.len() {
+            a[i] = a[i - 1] + (piece[i].gt.translation.vector - piece[i - 1].gt.translation.vector).norm();
+        }
+        along.push(a);
     }
-    let scaled = |x: &Isometry3<f64>| {
-        let mut x = *x;
-        x.translation.vector *= scale;
-        x
+    let scaled = |x: &Pair| {
+        let mut e = x.est;
+        e.translation.vector *= similarities[x.piece].scale;
+        e
     };
     distances
         .iter()
         .filter_map(|&d| {
             let (mut trans, mut rot, mut pct) = (Vec::new(), Vec::new(), Vec::new());
-            for i in 0..pairs.len() {
-                let j = along.partition_point(|&a| a < along[i] + d);
-                if j >= pairs.len() {
-                    break;
+            for (pairs, along) in pieces.iter().zip(&along) {
+                for i in 0..pairs.len() {
+                    let j = along.partition_point(|&a| a < along[i] + d);
+                    if j >= pairs.len() {
+                        break;
+                    }
+                    let dg = pairs[i].gt.inverse() * pairs[j].gt;
+                    let de = scaled(&pairs[i]).inverse() * scaled(&pairs[j]);
+                    let e = dg.inverse() * de;
+                    trans.push(e.translation.vector.norm());
+                    rot.push(e.rotation.angle().to_degrees());
+                    pct.push(100.0 * e.translation.vector.norm() / (along[j] - along[i]).max(1e-12));
                 }
-                let dg = pairs[i].gt.inverse() * pairs[j].gt;
-                let de = scaled(&pairs[i].est).inverse() * scaled(&pairs[j].est);
-                let e = dg.inverse() * de;
-                trans.push(e.translation.vector.norm());
-                rot.push(e.rotation.angle().to_degrees());
-                pct.push(100.0 * e.translation.vector.norm() / (along[j] - along[i]).max(1e-12));
             }
             if trans.is_empty() {
                 return None;
@@ -350,6 +429,53 @@ fn relative_errors(pairs: &[Pair], distances: &[f64], scale: f64) -> Vec<RpeEntr
             })
         })
         .collect()
+}
+
+/// Align each piece of `pairs` (consecutive pairs of one [`Pair::piece`])
+/// by itself. A piece too short or too straight to align is left out with a
+/// warning, unless it is the only one (then its error is the evaluation's);
+/// the pieces kept are numbered again from 0.
+fn align_pieces(
+    pairs: Vec<Pair>,
+    kind: Alignment,
+    warnings: &mut Vec<String>,
+) -> Result<(Vec<Pair>, Vec<Similarity>), EvalError> {
+    let total = pairs.chunk_by(|a, b| a.piece == b.piece).count();
+    let (mut kept, mut similarities) = (Vec::with_capacity(pairs.len()), Vec::new());
+    for piece in pairs.chunk_by(|a, b| a.piece == b.piece) {
+        let pe: Vec<Vector3<f64>> = piece.iter().map(|p| p.est.translation.vector).collect();
+        let pg: Vec<Vector3<f64>> = piece.iter().map(|p| p.gt.translation.vector).collect();
+        let sim = if piece.len() < 3 {
+            Err(EvalError::Invalid(format!("only {} paired poses", piece.len())))
+        } else {
+            align(&pe, &pg, kind)
+        };
+        match sim {
+            Ok(sim) => {
+                kept.extend(piece.iter().map(|p| Pair { piece: similarities.len(), ..*p }));
+                similarities.push(sim);
+            }
+            Err(e) if total == 1 => return Err(e),
+            Err(e) => warnings.push(format!(
+                "the piece of the estimate over {:.2}–{:.2} s cannot be aligned by itself ({e}): \
+                 its {} poses are left out",
+                piece[0].t,
+                piece[piece.len() - 1].t,
+                piece.len()
+            )),
+        }
+    }
+    if similarities.is_empty() {
+        return Err(format!("none of the estimate's {total} pieces can be aligned by itself").into());
+    }
+    if similarities.len() > 1 {
+        warnings.push(format!(
+            "the estimate is in {} pieces, each in a frame of its own: each is aligned by itself, \
+             and relative errors are measured within pieces",
+            similarities.len()
+        ));
+    }
+    Ok((kept, similarities))
 }
 
 /// The default relative-error distances: 10–50 % of the path, rounded to two significant digits.
@@ -469,10 +595,14 @@ pub fn evaluate(
     }
     let t0_ns = est.t_ns[0];
     let max_gap_ns = opts.max_gap_s * 1e9;
+    // Seconds of an epoch clock resolve ~0.2 µs in f64: a pose within 1 µs
+    // of a piece's start is its first.
+    let starts_ns: Vec<i64> = opts.piece_starts_s.iter().map(|s| (s * 1e9).round() as i64 - 1_000).collect();
     let mut pairs = Vec::with_capacity(est.len());
     for i in 0..est.len() {
         if let Some(g) = pose_at(gt, est.t_ns[i], max_gap_ns) {
-            pairs.push(Pair { t: (est.t_ns[i] - t0_ns) as f64 * 1e-9, est: iso(est.p[i], est.q[i]), gt: g });
+            let piece = starts_ns.partition_point(|&s| s <= est.t_ns[i]);
+            pairs.push(Pair { t: (est.t_ns[i] - t0_ns) as f64 * 1e-9, piece, est: iso(est.p[i], est.q[i]), gt: g });
         }
     }
     let span = |t: &[i64]| format!("{:.3}–{:.3} s", t[0] as f64 * 1e-9, t[t.len() - 1] as f64 * 1e-9);
@@ -487,26 +617,55 @@ pub fn evaluate(
         )
         .into());
     }
-    let pe: Vec<Vector3<f64>> = pairs.iter().map(|p| p.est.translation.vector).collect();
-    let pg: Vec<Vector3<f64>> = pairs.iter().map(|p| p.gt.translation.vector).collect();
-    let sim = align(&pe, &pg, opts.alignment)?;
-    let position_errors: Vec<f64> = pe.iter().zip(&pg).map(|(e, g)| (sim.apply(e) - g).norm()).collect();
-    let align_q = UnitQuaternion::from_rotation_matrix(&sim.rotation);
-    let rot_err: Vec<f64> =
-        pairs.iter().map(|p| (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees()).collect();
-    let oriented = orientation_alignment(&pairs, opts.alignment);
-    let rot_err_oriented: Vec<f64> =
-        pairs.iter().map(|p| (p.gt.rotation.inverse() * oriented * p.est.rotation).angle().to_degrees()).collect();
-    let distance_m: f64 = pg.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    let paired = pairs.len();
+    let mut warnings = Vec::new();
+    let (pairs, similarities) = align_pieces(pairs, opts.alignment, &mut warnings)?;
+    let aligned = |p: &Pair| similarities[p.piece].apply(&p.est.translation.vector);
+    let position_errors: Vec<f64> = pairs.iter().map(|p| (aligned(p) - p.gt.translation.vector).norm()).collect();
+    let rot_err: Vec<f64> = pairs
+        .iter()
+        .map(|p| {
+            let align_q = UnitQuaternion::from_rotation_matrix(&similarities[p.piece].rotation);
+            (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees()
+        })
+        .collect();
+    let slices: Vec<&[Pair]> = pairs.chunk_by(|a, b| a.piece == b.piece).collect();
+    let mut rot_err_oriented = Vec::with_capacity(pairs.len());
+    for piece in &slices {
+        let oriented = orientation_alignment(piece, opts.alignment);
+        rot_err_oriented
+            .extend(piece.iter().map(|p| (p.gt.rotation.inverse() * oriented * p.est.rotation).angle().to_degrees()));
+    }
+    let travelled = |piece: &[Pair]| -> f64 {
+        piece.windows(2).map(|w| (w[1].gt.translation.vector - w[0].gt.translation.vector).norm()).sum()
+    };
+    let distance_m: f64 = slices.iter().map(|p| travelled(p)).sum();
     let distances =
         if opts.rpe_distances.is_empty() { default_distances(distance_m) } else { opts.rpe_distances.clone() };
     let (ate_rmse_m, ate_mean_m, ate_median_m, ate_max_m) = stats(&position_errors);
+    let mut first = 0;
+    let pieces: Vec<Piece> = slices
+        .iter()
+        .map(|piece| {
+            let errors = &position_errors[first..first + piece.len()];
+            first += piece.len();
+            Piece {
+                from_s: piece[0].t,
+                to_s: piece[piece.len() - 1].t,
+                matched: piece.len(),
+                ate_rmse_m: stats(errors).0,
+                scale: similarities[piece[0].piece].scale,
+            }
+        })
+        .collect();
+    let longest = pieces.iter().max_by_key(|p| p.matched).map_or(1.0, |p| p.scale);
+    let matched = pairs.len();
     let mut metrics = Metrics {
         alignment: opts.alignment,
-        scale: sim.scale,
-        matched: pairs.len(),
-        unmatched: est.len() - pairs.len(),
-        duration_s: pairs[pairs.len() - 1].t - pairs[0].t,
+        scale: longest,
+        matched,
+        unmatched: est.len() - matched,
+        duration_s: pairs[matched - 1].t - pairs[0].t,
         distance_m,
         ate_rmse_m,
         ate_mean_m,
@@ -514,7 +673,8 @@ pub fn evaluate(
         ate_max_m,
         rotation_rmse_deg: stats(&rot_err).0,
         rotation_rmse_oriented_deg: stats(&rot_err_oriented).0,
-        rpe: relative_errors(&pairs, &distances, sim.scale),
+        rpe: relative_errors(&slices, &distances, &similarities),
+        pieces,
         bias_rmse_gyro: None,
         bias_rmse_accel: None,
         bias_rmse_gyro_axes: None,
@@ -523,12 +683,12 @@ pub fn evaluate(
         bias_nees_accel_axes: None,
         bias_samples: 0,
         bias_from_s: opts.bias_after_s,
-        warnings: Vec::new(),
+        warnings,
     };
-    if metrics.unmatched > 0 {
+    if paired < est.len() {
         metrics.warnings.push(format!(
             "{} of {} estimated poses lie outside the ground truth ({}) or in its gaps > {} s; they are not counted",
-            metrics.unmatched,
+            est.len() - paired,
             est.len(),
             span(&gt.t_ns),
             opts.max_gap_s
@@ -552,7 +712,7 @@ pub fn evaluate(
     };
     let mut groundtruth = gt.clone();
     groundtruth.t_ns.iter_mut().for_each(|t| *t -= t0_ns);
-    Ok(Evaluation { metrics, pairs, similarity: sim, position_errors, groundtruth, bias_rows })
+    Ok(Evaluation { metrics, pairs, similarities, position_errors, groundtruth, bias_rows })
 }
 
 impl Metrics {
@@ -575,6 +735,14 @@ impl Metrics {
             self.rotation_rmse_deg,
             self.rotation_rmse_oriented_deg
         );
+        if self.pieces.len() > 1 {
+            let each: Vec<String> = self
+                .pieces
+                .iter()
+                .map(|p| format!("{:.1}–{:.1} s ATE {:.4} m", p.from_s, p.to_s, p.ate_rmse_m))
+                .collect();
+            s.push_str(&format!("{} pieces, each aligned by itself: {}\n", self.pieces.len(), each.join("; ")));
+        }
         for r in &self.rpe {
             s.push_str(&format!(
                 "RPE over {:>6.2} m ({:>5} pairs): translation RMSE {:.4} m (mean {:.2} %), rotation mean {:.3}°\n",

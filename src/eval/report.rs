@@ -21,24 +21,37 @@ fn top_view(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
         .filter(|&i| (t0..=t1).contains(&(e.groundtruth.t_ns[i] as f64 * 1e-9)))
         .map(|i| (e.groundtruth.p[i][0], e.groundtruth.p[i][1]))
         .collect();
-    let est = e
-        .pairs
-        .iter()
-        .map(|p| {
-            let q = e.similarity.apply(&p.est.translation.vector);
-            (q.x, q.y)
-        })
-        .collect();
+    // One line per piece of the estimate, each aligned by itself.
+    let pieces = e.pairs.chunk_by(|a, b| a.piece == b.piece).enumerate().map(|(k, piece)| {
+        let est = piece
+            .iter()
+            .map(|p| {
+                let q = e.similarities[p.piece].apply(&p.est.translation.vector);
+                (q.x, q.y)
+            })
+            .collect();
+        line(if k == 0 { "estimate" } else { "" }, ESTIMATE, est)
+    });
     let first = e.pairs[0].gt.translation.vector;
+    let n = e.similarities.len();
     ScatterChart {
-        title: format!("Top view, {} aligned: ATE RMSE {:.3} m", e.metrics.alignment.name(), e.metrics.ate_rmse_m),
+        title: format!(
+            "Top view, {} aligned{}: ATE RMSE {:.3} m",
+            e.metrics.alignment.name(),
+            if n > 1 { format!(" ({n} pieces, each by itself)") } else { String::new() },
+            e.metrics.ate_rmse_m
+        ),
         x_label: "x [m]".into(),
         y_label: "y [m]".into(),
-        series: vec![
-            line("ground truth", TRUTH, gt),
-            line("estimate", ESTIMATE, est),
-            Series { label: "start".into(), color: AXIS_COLORS[1], points: vec![(first.x, first.y)], line: false },
-        ],
+        series: std::iter::once(line("ground truth", TRUTH, gt))
+            .chain(pieces)
+            .chain([Series {
+                label: "start".into(),
+                color: AXIS_COLORS[1],
+                points: vec![(first.x, first.y)],
+                line: false,
+            }])
+            .collect(),
         equal_aspect: true,
         ..Default::default()
     }
@@ -47,12 +60,14 @@ fn top_view(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
 
 /// Position and rotation error over time.
 fn errors_over_time(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
-    let align_q = nalgebra::UnitQuaternion::from_rotation_matrix(&e.similarity.rotation);
     let pos = e.pairs.iter().zip(&e.position_errors).map(|(p, &d)| (p.t, d)).collect();
     let rot = e
         .pairs
         .iter()
-        .map(|p| (p.t, (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees()))
+        .map(|p| {
+            let align_q = nalgebra::UnitQuaternion::from_rotation_matrix(&e.similarities[p.piece].rotation);
+            (p.t, (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees())
+        })
         .collect();
     let panel = |title: String, y: &str, pts| ScatterChart {
         title,

@@ -63,7 +63,7 @@ pub use options::{
     CameraCalibrationOptions, Estimate, GateOptions, Init, InitOptions, NoiseOptions, RestOptions, SolverOptions,
     VioOptions, WindowOptions, REST_NOISE_SIGMAS,
 };
-pub use output::{bias_track, summarize, trajectory, write_outputs, Summary};
+pub use output::{bias_track, piece_starts_s, summarize, trajectory, write_outputs, Summary};
 
 /// Why the estimator cannot run or could not produce an estimate.
 #[derive(Debug, thiserror::Error)]

@@ -39,6 +39,9 @@ pub struct Summary {
     /// Times \[s\] at which the trajectory begins in a frame of its own
     /// ([`VioResult::starts`]); more than one: it is in pieces.
     pub starts: Vec<f64>,
+    /// The recording's clock (`trajectory.txt`'s first column) at 0 in this
+    /// summary's times \[s\].
+    pub clock_t0_s: f64,
     /// Median per-frame solve time \[ms\].
     pub solve_ms_median: f64,
     /// 95th percentile per-frame solve time \[ms\].
@@ -176,7 +179,12 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
     let mut warnings = result.warnings.clone();
     warnings.extend(result.noise.as_ref().and_then(slow_error_warning));
     let evaluation = input.groundtruth.as_ref().and_then(|gt| {
-        let opts = EvalOptions { alignment: Alignment::PosYaw, bias_after_s: bias_from_s, ..EvalOptions::default() };
+        let opts = EvalOptions {
+            alignment: Alignment::PosYaw,
+            bias_after_s: bias_from_s,
+            piece_starts_s: piece_starts_s(input, result),
+            ..EvalOptions::default()
+        };
         evaluate(&trajectory(input, result), Some(&bias_track(input, result)), gt, &opts)
             .map_err(|err| warnings.push(format!("evaluation against the ground truth: {err}")))
             .ok()
@@ -201,6 +209,7 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         keyframes: e.iter().filter(|x| x.keyframe).count(),
         resets: result.resets,
         starts: result.starts.clone(),
+        clock_t0_s: input.t0_ns as f64 * 1e-9,
         residuals: result.residuals,
         residual_gap: result.residuals.gap(),
         solve_ms_median: percentile(&mut solve, 0.5),
@@ -310,6 +319,13 @@ pub fn trajectory(input: &VioInput, result: &VioResult) -> Trajectory {
         q: e.iter().map(|x| x.rotation).collect(),
         ..Default::default()
     }
+}
+
+/// Where the run's trajectory begins again in a frame of its own, on the
+/// recording's clock \[s\] ([`VioResult::starts`], for
+/// [`EvalOptions::piece_starts_s`]).
+pub fn piece_starts_s(input: &VioInput, result: &VioResult) -> Vec<f64> {
+    result.starts.iter().map(|t| input.t0_ns as f64 * 1e-9 + t).collect()
 }
 
 /// The estimated biases of a run with their marginal σ.
