@@ -86,10 +86,36 @@ mod recording {
         let strips = c.rows_of("world/trajectory");
         assert!(strips as f64 >= seconds.floor() && strips as f64 <= seconds.ceil() + 1.0, "{strips} strips");
         assert_eq!(c.rows_of("world/groundtruth"), 1);
+        assert_eq!(c.rows_of("status/events"), 0, "nothing withdrawn");
         assert!(c.rows_of("world/body/camera") >= 1);
         // The landmarks logged are the window's: some, in metres, near the walk.
         assert!(result.estimates.iter().any(|e| e.landmarks > 20));
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A walk whose gyro reads 2 rad/s too much over 20–21 s: the estimator
+    /// withdraws what followed and starts again at the origin; the recording
+    /// says so once per withdrawal, begins the strip again and aligns the
+    /// truth again at the new piece.
+    #[test]
+    fn withdrawn_estimates_are_marked_and_a_new_piece_drawn_by_itself() {
+        let cfg = SimConfig { duration_s: Some(40.0), ..SimConfig::default() };
+        let sim = simulate(Scenario::Walk, &cfg, 3).unwrap();
+        let mut input = VioInput::from_simulation(&sim).unwrap();
+        for (t, g) in input.imu.t.iter().zip(input.imu.gyro.iter_mut()) {
+            if *t > 20.0 && *t < 21.0 {
+                g.x += 2.0;
+            }
+        }
+        let path = temp_dir("shock").join("walk.rrd");
+        let (result, _) = run_recorded(&input, &VioOptions::for_simulation(&cfg), None, Some(&path)).unwrap();
+        let withdrawn = result.warnings.iter().filter(|w| w.contains("estimates are withdrawn")).count() as u64;
+        assert!(withdrawn >= 1 && result.starts.len() >= 2, "{:?}", result.warnings);
+        let c = read_rrd(&path).unwrap();
+        assert_eq!(c.rows_of("status/events"), withdrawn, "{:?}", c.rows);
+        // Aligned again at each new start, withdrawn later or not.
+        assert_eq!(c.rows_of("world/groundtruth"), withdrawn + 1);
+        std::fs::remove_dir_all(path.parent().unwrap()).ok();
     }
 
     #[test]

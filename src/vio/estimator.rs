@@ -123,6 +123,8 @@ pub struct Estimator<'a> {
     /// The start of a span whose estimates are withdrawn (a start or an
     /// estimate the features contradicted), until [`Estimator::take_withdrawn`].
     discarded_from: Option<f64>,
+    /// Every time from which estimates were withdrawn, in order.
+    withdrawals: Vec<f64>,
     /// The initializations so far \[s\] ([`VioResult::starts`]).
     starts: Vec<f64>,
 }
@@ -166,6 +168,7 @@ impl<'a> Estimator<'a> {
             camera_track: Vec::new(),
             camera_held: 0,
             discarded_from: None,
+            withdrawals: Vec::new(),
             starts: Vec::new(),
         }
     }
@@ -179,11 +182,21 @@ impl<'a> Estimator<'a> {
     /// The time \[s\] from which the estimates [`Estimator::process`] has
     /// returned are withdrawn (a start or an estimate the features
     /// contradicted: the warnings say why), once; None when nothing was.
-    /// Whoever keeps the estimates drops those at or after it, as [`run`] does.
+    /// Whoever keeps the estimates drops those at or after it, as [`run`] does;
+    /// the starts and the camera's calibration track drop theirs here.
     pub fn take_withdrawn(&mut self) -> Option<f64> {
         let t0 = self.discarded_from.take()?;
         self.starts.retain(|t| *t < t0);
+        self.camera_track.retain(|(t, _)| *t < t0);
         Some(t0)
+    }
+
+    /// Every time \[s\] from which estimates have been withdrawn so far, in
+    /// order (each followed by a new start at the origin, in a frame of its
+    /// own): for an observer of [`run_observed`], which sees the estimates as
+    /// they come, to drop what was withdrawn.
+    pub fn withdrawals(&self) -> &[f64] {
+        &self.withdrawals
     }
 
     /// The landmarks in the window now, by track id, in the world frame \[m\].
@@ -665,6 +678,7 @@ impl<'a> Estimator<'a> {
             self.warn(format!("blind from {t0:.3} s until the estimates were withdrawn at {t:.3} s ({n} frames)"));
         }
         self.discarded_from = Some(from);
+        self.withdrawals.push(from);
         self.resets += 1;
         self.window.clear();
         self.landmarks.clear();

@@ -14,13 +14,20 @@
 //! | `world/body/camera` | `T_BC` and the pinhole model (static) |
 //! | `world/body/camera/image` | the frame's image, when image files are given |
 //! | `world/body/camera/image/features` | the frame's feature observations \[px\] |
-//! | `world/trajectory` | estimated positions so far (line strip, once a second) |
+//! | `world/trajectory` | estimated positions so far (line strip, once a second), of the current piece |
 //! | `world/window` | positions of the window's states |
 //! | `world/landmarks` | the window's landmarks \[m\] |
-//! | `world/groundtruth` | ground truth, aligned at the first state (static) |
+//! | `world/groundtruth` | ground truth, aligned at the current piece's first state (static) |
 //! | `biases/{accel,gyro}/{x,y,z}` | estimated biases \[m/s², rad/s\] |
 //! | `biases/{accel,gyro}_truth/{x,y,z}` | ground-truth biases, when known |
 //! | `status/{landmarks,solve_ms}` | landmarks in the window, solve time |
+//! | `status/events` | estimates withdrawn (text) |
+//!
+//! When the estimator withdraws estimates and starts again at the origin
+//! ([`Estimator::withdrawals`]), the trajectory's line strip begins again
+//! with the new piece, the ground truth is aligned again at its first state,
+//! and `status/events` says from when the estimates were withdrawn (they stay
+//! on the timeline, where they were estimated, but out of `tumble vio`'s files).
 //!
 //! ```no_run
 //! use tumble::sim::{simulate, Scenario, SimConfig};
@@ -53,9 +60,12 @@ pub struct Recorder<'a> {
     input: &'a VioInput,
     /// Image file by frame time \[ns\] (absolute, as the dataset's file names).
     images: BTreeMap<i64, PathBuf>,
+    /// The current piece's positions.
     trajectory: Vec<[f32; 3]>,
     last_strip_t: f64,
     groundtruth_logged: bool,
+    /// Withdrawals ([`Estimator::withdrawals`]) already acted on.
+    withdrawals_seen: usize,
     /// The first logging error met (logging goes on without it: a viewer file
     /// is not worth stopping an estimate for), reported by [`Recorder::finish`].
     error: Option<String>,
@@ -93,6 +103,7 @@ impl<'a> Recorder<'a> {
             trajectory: Vec::new(),
             last_strip_t: f64::NEG_INFINITY,
             groundtruth_logged: false,
+            withdrawals_seen: 0,
             error: None,
             warnings: Vec::new(),
         };
@@ -135,6 +146,22 @@ impl<'a> Recorder<'a> {
     pub fn frame(&mut self, est: &Estimator, index: usize, e: &FrameEstimate) {
         let frame = &self.input.frames[index];
         self.rec.set_duration_secs("time", e.t);
+        let new = est.withdrawals().get(self.withdrawals_seen..).unwrap_or_default();
+        if !new.is_empty() {
+            // A new piece, at the origin: its own strip and its own alignment of the truth.
+            self.trajectory.clear();
+            self.last_strip_t = f64::NEG_INFINITY;
+            self.groundtruth_logged = false;
+        }
+        for from in new {
+            let text = format!(
+                "the estimates from {from:.3} s on are withdrawn (the run's warnings say why); \
+                 the estimate begins again at the origin"
+            );
+            let r = self.rec.log("status/events", &rerun::TextLog::new(text).with_level(rerun::TextLogLevel::WARN));
+            self.check(r);
+        }
+        self.withdrawals_seen = est.withdrawals().len();
         if !self.groundtruth_logged {
             self.groundtruth_logged = true;
             let r = self.log_groundtruth(e);
