@@ -298,6 +298,8 @@ pub struct Evaluation {
     pub similarities: Vec<Similarity>,
     /// Aligned position error of each pair \[m\].
     pub position_errors: Vec<f64>,
+    /// Rotation error of each pair, its piece's alignment applied \[deg\].
+    pub rotation_errors: Vec<f64>,
     /// The whole ground-truth trajectory (for the top view), times in seconds since the first estimate.
     pub groundtruth: Trajectory,
     /// Bias comparison rows: time \[s since the first estimate\], estimate, its σ, ground truth — gyro then accel.
@@ -622,12 +624,11 @@ pub fn evaluate(
     let (pairs, similarities) = align_pieces(pairs, opts.alignment, &mut warnings)?;
     let aligned = |p: &Pair| similarities[p.piece].apply(&p.est.translation.vector);
     let position_errors: Vec<f64> = pairs.iter().map(|p| (aligned(p) - p.gt.translation.vector).norm()).collect();
-    let rot_err: Vec<f64> = pairs
+    let align_q: Vec<UnitQuaternion<f64>> =
+        similarities.iter().map(|s| UnitQuaternion::from_rotation_matrix(&s.rotation)).collect();
+    let rotation_errors: Vec<f64> = pairs
         .iter()
-        .map(|p| {
-            let align_q = UnitQuaternion::from_rotation_matrix(&similarities[p.piece].rotation);
-            (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees()
-        })
+        .map(|p| (p.gt.rotation.inverse() * align_q[p.piece] * p.est.rotation).angle().to_degrees())
         .collect();
     let slices: Vec<&[Pair]> = pairs.chunk_by(|a, b| a.piece == b.piece).collect();
     let mut rot_err_oriented = Vec::with_capacity(pairs.len());
@@ -671,7 +672,7 @@ pub fn evaluate(
         ate_mean_m,
         ate_median_m,
         ate_max_m,
-        rotation_rmse_deg: stats(&rot_err).0,
+        rotation_rmse_deg: stats(&rotation_errors).0,
         rotation_rmse_oriented_deg: stats(&rot_err_oriented).0,
         rpe: relative_errors(&slices, &distances, &similarities),
         pieces,
@@ -712,7 +713,7 @@ pub fn evaluate(
     };
     let mut groundtruth = gt.clone();
     groundtruth.t_ns.iter_mut().for_each(|t| *t -= t0_ns);
-    Ok(Evaluation { metrics, pairs, similarities, position_errors, groundtruth, bias_rows })
+    Ok(Evaluation { metrics, pairs, similarities, position_errors, rotation_errors, groundtruth, bias_rows })
 }
 
 impl Metrics {

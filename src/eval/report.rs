@@ -61,14 +61,7 @@ fn top_view(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
 /// Position and rotation error over time.
 fn errors_over_time(e: &Evaluation, path: &Path) -> Result<(), crate::plot::PlotError> {
     let pos = e.pairs.iter().zip(&e.position_errors).map(|(p, &d)| (p.t, d)).collect();
-    let rot = e
-        .pairs
-        .iter()
-        .map(|p| {
-            let align_q = nalgebra::UnitQuaternion::from_rotation_matrix(&e.similarities[p.piece].rotation);
-            (p.t, (p.gt.rotation.inverse() * align_q * p.est.rotation).angle().to_degrees())
-        })
-        .collect();
+    let rot = e.pairs.iter().zip(&e.rotation_errors).map(|(p, &d)| (p.t, d)).collect();
     let panel = |title: String, y: &str, pts| ScatterChart {
         title,
         x_label: "time since the first estimate [s]".into(),

@@ -120,11 +120,11 @@ pub struct Estimator<'a> {
     camera_track: Vec<(f64, CameraEstimate)>,
     /// Keyframes for which the camera's calibration stays held after an implausible estimate.
     camera_held: usize,
-    /// The start of a span whose estimates are withdrawn (a start or an
-    /// estimate the features contradicted), until [`Estimator::take_withdrawn`].
-    discarded_from: Option<f64>,
-    /// Every time from which estimates were withdrawn, in order.
+    /// Every time from which estimates were withdrawn (a start or an
+    /// estimate the features contradicted), in order.
     withdrawals: Vec<f64>,
+    /// How many of them [`Estimator::take_withdrawn`] has handed out.
+    withdrawals_taken: usize,
     /// The initializations so far \[s\] ([`VioResult::starts`]).
     starts: Vec<f64>,
 }
@@ -167,8 +167,8 @@ impl<'a> Estimator<'a> {
             noise: None,
             camera_track: Vec::new(),
             camera_held: 0,
-            discarded_from: None,
             withdrawals: Vec::new(),
+            withdrawals_taken: 0,
             starts: Vec::new(),
         }
     }
@@ -185,7 +185,8 @@ impl<'a> Estimator<'a> {
     /// Whoever keeps the estimates drops those at or after it, as [`run`] does;
     /// the starts and the camera's calibration track drop theirs here.
     pub fn take_withdrawn(&mut self) -> Option<f64> {
-        let t0 = self.discarded_from.take()?;
+        let t0 = self.withdrawals[self.withdrawals_taken..].iter().copied().reduce(f64::min)?;
+        self.withdrawals_taken = self.withdrawals.len();
         self.starts.retain(|t| *t < t0);
         self.camera_track.retain(|(t, _)| *t < t0);
         Some(t0)
@@ -677,7 +678,6 @@ impl<'a> Estimator<'a> {
             self.blind_spans.push([t0, t]);
             self.warn(format!("blind from {t0:.3} s until the estimates were withdrawn at {t:.3} s ({n} frames)"));
         }
-        self.discarded_from = Some(from);
         self.withdrawals.push(from);
         self.resets += 1;
         self.window.clear();
