@@ -40,8 +40,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if cases.is_empty() {
         return Err(format!("no case named {names:?} (see --list)").into());
     }
-    println!("| case | sizes | noise | passed | named first (family, form) | gap before | shrink (min–median) |");
-    println!("|---|---|---|---|---|---|---|");
+    println!(
+        "| case | sizes | noise | passed | named first (family, form) | of which the form determined (exactly) | gap before | gap of the clean recording | \
+         shrink (min–median) | shrink of the effect's gap (min–median) |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
     for case in &cases {
         for &mode in &modes {
             let n = if case.expect == Expect::Nothing { 2 * seeds } else { seeds };
@@ -64,6 +67,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     _ => t.passed,
                 })
                 .count();
+            let determined = ok
+                .iter()
+                .filter(|t| match &case.expect {
+                    Expect::First(e) => t.found.first() == Some(e) && t.form_determined,
+                    _ => false,
+                })
+                .count();
+            let determined_s =
+                if matches!(case.expect, Expect::First(_)) { format!("{determined}/{named}") } else { "–".into() };
             let sizes =
                 case.hidden
                     .iter()
@@ -76,21 +88,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     })
                     .collect::<Vec<_>>()
                     .join(", ");
-            let mut shrink: Vec<f64> = ok.iter().map(|t| t.shrink).collect();
-            shrink.sort_by(f64::total_cmp);
-            let gap = ok.iter().fold((f64::MAX, f64::MIN), |(a, b), t| (a.min(t.gaps.0), b.max(t.gaps.0)));
-            let shrink_s = if matches!(case.expect, Expect::Nothing) || shrink.is_empty() {
-                "–".to_string()
-            } else {
-                format!("{:.0}–{:.0} %", 100.0 * shrink[0], 100.0 * shrink[shrink.len() / 2])
+            let range = |v: Vec<f64>| {
+                let v: Vec<f64> = v.into_iter().filter(|x| x.is_finite()).collect();
+                v.iter().fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)))
             };
+            let min_median = |mut v: Vec<f64>| {
+                v.sort_by(f64::total_cmp);
+                if matches!(case.expect, Expect::Nothing) || v.is_empty() {
+                    "–".to_string()
+                } else {
+                    format!("{:.0}–{:.0} %", 100.0 * v[0], 100.0 * v[v.len() / 2])
+                }
+            };
+            let gap = range(ok.iter().map(|t| t.gaps.0).collect());
+            let clean = range(ok.iter().filter_map(|t| t.gap_clean).collect());
+            let clean_s = if clean.0 <= clean.1 { format!("{:.2}–{:.2}", clean.0, clean.1) } else { "–".into() };
             println!(
-                "| {} | {} | {} | {passed}/{n} | {named}/{n} | {:.2}–{:.2} | {shrink_s} |",
+                "| {} | {} | {} | {passed}/{n} | {named}/{n} | {determined_s} | {:.2}–{:.2} | {clean_s} | {} | {} |",
                 case.name,
                 if sizes.is_empty() { "–".into() } else { sizes },
                 if mode == NoiseMode::File { "file" } else { "estimated" },
                 gap.0,
                 gap.1,
+                min_median(ok.iter().map(|t| t.shrink).collect()),
+                min_median(ok.iter().map(|t| t.shrink_of_effect).collect()),
             );
             eprintln!("  ({} in {:.0} s)", case.name, t0.elapsed().as_secs_f64());
         }

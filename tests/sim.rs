@@ -213,6 +213,8 @@ fn bad_configs_are_refused_with_the_field_named() {
     assert!(SimConfig::read(&p).unwrap_err().to_string().contains("duration_s"));
     std::fs::write(&p, "camera:\n  body_q_camera: [1, 1, 0, 0]\n").unwrap();
     assert!(SimConfig::read(&p).unwrap_err().to_string().contains("norm"));
+    std::fs::write(&p, "tumble:\n  turn_rate_ratio: 0.5\n").unwrap();
+    assert!(SimConfig::read(&p).unwrap_err().to_string().contains("turn_rate_ratio"));
     std::fs::write(&p, "imu:\n  rate_hz: 400\n").unwrap();
     assert_eq!(SimConfig::read(&p).unwrap().imu.rate_hz, 400.0);
 }

@@ -359,6 +359,13 @@ fn aitken(h: &[[f64; 6]], walks: Walks, floor: (f64, f64)) -> Walks {
     out
 }
 
+/// Degrees of freedom the walk residuals carry per axis at `fit` (gyro x y z,
+/// accelerometer x y z): their count minus their share of the hat matrix. A
+/// walk estimated from `r` of them is uncertain by `√(2/r)` in variance.
+pub fn walk_redundancy(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Walks, AuditError> {
+    walk_components(data, noise, fit).map(|(_, r)| r)
+}
+
 /// Per axis, the χ² of the gyro and accelerometer walk residuals at `fit` and
 /// their redundancy: the residual count minus `Σ_k (Σ_kk + Σ_k+1,k+1 −
 /// 2 Σ_k,k+1)_aa / σ_a,k²` (the hat matrix's diagonal for the between factor

@@ -69,6 +69,11 @@ use tumble_factors::imu_effects::Layout;
 /// MEMS (the estimate moves from there; see [`fit::solve_walks`]).
 pub const INITIAL_RANDOM_WALK: (f64, f64) = (1e-3, 1e-2);
 
+/// Degrees of freedom below which a triad's estimated walk is reported as not
+/// determined: a variance estimated from `r` of them is uncertain by `√(2/r)`,
+/// ±45 % at 10 (the VIO's noise meter asks as many).
+pub const WALK_DETERMINED_DOF: f64 = 10.0;
+
 /// ΔBIC below which two explanations are not told apart (2 ln of a Bayes
 /// factor of 20, "strong evidence" on Kass and Raftery's scale).
 pub const DISTINGUISHABLE_BIC: f64 = 6.0;
@@ -242,6 +247,9 @@ pub struct Audit {
     pub random_walk_axes: fit::Walks,
     /// Whether the walks were estimated from the recording (no noise file).
     pub walks_estimated: bool,
+    /// When estimated: the degrees of freedom the estimate rests on per axis
+    /// (gyro x y z, accelerometer x y z; [`fit::walk_redundancy`]).
+    pub walk_redundancy: Option<fit::Walks>,
     /// Structure left in the final model's residuals.
     pub structure: Vec<structure::Structure>,
     /// The family-wise significance level used.
@@ -292,6 +300,13 @@ impl Audit {
         } else if p_left < self.alpha {
             v += &format!("; {}", self.where_the_gap_is());
         }
+        if let Some(dof) = self.walks_undetermined() {
+            v += &format!(
+                "; the bias walks were estimated from a recording that does not determine them ({dof:.1} degrees \
+                 of freedom for the less determined sensor), so what it says of slow drifts (temperature, bias \
+                 drift) rests on an uncertain walk: give --noise"
+            );
+        }
         let untested = self.untestable();
         if !untested.is_empty() {
             v += &format!(
@@ -300,6 +315,14 @@ impl Audit {
             );
         }
         v
+    }
+
+    /// When the walks were estimated from a recording that does not determine
+    /// them: the degrees of freedom of the less determined sensor (below
+    /// [`WALK_DETERMINED_DOF`]).
+    pub fn walks_undetermined(&self) -> Option<f64> {
+        let dof = least_determined(&self.walk_redundancy?);
+        (dof < WALK_DETERMINED_DOF).then_some(dof)
     }
 
     /// Candidates that passed the significance test in some round but whose χ²
@@ -454,6 +477,7 @@ pub fn audit_with_progress(
     let start = fit::start_values(&data, accel, gyro, gyro_bias);
     let noise =
         Noise::new(&data, &start, (rw_g.map(|w| w * kg), rw_a.map(|w| w * ka))).map_err(|e| fail(e.to_string()))?;
+    let mut walk_redundancy = None;
     let noise = if estimate {
         // The walks from the recording, with every candidate family in the
         // model so that none of them can hide in the walk.
@@ -485,6 +509,21 @@ pub fn audit_with_progress(
             axes(&n.walks.0, kg),
             axes(&n.walks.1, ka)
         ));
+        let r = fit::walk_redundancy(&data, &n, &sat).map_err(|e| fail(e.to_string()))?;
+        if least_determined(&r) < WALK_DETERMINED_DOF {
+            let dof = |x: &[f64; 3]| x.iter().map(|v| format!("{v:.1}")).collect::<Vec<_>>().join(", ");
+            notes.push(format!(
+                "the bias random walks are not determined by this recording: their residuals carry {} (gyro) and {} \
+                 (accel) degrees of freedom, x, y, z, where a walk needs about {WALK_DETERMINED_DOF:.0} per sensor \
+                 (a hand tumble's holds measure a bias change over a few seconds less precisely than the walk moves \
+                 it). A slow drift (temperature, bias drift) is judged against walks uncertain by a factor of several \
+                 either way — too large a walk hides one, too small a walk makes one of the wander: give --noise \
+                 (`tumble allan` on a static recording) for a firm verdict on it",
+                dof(&r.0),
+                dof(&r.1)
+            ));
+        }
+        walk_redundancy = Some(r);
         n
     } else {
         noise
@@ -586,10 +625,17 @@ pub fn audit_with_progress(
         calibration,
         random_walk_axes: noise.walks,
         walks_estimated: estimate,
+        walk_redundancy,
         structure,
         alpha: opts.alpha,
         notes,
     })
+}
+
+/// The degrees of freedom of the sensor whose walks rest on fewer (each
+/// triad's axes summed).
+fn least_determined(r: &fit::Walks) -> f64 {
+    r.0.iter().sum::<f64>().min(r.1.iter().sum())
 }
 
 /// The models the walks are estimated with, richest first: of every candidate

@@ -35,7 +35,8 @@ pub struct AuditArgs {
     frontend: FrontendArgs,
     /// Kalibr imu.yaml with the noise (from `tumble allan`): its bias random walks (per axis
     /// when it has tumble's `axes` block) set how far biases may wander (default: estimated
-    /// from the recording, per axis, and stated in the report).
+    /// from the recording, per axis, and stated in the report; a hand tumble rarely determines
+    /// them, and the verdict then says so).
     #[arg(long)]
     noise: Option<PathBuf>,
     /// Output folder.

@@ -187,6 +187,13 @@ impl SimConfig {
         if self.tumble.poses == 0 || self.tumble.hold_s[0] <= 0.0 || self.tumble.hold_s[1] < self.tumble.hold_s[0] {
             return Err("tumble: poses must be ≥ 1 and 0 < hold_s[0] ≤ hold_s[1]".into());
         }
+        let (rate, ratio) = (self.tumble.turn_rate, self.tumble.turn_rate_ratio);
+        if !(rate.is_finite() && rate > 0.0 && ratio.is_finite() && ratio >= 1.0) {
+            return Err(format!(
+                "tumble: turn_rate must be positive and turn_rate_ratio ≥ 1, found {rate} and {ratio}"
+            )
+            .into());
+        }
         self.imu.check()?;
         self.corridor.check()?;
         self.camera.check()

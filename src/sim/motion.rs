@@ -118,6 +118,13 @@ pub struct TumbleSettings {
     pub hold_s: [f64; 2],
     /// Mean rotation rate of the hand between poses \[rad/s\].
     pub turn_rate: f64,
+    /// How much the hand's rate varies from turn to turn: each turn's mean
+    /// rate is `turn_rate` times a factor drawn log-uniformly in
+    /// `[1/turn_rate_ratio, turn_rate_ratio]` (≥ 1; 1: every turn alike, so
+    /// every turn peaks at the same rate). A hand turns some poses quickly and
+    /// some slowly; only turns at different rates tell a rate nonlinearity's
+    /// forms apart (`ω²` against `|ω|` integrate alike over turns of one rate).
+    pub turn_rate_ratio: f64,
     /// Largest translation between poses \[m\].
     pub max_shift_m: f64,
     /// Hold only axis-aligned poses (each turn is a quarter turn about a body
@@ -134,6 +141,7 @@ impl Default for TumbleSettings {
             poses: 50,
             hold_s: [1.5, 3.0],
             turn_rate: 1.2,
+            turn_rate_ratio: 1.0,
             max_shift_m: 0.05,
             axis_aligned: false,
         }
@@ -145,6 +153,10 @@ impl Tumble {
     /// 40°–140° (every axis gets excited), deterministic for `seed`.
     pub fn new(s: &TumbleSettings, seed: u64) -> Tumble {
         let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x7475_6d62);
+        // The rates draw from a stream of their own, so that a ratio of 1 leaves
+        // every other draw (and the recordings of earlier versions) unchanged.
+        let mut rates = ChaCha8Rng::seed_from_u64(seed ^ 0x7261_7465);
+        let log_ratio = s.turn_rate_ratio.max(1.0).ln();
         let mut segments = Vec::new();
         let mut r = Matrix3::identity();
         let mut p = Vector3::zeros();
@@ -185,7 +197,12 @@ impl Tumble {
                     / 3f64.sqrt();
             // Keep the device near its start.
             let dp = dp - p * 0.5;
-            let len = (angle / s.turn_rate).max(0.8);
+            let rate = if log_ratio > 0.0 {
+                s.turn_rate * rates.random_range(-log_ratio..log_ratio).exp()
+            } else {
+                s.turn_rate
+            };
+            let len = (angle / rate).max(0.8);
             turns.push((len, phi, dp, rng.random_range(s.hold_s[0]..=s.hold_s[1])));
         }
         let mut segs = segments;
@@ -510,6 +527,32 @@ mod tests {
         check_derivatives(&Loop::handheld(60.0, 4));
         check_derivatives(&Loop::flight(60.0, 5));
         check_derivatives(&Paused::new(Loop::handheld(60.0, 4), &[[10.3, 3.0], [20.0, 0.5]]).unwrap());
+    }
+
+    /// Each turn's mean rate: its angle over its length (turns of at least
+    /// 0.8 s are the ones no clamp shortened).
+    fn turn_rates(t: &Tumble) -> Vec<f64> {
+        t.segments
+            .iter()
+            .filter(|s| s.phi != Vector3::zeros() && s.length > 0.8)
+            .map(|s| s.phi.norm() / s.length)
+            .collect()
+    }
+
+    #[test]
+    fn turns_differ_in_rate_by_the_ratio_asked_and_the_poses_stay() {
+        let base = TumbleSettings { poses: 40, ..Default::default() };
+        let one = Tumble::new(&base, 7);
+        assert!(turn_rates(&one).iter().all(|r| (r - base.turn_rate).abs() < 1e-12));
+        let varied = Tumble::new(&TumbleSettings { turn_rate_ratio: 2.0, ..base.clone() }, 7);
+        let rates = turn_rates(&varied);
+        assert!(rates.iter().all(|r| *r >= 0.5 * base.turn_rate - 1e-12 && *r <= 2.0 * base.turn_rate + 1e-12));
+        let (lo, hi) = rates.iter().fold((f64::MAX, f64::MIN), |(a, b), &r| (a.min(r), b.max(r)));
+        assert!(hi / lo > 2.0, "rates {lo:.2}–{hi:.2} rad/s");
+        // The rates draw from their own stream: the poses and holds are the same.
+        let turns = |t: &Tumble| t.segments.iter().map(|s| (s.phi, s.dp)).collect::<Vec<_>>();
+        assert_eq!(turns(&one), turns(&varied));
+        assert_eq!(one.static_intervals().len(), varied.static_intervals().len());
     }
 
     #[test]
