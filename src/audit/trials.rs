@@ -16,8 +16,8 @@ use crate::calib::{calibrate, CalibOptions};
 use crate::io::ImuNoise;
 use crate::sim::{hide_effect, simulate, Motion, Scenario, SimConfig, TemperatureTrace, Tumble};
 
-/// Gyro full scale the nonlinearity trials use \[rad/s\]: ±250 °/s, the range a
-/// hand tumble (turns of 1–3 rad/s) is recorded at.
+/// Gyro full scale the nonlinearity trials use \[rad/s\]: ±500 °/s, a range a
+/// hand tumble (turns of 0.5–4 rad/s on average) is recorded at (`lsb` = range / 32768).
 pub const TRIAL_GYRO_RANGE: f64 = 500.0 * std::f64::consts::PI / 180.0;
 
 /// How much a trial's turns differ in rate (`TumbleSettings::turn_rate_ratio`):
