@@ -154,23 +154,25 @@ fn unit(seed: u64, salt: u64) -> f64 {
 /// Simulate the case for `seed`, calibrate without the effects, audit.
 pub fn run_trial(case: &Case, seed: u64, mode: NoiseMode) -> Result<Trial, String> {
     let (cfg, strengths, warmup_c) = config(case, seed)?;
-    let a = simulate_and_audit(&cfg, seed, mode)?;
+    let a = simulate_and_audit(&cfg, seed, mode, AuditOptions::default().max_effects)?;
     let gap_clean = match case.expect {
         Expect::Nothing => None,
         _ => {
+            // Only its gap before any effect is wanted: no search.
             let clean = Case { hidden: Vec::new(), expect: Expect::Nothing, ..case.clone() };
-            Some(simulate_and_audit(&config(&clean, seed)?.0, seed, mode)?.base.gap())
+            Some(simulate_and_audit(&config(&clean, seed)?.0, seed, mode, 0)?.base.gap())
         }
     };
     Ok(judge(case, seed, strengths, warmup_c, gap_clean, &a))
 }
 
-fn simulate_and_audit(cfg: &SimConfig, seed: u64, mode: NoiseMode) -> Result<Audit, String> {
+/// Simulate `cfg`, calibrate, audit with at most `max_effects` added.
+fn simulate_and_audit(cfg: &SimConfig, seed: u64, mode: NoiseMode, max_effects: usize) -> Result<Audit, String> {
     let sim = simulate(Scenario::Tumble, cfg, seed).map_err(|e| e.to_string())?;
     let rec = sim.imu.to_recording();
     let cal = calibrate(&rec, &CalibOptions { gravity: cfg.gravity, ..Default::default() }).map_err(|e| e.message)?;
     let noise = (mode == NoiseMode::File).then(|| ImuNoise::from_model(&cfg.imu));
-    audit(&rec, &cal.calibration, &AuditOptions { noise, ..Default::default() }).map_err(|e| e.0)
+    audit(&rec, &cal.calibration, &AuditOptions { noise, max_effects, ..Default::default() }).map_err(|e| e.0)
 }
 
 /// The simulator configuration of `case` for `seed`: sizes drawn, a warm-up of
@@ -251,23 +253,19 @@ fn judge(case: &Case, seed: u64, strengths: Vec<f64>, warmup_c: f64, gap_clean: 
     let found = a.effects_added();
     let first = a.iterations.first();
     let gaps = (a.base.gap(), first.map(|i| i.gap_after).unwrap_or(a.base.gap()));
-    // A gap of 0 after the effect is fully shrunk, even from 0 (an effect can be
-    // significant while χ²/dof stays below 1).
-    let shrink = if gaps.1 <= 0.0 {
-        1.0
-    } else if gaps.0 > 0.0 {
-        1.0 - gaps.1 / gaps.0
-    } else {
-        0.0
+    // The share of the gap above `floor` the first effect removed. Shrunk
+    // fully when no more than `floor` is left, even from `floor` itself (an
+    // effect can be significant while χ²/dof stays below 1).
+    let shrink_above = |floor: f64| {
+        if gaps.1 <= floor {
+            1.0
+        } else if gaps.0 > floor {
+            (gaps.0 - gaps.1) / (gaps.0 - floor)
+        } else {
+            0.0
+        }
     };
-    let floor = gap_clean.unwrap_or(0.0);
-    let shrink_of_effect = if gaps.1 <= floor {
-        1.0
-    } else if gaps.0 > floor {
-        (gaps.0 - gaps.1) / (gaps.0 - floor)
-    } else {
-        0.0
-    };
+    let (shrink, shrink_of_effect) = (shrink_above(0.0), shrink_above(gap_clean.unwrap_or(0.0)));
     let confounded = first.map(|i| i.confounded_with.clone()).unwrap_or_default();
     let passed = match &case.expect {
         Expect::Nothing => found.is_empty(),
