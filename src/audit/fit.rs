@@ -305,7 +305,7 @@ pub fn solve_walks(
     // from the limit, which three iterates extrapolate to.
     let mut history: Vec<[f64; 6]> = Vec::new();
     for _ in 0..WALK_ITERATIONS {
-        let (chi2, r) = walk_components(data, &noise, &fit)?;
+        let WalkComponents { chi2, redundancy: r, .. } = walk_components(data, &noise, &fit)?;
         let mut change: f64 = 0.0;
         let mut update = |w: &mut [f64; 3], chi2: &[f64; 3], r: &[f64; 3], lo: f64| {
             for a in 0..3 {
@@ -359,18 +359,31 @@ fn aitken(h: &[[f64; 6]], walks: Walks, floor: (f64, f64)) -> Walks {
     out
 }
 
-/// Degrees of freedom the walk residuals carry per axis at `fit` (gyro x y z,
-/// accelerometer x y z): their count minus their share of the hat matrix. A
-/// walk estimated from `r` of them is uncertain by `√(2/r)` in variance.
+/// Degrees of freedom the walk estimate rests on per axis at `fit` (gyro
+/// x y z, accelerometer x y z): `ν = tr(R²)` of that axis's block of the
+/// residual projector `R = I − H` of the walk residuals (`H` the hat matrix),
+/// twice the Fisher information of `ln σ²`, so the walk's variance is
+/// uncertain by `√(2/ν)` as from `ν` independent residuals. It is at most
+/// the redundancy `tr(R)` the estimate iterates on, and well below it where
+/// each residual carries a fraction of one.
 pub fn walk_redundancy(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Walks, AuditError> {
-    walk_components(data, noise, fit).map(|(_, r)| r)
+    walk_components(data, noise, fit).map(|c| c.information)
 }
 
-/// Per axis, the χ² of the gyro and accelerometer walk residuals at `fit` and
-/// their redundancy: the residual count minus `Σ_k (Σ_kk + Σ_k+1,k+1 −
-/// 2 Σ_k,k+1)_aa / σ_a,k²` (the hat matrix's diagonal for the between factor
-/// of biases `k`, `k+1`; `Σ` their joint covariance).
-fn walk_components(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<(Walks, Walks), AuditError> {
+/// Per axis at `fit`: the χ² of the gyro and accelerometer walk residuals,
+/// their redundancy `tr(R)` and `tr(R²)` (see [`walk_redundancy`]).
+struct WalkComponents {
+    chi2: Walks,
+    redundancy: Walks,
+    information: Walks,
+}
+
+/// [`WalkComponents`] at `fit`. For the between factors of biases `k`, `k+1`
+/// and `l`, `l+1` of one axis, with `Σ` the biases' joint covariance and
+/// `σ_k` the walk over gap `k`, `H_kl = (Σ_k+1,l+1 − Σ_k+1,l − Σ_k,l+1 +
+/// Σ_k,l)_aa / (σ_k σ_l)`, `tr(R) = Σ_k (1 − H_kk)` and `tr(R²) = Σ_k (1 −
+/// H_kk)² + Σ_k≠l H_kl²`.
+fn walk_components(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<WalkComponents, AuditError> {
     let graph = build(data, noise, &fit.layout)?;
     let n = data.statics.len();
     let free = |k: &Key| !fit.values.is_constant(*k);
@@ -384,23 +397,88 @@ fn walk_components(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<(Walks,
         }
     };
     let value = |k: Key| fit.values.get::<Vector3<f64>>(k).copied().unwrap_or_else(|_| Vector3::zeros());
-    let group = |key: fn(usize) -> Key, rw: &[f64; 3]| -> Result<([f64; 3], [f64; 3]), AuditError> {
-        let (mut chi2, mut r) = ([0.0; 3], [0.0; 3]);
-        for k in 0..n - 1 {
-            let d = value(key(k + 1)) - value(key(k));
-            for a in 0..3 {
-                let s2 = noise.walk_sigma(rw[a], k).powi(2);
-                chi2[a] += d[a] * d[a] / s2;
-                let t =
-                    entry(key(k), key(k), a) + entry(key(k + 1), key(k + 1), a) - 2.0 * entry(key(k), key(k + 1), a);
-                r[a] += 1.0 - t / s2;
+    let group = |key: fn(usize) -> Key, rw: &[f64; 3]| {
+        let (mut chi2, mut r, mut info) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+        for a in 0..3 {
+            let s: Vec<f64> = (0..n - 1).map(|k| noise.walk_sigma(rw[a], k)).collect();
+            let h = |k: usize, l: usize| {
+                (entry(key(k + 1), key(l + 1), a) - entry(key(k + 1), key(l), a) - entry(key(k), key(l + 1), a)
+                    + entry(key(k), key(l), a))
+                    / (s[k] * s[l])
+            };
+            for (k, sk) in s.iter().enumerate() {
+                let d = value(key(k + 1))[a] - value(key(k))[a];
+                chi2[a] += d * d / (sk * sk);
+                let rkk = 1.0 - h(k, k);
+                r[a] += rkk;
+                info[a] += rkk * rkk;
+                for l in 0..n - 1 {
+                    if l != k {
+                        info[a] += h(k, l).powi(2);
+                    }
+                }
             }
         }
-        Ok((chi2, r))
+        (chi2, r, info)
     };
-    let (cg, rg) = group(key_bias, &noise.walks.0)?;
-    let (ca, ra) = group(key_wander, &noise.walks.1)?;
-    Ok(((cg, ca), (rg, ra)))
+    let (cg, rg, ig) = group(key_bias, &noise.walks.0);
+    let (ca, ra, ia) = group(key_wander, &noise.walks.1);
+    Ok(WalkComponents { chi2: (cg, ca), redundancy: (rg, ra), information: (ig, ia) })
+}
+
+/// The restricted deviance of the walks at `fit`: `−2 ln` of the likelihood
+/// with every parameter integrated out under a flat prior (REML, exact for a
+/// model linear around `fit`): `χ² + ln det H + Σ ln σ²` over the walk
+/// factors, `H` the Gauss–Newton information of the free parameters. Constant
+/// terms (the data's noise, 2π) are left out: only differences between walks
+/// on one recording mean anything.
+pub fn restricted_deviance(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<f64, AuditError> {
+    let graph = build(data, noise, &fit.layout)?;
+    let values = &fit.values;
+    let mut offsets = std::collections::HashMap::new();
+    let mut n = 0;
+    let mut keys: Vec<Key> = values.keys().filter(|k| !values.is_constant(*k)).collect();
+    keys.sort();
+    for k in keys {
+        offsets.insert(k, n);
+        n += values.get_dyn(k).map_err(|e| e.to_string())?.dim();
+    }
+    let mut h = DMatrix::<f64>::zeros(n, n);
+    let mut chi2 = 0.0;
+    for entry in graph.entries() {
+        let vars: Vec<&dyn tumble_solvers::DynVariable> = entry
+            .factor
+            .keys()
+            .iter()
+            .map(|k| values.get_dyn(*k))
+            .collect::<Result<_, _>>()
+            .map_err(|e| e.to_string())?;
+        let mut lin = entry.factor.linearize(Vars::new(&vars)).map_err(|e| e.to_string())?;
+        entry.noise.whiten(&mut lin.residual);
+        chi2 += lin.residual.norm_squared();
+        for j in lin.jacobians.iter_mut() {
+            entry.noise.whiten_jacobian(j);
+        }
+        for (a, ka) in entry.factor.keys().iter().enumerate() {
+            let Some(&oa) = offsets.get(ka) else { continue };
+            for (b, kb) in entry.factor.keys().iter().enumerate() {
+                let Some(&ob) = offsets.get(kb) else { continue };
+                let block = lin.jacobians[a].tr_mul(&lin.jacobians[b]);
+                let mut view = h.view_mut((oa, ob), block.shape());
+                view += block;
+            }
+        }
+    }
+    let chol = nalgebra::Cholesky::new(h).ok_or("the information matrix is not positive definite")?;
+    let logdet: f64 = 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+    let mut walk_logdet = 0.0;
+    for k in 0..noise.walk_dt.len() {
+        for a in 0..3 {
+            walk_logdet += 2.0 * noise.walk_sigma(noise.walks.0[a], k).ln();
+            walk_logdet += 2.0 * noise.walk_sigma(noise.walks.1[a], k).ln();
+        }
+    }
+    Ok(chi2 + logdet + walk_logdet)
 }
 
 /// Marginal covariance of the calibration blocks (`M_a/b_a`, `M_g`, `b_g` of the first interval).

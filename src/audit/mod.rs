@@ -513,8 +513,8 @@ pub fn audit_with_progress(
         if least_determined(&r) < WALK_DETERMINED_DOF {
             let dof = |x: &[f64; 3]| x.iter().map(|v| format!("{v:.1}")).collect::<Vec<_>>().join(", ");
             notes.push(format!(
-                "the bias random walks are not determined by this recording: their residuals carry {} (gyro) and {} \
-                 (accel) degrees of freedom, x, y, z, where a walk needs about {WALK_DETERMINED_DOF:.0} per sensor \
+                "the bias random walks are not determined by this recording: their estimates rest on {} (gyro) and \
+                 {} (accel) degrees of freedom, x, y, z, where a walk needs about {WALK_DETERMINED_DOF:.0} per sensor \
                  (a hand tumble's holds measure a bias change over a few seconds less precisely than the walk moves \
                  it). A slow drift (temperature, bias drift) is judged against walks uncertain by a factor of several \
                  either way — too large a walk hides one, too small a walk makes one of the wander: give --noise \

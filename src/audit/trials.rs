@@ -208,17 +208,23 @@ pub fn config(case: &Case, seed: u64) -> Result<(SimConfig, Vec<f64>, f64), Stri
             ripple: if case.linear_warmup { 0.0 } else { TemperatureTrace::default().ripple },
             ..Default::default()
         };
-        // A quadratic temperature curve turns around in the middle of the
-        // temperatures the tumbling covers (after the initial rest, which
-        // takes much of the warm-up), and is sized by what the recording can
-        // see of it: its sagitta over that span equals the drift the linear
-        // coefficient drawn (the model's times the strength) gives over the
-        // span. A vertex outside the span, or a curvature sized alone, leaves
-        // a curve that is straight or flat over the temperatures recorded.
+        // A quadratic temperature curve is sized as a sensor would be: its
+        // largest change over the temperatures recorded (from power-on, the
+        // reference, to the end) is the drift the linear coefficient drawn
+        // gives over them. Its curvature, which tells it from a linear one,
+        // shows as a sagitta over the temperatures the tumbling covers that
+        // does not depend on where the curve turns around; the turn-around is
+        // put where it makes that largest change least for a given curvature,
+        // the middle of the temperatures recorded (inside the tumbling's,
+        // after an initial rest that takes a third of the warm-up). Sized by
+        // the tumbling's span alone, with the turn-around in its middle, the
+        // curve swung by several times the linear drift between power-on and
+        // the turns: a gyro scale 20 % off at ×16, which the calibration
+        // rightly refused.
         let duration = Tumble::new(&cfg.tumble, seed).duration();
         let trace = &cfg.imu.temperature;
-        let (lo, hi) = (trace.at(cfg.tumble.initial_static_s) - trace.reference, trace.at(duration) - trace.reference);
-        let (vertex, span) = (0.5 * (lo + hi), (hi - lo).abs().max(f64::EPSILON));
+        let hi = trace.at(duration) - trace.reference;
+        let vertex = 0.5 * hi;
         for t in [&mut cfg.imu.gyro, &mut cfg.imu.accel] {
             for k in 0..3 {
                 for (linear, quadratic) in [
@@ -226,8 +232,8 @@ pub fn config(case: &Case, seed: u64) -> Result<(SimConfig, Vec<f64>, f64), Stri
                     (&mut t.temperature_scale[k], &mut t.temperature_scale_quadratic[k]),
                 ] {
                     if *quadratic != 0.0 {
-                        // q (span/2)² = |linear| · span, vertex where q (ΔT − vertex)² is least.
-                        *quadratic = quadratic.signum() * 4.0 * linear.abs() / span;
+                        // q (hi/2)² = |linear| · |hi|, vertex where q (ΔT − vertex)² is least.
+                        *quadratic = quadratic.signum() * 4.0 * linear.abs() / hi.abs().max(f64::EPSILON);
                         *linear = -2.0 * *quadratic * vertex;
                     }
                 }
