@@ -305,7 +305,7 @@ pub fn solve_walks(
     // from the limit, which three iterates extrapolate to.
     let mut history: Vec<[f64; 6]> = Vec::new();
     for _ in 0..WALK_ITERATIONS {
-        let WalkComponents { chi2, redundancy: r, .. } = walk_components(data, &noise, &fit)?;
+        let WalkComponents { chi2, redundancy: r, .. } = walk_components(data, &noise, &fit, false)?;
         let mut change: f64 = 0.0;
         let mut update = |w: &mut [f64; 3], chi2: &[f64; 3], r: &[f64; 3], lo: f64| {
             for a in 0..3 {
@@ -367,7 +367,7 @@ fn aitken(h: &[[f64; 6]], walks: Walks, floor: (f64, f64)) -> Walks {
 /// the redundancy `tr(R)` the estimate iterates on, and well below it where
 /// each residual carries a fraction of one.
 pub fn walk_redundancy(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Walks, AuditError> {
-    walk_components(data, noise, fit).map(|c| c.information)
+    walk_components(data, noise, fit, true).map(|c| c.information)
 }
 
 /// Per axis at `fit`: the χ² of the gyro and accelerometer walk residuals,
@@ -378,12 +378,18 @@ struct WalkComponents {
     information: Walks,
 }
 
-/// [`WalkComponents`] at `fit`. For the between factors of biases `k`, `k+1`
+/// [`WalkComponents`] at `fit` (`tr(R²)` only `with_information`: it takes
+/// every pair of intervals). For the between factors of biases `k`, `k+1`
 /// and `l`, `l+1` of one axis, with `Σ` the biases' joint covariance and
 /// `σ_k` the walk over gap `k`, `H_kl = (Σ_k+1,l+1 − Σ_k+1,l − Σ_k,l+1 +
 /// Σ_k,l)_aa / (σ_k σ_l)`, `tr(R) = Σ_k (1 − H_kk)` and `tr(R²) = Σ_k (1 −
 /// H_kk)² + Σ_k≠l H_kl²`.
-fn walk_components(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<WalkComponents, AuditError> {
+fn walk_components(
+    data: &AuditData,
+    noise: &Noise,
+    fit: &Fit,
+    with_information: bool,
+) -> Result<WalkComponents, AuditError> {
     let graph = build(data, noise, &fit.layout)?;
     let n = data.statics.len();
     let free = |k: &Key| !fit.values.is_constant(*k);
@@ -412,10 +418,8 @@ fn walk_components(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<WalkCom
                 let rkk = 1.0 - h(k, k);
                 r[a] += rkk;
                 info[a] += rkk * rkk;
-                for l in 0..n - 1 {
-                    if l != k {
-                        info[a] += h(k, l).powi(2);
-                    }
+                if with_information {
+                    info[a] += (0..n - 1).filter(|&l| l != k).map(|l| h(k, l).powi(2)).sum::<f64>();
                 }
             }
         }
