@@ -238,8 +238,8 @@ fn the_walk_estimate_maximizes_the_restricted_likelihood() {
         let dof = tumble::audit::fit::walk_redundancy(&data, &noise, &fit).unwrap();
         let mut checked = 0;
         for axis in 0..6 {
-            let r = if axis < 3 { dof.0[axis] } else { dof.1[axis - 3] };
-            if r < 3.0 {
+            let nu = if axis < 3 { dof.0[axis] } else { dof.1[axis - 3] };
+            if nu < 3.0 {
                 continue;
             }
             let mut rise = 0.0;
@@ -253,7 +253,7 @@ fn the_walk_estimate_maximizes_the_restricted_likelihood() {
                 let moved = noise.with_walks(walks);
                 let other = solve(&data, &moved, &layout, &fit.values).unwrap();
                 let d = restricted_deviance(&data, &moved, &other).unwrap();
-                println!("seed {seed} axis {axis} (r {r:.1}) ×{factor:.2}: deviance {:+.3}", d - best);
+                println!("seed {seed} axis {axis} (ν {nu:.1}) ×{factor:.2}: deviance {:+.3}", d - best);
                 assert!(
                     d > best,
                     "seed {seed} axis {axis}: ×{factor:.2} gives a deviance {:.3} below the estimate's",
@@ -263,8 +263,8 @@ fn the_walk_estimate_maximizes_the_restricted_likelihood() {
             }
             let curvature = rise / (2.0 * 1.5f64.ln().powi(2));
             assert!(
-                r / curvature > 0.5 && r / curvature < 2.0,
-                "seed {seed} axis {axis}: ν {r:.1}, curvature {curvature:.1}"
+                nu / curvature > 0.5 && nu / curvature < 2.0,
+                "seed {seed} axis {axis}: ν {nu:.1}, curvature {curvature:.1}"
             );
             checked += 1;
         }

@@ -53,8 +53,8 @@ pub use lie::LieGroup;
 pub use linear::LinearSolver;
 pub use loss::{Cauchy, Huber, RobustLoss, Tukey};
 pub use marginal::{
-    cluster_robust_covariances, covariances, covariances_eliminating, marginalize, Covariances, MarginalPrior,
-    Marginalization, RobustCovariances,
+    cluster_robust_covariances, covariances, covariances_eliminating, information_log_det, marginalize, Covariances,
+    MarginalPrior, Marginalization, RobustCovariances,
 };
 pub use noise::NoiseModel;
 pub use optimizer::{IterationLog, LmOptions, Method, Optimizer, Summary, Termination};

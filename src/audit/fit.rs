@@ -7,7 +7,9 @@ use nalgebra::{DMatrix, Vector3};
 use tumble_factors::imu_calib::{AccelParams, GyroMatrix};
 use tumble_factors::imu_effects::{Layout, MotionFactor, StaticFactor};
 use tumble_factors::BetweenFactor;
-use tumble_solvers::{covariances, DynVector, Graph, Key, LmOptions, NoiseModel, Optimizer, Values, Vars};
+use tumble_solvers::{
+    covariances, information_log_det, DynVector, Graph, Key, LmOptions, NoiseModel, Optimizer, Values, Vars,
+};
 
 /// Key of the accelerometer parameters.
 pub const KEY_ACCEL: Key = Key::new('a', 0);
@@ -438,51 +440,12 @@ fn walk_components(
 /// on one recording mean anything.
 pub fn restricted_deviance(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<f64, AuditError> {
     let graph = build(data, noise, &fit.layout)?;
-    let values = &fit.values;
-    let mut offsets = std::collections::HashMap::new();
-    let mut n = 0;
-    let mut keys: Vec<Key> = values.keys().filter(|k| !values.is_constant(*k)).collect();
-    keys.sort();
-    for k in keys {
-        offsets.insert(k, n);
-        n += values.get_dyn(k).map_err(|e| e.to_string())?.dim();
-    }
-    let mut h = DMatrix::<f64>::zeros(n, n);
-    let mut chi2 = 0.0;
-    for entry in graph.entries() {
-        let vars: Vec<&dyn tumble_solvers::DynVariable> = entry
-            .factor
-            .keys()
-            .iter()
-            .map(|k| values.get_dyn(*k))
-            .collect::<Result<_, _>>()
-            .map_err(|e| e.to_string())?;
-        let mut lin = entry.factor.linearize(Vars::new(&vars)).map_err(|e| e.to_string())?;
-        entry.noise.whiten(&mut lin.residual);
-        chi2 += lin.residual.norm_squared();
-        for j in lin.jacobians.iter_mut() {
-            entry.noise.whiten_jacobian(j);
-        }
-        for (a, ka) in entry.factor.keys().iter().enumerate() {
-            let Some(&oa) = offsets.get(ka) else { continue };
-            for (b, kb) in entry.factor.keys().iter().enumerate() {
-                let Some(&ob) = offsets.get(kb) else { continue };
-                let block = lin.jacobians[a].tr_mul(&lin.jacobians[b]);
-                let mut view = h.view_mut((oa, ob), block.shape());
-                view += block;
-            }
-        }
-    }
-    let chol = nalgebra::Cholesky::new(h).ok_or("the information matrix is not positive definite")?;
-    let logdet: f64 = 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>();
-    let mut walk_logdet = 0.0;
-    for k in 0..noise.walk_dt.len() {
-        for a in 0..3 {
-            walk_logdet += 2.0 * noise.walk_sigma(noise.walks.0[a], k).ln();
-            walk_logdet += 2.0 * noise.walk_sigma(noise.walks.1[a], k).ln();
-        }
-    }
-    Ok(chi2 + logdet + walk_logdet)
+    let (chi2, log_det) = information_log_det(&graph, &fit.values).map_err(|e| e.to_string())?;
+    let walk_log_det: f64 = (0..noise.walk_dt.len())
+        .flat_map(|k| (0..3).flat_map(move |a| [noise.walks.0[a], noise.walks.1[a]].map(|w| (k, w))))
+        .map(|(k, w)| 2.0 * noise.walk_sigma(w, k).ln())
+        .sum();
+    Ok(chi2 + log_det + walk_log_det)
 }
 
 /// Marginal covariance of the calibration blocks (`M_a/b_a`, `M_g`, `b_g` of the first interval).
