@@ -256,6 +256,43 @@ impl Effect {
         }
     }
 
+    /// Unit of parameter `i` (in [`Effect::param_names`]' order; "" past the end).
+    pub fn param_unit(self, i: usize) -> &'static str {
+        // Accelerometer parameters come first where both triads have them.
+        let accel = |i: usize| i % 6 < 3;
+        let triad = |i: usize, a: &'static str, g: &'static str| if accel(i) { a } else { g };
+        if i >= self.dim() {
+            return "";
+        }
+        match self {
+            Effect::GyroGSensitivity => "rad/s per m/s²",
+            Effect::TemperatureBias => triad(i, "m/s² per °C", "rad/s per °C"),
+            Effect::TemperatureBiasQuadratic => match (i < 6, accel(i)) {
+                (true, true) => "m/s² per °C",
+                (true, false) => "rad/s per °C",
+                (false, true) => "m/s² per °C²",
+                (false, false) => "rad/s per °C²",
+            },
+            Effect::TemperatureScale => "1/°C",
+            Effect::TemperatureScaleQuadratic => {
+                if i < 6 {
+                    "1/°C"
+                } else {
+                    "1/°C²"
+                }
+            }
+            Effect::BiasDrift => triad(i, "m/s³", "rad/s²"),
+            Effect::AccelGyroTimeOffset | Effect::CameraImuTimeOffset => "s",
+            e => match e.nonlinearity() {
+                Some((Triad::Gyro, NonlinearityForm::Even | NonlinearityForm::Odd)) => "1/(rad/s)",
+                Some((Triad::Gyro, NonlinearityForm::Cubic)) => "1/(rad/s)²",
+                Some((Triad::Accel, NonlinearityForm::Even | NonlinearityForm::Odd)) => "1/(m/s²)",
+                Some((Triad::Accel, NonlinearityForm::Cubic)) => "1/(m/s²)²",
+                _ => "1",
+            },
+        }
+    }
+
     /// Number of parameters.
     pub fn dim(self) -> usize {
         self.param_names().len()
@@ -871,5 +908,34 @@ impl Factor for MotionFactor {
     fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
         let (residual, jacobians) = self.eval(vars, true)?;
         Ok(Linearization { residual, jacobians })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every parameter has a unit, of its own triad: a gyro parameter's unit
+    /// names rad/s and an accelerometer's m/s² wherever the unit has a
+    /// sensor quantity in it (scale changes and asymmetries are relative).
+    #[test]
+    fn every_parameter_has_a_unit_of_its_triad() {
+        for e in Effect::ALL {
+            for (i, name) in e.param_names().iter().enumerate() {
+                let unit = e.param_unit(i);
+                assert!(!unit.is_empty(), "{e:?} {name}");
+                let relative = unit == "1" || unit.starts_with("1/°C") || unit == "s";
+                if name.starts_with("gyro") && !relative {
+                    assert!(unit.contains("rad"), "{e:?} {name}: {unit}");
+                }
+                if name.starts_with("accel") && !relative {
+                    assert!(unit.contains("m/s") && !unit.contains("rad"), "{e:?} {name}: {unit}");
+                }
+                if name.ends_with("_2") {
+                    assert!(unit.contains("°C²"), "{e:?} {name}: {unit}");
+                }
+            }
+            assert_eq!(e.param_unit(e.dim()), "");
+        }
     }
 }

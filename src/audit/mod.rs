@@ -166,6 +166,29 @@ pub struct CandidateScore {
     pub testable: bool,
 }
 
+/// How far above the size of its estimate a bound on an effect's parameter
+/// lies, in σ: 1.96, a two-sided 95 % interval of one parameter.
+pub const BOUND_SIGMAS: f64 = 1.96;
+
+/// What the recording says of one parameter of an effect the audit did not
+/// add: its estimate against the final model, and the size it is below
+/// with 95 % confidence.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct EffectBound {
+    /// The effect (its id).
+    pub effect: String,
+    /// The parameter ([`Effect::param_names`]).
+    pub parameter: &'static str,
+    /// Its estimate \[`unit`\].
+    pub value: f64,
+    /// Its standard deviation (scaled by max(1, χ²/dof)) \[`unit`\].
+    pub std: f64,
+    /// `|value| + BOUND_SIGMAS · std` \[`unit`\].
+    pub bound: f64,
+    /// Its unit ([`Effect::param_unit`]), in the calibrated frame.
+    pub unit: &'static str,
+}
+
 /// One added effect.
 #[derive(Clone, Debug)]
 pub struct AuditIteration {
@@ -315,6 +338,28 @@ impl Audit {
             );
         }
         v
+    }
+
+    /// Bounds on the effects not added: every parameter of every candidate of
+    /// the last round (fitted against the final model, none significant),
+    /// where its fit is testable (its χ² drop and Wald statistic agree). Empty
+    /// when the search stopped at `max_effects` or ran out of candidates.
+    pub fn bounds(&self) -> Vec<EffectBound> {
+        let mut out = Vec::new();
+        for c in self.last_round.iter().filter(|c| c.testable) {
+            let Some(e) = Effect::from_id(&c.effect) else { continue };
+            for (i, (&value, &std)) in c.params.iter().zip(&c.params_std).enumerate() {
+                out.push(EffectBound {
+                    effect: c.effect.clone(),
+                    parameter: e.param_names().get(i).copied().unwrap_or(""),
+                    value,
+                    std,
+                    bound: value.abs() + BOUND_SIGMAS * std,
+                    unit: e.param_unit(i),
+                });
+            }
+        }
+        out
     }
 
     /// When the walks were estimated from a recording that does not determine

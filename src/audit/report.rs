@@ -4,7 +4,7 @@
 
 use super::fit::{self, Fit};
 use super::AuditError;
-use super::{Audit, CandidateScore, Effect};
+use super::{Audit, CandidateScore, Effect, BOUND_SIGMAS};
 use crate::plot::{ScatterChart, Series, AXIS_COLORS};
 use plotters::style::RGBColor;
 use std::fmt::Write as _;
@@ -72,6 +72,7 @@ pub fn json(a: &Audit) -> serde_json::Value {
         "random_walk_degrees_of_freedom": a.walk_redundancy,
         "final_groups": groups,
         "last_round": a.last_round,
+        "bounds": a.bounds(),
         "static_intervals": a.data.statics.len(),
         "motions": a.data.motions.len(),
         "random_walk_raw": {"gyro": a.random_walk().0, "accel": a.random_walk().1},
@@ -332,6 +333,27 @@ fn markdown(a: &Audit, figures: &[String]) -> String {
         let _ = writeln!(s, "\n## `{}`: {}\n\n| parameter | value | std |\n|---|---|---|", it.effect, it.describe());
         for ((n, v), sd) in it.effect.param_names().iter().zip(&it.score.params).zip(&it.score.params_std) {
             let _ = writeln!(s, "| {n} | {v:.4e} | {sd:.1e} |");
+        }
+    }
+    let bounds = a.bounds();
+    if !bounds.is_empty() {
+        let _ = writeln!(
+            s,
+            "\n## What the recording bounds\n\nThe effects not added, fitted against the final model: each \
+             parameter's estimate and the size it is below with 95 % confidence (|value| + {BOUND_SIGMAS} σ), in \
+             the calibrated frame{}.\n\n| effect | parameter | value | std | below | unit |\n|---|---|---|---|---|---|",
+            if a.walks_undetermined().is_some() {
+                "; the walks are not determined by this recording, and the bounds on slow drifts rest on them"
+            } else {
+                ""
+            }
+        );
+        for b in &bounds {
+            let _ = writeln!(
+                s,
+                "| `{}` | {} | {:.3e} | {:.1e} | {:.2e} | {} |",
+                b.effect, b.parameter, b.value, b.std, b.bound, b.unit
+            );
         }
     }
     let _ = writeln!(s, "\n## Scores\n\n```text\n{}```\n", summary_table(a));
