@@ -129,24 +129,7 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
     let nm: usize = dims[..keys.len()].iter().sum();
     let mut h = DMatrix::zeros(n, n);
     let mut g = DVector::zeros(n);
-    for &fi in &removed {
-        let e: &FactorEntry = &graph.entries()[fi];
-        let vars: Vec<&dyn DynVariable> =
-            e.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>()?;
-        let wl = e.linearize_whitened(Vars::new(&vars)).map_err(|source| SolveError::Factor { factor: fi, source })?;
-        for (a, ka) in e.factor.keys().iter().enumerate() {
-            let oa = offsets[ka];
-            let ja = &wl.lin.jacobians[a];
-            let mut ga = g.rows_mut(oa, ja.ncols());
-            ga += ja.tr_mul(&wl.lin.residual);
-            for (b, kb) in e.factor.keys().iter().enumerate() {
-                let ob = offsets[kb];
-                let jb = &wl.lin.jacobians[b];
-                let mut blk = h.view_mut((oa, ob), (ja.ncols(), jb.ncols()));
-                blk += ja.tr_mul(jb);
-            }
-        }
-    }
+    add_normal_equations(graph, values, &removed, &offsets, &mut h, &mut g)?;
     let hmm = h.view((0, 0), (nm, nm)).into_owned();
     let hms = h.view((0, nm), (nm, n - nm)).into_owned();
     let hss = h.view((nm, nm), (n - nm, n - nm)).into_owned();
@@ -168,6 +151,41 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
         },
         removed_factors: removed,
     })
+}
+
+/// Add the whitened normal equations of the factors `factors` of `graph` at
+/// `values` — `JᵀJ` to `h` and `Jᵀr` to `g`, robust weights included — over
+/// the variables placed by `offsets` (others are held fixed); the sum of their
+/// `ρ(‖r‖²)` (their χ² without robust losses) back.
+fn add_normal_equations(
+    graph: &Graph,
+    values: &Values,
+    factors: &[usize],
+    offsets: &HashMap<Key, usize>,
+    h: &mut DMatrix<f64>,
+    g: &mut DVector<f64>,
+) -> Result<f64, SolveError> {
+    let mut cost = 0.0;
+    for &fi in factors {
+        let e: &FactorEntry = &graph.entries()[fi];
+        let vars: Vec<&dyn DynVariable> =
+            e.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>()?;
+        let wl = e.linearize_whitened(Vars::new(&vars)).map_err(|source| SolveError::Factor { factor: fi, source })?;
+        cost += wl.rho;
+        for (a, ka) in e.factor.keys().iter().enumerate() {
+            let Some(&oa) = offsets.get(ka) else { continue };
+            let ja = &wl.lin.jacobians[a];
+            let mut ga = g.rows_mut(oa, ja.ncols());
+            ga += ja.tr_mul(&wl.lin.residual);
+            for (b, kb) in e.factor.keys().iter().enumerate() {
+                let Some(&ob) = offsets.get(kb) else { continue };
+                let jb = &wl.lin.jacobians[b];
+                let mut blk = h.view_mut((oa, ob), (ja.ncols(), jb.ncols()));
+                blk += ja.tr_mul(jb);
+            }
+        }
+    }
+    Ok(cost)
 }
 
 /// The eigen-decomposition of the symmetric positive semi-definite `h` (an
@@ -459,7 +477,7 @@ pub fn cluster_robust_covariances(
 
 /// `ln det(JᵀJ)` of the whitened Gauss–Newton information of the free
 /// (non-constant) variables of `graph` at `values`, with the χ² there
-/// (robust losses ignored): the terms a Laplace approximation of the
+/// (robust weights included, as in [`covariances`]: `Σ ρ(‖r‖²)`): the terms a Laplace approximation of the
 /// marginal likelihood needs (`−2 ln L = χ² + ln det(JᵀJ) + const`, exact for
 /// linear factors), e.g. to compare noise models by restricted likelihood.
 /// Dense: for graphs of a few hundred variables. An error when the
@@ -487,27 +505,8 @@ pub fn information_log_det(graph: &Graph, values: &Values) -> Result<(f64, f64),
         n += values.get_dyn(k)?.dim();
     }
     let mut h = DMatrix::<f64>::zeros(n, n);
-    let mut chi2 = 0.0;
-    for (fi, entry) in graph.entries().iter().enumerate() {
-        let vars: Vec<&dyn DynVariable> =
-            entry.factor.keys().iter().map(|k| values.get_dyn(*k)).collect::<Result<_, _>>()?;
-        let mut lin =
-            entry.factor.linearize(Vars::new(&vars)).map_err(|source| SolveError::Factor { factor: fi, source })?;
-        entry.noise.whiten(&mut lin.residual);
-        chi2 += lin.residual.norm_squared();
-        for j in lin.jacobians.iter_mut() {
-            entry.noise.whiten_jacobian(j);
-        }
-        for (a, ka) in entry.factor.keys().iter().enumerate() {
-            let Some(&oa) = offsets.get(ka) else { continue };
-            for (b, kb) in entry.factor.keys().iter().enumerate() {
-                let Some(&ob) = offsets.get(kb) else { continue };
-                let block = lin.jacobians[a].tr_mul(&lin.jacobians[b]);
-                let mut view = h.view_mut((oa, ob), block.shape());
-                view += block;
-            }
-        }
-    }
+    let factors: Vec<usize> = (0..graph.len()).collect();
+    let chi2 = add_normal_equations(graph, values, &factors, &offsets, &mut h, &mut DVector::zeros(n))?;
     let chol = nalgebra::Cholesky::new(h)
         .ok_or_else(|| SolveError::Singular("the information of the free variables is singular".into()))?;
     Ok((chi2, 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>()))
