@@ -187,10 +187,10 @@ fn estimates_the_bias_random_walk_from_the_recording() {
         assert!(lines.iter().any(|l| l.starts_with("round 1: fitting")), "{lines:?}");
         assert_eq!(lines.last().map(String::as_str), Some("testing the residuals left for structure"));
         let (kg, ka) = (cal.calibration.gyro.mean_scale(), cal.calibration.accel.mean_scale());
-        println!("seed {seed}: {} | degrees of freedom {:?}", a.notes.join(" | "), a.walk_redundancy);
+        println!("seed {seed}: {} | degrees of freedom {:?}", a.notes.join(" | "), a.walk_degrees_of_freedom);
         // A walk this large shows between holds: the gyro's rests on enough
         // degrees of freedom to be reported as determined.
-        let dof = a.walk_redundancy.expect("estimated walks carry their degrees of freedom");
+        let dof = a.walk_degrees_of_freedom.expect("estimated walks carry their degrees of freedom");
         assert!(dof.0.iter().sum::<f64>() >= WALK_DETERMINED_DOF, "seed {seed}: {dof:?}");
         for w in a.random_walk_axes.0 {
             let ratio = w / kg / 1e-3;
@@ -235,7 +235,7 @@ fn the_walk_estimate_maximizes_the_restricted_likelihood() {
         let floor = (MIN_RANDOM_WALK.0 * kg, MIN_RANDOM_WALK.1 * ka);
         let (fit, noise) = solve_walks(&data, &noise, &layout, &start, true, floor).unwrap();
         let best = restricted_deviance(&data, &noise, &fit).unwrap();
-        let dof = tumble::audit::fit::walk_redundancy(&data, &noise, &fit).unwrap();
+        let dof = tumble::audit::fit::walk_degrees_of_freedom(&data, &noise, &fit).unwrap();
         let mut checked = 0;
         for axis in 0..6 {
             let nu = if axis < 3 { dof.0[axis] } else { dof.1[axis - 3] };
@@ -325,7 +325,7 @@ fn says_when_the_recording_does_not_determine_the_walks() {
     assert!(a.notes.iter().any(|n| n.starts_with("the bias random walks are not determined")), "{:?}", a.notes);
     let noise = Some(ImuNoise::from_model(&cfg.imu));
     let a = audit(&rec, &cal.calibration, &AuditOptions { noise, ..Default::default() }).unwrap();
-    assert!(a.walk_redundancy.is_none() && a.walks_undetermined().is_none());
+    assert!(a.walk_degrees_of_freedom.is_none() && a.walks_undetermined().is_none());
     assert!(!a.verdict().contains("does not determine"), "{}", a.verdict());
 }
 

@@ -368,12 +368,12 @@ fn aitken(h: &[[f64; 6]], walks: Walks, floor: (f64, f64)) -> Walks {
 /// uncertain by `√(2/ν)` as from `ν` independent residuals. It is at most
 /// the redundancy `tr(R)` the estimate iterates on, and well below it where
 /// each residual carries a fraction of one.
-pub fn walk_redundancy(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Walks, AuditError> {
+pub fn walk_degrees_of_freedom(data: &AuditData, noise: &Noise, fit: &Fit) -> Result<Walks, AuditError> {
     walk_components(data, noise, fit, true).map(|c| c.information)
 }
 
 /// Per axis at `fit`: the χ² of the gyro and accelerometer walk residuals,
-/// their redundancy `tr(R)` and `tr(R²)` (see [`walk_redundancy`]).
+/// their redundancy `tr(R)` and `tr(R²)` (see [`walk_degrees_of_freedom`]).
 struct WalkComponents {
     chi2: Walks,
     redundancy: Walks,

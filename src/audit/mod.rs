@@ -70,7 +70,7 @@ use tumble_factors::imu_effects::Layout;
 pub const INITIAL_RANDOM_WALK: (f64, f64) = (1e-3, 1e-2);
 
 /// Degrees of freedom below which a triad's estimated walk is reported as not
-/// determined: a variance estimated from `r` of them is uncertain by `√(2/r)`,
+/// determined: a variance estimated from `ν` of them is uncertain by `√(2/ν)`,
 /// ±45 % at 10 (the VIO's noise meter asks as many).
 pub const WALK_DETERMINED_DOF: f64 = 10.0;
 
@@ -271,8 +271,8 @@ pub struct Audit {
     /// Whether the walks were estimated from the recording (no noise file).
     pub walks_estimated: bool,
     /// When estimated: the degrees of freedom the estimate rests on per axis
-    /// (gyro x y z, accelerometer x y z; [`fit::walk_redundancy`]).
-    pub walk_redundancy: Option<fit::Walks>,
+    /// (gyro x y z, accelerometer x y z; [`fit::walk_degrees_of_freedom`]).
+    pub walk_degrees_of_freedom: Option<fit::Walks>,
     /// Structure left in the final model's residuals.
     pub structure: Vec<structure::Structure>,
     /// The family-wise significance level used.
@@ -366,7 +366,7 @@ impl Audit {
     /// them: the degrees of freedom of the less determined sensor (below
     /// [`WALK_DETERMINED_DOF`]).
     pub fn walks_undetermined(&self) -> Option<f64> {
-        let dof = least_determined(&self.walk_redundancy?);
+        let dof = least_determined(&self.walk_degrees_of_freedom?);
         (dof < WALK_DETERMINED_DOF).then_some(dof)
     }
 
@@ -522,7 +522,7 @@ pub fn audit_with_progress(
     let start = fit::start_values(&data, accel, gyro, gyro_bias);
     let noise =
         Noise::new(&data, &start, (rw_g.map(|w| w * kg), rw_a.map(|w| w * ka))).map_err(|e| fail(e.to_string()))?;
-    let mut walk_redundancy = None;
+    let mut walk_degrees_of_freedom = None;
     let noise = if estimate {
         // The walks from the recording, with every candidate family in the
         // model so that none of them can hide in the walk.
@@ -554,7 +554,7 @@ pub fn audit_with_progress(
             axes(&n.walks.0, kg),
             axes(&n.walks.1, ka)
         ));
-        let r = fit::walk_redundancy(&data, &n, &sat).map_err(|e| fail(e.to_string()))?;
+        let r = fit::walk_degrees_of_freedom(&data, &n, &sat).map_err(|e| fail(e.to_string()))?;
         if least_determined(&r) < WALK_DETERMINED_DOF {
             let dof = |x: &[f64; 3]| x.iter().map(|v| format!("{v:.1}")).collect::<Vec<_>>().join(", ");
             notes.push(format!(
@@ -568,7 +568,7 @@ pub fn audit_with_progress(
                 dof(&r.1)
             ));
         }
-        walk_redundancy = Some(r);
+        walk_degrees_of_freedom = Some(r);
         n
     } else {
         noise
@@ -670,7 +670,7 @@ pub fn audit_with_progress(
         calibration,
         random_walk_axes: noise.walks,
         walks_estimated: estimate,
-        walk_redundancy,
+        walk_degrees_of_freedom,
         structure,
         alpha: opts.alpha,
         notes,

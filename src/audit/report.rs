@@ -69,7 +69,7 @@ pub fn json(a: &Audit) -> serde_json::Value {
         "structure": a.structure,
         "within_intervals": a.data.within,
         "random_walk_estimated": a.walks_estimated,
-        "random_walk_degrees_of_freedom": a.walk_redundancy,
+        "random_walk_degrees_of_freedom": a.walk_degrees_of_freedom,
         "final_groups": groups,
         "last_round": a.last_round,
         "bounds": a.bounds(),
