@@ -8,7 +8,7 @@
 //! as the target's tilt against gravity is known only to the accelerometer's bias).
 //!
 //! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--seed N]
-//! [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--from SECONDS] [--only TEXT] [--out DIR]
+//! [--noise-in-flight] [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--from SECONDS] [--only TEXT] [--out DIR]
 //! [--markdown]`
 //!
 //! `--only` runs the cases whose name contains TEXT; `--out` writes each
@@ -25,6 +25,11 @@
 //! hold instead of the midpoint rule, `--fixed-noise` does not measure the
 //! noise in motion, `--walk-scale G,A` multiplies the bias random walks given
 //! (gyro, accelerometer; `docs/vio.md`, "The bias random walk in flight"),
+//! `--noise-in-flight` gives each case the noise its IMU shows in flight on
+//! the *other* sequences under `full_imu/` (`tumble allan --groundtruth` on
+//! each, pooled: [`ImuNoise::pooled`]; V1_01, which is not among them, gets
+//! all of them; imu_april, moved by hand with the rotors off, keeps the
+//! datasheet's) instead of the datasheet's,
 //! `--online auto` estimates imu_april's camera calibration online in the
 //! `auto` mode instead of `on` (freed once the motion determines it), and
 //! `--blackout FROM,SECONDS` removes every feature over that span of each
@@ -36,6 +41,7 @@
 use std::path::{Path, PathBuf};
 use tumble::eval::{Alignment, EvalOptions};
 use tumble::inputs::{open_vio, VioSource};
+use tumble::io::ImuNoise;
 use tumble::vio::{piece_starts_s, run, summarize, trajectory, Summary, VioInput, VioOptions};
 
 fn main() {
@@ -49,6 +55,7 @@ fn main() {
         matches!(
             a,
             "--noise-from-static"
+                | "--noise-in-flight"
                 | "--zoh"
                 | "--fixed-noise"
                 | "--markdown"
@@ -112,6 +119,17 @@ fn main() {
         .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.join("mav0").is_dir()).collect())
         .unwrap_or_default();
     seqs.sort();
+    let flight: Vec<(PathBuf, ImuNoise)> = if has("--noise-in-flight") {
+        match seqs.iter().map(|s| noise_in_flight(s).map(|n| (s.clone(), n))).collect() {
+            Ok(f) => f,
+            Err(e) => {
+                eprintln!("--noise-in-flight: {e}");
+                std::process::exit(1);
+            }
+        }
+    } else {
+        Vec::new()
+    };
     for s in seqs {
         let name = format!("{} (sim. camera)", s.file_name().unwrap_or_default().to_string_lossy());
         let source = VioSource { simulate_camera: Some(seed), ..Default::default() };
@@ -151,7 +169,16 @@ fn main() {
         }
         eprintln!("running {name} …");
         let dir = out.as_ref().map(|d| d.join(folder_name(name)));
-        match evaluate(case, o, walk_scale, &cuts, &data, dir.as_deref()) {
+        // The flights' noise for a flight (every sequence's but the case's own);
+        // imu_april is moved by hand, rotors off, and keeps its own figures.
+        let noise = match case {
+            Case::Source(path, _) => {
+                let others: Vec<ImuNoise> = flight.iter().filter(|(p, _)| p != path).map(|(_, n)| *n).collect();
+                ImuNoise::pooled(&others)
+            }
+            Case::Target(..) => None,
+        };
+        match evaluate(case, o, noise, walk_scale, &cuts, &data, dir.as_deref()) {
             Ok(Some((s, note))) => {
                 notes.extend(note.map(|n| format!("{name}: {n}")));
                 rows.push((name.clone(), s));
@@ -168,6 +195,42 @@ fn main() {
         println!("{n}");
     }
 }
+
+/// The noise the IMU of the ASL sequence `dir` shows in flight against its
+/// ground truth: the Allan analysis of its error in motion, each axis's own
+/// figures (`tumble allan --groundtruth`).
+fn noise_in_flight(dir: &Path) -> Result<ImuNoise, String> {
+    let ds = tumble::io::asl::read_asl(dir, &Default::default()).map_err(|e| e.to_string())?;
+    let truth = ds.groundtruth.as_ref().ok_or_else(|| format!("{}: no ground truth", dir.display()))?;
+    let (report, span) =
+        tumble::allan::in_motion::run_allan_in_motion(&ds.imu, truth, GRAVITY, &Default::default(), &|_, _| {})
+            .map_err(|e| e.to_string())?;
+    let noise = report.kalibr.as_ref().map(|k| k.imu_noise()).ok_or("no noise identified")?;
+    let axes = noise.axes.ok_or("no per-axis noise")?;
+    eprintln!(
+        "  {} in flight ({:.0}–{:.0} s): gyro white {:.1e} {:.1e} {:.1e}, walk {:.1e} {:.1e} {:.1e}; \
+         accel white {:.1e} {:.1e} {:.1e}, walk {:.1e} {:.1e} {:.1e}",
+        dir.file_name().unwrap_or_default().to_string_lossy(),
+        span.from_s,
+        span.to_s,
+        axes.gyroscope_noise_density[0],
+        axes.gyroscope_noise_density[1],
+        axes.gyroscope_noise_density[2],
+        axes.gyroscope_random_walk[0],
+        axes.gyroscope_random_walk[1],
+        axes.gyroscope_random_walk[2],
+        axes.accelerometer_noise_density[0],
+        axes.accelerometer_noise_density[1],
+        axes.accelerometer_noise_density[2],
+        axes.accelerometer_random_walk[0],
+        axes.accelerometer_random_walk[1],
+        axes.accelerometer_random_walk[2],
+    );
+    Ok(noise)
+}
+
+/// EuRoC's gravity as the estimator assumes it \[m/s²\].
+const GRAVITY: f64 = 9.81;
 
 /// `G` or `G,A`: the factors on the gyro's and the accelerometer's bias
 /// random walks (one factor for both when A is left out); positive and finite.
@@ -258,6 +321,7 @@ fn folder_name(name: &str) -> String {
 fn evaluate(
     case: &Case,
     opts: &VioOptions,
+    noise: Option<ImuNoise>,
     walk_scale: [f64; 2],
     cuts: &Cuts,
     data: &Path,
@@ -299,7 +363,7 @@ fn evaluate(
             f.features.clear();
         }
     }
-    input.apply_noise(None, &mut opts.noise.imu);
+    input.apply_noise(noise, &mut opts.noise.imu);
     scale_walks(&mut opts.noise.imu, walk_scale);
     let result = run(&input, &opts, None).map_err(|e| e.to_string())?;
     let mut summary = summarize(&input, &opts, &result, 10.0);

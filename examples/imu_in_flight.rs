@@ -6,16 +6,18 @@
 //! `cargo run --release --example imu_in_flight -- [SEQUENCE_DIR ...]`
 //! (default: every sequence under `../shared/data/euroc/full_imu/`).
 //!
-//! The truth's rate is the rotation between consecutive ground-truth poses
-//! over their interval, at its middle, interpolated to the IMU's stamps;
-//! flight is from 2 s after the truth's speed first exceeds 0.2 m/s to 2 s
-//! before it last does. At short τ the figure includes the ground truth's own
+//! The error is `tumble::allan::in_motion::error_in_motion` (what `tumble
+//! allan --groundtruth` analyses): the truth's rate is the rotation between
+//! consecutive ground-truth poses over their interval, at its middle,
+//! interpolated to the IMU's stamps; flight is from 2 s after the truth's
+//! speed first exceeds 0.2 m/s to 2 s before it last does. At short τ the figure includes the ground truth's own
 //! noise, differentiated; from about 0.5 s on it is the IMU's: where it lies
 //! above the prediction, the IMU's error in flight is larger at that time
 //! scale than the figures say, and an estimator that uses them claims biases
 //! more precise than they are (`docs/vio.md`, "The bias random walk").
 
 use std::path::PathBuf;
+use tumble::allan::in_motion::error_in_motion;
 use tumble::allan::{allan_deviation, AllanOptions};
 use tumble::io::asl::read_asl;
 
@@ -43,42 +45,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for dir in dirs {
         let ds = read_asl(&dir, &Default::default())?;
         let gt = ds.groundtruth.as_ref().ok_or_else(|| format!("{}: no ground truth", dir.display()))?;
-        let (Some(v), Some(bias)) = (&gt.v, &gt.bias_gyro) else {
-            return Err(format!("{}: the ground truth has no velocity or gyro bias", dir.display()).into());
-        };
-        // Truth times relative to the IMU's first sample [s].
-        let t_gt: Vec<f64> = gt.t_ns.iter().map(|t| (t - ds.imu.t0_ns) as f64 * 1e-9).collect();
-        let q = |i: usize| {
-            let [w, x, y, z] = gt.q[i];
-            nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z))
-        };
-        let mid: Vec<f64> = t_gt.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
-        let rate: Vec<[f64; 3]> = (0..t_gt.len() - 1)
-            .map(|i| {
-                let r = (q(i).inverse() * q(i + 1)).scaled_axis() / (t_gt[i + 1] - t_gt[i]);
-                [r.x, r.y, r.z]
-            })
-            .collect();
-        let moving: Vec<f64> = t_gt
-            .iter()
-            .zip(v)
-            .filter(|(_, v)| v.iter().map(|x| x * x).sum::<f64>().sqrt() > 0.2)
-            .map(|(t, _)| *t)
-            .collect();
-        let (Some(&first), Some(&last)) = (moving.first(), moving.last()) else {
-            println!("{}: the ground truth never moves faster than 0.2 m/s", dir.display());
-            continue;
-        };
-        let (from, to) = (first + 2.0, last - 2.0);
-        let mut residual = [Vec::new(), Vec::new(), Vec::new()];
-        for (t, g) in ds.imu.t.iter().zip(&ds.imu.gyro) {
-            if *t < from.max(mid[0]) || *t > to.min(mid[mid.len() - 1]) {
-                continue;
-            }
-            for (a, r) in residual.iter_mut().enumerate() {
-                r.push(g[a] - interp(&mid, &rate, *t, a) - interp(&t_gt, bias, *t, a));
-            }
+        if gt.bias_gyro.is_none() {
+            return Err(format!("{}: the ground truth has no gyro bias", dir.display()).into());
         }
+        let (error, span) = error_in_motion(&ds.imu, gt, 9.81)?;
+        let (from, to) = (span.from_s, span.to_s);
+        let residual: [Vec<f64>; 3] = std::array::from_fn(|a| error.gyro.iter().map(|g| g[a]).collect());
+        // The truth's rate plus its bias at the same samples.
+        let truth: Vec<[f64; 3]> = ds
+            .imu
+            .slice_time(from, to)
+            .gyro
+            .iter()
+            .zip(&error.gyro)
+            .map(|(g, e)| std::array::from_fn(|a| g[a] - e[a]))
+            .collect();
         let tau0 = (ds.imu.t[ds.imu.t.len() - 1] - ds.imu.t[0]) / (ds.imu.t.len() - 1) as f64;
         let curves = residual
             .iter()
@@ -129,7 +110,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         // Scale and misalignment: the error's means over 0.5 s blocks against
         // the truth's rate (and a constant), per axis.
-        let (sm, rms) = scale_misalignment(&residual, &ds.imu.t, from, to, &mid, &rate);
+        let (sm, rms) = scale_misalignment(&residual, &error.t, &truth);
         println!(
             "  error against the truth's rate (0.5 s means), scale x y z {:+.3} {:+.3} {:+.3} %, \
              largest misalignment {:.3} %; RMS {:.1e} → {:.1e} rad/s",
@@ -144,26 +125,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-/// The gyro error `residual` (per axis, at the IMU stamps `t` within
-/// `[from, to]`) averaged over 0.5 s blocks and fitted as `M ω + c` against
-/// the truth's rate (`rate` at `mid`): `M` (scale on the diagonal,
+/// The gyro error `residual` (per axis, at the stamps `t`) averaged over
+/// 0.5 s blocks and fitted as `M ω + c` against the truth's rate `truth`
+/// (with its bias, which the constant takes): `M` (scale on the diagonal,
 /// misalignment off it) and the blocks' RMS error before and after.
-fn scale_misalignment(
-    residual: &[Vec<f64>; 3],
-    t: &[f64],
-    from: f64,
-    to: f64,
-    mid: &[f64],
-    rate: &[[f64; 3]],
-) -> (nalgebra::Matrix3<f64>, (f64, f64)) {
-    let ts: Vec<f64> =
-        t.iter().copied().filter(|s| *s >= from.max(mid[0]) && *s <= to.min(mid[mid.len() - 1])).collect();
-    let per_block = ((0.5 / ((ts[ts.len() - 1] - ts[0]) / (ts.len() - 1) as f64)).round() as usize).max(1);
+fn scale_misalignment(residual: &[Vec<f64>; 3], t: &[f64], truth: &[[f64; 3]]) -> (nalgebra::Matrix3<f64>, (f64, f64)) {
+    let per_block = ((0.5 / ((t[t.len() - 1] - t[0]) / (t.len() - 1) as f64)).round() as usize).max(1);
     let mut rows: Vec<([f64; 4], [f64; 3])> = Vec::new();
-    for (b, chunk) in ts.chunks(per_block).enumerate().filter(|(_, c)| c.len() == per_block) {
+    for (b, chunk) in truth.chunks(per_block).enumerate().filter(|(_, c)| c.len() == per_block) {
         let i0 = b * per_block;
         let mean = |f: &dyn Fn(usize) -> f64| (0..chunk.len()).map(f).sum::<f64>() / chunk.len() as f64;
-        let w: [f64; 3] = std::array::from_fn(|a| mean(&|k| interp(mid, rate, chunk[k], a)));
+        let w: [f64; 3] = std::array::from_fn(|a| mean(&|k| chunk[k][a]));
         let e: [f64; 3] = std::array::from_fn(|a| mean(&|k| residual[a][i0 + k]));
         rows.push(([w[0], w[1], w[2], 1.0], e));
     }
@@ -231,17 +203,4 @@ fn fit_white_and_walk(c: &tumble::allan::AllanCurve, from: f64) -> (f64, f64) {
 fn white_and_walk_dev(n: f64, k: f64, tau: f64) -> f64 {
     let b = tumble::allan::identify::basis(tau);
     (n * n * b[1] + k * k * b[3]).sqrt()
-}
-
-/// Column `axis` of `y` at `t`, linear between the samples at `ts` (held at the ends).
-fn interp(ts: &[f64], y: &[[f64; 3]], t: f64, axis: usize) -> f64 {
-    let i = ts.partition_point(|x| *x < t);
-    if i == 0 {
-        return y[0][axis];
-    }
-    if i >= ts.len() {
-        return y[ts.len() - 1][axis];
-    }
-    let a = (t - ts[i - 1]) / (ts[i] - ts[i - 1]);
-    y[i - 1][axis] * (1.0 - a) + y[i][axis] * a
 }

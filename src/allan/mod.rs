@@ -29,6 +29,7 @@ pub mod deviation;
 pub mod disturbance;
 pub mod edf;
 pub mod identify;
+pub mod in_motion;
 pub mod report;
 
 pub use deviation::DeviationKind;

@@ -1,4 +1,5 @@
-//! `tumble allan`: noise identification from a static recording.
+//! `tumble allan`: noise identification from a static recording, or from a
+//! recording in motion against its ground truth (`--groundtruth`).
 
 use super::common::{paths, progress_bar, RecordingArgs};
 use super::CliResult;
@@ -10,7 +11,8 @@ use tumble::allan::{AllanOptions, AllanRunOptions, AxisStat, DeviationKind, TauG
 /// Flags of `tumble allan`.
 #[derive(Args)]
 pub struct AllanArgs {
-    /// Static recording: ASL folder, ROS bag/MCAP, or text/CSV (.gz allowed).
+    /// Static recording: ASL folder, ROS bag/MCAP, or text/CSV (.gz allowed);
+    /// with --groundtruth, a recording in motion.
     recording: PathBuf,
     #[command(flatten)]
     read: RecordingArgs,
@@ -37,6 +39,15 @@ pub struct AllanArgs {
     /// Analyse only this time span of the recording [s from its start], e.g. 0:3600.
     #[arg(long, value_parser = |s: &str| s.parse::<TimeSpan>())]
     span: Option<TimeSpan>,
+    /// Ground truth of the IMU's pose on the recording's clock (EuRoC's
+    /// state_groundtruth_estimate0/data.csv, or TUM): analyse what the IMU
+    /// reads beyond the truth's motion while it moves (the noise on its
+    /// platform in use, rotors running), not a static log.
+    #[arg(long)]
+    groundtruth: Option<PathBuf>,
+    /// Local gravity [m/s²] for --groundtruth.
+    #[arg(long, default_value_t = 9.81)]
+    gravity: f64,
 }
 
 impl AllanArgs {
@@ -60,10 +71,17 @@ impl AllanArgs {
         eprintln!("read {} samples ({:.1} s) in {:.2} s", rec.len(), rec.duration(), start.elapsed().as_secs_f64());
         let bar = progress_bar(0, "allan [{bar:40}] {pos}/{len} τ  {elapsed_precise} (eta {eta})");
         let t = std::time::Instant::now();
-        let report = tumble::allan::run_allan_with_progress(&rec, &opts, &|done, total| {
+        let progress = |done: usize, total: usize| {
             bar.set_length(total as u64);
             bar.set_position(done as u64);
-        })?;
+        };
+        let report = match &self.groundtruth {
+            Some(path) => {
+                let truth = tumble::io::trajectory::read_trajectory(path)?;
+                tumble::allan::in_motion::run_allan_in_motion(&rec, &truth, self.gravity, &opts, &progress)?.0
+            }
+            None => tumble::allan::run_allan_with_progress(&rec, &opts, &progress)?,
+        };
         bar.finish_and_clear();
         let elapsed = t.elapsed().as_secs_f64();
         print!("{}", report.summary_table());

@@ -135,6 +135,46 @@ impl ImuNoise {
             }),
         }
     }
+    /// The noise of several recordings of one sensor taken together: each
+    /// figure (per axis where every one has axes) the root mean square over
+    /// `all` — the density whose variance is their mean, as pooling their
+    /// Allan variances over equal spans gives. None when `all` is empty.
+    ///
+    /// ```
+    /// use tumble::model::noise::ImuNoise;
+    /// let a = ImuNoise { accelerometer_noise_density: 1.0, accelerometer_random_walk: 1.0,
+    ///     gyroscope_noise_density: 3.0, gyroscope_random_walk: 1.0, axes: None };
+    /// let b = ImuNoise { gyroscope_noise_density: 4.0, ..a };
+    /// let p = ImuNoise::pooled(&[a, b]).unwrap();
+    /// assert!((p.gyroscope_noise_density - 12.5f64.sqrt()).abs() < 1e-12);
+    /// assert_eq!(p.accelerometer_noise_density, 1.0);
+    /// ```
+    pub fn pooled(all: &[ImuNoise]) -> Option<ImuNoise> {
+        let rms =
+            |f: &dyn Fn(&ImuNoise) -> f64| (all.iter().map(|n| f(n).powi(2)).sum::<f64>() / all.len() as f64).sqrt();
+        let rms3 = |f: &dyn Fn(&ImuNoiseAxes) -> [f64; 3]| {
+            let axes: Vec<ImuNoiseAxes> = all.iter().map(|n| n.axes).collect::<Option<_>>()?;
+            Some([0, 1, 2].map(|i| (axes.iter().map(|a| f(a)[i].powi(2)).sum::<f64>() / axes.len() as f64).sqrt()))
+        };
+        if all.is_empty() {
+            return None;
+        }
+        let axes = (|| {
+            Some(ImuNoiseAxes {
+                accelerometer_noise_density: rms3(&|a| a.accelerometer_noise_density)?,
+                accelerometer_random_walk: rms3(&|a| a.accelerometer_random_walk)?,
+                gyroscope_noise_density: rms3(&|a| a.gyroscope_noise_density)?,
+                gyroscope_random_walk: rms3(&|a| a.gyroscope_random_walk)?,
+            })
+        })();
+        Some(ImuNoise {
+            accelerometer_noise_density: rms(&|n| n.accelerometer_noise_density),
+            accelerometer_random_walk: rms(&|n| n.accelerometer_random_walk),
+            gyroscope_noise_density: rms(&|n| n.gyroscope_noise_density),
+            gyroscope_random_walk: rms(&|n| n.gyroscope_random_walk),
+            axes,
+        })
+    }
     /// Apply to preintegration settings.
     pub fn apply(&self, p: &mut PreintegrationParams) {
         p.accel_noise_density = self.accelerometer_noise_density;

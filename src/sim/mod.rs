@@ -24,7 +24,7 @@ pub use corridor::{Corridor, CorridorWalk};
 pub use imu::{noise_series, simulate_imu, AxisNoise, SimulatedImu};
 pub use model::{Effects, ImuModel, TemperatureTrace, TriadModel};
 pub use motion::{Kinematics, Loop, Motion, Static, Tumble, TumbleSettings};
-pub use writer::{simulate_and_write, write_asl};
+pub use writer::{groundtruth, simulate_and_write, write_asl};
 
 use crate::error::InputError;
 use nalgebra::Vector3;
