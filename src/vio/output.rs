@@ -128,7 +128,7 @@ fn percentile(v: &mut [f64], p: f64) -> f64 {
 /// platform that shakes its IMU beyond the figures given the biases also
 /// wander more, over seconds, than the random walk given allows (on EuRoC's
 /// flights the gyro's slow error is 5–18× what the datasheet's walk allows
-/// over 2–10 s, `examples/imu_in_flight.rs`), and the bias σ then come out
+/// over 2–10 s, [`crate::allan::in_motion`]), and the bias σ then come out
 /// too small; the biases are written all the same, with this warning. None
 /// when the noise in use is the noise given.
 pub fn slow_error_warning(noise: &super::noise_meter::NoiseReport) -> Option<String> {
@@ -137,8 +137,9 @@ pub fn slow_error_warning(noise: &super::noise_meter::NoiseReport) -> Option<Str
         format!(
             "the IMU's white noise in motion was raised beyond the figures given (gyro ×{:.1}, accelerometer ×{:.1}): \
              a platform that shakes its IMU so also makes its biases wander more than the random walk given allows, and the \
-             bias σ may then be several times too small (EuRoC: 3–10×); give the walks the platform shows \
-             (--noise; docs/vio.md, \"The bias random walk in flight\")",
+             bias σ may then be several times too small (EuRoC: 3–10×); give the noise the platform shows in use \
+             (tumble allan --groundtruth on a recording with a motion capture, then --noise; docs/vio.md, \"Given the \
+             noise its IMU shows in flight\")",
             ratio[0], ratio[1]
         )
     })
