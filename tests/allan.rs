@@ -600,7 +600,8 @@ fn knocks_and_steps_are_found_and_cut_out() {
 /// standard errors there for white noise over this flight, edf 180 and 39;
 /// seeds 7–10 scatter 0.90–1.09 and 0.80–1.31. A leak of the flight's rates
 /// or of gravity would be tens of times the noise), each axis's white noise is identified
-/// within 25 %; a truth on another clock, or one that never moves, is an error saying so.
+/// within 25 %; quaternions flipping sign change nothing; a truth on another
+/// clock, or one that never moves, is an error saying so.
 #[test]
 fn noise_in_motion_against_a_ground_truth() {
     use tumble::allan::in_motion::{error_in_motion, run_allan_in_motion};
@@ -640,6 +641,15 @@ fn noise_in_motion_against_a_ground_truth() {
             assert!((found / n - 1.0).abs() < 0.25, "{} axis {a}: white {found:.3e} against {n:.3e}", sensor.name);
         }
     }
+    // Quaternions that flip sign from sample to sample are the same rotations.
+    let (error, _) = error_in_motion(&imu, &truth, cfg.gravity).unwrap();
+    let mut flipped = truth.clone();
+    flipped.q.iter_mut().skip(1).step_by(2).for_each(|q| *q = q.map(|x| -x));
+    let (again, _) = error_in_motion(&imu, &flipped, cfg.gravity).unwrap();
+    let worst = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        a.iter().zip(b).flat_map(|(x, y)| (0..3).map(move |k| (x[k] - y[k]).abs())).fold(0.0, f64::max)
+    };
+    assert!(worst(&error.gyro, &again.gyro) < 1e-9 && worst(&error.accel, &again.accel) < 1e-9);
     // The truth on a clock 1000 s off shares no motion with the IMU.
     let mut late = truth.clone();
     late.t_ns.iter_mut().for_each(|t| *t += 1_000_000_000_000);

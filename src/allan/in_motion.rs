@@ -4,7 +4,7 @@
 //!
 //! [`error_in_motion`] takes an IMU recording and a ground truth of the
 //! body (IMU) frame's pose, and returns a recording of what the IMU reads
-//! beyond the truth's motion: `gyro − ω_truth` and `accel − Rᵀ(a_truth − g)`,
+//! beyond the truth's motion: `gyro − ω_truth` and `accel − Rᵀ(a_truth + g ẑ)`,
 //! less the truth's biases when it carries them (EuRoC's ground truth does),
 //! over the span in which the platform moves. Its Allan analysis
 //! ([`super::run_allan`], disturbances kept: in motion everything would be
@@ -67,7 +67,7 @@ pub struct MotionSpan {
 /// ```
 /// use tumble::allan::in_motion::error_in_motion;
 /// use tumble::io::{trajectory::Trajectory, ImuRecording};
-/// // A body circling at 1 rad/s on a 1 m radius (0.5 m/s, yaw turning with it),
+/// // A body circling at 0.5 rad/s on a 1 m radius (0.5 m/s, yaw turning with it),
 /// // and an ideal IMU on it.
 /// let (n, dt, w) = (6000, 0.005, 0.5);
 /// let pose = |t: f64| ([(w * t).cos(), (w * t).sin(), 0.0], w * t);
@@ -150,10 +150,12 @@ pub fn error_in_motion(
     let (rate, force): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = (0..n - 1)
         .map(|i| {
             let dt = t[i + 1] - t[i];
-            let (qa, qb) = (q(i), q(i + 1));
-            let rate = (qa.inverse() * qb).scaled_axis() / dt;
+            // The relative rotation's own axis and angle: a truth whose
+            // quaternions flip sign between samples turns no more for it.
+            let turn = (q(i).inverse() * q(i + 1)).scaled_axis();
+            let half = q(i) * UnitQuaternion::from_scaled_axis(0.5 * turn);
             let accel = (v[i + 1] - v[i]) / dt;
-            (rate, qa.slerp(&qb, 0.5).inverse() * (accel + g))
+            (turn / dt, half.inverse() * (accel + g))
         })
         .unzip();
     let mut out = imu.slice_time(from, to);
@@ -209,6 +211,7 @@ pub fn run_allan_in_motion(
     let (error, span) = error_in_motion(imu, truth, gravity).map_err(super::AllanError)?;
     let opts = super::AllanRunOptions { cut_disturbances: false, ..opts.clone() };
     let mut report = super::run_allan_with_progress(&error, &opts, progress)?;
+    report.source = format!("{}, in motion against its ground truth", report.source);
     report.warnings.insert(
         0,
         format!(
