@@ -116,6 +116,8 @@ pub struct Estimator<'a> {
     residuals: ResidualTally,
     /// The IMU noise in motion ([`super::NoiseOptions::measure_in_motion`]), from initialization on.
     noise: Option<NoiseMeter>,
+    /// The IMU noise given to the run, before any start raised or scaled it.
+    noise_given: tumble_factors::imu_preint::PreintegrationParams,
     /// The camera's online calibration after each keyframe solve.
     camera_track: Vec<(f64, CameraEstimate)>,
     /// Keyframes for which the camera's calibration stays held after an implausible estimate.
@@ -165,6 +167,7 @@ impl<'a> Estimator<'a> {
             blind_spans: Vec::new(),
             residuals: ResidualTally::default(),
             noise: None,
+            noise_given: opts.noise.imu,
             camera_track: Vec::new(),
             camera_held: 0,
             withdrawals: Vec::new(),
@@ -202,7 +205,11 @@ impl<'a> Estimator<'a> {
 
     /// The landmarks in the window now, by track id, in the world frame \[m\].
     pub fn landmarks(&self) -> Vec<(u64, [f64; 3])> {
-        self.landmarks.world_points(self.input, &self.window.values).into_iter().map(|(id, p)| (id, vec3(&p))).collect()
+        self.landmarks
+            .world_points(self.input, &self.window.values, self.opts.noise.gravity)
+            .into_iter()
+            .map(|(id, p)| (id, vec3(&p)))
+            .collect()
     }
 
     fn warn(&mut self, msg: String) {
@@ -260,12 +267,21 @@ impl<'a> Estimator<'a> {
         let t = frame.t;
         let t_start = Instant::now();
         if self.window.states.is_empty() {
+            // Every start begins from the figures given to the run (a new
+            // start after a withdrawn one carries the scales its meter had
+            // in use, not figures scaled again).
+            self.opts.noise.imu = self.noise_given;
             let init = self.startup.initialize(self.input, &mut self.opts, &mut self.warnings, index, t)?;
             let x = init.x;
             self.init_time = Some(t);
             self.starts.push(t);
             if self.opts.noise.measure_in_motion {
-                self.noise = Some(NoiseMeter::new(self.opts.noise.imu));
+                let meter = match &self.noise {
+                    Some(previous) => NoiseMeter::continuing(self.opts.noise.imu, previous),
+                    None => NoiseMeter::new(self.opts.noise.imu),
+                };
+                self.opts.noise.imu = meter.params();
+                self.noise = Some(meter);
             }
             self.start(t, init);
             let obs = self.frame_obs(index);

@@ -5,7 +5,7 @@
 //! A landmark is an inverse depth `L(lid)` along its anchor observation's ray.
 
 use super::geometry::{parts, triangulate};
-use super::online_calib::{body_from_camera, exposure_motion, EXTRINSIC, TIME_OFFSET};
+use super::online_calib::{body_at_exposure, body_from_camera, exposure_motion, EXTRINSIC, TIME_OFFSET};
 use super::{VioInput, VioOptions};
 use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
@@ -131,11 +131,13 @@ fn rays(tr: &Track, poses: &CameraPoses, poses1: &CameraPoses, stereo_camera: Op
 }
 
 /// A track's landmark in the world frame \[m\]: its anchor observation's ray
-/// at the estimated inverse depth, seen from the anchor state's camera.
-fn landmark_world(values: &Values, body_from_camera: &Isometry3F64, tr: &Track) -> Option<Vector3<f64>> {
+/// at the estimated inverse depth, seen from the anchor state's camera at
+/// its exposure (moved by the time offset in `values`, as the factors see it;
+/// `gravity` \[m/s²\]).
+fn landmark_world(values: &Values, body_from_camera: &Isometry3F64, tr: &Track, gravity: f64) -> Option<Vector3<f64>> {
     let (lid, anchor) = tr.landmark?;
     let a = tr.obs.iter().find(|o| o.sid == anchor)?;
-    let (ra, pa) = parts(values.get::<Isometry3F64>(X(anchor)).ok()?);
+    let (ra, pa) = body_at_exposure(values, anchor, &a.motion, gravity)?;
     let rho = values.get::<Vector1<f64>>(L(lid)).ok()?[0];
     let (r_bc, t_bc) = parts(body_from_camera);
     let pw = ra * (r_bc * (Vector3::new(a.xy[0], a.xy[1], 1.0) / rho) + t_bc) + pa;
@@ -236,12 +238,12 @@ impl Landmarks {
     }
 
     /// The landmarks in the world frame \[m\], by track id (`input`'s camera,
-    /// or its online estimate in `values`).
-    pub fn world_points(&self, input: &VioInput, values: &Values) -> Vec<(u64, Vector3<f64>)> {
+    /// or its online estimate in `values`; `gravity` \[m/s²\]).
+    pub fn world_points(&self, input: &VioInput, values: &Values, gravity: f64) -> Vec<(u64, Vector3<f64>)> {
         let body_from_camera = body_from_camera(input, values);
         self.tracks
             .iter()
-            .filter_map(|(id, tr)| landmark_world(values, &body_from_camera, tr).map(|p| (*id, p)))
+            .filter_map(|(id, tr)| landmark_world(values, &body_from_camera, tr, gravity).map(|p| (*id, p)))
             .collect()
     }
 
@@ -284,7 +286,6 @@ impl Landmarks {
         };
         let body_from_camera = body_from_camera(input, values);
         let (r_bc, t_bc) = parts(&body_from_camera);
-        let (rj, pj) = parts(values.get::<Isometry3F64>(X(sid)).expect("newest state"));
         // The motion around the stamp moves the pose to the exposure, for the time offset alone.
         let motion = match values.get::<nalgebra::Vector6<f64>>(B(sid)) {
             Ok(b) if opts.camera.online() && input.imu.t.len() >= 2 => {
@@ -292,13 +293,15 @@ impl Landmarks {
             }
             _ => ExposureMotion::default(),
         };
+        let gravity = opts.noise.gravity;
+        let (rj, pj) = body_at_exposure(values, sid, &motion, gravity).expect("newest state");
         let mut added = Added::default();
         for (id, uv) in &input.frames[index].features {
             let Some(&xy) = obs.get(id) else { continue };
             let tr = self.tracks.entry(*id).or_default();
             if tr.landmark.is_some() {
                 added.landmarks_seen += 1;
-                let Some(pw) = landmark_world(values, &body_from_camera, tr) else {
+                let Some(pw) = landmark_world(values, &body_from_camera, tr, gravity) else {
                     continue;
                 };
                 let pc = r_bc.transpose() * (rj.transpose() * (pw - pj) - t_bc);
@@ -334,11 +337,17 @@ impl Landmarks {
         let (r_bc, t_bc) = parts(&body_from_camera(input, values));
         let min_angle = opts.gates.min_triangulation_deg.to_radians();
         let stereo = input.stereo.as_ref().map(|st| (st, parts(&st.body_from_camera)));
-        // Per state: the first camera's pose in the world, and the second's.
+        // Per state: the first camera's pose in the world at the frame's
+        // exposure (as the factors see it), and the second's.
+        let mut motion: HashMap<u64, ExposureMotion> = HashMap::new();
+        for o in self.tracks.values().flat_map(|t| &t.obs) {
+            motion.entry(o.sid).or_insert(o.motion);
+        }
         let mut poses: CameraPoses = HashMap::new();
         let mut poses1: CameraPoses = HashMap::new();
         for &sid in states {
-            let (r, p) = parts(values.get::<Isometry3F64>(X(sid)).expect("window state"));
+            let m = motion.get(&sid).copied().unwrap_or_default();
+            let (r, p) = body_at_exposure(values, sid, &m, opts.noise.gravity).expect("window state");
             poses.insert(sid, (r * r_bc, r * t_bc + p));
             if let Some((_, (r_bc1, t_bc1))) = &stereo {
                 poses1.insert(sid, (r * r_bc1, r * t_bc1 + p));
@@ -555,7 +564,7 @@ mod tests {
         let (inp, mut values, mut lm) = five_views(0.0);
         lm.triangulate(&inp, &[0, 1, 2, 3, 4], &mut values, &VioOptions::default());
         assert_eq!(lm.count(), 1);
-        let points = lm.world_points(&inp, &values);
+        let points = lm.world_points(&inp, &values, 9.81);
         assert!((points[0].1 - Vector3::new(0.3, -0.2, 5.0)).norm() < 1e-9, "{:?}", points);
         assert_eq!(lm.anchored_in(0), vec![(7, 0)]);
     }
@@ -567,7 +576,7 @@ mod tests {
         assert_eq!(lm.count(), 1);
         let tr = &lm.tracks()[&7];
         assert_eq!(tr.obs.iter().map(|o| o.sid).collect::<Vec<_>>(), vec![0, 1, 3, 4], "the outlier in state 2 left");
-        let p = lm.world_points(&inp, &values)[0].1;
+        let p = lm.world_points(&inp, &values, 9.81)[0].1;
         assert!((p - Vector3::new(0.3, -0.2, 5.0)).norm() < 1e-9);
     }
 

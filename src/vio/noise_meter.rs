@@ -79,6 +79,24 @@ impl NoiseMeter {
         NoiseMeter { given, links: VecDeque::new(), in_use: [1.0, 1.0], largest: [0.0, 0.0], measured: None }
     }
 
+    /// A meter over the given figures `given` for a new start after
+    /// `previous` (a withdrawn start's meter): it begins with the scales the
+    /// previous one had in use and keeps what it measured, without its links
+    /// (integrated from the estimate that was withdrawn).
+    ///
+    /// The given figures stay the run's: a meter built on the previous one's
+    /// figures in use would scale them again at every new start (a simulated
+    /// walk started again 30 times ended with its given gyro noise 20× the
+    /// model's).
+    pub fn continuing(given: PreintegrationParams, previous: &NoiseMeter) -> Self {
+        NoiseMeter {
+            in_use: previous.in_use,
+            largest: previous.largest,
+            measured: previous.measured,
+            ..Self::new(given)
+        }
+    }
+
     /// The given figures.
     pub fn given(&self) -> &PreintegrationParams {
         &self.given

@@ -21,7 +21,7 @@ use nalgebra::{DMatrix, Matrix3, Vector1, Vector3, Vector6};
 use tumble_factors::reprojection::ExposureMotion;
 use tumble_factors::PriorFactor;
 use tumble_solvers::sophus_lie::Isometry3F64;
-use tumble_solvers::{Covariances, Graph, Key, NoiseModel, SolveError, Values};
+use tumble_solvers::{Covariances, Graph, Key, NoiseModel, SolveError, Values, V, X};
 
 /// Key of the first camera's pose in the IMU frame `T_BC` (SE(3)).
 pub(crate) const EXTRINSIC: Key = Key::new('c', 0);
@@ -436,8 +436,33 @@ pub(crate) fn body_from_camera(input: &VioInput, values: &Values) -> Isometry3F6
 }
 
 /// The time offset in `values` \[s\] (0 without online calibration).
-fn time_offset(values: &Values) -> f64 {
+pub(crate) fn time_offset(values: &Values) -> f64 {
     values.get::<Vector1<f64>>(TIME_OFFSET).map_or(0.0, |v| v[0])
+}
+
+/// The body's rotation (world ← body) and position \[m\] at the exposure of
+/// the frame of state `sid` in `values`, whose motion around its stamp is
+/// `motion`: its pose moved by the time offset in `values` as
+/// [`tumble_factors::reprojection::CalibratingReprojection`] moves it,
+/// `R Exp(ω₀ td + ω₁ td²/2 + ω₂ td³/3)` and `p + v td + (R f + g) td²/2`
+/// (`gravity` \[m/s²\], world z up). Without a time offset, the stamp's
+/// pose. None when the state is not in `values`.
+pub(crate) fn body_at_exposure(
+    values: &Values,
+    sid: u64,
+    motion: &ExposureMotion,
+    gravity: f64,
+) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    let (r, p) = parts(values.get::<Isometry3F64>(X(sid)).ok()?);
+    let td = time_offset(values);
+    if td == 0.0 {
+        return Some((r, p));
+    }
+    let v = *values.get::<Vector3<f64>>(V(sid)).ok()?;
+    let [w0, w1, w2] = motion.rate.map(Vector3::from);
+    let phi = w0 * td + w1 * (0.5 * td * td) + w2 * (td * td * td / 3.0);
+    let accel = r * Vector3::from(motion.specific_force) - Vector3::new(0.0, 0.0, gravity);
+    Some((r * tumble_solvers::lie::so3_exp(&phi), p + v * td + accel * (0.5 * td * td)))
 }
 
 /// The body's motion around the stamp `t` \[s\] from the IMU, for the time
