@@ -250,6 +250,15 @@ pub struct ExposureMotion {
     pub specific_force: [f64; 3],
 }
 
+impl ExposureMotion {
+    /// The rotation vector `φ(td) = ω₀ td + ω₁ td²/2 + ω₂ td³/3` \[rad, body
+    /// frame\] by which the body turns from the stamp to `td` \[s\] after it.
+    pub fn rotation_vector(&self, td: f64) -> Vector3<f64> {
+        let [w0, w1, w2] = self.rate.map(Vector3::from);
+        w0 * td + w1 * (0.5 * td * td) + w2 * (td * td * td / 3.0)
+    }
+}
+
 /// [`InverseDepthReprojection`] with the camera's extrinsic `T_BC` and time
 /// offset `td` as unknowns, for their online calibration in a sliding window
 /// (VINS-Mono's `estimate_extrinsic` / `estimate_td`): a factor on
@@ -359,11 +368,7 @@ impl CalibratingReprojection {
     fn exposure(&self, k: usize, td: f64) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
         let m = &self.motion[k];
         let [w0, w1, w2] = m.rate.map(Vector3::from);
-        (
-            w0 * td + w1 * (0.5 * td * td) + w2 * (td * td * td / 3.0),
-            w0 + w1 * td + w2 * (td * td),
-            m.specific_force.into(),
-        )
+        (m.rotation_vector(td), w0 + w1 * td + w2 * (td * td), m.specific_force.into())
     }
 
     /// Residual \[px\] and, with `jac`, its seven Jacobian blocks

@@ -436,7 +436,7 @@ pub(crate) fn body_from_camera(input: &VioInput, values: &Values) -> Isometry3F6
 }
 
 /// The time offset in `values` \[s\] (0 without online calibration).
-pub(crate) fn time_offset(values: &Values) -> f64 {
+fn time_offset(values: &Values) -> f64 {
     values.get::<Vector1<f64>>(TIME_OFFSET).map_or(0.0, |v| v[0])
 }
 
@@ -459,10 +459,8 @@ pub(crate) fn body_at_exposure(
         return Some((r, p));
     }
     let v = *values.get::<Vector3<f64>>(V(sid)).ok()?;
-    let [w0, w1, w2] = motion.rate.map(Vector3::from);
-    let phi = w0 * td + w1 * (0.5 * td * td) + w2 * (td * td * td / 3.0);
     let accel = r * Vector3::from(motion.specific_force) - Vector3::new(0.0, 0.0, gravity);
-    Some((r * tumble_solvers::lie::so3_exp(&phi), p + v * td + accel * (0.5 * td * td)))
+    Some((r * tumble_solvers::lie::so3_exp(&motion.rotation_vector(td)), p + v * td + accel * (0.5 * td * td)))
 }
 
 /// The body's motion around the stamp `t` \[s\] from the IMU, for the time
