@@ -600,8 +600,8 @@ fn knocks_and_steps_are_found_and_cut_out() {
 /// standard errors there for white noise over this flight, edf 180 and 39;
 /// seeds 7–10 scatter 0.90–1.09 and 0.80–1.31. A leak of the flight's rates
 /// or of gravity would be tens of times the noise), each axis's white noise is identified
-/// within 25 %; quaternions flipping sign change nothing; a truth on another
-/// clock, or one that never moves, is an error saying so.
+/// within 25 %; quaternions flipping sign change nothing; a gravity off the
+/// Earth's, a truth on another clock, or one that never moves, is an error saying so.
 #[test]
 fn noise_in_motion_against_a_ground_truth() {
     use tumble::allan::in_motion::{error_in_motion, run_allan_in_motion};
@@ -655,6 +655,10 @@ fn noise_in_motion_against_a_ground_truth() {
     late.t_ns.iter_mut().for_each(|t| *t += 1_000_000_000_000);
     let e = error_in_motion(&imu, &late, cfg.gravity).unwrap_err();
     assert!(e.contains("another clock"), "{e}");
+    // A gravity off the Earth's (a typo) is refused by the options' own check.
+    let opts = tumble::allan::AllanRunOptions::default();
+    let e = run_allan_in_motion(&imu, &truth, 98.1, &opts, &|_, _| {}).unwrap_err().to_string();
+    assert!(e.starts_with("--gravity must be the local gravity on Earth"), "{e}");
     // A truth that stands still has no motion to analyse.
     let mut still = truth.clone();
     still.p.iter_mut().for_each(|p| *p = [0.0; 3]);

@@ -205,9 +205,8 @@ pub fn run_allan_in_motion(
     opts: &super::AllanRunOptions,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(super::AllanReport, MotionSpan), super::AllanError> {
-    if !(gravity.is_finite() && gravity > 0.0) {
-        return Err(super::AllanError(format!("gravity must be a positive number of m/s², found {gravity}")));
-    }
+    crate::error::OptionError::earth_gravity(gravity, "the accelerometer's error is taken against it")
+        .map_err(|e| super::AllanError(e.to_string()))?;
     let (error, span) = error_in_motion(imu, truth, gravity).map_err(super::AllanError)?;
     let opts = super::AllanRunOptions { cut_disturbances: false, ..opts.clone() };
     let mut report = super::run_allan_with_progress(&error, &opts, progress)?;

@@ -71,15 +71,7 @@ impl CalibOptions {
     /// gravity, periods and windows positive, multipliers positive, at least
     /// one interval asked for.
     pub fn validate(&self) -> Result<(), OptionError> {
-        if !EARTH_GRAVITY_M_S2.contains(&self.gravity) {
-            return Err(OptionError::new(
-                "--gravity",
-                format!(
-                    "must be the local gravity on Earth in m/s² ({}–{}), got {}: every scale is calibrated against it",
-                    EARTH_GRAVITY_M_S2.start, EARTH_GRAVITY_M_S2.end, self.gravity
-                ),
-            ));
-        }
+        OptionError::earth_gravity(self.gravity, "every scale is calibrated against it")?;
         if let Some(t) = self.init_static_s {
             OptionError::positive("--init-static", t, "seconds")?;
         }

@@ -340,17 +340,10 @@ impl VioOptions {
             return Err(OptionError::new("--pixel-sigma", format!("must be positive, got {}", n.pixel_sigma)));
         }
         OptionError::positive("--gravity", n.gravity, "m/s²")?;
-        let earth = crate::model::EARTH_GRAVITY_M_S2;
-        if !earth.contains(&n.gravity) {
-            return Err(OptionError::new(
-                "--gravity",
-                format!(
-                    "must be the local gravity on Earth in m/s² ({}–{}), got {}: the estimator levels the trajectory \
-                     and the accelerometer biases against it",
-                    earth.start, earth.end, n.gravity
-                ),
-            ));
-        }
+        OptionError::earth_gravity(
+            n.gravity,
+            "the estimator levels the trajectory and the accelerometer biases against it",
+        )?;
         OptionError::positive("noise.max_imu_gap_s", n.max_imu_gap_s, "seconds")?;
         for (v, name) in [
             (n.imu.accel_noise_density, "noise.imu.accel_noise_density"),
