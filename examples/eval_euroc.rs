@@ -120,7 +120,7 @@ fn main() {
         .unwrap_or_default();
     seqs.sort();
     let flight: Vec<(PathBuf, ImuNoise)> = if has("--noise-in-flight") {
-        match seqs.iter().map(|s| noise_in_flight(s).map(|n| (s.clone(), n))).collect() {
+        match seqs.iter().map(|s| noise_in_flight(s, opts.noise.gravity).map(|n| (s.clone(), n))).collect() {
             Ok(f) => f,
             Err(e) => {
                 eprintln!("--noise-in-flight: {e}");
@@ -197,40 +197,29 @@ fn main() {
 }
 
 /// The noise the IMU of the ASL sequence `dir` shows in flight against its
-/// ground truth: the Allan analysis of its error in motion, each axis's own
-/// figures (`tumble allan --groundtruth`).
-fn noise_in_flight(dir: &Path) -> Result<ImuNoise, String> {
+/// ground truth (`gravity` \[m/s²\]): the Allan analysis of its error in
+/// motion, each axis's own figures (`tumble allan --groundtruth`).
+fn noise_in_flight(dir: &Path, gravity: f64) -> Result<ImuNoise, String> {
     let ds = tumble::io::asl::read_asl(dir, &Default::default()).map_err(|e| e.to_string())?;
     let truth = ds.groundtruth.as_ref().ok_or_else(|| format!("{}: no ground truth", dir.display()))?;
     let (report, span) =
-        tumble::allan::in_motion::run_allan_in_motion(&ds.imu, truth, GRAVITY, &Default::default(), &|_, _| {})
+        tumble::allan::in_motion::run_allan_in_motion(&ds.imu, truth, gravity, &Default::default(), &|_, _| {})
             .map_err(|e| e.to_string())?;
     let noise = report.kalibr.as_ref().map(|k| k.imu_noise()).ok_or("no noise identified")?;
-    let axes = noise.axes.ok_or("no per-axis noise")?;
+    let a = noise.axes.ok_or("no per-axis noise")?;
+    let xyz = |v: [f64; 3]| format!("{:.1e} {:.1e} {:.1e}", v[0], v[1], v[2]);
     eprintln!(
-        "  {} in flight ({:.0}–{:.0} s): gyro white {:.1e} {:.1e} {:.1e}, walk {:.1e} {:.1e} {:.1e}; \
-         accel white {:.1e} {:.1e} {:.1e}, walk {:.1e} {:.1e} {:.1e}",
+        "  {} in flight ({:.0}–{:.0} s): gyro white {}, walk {}; accel white {}, walk {}",
         dir.file_name().unwrap_or_default().to_string_lossy(),
         span.from_s,
         span.to_s,
-        axes.gyroscope_noise_density[0],
-        axes.gyroscope_noise_density[1],
-        axes.gyroscope_noise_density[2],
-        axes.gyroscope_random_walk[0],
-        axes.gyroscope_random_walk[1],
-        axes.gyroscope_random_walk[2],
-        axes.accelerometer_noise_density[0],
-        axes.accelerometer_noise_density[1],
-        axes.accelerometer_noise_density[2],
-        axes.accelerometer_random_walk[0],
-        axes.accelerometer_random_walk[1],
-        axes.accelerometer_random_walk[2],
+        xyz(a.gyroscope_noise_density),
+        xyz(a.gyroscope_random_walk),
+        xyz(a.accelerometer_noise_density),
+        xyz(a.accelerometer_random_walk),
     );
     Ok(noise)
 }
-
-/// EuRoC's gravity as the estimator assumes it \[m/s²\].
-const GRAVITY: f64 = 9.81;
 
 /// `G` or `G,A`: the factors on the gyro's and the accelerometer's bias
 /// random walks (one factor for both when A is left out); positive and finite.

@@ -905,6 +905,16 @@ fn a_start_in_motion_the_prediction_gate_refutes_is_made_again() {
     assert!(s.ate_rmse_m.unwrap() < 0.1, "ATE {:?}", s.ate_rmse_m);
 }
 
+/// A shock the IMU misreads: the gyro reads 2 rad/s too much about x over
+/// the second after `from` \[s\].
+fn gyro_shock(input: &mut VioInput, from: f64) {
+    for (t, g) in input.imu.t.iter().zip(input.imu.gyro.iter_mut()) {
+        if *t > from && *t < from + 1.0 {
+            g.x += 2.0;
+        }
+    }
+}
+
 /// Every start measures the noise over the figures given to the run. A new
 /// start after a withdrawn one took the last one's figures in use as its
 /// given ones, so each start scaled them again (a run restarted 30 times
@@ -920,11 +930,7 @@ fn every_start_measures_the_noise_over_the_figures_given() {
         triad.noise_density = triad.noise_density.map(|n| 4.0 * n);
     }
     let mut input = VioInput::from_simulation(&simulate(Scenario::Walk, &cfg, 3).unwrap()).unwrap();
-    for (t, g) in input.imu.t.iter().zip(input.imu.gyro.iter_mut()) {
-        if *t > 30.0 && *t < 31.0 {
-            g.x += 2.0;
-        }
-    }
+    gyro_shock(&mut input, 30.0);
     let out = run(&input, &opts, None).unwrap();
     let noise = out.noise.expect("the noise was measured in motion");
     println!("{} resets; {}", out.resets, noise.line());
@@ -943,11 +949,7 @@ fn every_start_measures_the_noise_over_the_figures_given() {
 #[test]
 fn a_shock_the_features_contradict_is_withdrawn_and_the_pieces_named() {
     let (mut input, opts) = walk(40.0, 3);
-    for (t, g) in input.imu.t.iter().zip(input.imu.gyro.iter_mut()) {
-        if *t > 20.0 && *t < 21.0 {
-            g.x += 2.0;
-        }
-    }
+    gyro_shock(&mut input, 20.0);
     let out = run(&input, &opts, None).unwrap();
     println!("{:#?}", out.warnings);
     assert!(out.warnings.iter().any(|w| w.starts_with("the estimate is contradicted by the features")));

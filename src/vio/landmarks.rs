@@ -340,8 +340,10 @@ impl Landmarks {
         // Per state: the first camera's pose in the world at the frame's
         // exposure (as the factors see it), and the second's.
         let mut motion: HashMap<u64, ExposureMotion> = HashMap::new();
-        for o in self.tracks.values().flat_map(|t| &t.obs) {
-            motion.entry(o.sid).or_insert(o.motion);
+        if opts.camera.online() {
+            for o in self.tracks.values().flat_map(|t| &t.obs) {
+                motion.entry(o.sid).or_insert(o.motion);
+            }
         }
         let mut poses: CameraPoses = HashMap::new();
         let mut poses1: CameraPoses = HashMap::new();
