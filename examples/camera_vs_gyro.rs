@@ -28,10 +28,10 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use std::path::PathBuf;
-use tumble::aid::{TARGET_TRUTH_MAX_RMS_PX, TARGET_TRUTH_MIN_CORNERS};
 use tumble::rig::init::refine_view_pose;
-use tumble::rig::input::View;
+use tumble::rig::View;
 use tumble::rig::{calibrate_rig, RigInput, RigOptions};
+use tumble::vio::{TARGET_TRUTH_MAX_RMS_PX, TARGET_TRUTH_MIN_CORNERS};
 use tumble_factors::camera::CameraModel;
 
 /// Largest RMS reprojection of a frame's PnP pose \[px\]: twice the PnP
@@ -115,7 +115,7 @@ fn fit(
         if rms > MAX_RMS_PX {
             continue;
         }
-        let (r, _) = tumble::vio::geometry::parts(&t_ct);
+        let (r, _) = tumble::model::geometry::parts(&t_ct);
         let r_ct = UnitQuaternion::from_matrix(&r);
         posed.push(((v.t_ns - input.imu_t0_ns) as f64 * 1e-9, r_ct.inverse() * r_bc.inverse()));
     }

@@ -40,8 +40,8 @@
 
 use std::path::{Path, PathBuf};
 use tumble::eval::{Alignment, EvalOptions};
-use tumble::inputs::{open_vio, VioSource};
 use tumble::io::ImuNoise;
+use tumble::vio::VioSource;
 use tumble::vio::{piece_starts_s, run, summarize, trajectory, Summary, VioInput, VioOptions};
 
 fn main() {
@@ -319,7 +319,7 @@ fn evaluate(
     let mut opts = opts.clone();
     let mut correct = None;
     let mut input = match case {
-        Case::Source(path, source) => open_vio(path, source, &mut |_, _| {}).map_err(|e| e.to_string())?.input,
+        Case::Source(path, source) => VioInput::open(path, source, &mut |_, _| {}).map_err(|e| e.to_string())?.input,
         Case::Target(dir, perturbed) => {
             let cameras = data.join("V1_01_easy_micro");
             let (input, truth) =

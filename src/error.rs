@@ -73,20 +73,6 @@ impl OptionError {
             Err(OptionError::new(option, format!("must be a positive number of {unit}, got {value}")))
         }
     }
-
-    /// Ok when `gravity` \[m/s²\] is a local gravity on Earth
-    /// ([`crate::model::EARTH_GRAVITY_M_S2`]); else an error on `--gravity`
-    /// that ends with `why` it matters.
-    pub fn earth_gravity(gravity: f64, why: &str) -> Result<(), OptionError> {
-        let earth = crate::model::EARTH_GRAVITY_M_S2;
-        if earth.contains(&gravity) {
-            return Ok(());
-        }
-        Err(OptionError::new(
-            "--gravity",
-            format!("must be the local gravity on Earth in m/s² ({}–{}), got {gravity}: {why}", earth.start, earth.end),
-        ))
-    }
 }
 
 /// Why an output (a report, a figure, a data file) could not be written.

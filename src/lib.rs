@@ -7,7 +7,6 @@
 
 #![warn(missing_docs)]
 
-pub mod aid;
 pub mod allan;
 pub mod audit;
 pub mod calib;
@@ -15,7 +14,6 @@ pub mod demo;
 pub mod error;
 pub mod eval;
 pub mod export;
-pub mod inputs;
 pub mod inspect;
 pub mod io;
 pub mod model;

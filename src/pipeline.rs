@@ -26,9 +26,9 @@
 
 use crate::allan::{run_allan_with_progress, AllanError, AllanReport, AllanRunOptions};
 use crate::audit::{audit, Audit, AuditOptions};
-use crate::calib::model::ImuCalibration;
 use crate::calib::{calibrate, CalibOptions, CalibrationResult};
 use crate::io::{ImuNoise, ImuRecording};
+use crate::model::calibration::ImuCalibration;
 use crate::vio::{summarize, write_outputs, NoiseSource, Summary, VioInput, VioOptions, VioResult};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

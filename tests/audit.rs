@@ -418,7 +418,7 @@ fn bad_input_gives_clear_errors() {
     // Unknown effects in a calibration file name the effect.
     let dir = std::env::temp_dir().join(format!("tumble_audit_bad_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let mut file = serde_json::to_value(tumble::calib::model::CalibrationFile::from(&cal)).unwrap();
+    let mut file = serde_json::to_value(tumble::model::calibration::CalibrationFile::from(&cal)).unwrap();
     file["effects"] = serde_json::json!({"reference_temperature_c": 20.0, "reference_time_s": 0.0,
         "effects": [{"id": "gyro_warp_drive", "params": {"x": 1.0}}]});
     let p = dir.join("calibration.json");

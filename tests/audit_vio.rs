@@ -104,7 +104,7 @@ fn calibration_files_carry_time_offsets_and_refuse_bad_ones() {
         TimeOffsets { camera_imu_s: 0.0123, camera_imu_s_std: 1e-4, accel_gyro_s: -0.002, accel_gyro_s_std: 2e-4 };
     let cal = ImuCalibration { time_offsets: Some(offsets), ..ImuCalibration::identity() };
     let path = dir.join("calibration.json");
-    let file = tumble::calib::model::CalibrationFile::from(&cal);
+    let file = tumble::model::calibration::CalibrationFile::from(&cal);
     std::fs::write(&path, serde_json::to_string_pretty(&file).unwrap()).unwrap();
     assert_eq!(ImuCalibration::read(&path).unwrap(), cal);
     let text = std::fs::read_to_string(&path).unwrap().replace("0.0123", "12.3");
@@ -139,7 +139,7 @@ fn apply_resamples_the_accelerometer_by_the_calibrations_offset() {
     run(&["sim", "walk", "--duration", "40", "--out", walk.to_str().unwrap()]);
     let offsets = TimeOffsets { accel_gyro_s: 0.005, ..TimeOffsets::default() };
     let cal = ImuCalibration { time_offsets: Some(offsets), ..ImuCalibration::identity() };
-    let file = tumble::calib::model::CalibrationFile::from(&cal);
+    let file = tumble::model::calibration::CalibrationFile::from(&cal);
     std::fs::write(&cal_path, serde_json::to_string(&file).unwrap()).unwrap();
     run(&[
         "apply",

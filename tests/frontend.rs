@@ -313,10 +313,10 @@ fn an_aprilgrid_is_detected_where_it_projects() {
     println!("{} corners: median {median:.3} px, max {max:.3} px", errors.len());
     assert!(median < 0.1 && max < 0.5, "median {median}, max {max}");
     // Through the files: what is written reads back as it was.
-    let (csv, frames_csv) = tumble::rig::input::corners_csv(&views, &target);
+    let (csv, frames_csv) = tumble::io::target::corners_csv(&views, &target);
     std::fs::write(dir.join("corners.csv"), csv).unwrap();
     std::fs::write(dir.join("frames.csv"), frames_csv).unwrap();
-    let back = tumble::rig::input::read_corners(&dir, &target).unwrap();
+    let back = tumble::io::target::read_corners(&dir, &target).unwrap();
     assert_eq!(back.len(), views.len());
     for (a, b) in back.iter().zip(&views) {
         assert_eq!(a.corners.len(), b.corners.len());
@@ -491,7 +491,7 @@ fn a_rig_is_calibrated_from_its_images() {
     let out = dir.join("out");
     let files = tumble::rig::output::write_rig(&rig, &input, &out).unwrap();
     assert!(files.contains(&out.join("cam0/corners.csv")) && out.join("cam0/frames.csv").is_file());
-    let back = tumble::rig::input::read_corners(&out.join("cam0"), &input.target).unwrap();
+    let back = tumble::io::target::read_corners(&out.join("cam0"), &input.target).unwrap();
     assert_eq!(back.len(), cam.views.len());
     // The command line on the same folder of images: the target detected,
     // the calibration and the detected corners written.

@@ -252,7 +252,7 @@ fn the_written_rig_is_what_vio_uses() {
     let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
     let rig = calibrate_rig(&sim.input, &opts, &mut |_| {}).unwrap();
     tumble::rig::output::write_rig(&rig, &sim.input, &dir.join("rig")).unwrap();
-    let read = tumble::rig::input::RigCalibration::read(&dir.join("rig")).unwrap();
+    let read = tumble::io::target::RigCalibration::read(&dir.join("rig")).unwrap();
     assert!((read.time_offset_s - rig.time_offset_s).abs() < 1e-15);
     let (model, t_bc, _) = &read.cameras[0];
     assert!((model.fx - rig.cameras[0].model.fx).abs() < 1e-9);
@@ -262,11 +262,11 @@ fn the_written_rig_is_what_vio_uses() {
     cfg.camera.max_features = 20;
     let walk = simulate(Scenario::Walk, &cfg, 1).unwrap();
     tumble::sim::writer::write_asl(&walk, &dir.join("walk")).unwrap();
-    let plain = tumble::inputs::open_vio(&dir.join("walk"), &Default::default(), &mut |_, _| {}).unwrap().input;
-    let source = tumble::inputs::VioSource { rig: Some(read.clone()), ..Default::default() };
-    let with = tumble::inputs::open_vio(&dir.join("walk"), &source, &mut |_, _| {}).unwrap().input;
+    let plain = tumble::vio::VioInput::open(&dir.join("walk"), &Default::default(), &mut |_, _| {}).unwrap().input;
+    let source = tumble::vio::VioSource { rig: Some(read.clone()), ..Default::default() };
+    let with = tumble::vio::VioInput::open(&dir.join("walk"), &source, &mut |_, _| {}).unwrap().input;
     assert_eq!(with.camera, *model);
-    let (r, t) = tumble::vio::geometry::parts(&with.body_from_camera);
+    let (r, t) = tumble::model::geometry::parts(&with.body_from_camera);
     assert!((t - t_bc.translation.vector).norm() < 1e-9 && (r - rotation(t_bc)).norm() < 1e-9);
     let shift = with.frames[0].t - plain.frames[0].t;
     assert!((shift - read.time_offset_s).abs() < 1e-9, "frames moved by {shift} s");

@@ -615,8 +615,8 @@ fn imu_april_with_its_corners_as_features_tracks_the_pnp_poses() {
 #[test]
 fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
     let Some(seq) = common::shared("euroc/full_imu/V1_02_medium") else { return };
-    let source = tumble::inputs::VioSource { simulate_camera: Some(1), ..Default::default() };
-    let input = tumble::inputs::open_vio(&seq, &source, &mut |_, _| {}).unwrap().input;
+    let source = tumble::vio::VioSource { simulate_camera: Some(1), ..Default::default() };
+    let input = tumble::vio::VioInput::open(&seq, &source, &mut |_, _| {}).unwrap().input;
     let opts = VioOptions::default();
     let (out, s) = run_without_resets(&input, &opts, 10.0);
     let noise = out.noise.expect("measured");
@@ -645,8 +645,8 @@ fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
 #[test]
 fn a_blackout_in_a_real_flight_is_reported_and_survived() {
     let Some(seq) = common::shared("euroc/full_imu/V1_02_medium") else { return };
-    let source = tumble::inputs::VioSource { simulate_camera: Some(1), ..Default::default() };
-    let mut input = tumble::inputs::open_vio(&seq, &source, &mut |_, _| {}).unwrap().input;
+    let source = tumble::vio::VioSource { simulate_camera: Some(1), ..Default::default() };
+    let mut input = tumble::vio::VioInput::open(&seq, &source, &mut |_, _| {}).unwrap().input;
     for f in input.frames.iter_mut().filter(|f| f.t > 30.0 && f.t < 33.0) {
         f.features.clear();
     }
@@ -850,8 +850,8 @@ fn auto_holds_what_a_turn_about_one_axis_cannot_determine() {
 #[test]
 fn a_start_in_motion_the_features_contradict_is_made_again() {
     let Some(seq) = common::shared("euroc/full_imu/V2_01_easy") else { return };
-    let source = tumble::inputs::VioSource { simulate_camera: Some(1), ..Default::default() };
-    let mut input = tumble::inputs::open_vio(&seq, &source, &mut |_, _| {}).unwrap().input;
+    let source = tumble::vio::VioSource { simulate_camera: Some(1), ..Default::default() };
+    let mut input = tumble::vio::VioInput::open(&seq, &source, &mut |_, _| {}).unwrap().input;
     input.drop_before(40.0);
     let mut opts = VioOptions::default();
     input.apply_noise(None, &mut opts.noise.imu);

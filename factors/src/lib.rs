@@ -24,6 +24,7 @@ pub mod imu_calib;
 pub mod imu_effects;
 pub mod imu_factor;
 pub mod imu_preint;
+mod pixel;
 pub mod pose_graph_3d;
 pub mod prior;
 pub mod reprojection;

@@ -136,37 +136,7 @@ fn pixel_residual(
     Ok(jac.then(|| Matrix2x3::from_row_slice(&[jp[0][0], jp[0][1], jp[0][2], jp[1][0], jp[1][1], jp[1][2]])))
 }
 
-/// [`Factor`] for a two-row pixel residual whose `evaluate(vars, jac, out)`
-/// writes the residual and, with `jac`, the Jacobians into `out`.
-macro_rules! pixel_factor {
-    ($t:ty) => {
-        impl Factor for $t {
-            fn keys(&self) -> &[Key] {
-                &self.keys
-            }
-            fn residual_dim(&self) -> usize {
-                2
-            }
-            fn residual(&self, vars: Vars<'_>) -> Result<DVector<f64>, FactorError> {
-                let mut out = Linearization::default();
-                self.evaluate(vars, false, &mut out)?;
-                Ok(out.residual)
-            }
-            fn linearize(&self, vars: Vars<'_>) -> Result<Linearization, FactorError> {
-                let mut out = Linearization::default();
-                self.evaluate(vars, true, &mut out)?;
-                Ok(out)
-            }
-            fn linearize_into(&self, vars: Vars<'_>, out: &mut Linearization) -> Result<(), FactorError> {
-                self.evaluate(vars, true, out)
-            }
-        }
-    };
-}
-
-pub(crate) use pixel_factor;
-
-pixel_factor!(InverseDepthReprojection);
+crate::pixel::pixel_factor!(InverseDepthReprojection);
 
 /// A landmark's anchor observation matched in a second camera at the same
 /// time (stereo): a factor on its inverse depth alone, `[ρ]` (`Vector1`).
@@ -236,7 +206,7 @@ impl StereoInverseDepth {
     }
 }
 
-pixel_factor!(StereoInverseDepth);
+crate::pixel::pixel_factor!(StereoInverseDepth);
 
 /// How a body moves around a frame's stamp, for [`CalibratingReprojection`]:
 /// the bias-corrected rate as a quadratic in the time `τ` from the stamp,
@@ -340,7 +310,7 @@ impl CalibratingReprojection {
         let m = &self.motion[k];
         let (t2, t3) = (td * td, td * td * td);
         let phi = [0, 1, 2].map(|i| td * m.rate[0][i] + t2 * (0.5 * m.rate[1][i]) + t3 * (m.rate[2][i] / 3.0));
-        let rf = crate::rig::rot(&x[..9], m.specific_force.map(T::from));
+        let rf = crate::pixel::rot(&x[..9], m.specific_force.map(T::from));
         let dp = [0, 1, 2].map(|i| v[i] * td + (rf[i] + self.gravity[i]) * (t2 * 0.5));
         (phi, dp)
     }
@@ -401,7 +371,7 @@ impl CalibratingReprojection {
         let pc = r_bc.transpose() * (sj * e - t_bc);
         let cols = [6, 3, 6, 3, 1, 6, 1];
         let Some((jpi, _)) =
-            crate::rig::pixel_linearization(self.kind, &self.intrinsics, &pc, self.measured, (jac, &cols), out)?
+            crate::pixel::pixel_linearization(self.kind, &self.intrinsics, &pc, self.measured, (jac, &cols), out)?
         else {
             return Ok(());
         };
@@ -431,7 +401,7 @@ impl CalibratingReprojection {
     }
 }
 
-pixel_factor!(CalibratingReprojection);
+crate::pixel::pixel_factor!(CalibratingReprojection);
 
 impl tumble_solvers::AutoDiffResidual<26> for CalibratingReprojection {
     fn keys(&self) -> &[Key] {
@@ -441,7 +411,7 @@ impl tumble_solvers::AutoDiffResidual<26> for CalibratingReprojection {
         2
     }
     fn residual<T: tumble_solvers::Real>(&self, p: &[&[T]]) -> Vec<T> {
-        use crate::rig::{pixel_residual, rot, rot_t, small_rotation};
+        use crate::pixel::{pixel_residual, rot, rot_t, small_rotation};
         let (xa, va, xj, vj, rho, tbc, td) = (p[0], p[1], p[2], p[3], p[4][0], p[5], p[6][0]);
         let inv = T::one() / rho;
         // The landmark in the anchor body frame at its exposure.

@@ -7,6 +7,8 @@
 //! each iteration only refills numbers.
 
 use crate::error::SolveError;
+use crate::layout::{Layout, Role, Roles};
+use crate::variable::DynVariable;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::amd;
@@ -19,24 +21,9 @@ use nalgebra::DMatrix;
 use smallvec::SmallVec;
 
 mod assembly;
-pub(crate) use assembly::split_at_ends;
 mod schur;
 use assembly::AssemblyPlan;
 use schur::SchurPlan;
-
-/// Role of a variable in the linear system.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Role {
-    /// Held constant: no column.
-    Const,
-    /// Kept in the reduced system, as block `b`.
-    Kept(usize),
-    /// Eliminated first by the Schur complement, as eliminated block `e`.
-    Elim(usize),
-}
-
-/// The roles of one factor's variables, in key order (inline up to four keys).
-pub(crate) type Roles = SmallVec<[Role; 4]>;
 
 /// Which factorization solves the reduced system.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -268,6 +255,23 @@ pub(crate) struct System {
     pub gl: Vec<f64>,
     /// H_cl of every eliminated block's kept neighbours.
     pub hcl: Vec<f64>,
+}
+
+impl Layout {
+    /// The linear system's structure for this layout (`vars` in the layout's key order).
+    pub(crate) fn structure(
+        &self,
+        vars: &[Box<dyn DynVariable>],
+        solver: LinearSolver,
+    ) -> Result<Structure, SolveError> {
+        let kept_dims = self.kept_vars.iter().map(|&v| vars[v].dim()).collect();
+        let elim_dims = self.elim_vars.iter().map(|&v| vars[v].dim()).collect();
+        let factor_roles: Vec<Roles> =
+            self.factor_vars.iter().map(|fv| fv.iter().map(|&v| self.roles[v]).collect()).collect();
+        let mut s = Structure::new(kept_dims, elim_dims, &factor_roles, solver)?;
+        s.set_constant_hessians(&self.constant_hessian);
+        Ok(s)
+    }
 }
 
 impl Structure {

@@ -9,8 +9,7 @@
 use crate::error::SolveError;
 use crate::factor::Vars;
 use crate::graph::{FactorEntry, WhitenedLinearization};
-use crate::linear::split_at_ends;
-use crate::optimizer::Layout;
+use crate::layout::Layout;
 use crate::variable::DynVariable;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -145,4 +144,16 @@ pub(crate) fn linearize_all(
     let mut out = Linearized::default();
     let cost = linearize_all_into(entries, layout, vars, &mut out)?;
     Ok((out, cost))
+}
+
+/// Split `s` into consecutive slices ending at `ends` (ascending, the last = `s.len()`).
+pub(crate) fn split_at_ends<T>(mut s: &mut [T], ends: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
+    let (mut out, mut start) = (Vec::new(), 0);
+    for end in ends {
+        let (a, b) = std::mem::take(&mut s).split_at_mut(end - start);
+        out.push(a);
+        s = b;
+        start = end;
+    }
+    out
 }

@@ -4,9 +4,9 @@ use crate::error::{FactorError, SolveError};
 use crate::factor::{Factor, Linearization, Vars};
 use crate::graph::{FactorEntry, Graph};
 use crate::key::Key;
+use crate::layout::{Layout, Role};
 use crate::linear::{LinearSolver, Structure, System};
 use crate::linearized::linearize_all;
-use crate::optimizer::Layout;
 use crate::values::Values;
 use crate::variable::DynVariable;
 use nalgebra::{DMatrix, DVector};
@@ -343,8 +343,8 @@ fn key_columns(layout: &Layout, structure: &Structure, keys: &[Key]) -> Result<(
         let vi =
             layout.keys.iter().position(|x| x == k).ok_or(SolveError::Config(format!("key {k} is in no factor")))?;
         let b = match layout.roles[vi] {
-            crate::linear::Role::Kept(b) => b,
-            crate::linear::Role::Elim(_) => {
+            Role::Kept(b) => b,
+            Role::Elim(_) => {
                 return Err(SolveError::Config(format!("key {k} is eliminated: its covariance is not kept")))
             }
             _ => return Err(SolveError::Config(format!("key {k} is held constant"))),
@@ -408,7 +408,7 @@ pub(crate) fn robust_covariances_of_system(
         let m = r.len();
         let u = scores.entry(c).or_insert_with(|| DVector::zeros(p));
         for (k, &vi) in fv.iter().enumerate() {
-            let crate::linear::Role::Kept(b) = layout.roles[vi] else { continue };
+            let Role::Kept(b) = layout.roles[vi] else { continue };
             let (o, n) = (structure.kept_offset(b), lins.ncols(fi, k));
             let j = lins.jacobian(fi, k);
             for col in 0..n {

@@ -1,6 +1,7 @@
 //! The value store: current estimates of all variables, keyed by [`Key`].
 
 use crate::error::ValueError;
+use crate::factor::{Factor, Linearization, Vars};
 use crate::key::Key;
 use crate::variable::{DynVariable, Variable};
 use std::collections::{BTreeMap, HashSet};
@@ -48,6 +49,19 @@ impl Values {
     /// Untyped access.
     pub fn get_dyn(&self, key: Key) -> Result<&dyn DynVariable, ValueError> {
         self.map.get(&key).map(|b| b.as_ref()).ok_or(ValueError::Missing(key))
+    }
+    /// A factor's raw (unwhitened) residual at these values; None when one of
+    /// its variables is missing or the factor cannot be evaluated there.
+    pub fn residual_of(&self, f: &dyn Factor) -> Option<nalgebra::DVector<f64>> {
+        f.residual(Vars::new(&self.variables_of(f)?)).ok()
+    }
+    /// A factor's raw residual and Jacobians at these values (None as [`Values::residual_of`]).
+    pub fn linearize(&self, f: &dyn Factor) -> Option<Linearization> {
+        f.linearize(Vars::new(&self.variables_of(f)?)).ok()
+    }
+    /// A factor's variables, in its keys' order (None when one is missing).
+    fn variables_of(&self, f: &dyn Factor) -> Option<Vec<&dyn DynVariable>> {
+        f.keys().iter().map(|&k| self.get_dyn(k).ok()).collect()
     }
     /// Whether `key` has a value.
     pub fn contains(&self, key: Key) -> bool {

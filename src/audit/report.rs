@@ -188,7 +188,7 @@ pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
 fn write_unstaged(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
     let put = |name: &str, text: String| put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
-    let file = crate::calib::model::CalibrationFile::from(&a.calibration);
+    let file = crate::model::calibration::CalibrationFile::from(&a.calibration);
     written.push(put("calibration.json", serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?)?);
     let mut figures = vec![gap_figure(a, &dir.join("audit_gap.png"))?];
     let mut prev = &a.base;

@@ -516,7 +516,7 @@ fn write_unstaged(a: &VioAudit, calibration: Option<&ImuCalibration>, dir: &Path
     let put = |name: &str, text: String| super::report::put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     if let Some(c) = calibration {
-        let file = crate::calib::model::CalibrationFile::from(&with_offsets(c, a));
+        let file = crate::model::calibration::CalibrationFile::from(&with_offsets(c, a));
         written.push(put("calibration.json", serde_json::to_string_pretty(&file).map_err(|e| e.to_string())?)?);
     }
     let figure = "audit_time_offsets.png";

@@ -4,7 +4,7 @@ use crate::error::OutputError;
 use crate::io::imu_write::{write_asl_imu, write_imu_columns, write_imu_tk_pair};
 use crate::io::Stored;
 use crate::io::{ImuRecording, RecordingOptions};
-use crate::model::calibration::{Corrector, ImuCalibration};
+use crate::model::calibration::ImuCalibration;
 use std::path::{Path, PathBuf};
 
 /// Write `rec` (already corrected) into `out` in the layout of `input`: an
@@ -57,22 +57,6 @@ pub fn write_like_input(
     guard(&p)?;
     write_imu_columns(&p, rec, &opts.format.columns, opts.format.time_unit).map_err(err)?;
     Ok(vec![p])
-}
-
-impl Corrector {
-    /// Correct every sample of a recording with [`Corrector::sample`] (its
-    /// temperature column, when present, and its time stamps): specific forces
-    /// \[m/s²\] and rates \[rad/s\].
-    pub fn correct_recording(&self, rec: &ImuRecording) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
-        let temps = rec.temperature.as_deref();
-        (0..rec.len()).map(|i| self.sample(rec.accel[i], rec.gyro[i], temps.map(|t| t[i]), rec.t[i])).unzip()
-    }
-
-    /// Problems applying the effects to `rec` (missing temperature, a drift
-    /// fitted on another recording), for the user.
-    pub fn warnings_for(&self, rec: &ImuRecording) -> Vec<String> {
-        self.warnings(rec.temperature.is_some())
-    }
 }
 
 /// Why a calibration cannot be applied to a recording.

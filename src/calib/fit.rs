@@ -5,10 +5,11 @@
 //! `b` with standard deviations.
 
 use super::detect::{mean3, Interval};
-use super::model::{split_unit_diagonal, Triad};
 use super::observability::{prior_sigma, undetermined, OffDiagonal, ACCEL_OFF_DIAGONAL, GYRO_OFF_DIAGONAL};
-use super::solve::{CalibOptions, FitStats, RotationResidual, KEY_ACCEL, KEY_GYRO, KEY_GYRO_BIAS};
+use super::options::CalibOptions;
+use super::result::{FitStats, RotationResidual};
 use crate::io::{ImuRecording, Stored};
+use crate::model::calibration::{split_unit_diagonal, Triad};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 use rayon::prelude::*;
 use tumble_factors::imu_calib::{
@@ -16,6 +17,10 @@ use tumble_factors::imu_calib::{
 };
 use tumble_factors::PartialPriorFactor;
 use tumble_solvers::{covariances, Factor, Graph, Key, LmOptions, NoiseModel, Optimizer, Termination, Values, Vars};
+
+const KEY_ACCEL: Key = Key::new('a', 0);
+const KEY_GYRO: Key = Key::new('g', 0);
+const KEY_GYRO_BIAS: Key = Key::new('g', 1);
 
 /// The accelerometer estimate of one detection.
 #[derive(Clone)]

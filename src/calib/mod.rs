@@ -32,17 +32,20 @@ pub mod detect;
 mod fit;
 pub mod gravity;
 pub mod observability;
-pub use crate::model::calibration as model;
+mod options;
 pub mod report;
+mod result;
 pub mod solve;
 pub mod verdict;
 
 pub use crate::io::calibration::read_imu_tk_calib;
+pub use crate::model::calibration::{Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
 pub use apply::write_like_input;
 pub(crate) use fit::{accel_triad, gyro_triad};
 pub use gravity::{local_gravity, normal_gravity, LocalGravity};
-pub use model::{Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
-pub use solve::{
-    calibrate, parse_multipliers, CalibError, CalibOptions, CalibrationResult, DetectionThresholds, RECORDING_ADVICE,
+pub use options::{parse_multipliers, CalibOptions, MIN_STATIC_INTERVALS, RECORDING_ADVICE};
+pub use result::{
+    Assessment, CalibError, CalibrationResult, DetectionThresholds, FitStats, InitialRestReport, RotationResidual,
+    StaticInterval, SweepEntry, Verdict,
 };
-pub use verdict::{Assessment, Verdict};
+pub use solve::calibrate;

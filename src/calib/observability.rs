@@ -6,7 +6,7 @@
 //! σ is 10–100× smaller); where they do not, the estimate stays at the prior
 //! (no misalignment) with about the prior's σ instead of wandering off with a
 //! σ of 5. A misalignment is *determined* when its posterior σ (covariance
-//! inflated by χ²/dof) is below [`DETERMINED_FRACTION`] of the prior's, i.e.
+//! inflated by χ²/dof) is below [`DETERMINED_FRACTION`](crate::model::DETERMINED_FRACTION) of the prior's, i.e.
 //! the data carry at least 3× the prior's information; the others are
 //! reported as not determined. Scales and biases have no usable prior (raw
 //! units can be anything): every axis pointing up and down determines them,
@@ -18,16 +18,13 @@
 //! misalignments, whose effect on `|a|` is of second order when gravity lies
 //! along one axis.
 
+use crate::model::DETERMINED_FRACTION;
 use nalgebra::{DMatrix, SVector};
 
 /// Prior standard deviation of a misalignment or cross-axis term \[rad, or
 /// fraction of the axis's scale\]: consumer MEMS datasheets give cross-axis
 /// sensitivities up to 2 %, and mounting adds about as much.
 pub const MISALIGNMENT_PRIOR_SIGMA: f64 = 0.05;
-
-/// A parameter is determined when its σ from the data is below this fraction
-/// of its prior σ.
-pub const DETERMINED_FRACTION: f64 = 0.5;
 
 /// One off-diagonal parameter of a 9-vector model matrix.
 #[derive(Debug, Clone, Copy)]

@@ -2,14 +2,14 @@
 //! paper's convention plus diagnostics), imu_tk's `imu_tk_acc.calib` and
 //! `imu_tk_gyro.calib`, and `static_detection.png`.
 
-use super::model::{imu_tk_calib_text, CalibrationFile, Triad};
-use super::solve::{
-    CalibOptions, CalibrationResult, DetectionThresholds, FitStats, InitialRestReport, RotationResidual,
-    StaticInterval, SweepEntry,
+use super::options::CalibOptions;
+use super::result::{Assessment, Verdict};
+use super::result::{
+    CalibrationResult, DetectionThresholds, FitStats, InitialRestReport, RotationResidual, StaticInterval, SweepEntry,
 };
-use super::verdict::{Assessment, Verdict};
 use crate::error::OutputError;
 use crate::io::ImuRecording;
+use crate::model::calibration::{imu_tk_calib_text, CalibrationFile, Triad};
 use crate::plot::{ensure_font, AXIS_COLORS};
 use plotters::prelude::*;
 use serde::Serialize;

@@ -7,9 +7,7 @@
 //! recording gives 14 and 25), while a calibrated MEMS IMU carries gravity to
 //! within a fraction of a degree and measures its norm to ~0.01 m/s².
 
-use super::solve::CalibrationResult;
-use serde::{Deserialize, Serialize};
-use std::fmt;
+use super::result::{Assessment, CalibrationResult, Verdict};
 
 /// Largest RMS of `|a| − g` over the poses after calibration \[m/s²\] (1 % of
 /// g; a calibrated MEMS accelerometer reaches ~0.01): above it the model or
@@ -28,40 +26,6 @@ pub const MAX_GYRO_ANISOTROPY: f64 = 1.5;
 /// Largest relative σ of a scale for an `ok` verdict: a calibration should
 /// beat the datasheet's scale tolerance (±1–3 %).
 pub const MAX_SCALE_REL_SIGMA: f64 = 0.01;
-
-/// The verdict.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Verdict {
-    /// Every parameter determined, the fits explain the data.
-    Ok,
-    /// Usable, but some parameters are not determined or uncertain (see the reasons).
-    Weak,
-    /// The fit does not explain the data: do not use it.
-    Failed,
-}
-
-impl fmt::Display for Verdict {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Verdict::Ok => "ok",
-            Verdict::Weak => "weak",
-            Verdict::Failed => "failed",
-        })
-    }
-}
-
-/// The verdict with its reasons.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Assessment {
-    /// `ok`, `weak` or `failed`.
-    pub verdict: Verdict,
-    /// Why the verdict is not `ok` (empty when it is).
-    pub reasons: Vec<String>,
-    /// Parameters the poses do not determine (estimate near the prior of no
-    /// misalignment, σ about the prior's), e.g. `accelerometer T[0][1]`.
-    pub not_determined: Vec<String>,
-}
 
 impl Assessment {
     /// Judge a calibration (see the module's thresholds).

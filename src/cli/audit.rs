@@ -1,7 +1,7 @@
 //! `tumble audit`: the model-discrepancy audit of a calibration, or (`--vio`)
 //! of a VIO run's time offsets.
 
-use super::common::{open_vio, progress_bar, CalibInput, FrontendArgs};
+use super::common::{open_input, progress_bar, CalibInput, FrontendArgs};
 use super::CliResult;
 use clap::Args;
 use std::path::PathBuf;
@@ -106,13 +106,13 @@ impl AuditArgs {
             opts
         };
         audit_options(vopts.clone()).validate()?;
-        let source = tumble::inputs::VioSource {
+        let source = tumble::vio::VioSource {
             calibration: cal.cloned(),
             frontend: self.frontend.options(),
             frontend_dir: self.out.clone(),
             ..Default::default()
         };
-        let vin = open_vio(path, &source)?;
+        let vin = open_input(path, &source)?;
         vin.apply_noise(noise, &mut vopts.noise.imu);
         let opts = audit_options(vopts);
         if let Some(o) = cal.and_then(|c| c.time_offsets) {

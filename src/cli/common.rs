@@ -203,12 +203,12 @@ pub fn print_frontend(report: &tumble::vio::frontend::FrontendReport) {
 }
 
 /// Open a VIO input with a bar for the frontend, printing what opening it did.
-pub fn open_vio(
+pub fn open_input(
     path: &std::path::Path,
-    source: &tumble::inputs::VioSource,
-) -> Result<tumble::vio::VioInput, tumble::inputs::OpenError> {
+    source: &tumble::vio::VioSource,
+) -> Result<tumble::vio::VioInput, tumble::vio::OpenError> {
     let bar = track_bar(0);
-    let opened = tumble::inputs::open_vio(path, source, &mut |done, total| {
+    let opened = tumble::vio::VioInput::open(path, source, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64)
     })?;

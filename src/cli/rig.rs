@@ -64,7 +64,7 @@ fn parse_resolution(s: &str) -> Result<[u32; 2], String> {
 impl RigArgs {
     pub fn run(self) -> CliResult {
         let fixed_intrinsics = match &self.intrinsics {
-            Some(dir) => tumble::rig::input::read_intrinsics(dir)?,
+            Some(dir) => tumble::io::target::read_intrinsics(dir)?,
             None => Vec::new(),
         };
         let options = RigOptions {

@@ -1,6 +1,6 @@
 //! `tumble run`: the whole chain on the user's recordings.
 
-use super::common::{open_vio, progress_bar, CalibInput, FrontendArgs, InputFormat, RecordingArgs};
+use super::common::{open_input, progress_bar, CalibInput, FrontendArgs, InputFormat, RecordingArgs};
 use super::vio::EstimatorArgs;
 use super::CliResult;
 use clap::Args;
@@ -144,17 +144,17 @@ impl RunArgs {
         inputs.calibration = self.calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
         inputs.noise = self.noise.as_deref().map(tumble::io::ImuNoise::read).transpose()?;
         if let Some(p) = self.vio.clone() {
-            let mut source = tumble::inputs::VioSource {
+            let mut source = tumble::vio::VioSource {
                 groundtruth: self.groundtruth.clone(),
                 simulate_camera: self.simulate_camera.then_some(1),
                 frontend: self.frontend.options(),
                 frontend_dir: out.join(Stage::Vio.id()),
-                rig: self.rig.as_deref().map(tumble::rig::input::RigCalibration::read).transpose()?,
+                rig: self.rig.as_deref().map(tumble::io::target::RigCalibration::read).transpose()?,
                 ..Default::default()
             };
             inputs.vio = Some(Box::new(move |cal| {
                 source.calibration = cal.cloned();
-                Ok(open_vio(&p, &source)?)
+                Ok(open_input(&p, &source)?)
             }));
         }
         let bar = progress_bar(0, "{prefix} [{bar:40}] {pos}/{len} {msg} {elapsed_precise} (eta {eta})");

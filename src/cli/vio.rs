@@ -1,6 +1,6 @@
 //! `tumble vio`: visual-inertial bias estimation over a recording.
 
-use super::common::{open_vio, paths, progress_bar, FrontendArgs};
+use super::common::{open_input, paths, progress_bar, FrontendArgs};
 use super::CliResult;
 use clap::{Args, ValueEnum};
 use std::path::PathBuf;
@@ -238,16 +238,16 @@ impl VioArgs {
             tumble::vio::rerun_available(r)?;
         }
         let cal = self.calibration.as_deref().map(tumble::calib::ImuCalibration::read).transpose()?;
-        let source = tumble::inputs::VioSource {
+        let source = tumble::vio::VioSource {
             calibration: cal,
             groundtruth: self.groundtruth.clone(),
             simulate_camera: self.simulate_camera.then_some(self.seed),
             mono: self.mono,
             frontend: self.frontend.options(),
             frontend_dir: out.clone(),
-            rig: self.rig.as_deref().map(tumble::rig::input::RigCalibration::read).transpose()?,
+            rig: self.rig.as_deref().map(tumble::io::target::RigCalibration::read).transpose()?,
         };
-        let vin = open_vio(&input, &source)?;
+        let vin = open_input(&input, &source)?;
         if let (Some(st), Some(baseline)) = (&vin.stereo, vin.stereo_baseline_m()) {
             let matches: usize = st.features.iter().map(Vec::len).sum();
             println!("stereo: {matches} matches in cam1 ({baseline:.3} m from cam0) for the initialization (--mono to ignore)");

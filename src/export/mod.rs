@@ -17,14 +17,12 @@
 
 pub mod intrinsics;
 mod targets;
-pub(crate) use targets::kalibr_camera_blocks;
 
 use crate::error::{InputError, OutputError};
 use crate::io::ImuNoise;
 use crate::model::calibration::ImuCalibration;
-use nalgebra::Isometry3;
+use crate::model::target::RigCamera;
 use std::path::{Path, PathBuf};
-use tumble_factors::camera::CameraModel;
 
 /// The estimators tumble writes configuration for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -198,21 +196,6 @@ pub struct AuditGroup {
     pub residuals: usize,
 }
 
-/// One camera of the rig, from an ASL `sensor.yaml`.
-#[derive(Debug, Clone)]
-pub struct RigCamera {
-    /// Intrinsics and distortion.
-    pub model: CameraModel,
-    /// Width and height \[px\].
-    pub resolution: [u32; 2],
-    /// Frame rate \[Hz\].
-    pub rate_hz: f64,
-    /// IMU ← camera (a point in the camera frame mapped into the IMU frame).
-    pub t_imu_cam: Isometry3<f64>,
-    /// Its image topic.
-    pub topic: String,
-}
-
 /// Everything an export writes from.
 #[derive(Debug, Clone)]
 pub struct ExportInputs {
@@ -320,7 +303,7 @@ impl ExportInputs {
         // A rig calibration measured the time offset on a target: it is the one to use.
         let rig_time_offset_s = match &src.asl {
             Some(dir) if is_rig_output(dir) => {
-                let t = crate::rig::input::RigCalibration::read(dir)?.time_offset_s;
+                let t = crate::io::target::RigCalibration::read(dir)?.time_offset_s;
                 sources.push(format!("camera–IMU time offset: {} ({:.3} ms)", dir.join("rig.json").display(), t * 1e3));
                 Some(t)
             }
@@ -413,8 +396,11 @@ fn is_rig_output(dir: &Path) -> bool {
 fn rig_cameras(dir: &Path) -> Result<Vec<RigCamera>, InputError> {
     let root = if is_rig_output(dir) { dir.to_path_buf() } else { crate::io::asl::resolve_mav0(dir)? };
     let imu_yaml = root.join("imu0").join("sensor.yaml");
-    let body_imu =
-        if imu_yaml.is_file() { crate::io::asl::read_imu_sensor(&imu_yaml)?.t_bs } else { Isometry3::identity() };
+    let body_imu = if imu_yaml.is_file() {
+        crate::io::asl::read_imu_sensor(&imu_yaml)?.t_bs
+    } else {
+        nalgebra::Isometry3::identity()
+    };
     let mut cams = Vec::new();
     for k in 0..8 {
         let yaml = root.join(format!("cam{k}")).join("sensor.yaml");

@@ -2,9 +2,11 @@
 //! configuration each layout follows).
 
 use super::intrinsics::{rotation_times_lower, upper_times_rotation};
-use super::{ExportInputs, NoiseConvention, RigCamera, Target};
+use super::{ExportInputs, NoiseConvention, Target};
 use crate::error::OutputError;
-use nalgebra::{Isometry3, Matrix3, Matrix4, Vector3};
+use crate::io::kalibr::{camchain_blocks, list, m3, m4, num, rows};
+use crate::model::target::RigCamera;
+use nalgebra::{Isometry3, Matrix3, Vector3};
 use std::fmt::Write;
 use tumble_factors::camera::Distortion;
 
@@ -12,28 +14,6 @@ use tumble_factors::camera::Distortion;
 type Rendered = (Vec<(String, String)>, Vec<String>);
 
 /// A number as the shortest text that reads back to the same f64.
-fn num(x: f64) -> String {
-    format!("{x:?}")
-}
-
-fn list(v: &[f64]) -> String {
-    v.iter().map(|x| num(*x)).collect::<Vec<_>>().join(", ")
-}
-
-/// A matrix as YAML rows (`- [a, b, c]`) at `indent` spaces.
-fn rows(m: &[Vec<f64>], indent: usize) -> String {
-    m.iter().map(|r| format!("{}- [{}]\n", " ".repeat(indent), list(r))).collect()
-}
-
-fn m3(m: &Matrix3<f64>) -> Vec<Vec<f64>> {
-    (0..3).map(|i| (0..3).map(|j| m[(i, j)]).collect()).collect()
-}
-
-fn m4(t: &Isometry3<f64>) -> Vec<Vec<f64>> {
-    let m: Matrix4<f64> = t.to_homogeneous();
-    (0..4).map(|i| (0..4).map(|j| m[(i, j)]).collect()).collect()
-}
-
 /// An OpenCV FileStorage matrix (`!!opencv-matrix`, row-major, doubles) as a key's value.
 fn cv_matrix(m: &[Vec<f64>]) -> String {
     let data: Vec<f64> = m.iter().flatten().copied().collect();
@@ -114,50 +94,8 @@ fn apply_note(inp: &ExportInputs, target: Target, intrinsics: bool, modelled: &[
 }
 
 /// Kalibr's camera block fields (model, distortion name and coefficients, intrinsics).
-fn kalibr_camera(c: &RigCamera) -> (&'static str, Vec<f64>) {
-    match c.model.distortion {
-        Distortion::None => ("none", Vec::new()),
-        Distortion::RadTan { k1, k2, p1, p2 } => ("radtan", vec![k1, k2, p1, p2]),
-        Distortion::Equidistant { k1, k2, k3, k4 } => ("equidistant", vec![k1, k2, k3, k4]),
-    }
-}
-
 fn kalibr_cameras(inp: &ExportInputs, t_imu_cam_key: bool) -> String {
-    kalibr_camera_blocks(&inp.cameras, inp.camera_time_offset(), t_imu_cam_key)
-}
-
-/// Kalibr's per-camera blocks (`cam0:`, `cam1:` …) of `camchain-imucam.yaml`
-/// (`T_cam_imu` and `T_cn_cnm1`) or, with `t_imu_cam_key`, of Basalt-style
-/// `T_imu_cam` listings; `dt` is `timeshift_cam_imu` \[s\] (`t_imu = t_cam + dt`).
-pub(crate) fn kalibr_camera_blocks(cameras: &[RigCamera], dt: f64, t_imu_cam_key: bool) -> String {
-    let mut s = String::new();
-    for (i, c) in cameras.iter().enumerate() {
-        let (dist, d) = kalibr_camera(c);
-        let _ = writeln!(s, "cam{i}:");
-        if t_imu_cam_key {
-            let _ = writeln!(s, "  T_imu_cam:");
-            s.push_str(&rows(&m4(&c.t_imu_cam), 4));
-        } else {
-            let _ = writeln!(s, "  T_cam_imu:");
-            s.push_str(&rows(&m4(&c.t_imu_cam.inverse()), 2));
-            if i > 0 {
-                let rel = c.t_imu_cam.inverse() * cameras[i - 1].t_imu_cam;
-                let _ = writeln!(s, "  T_cn_cnm1:");
-                s.push_str(&rows(&m4(&rel), 2));
-            }
-        }
-        let overlaps: Vec<String> = (0..cameras.len()).filter(|&j| j != i).map(|j| j.to_string()).collect();
-        let _ = writeln!(s, "  cam_overlaps: [{}]", overlaps.join(", "));
-        let _ = writeln!(s, "  camera_model: pinhole");
-        let _ = writeln!(s, "  distortion_coeffs: [{}]", list(&d));
-        let _ = writeln!(s, "  distortion_model: {dist}");
-        let m = &c.model;
-        let _ = writeln!(s, "  intrinsics: [{}]", list(&[m.fx, m.fy, m.cx, m.cy]));
-        let _ = writeln!(s, "  resolution: [{}, {}]", c.resolution[0], c.resolution[1]);
-        let _ = writeln!(s, "  rostopic: {}", c.topic);
-        let _ = writeln!(s, "  timeshift_cam_imu: {}", num(dt));
-    }
-    s
+    camchain_blocks(&inp.cameras, inp.camera_time_offset(), t_imu_cam_key)
 }
 
 fn kalibr_imu_lines(inp: &ExportInputs, indent: &str) -> String {

@@ -90,6 +90,20 @@ pub struct AslDataset {
     pub warnings: Vec<String>,
 }
 
+impl AslDataset {
+    /// The noise figures of `imu0/sensor.yaml`, when it gives all four.
+    pub fn imu_noise(&self) -> Option<super::ImuNoise> {
+        let s = self.imu_sensor.as_ref()?;
+        Some(super::ImuNoise {
+            accelerometer_noise_density: s.accelerometer_noise_density?,
+            accelerometer_random_walk: s.accelerometer_random_walk?,
+            gyroscope_noise_density: s.gyroscope_noise_density?,
+            gyroscope_random_walk: s.gyroscope_random_walk?,
+            axes: s.axes,
+        })
+    }
+}
+
 #[derive(Deserialize)]
 #[allow(non_snake_case)]
 struct ImuYaml {

@@ -1,6 +1,9 @@
 //! An IMU recording in memory: timestamps, gyro and accelerometer triads, an
 //! optional temperature trace, and what the reader noticed on the way.
 
+use crate::model::calibration::{Corrector, ImuCalibration};
+use crate::model::ImuData;
+use nalgebra::Vector3;
 use std::path::PathBuf;
 
 /// What the stored numbers of one sensor are.
@@ -156,4 +159,37 @@ pub struct RecordingStats {
     pub gyro: Option<AxisStats>,
     /// Lowest and highest temperature \[°C\], when the recording has a temperature column.
     pub temperature: Option<(f64, f64)>,
+}
+
+impl Corrector {
+    /// Correct every sample of a recording with [`Corrector::sample`] (its
+    /// temperature column, when present, and its time stamps): specific forces
+    /// \[m/s²\] and rates \[rad/s\].
+    pub fn correct_recording(&self, rec: &ImuRecording) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+        let temps = rec.temperature.as_deref();
+        (0..rec.len()).map(|i| self.sample(rec.accel[i], rec.gyro[i], temps.map(|t| t[i]), rec.t[i])).unzip()
+    }
+
+    /// Problems applying the effects to `rec` (missing temperature, a drift
+    /// fitted on another recording), for the user.
+    pub fn warnings_for(&self, rec: &ImuRecording) -> Vec<String> {
+        self.warnings(rec.temperature.is_some())
+    }
+}
+
+impl ImuRecording {
+    /// The samples as the estimators take them: corrected by `calibration`
+    /// when given (eq. 16 and the audit's effects, [`Corrector::correct_recording`]),
+    /// else as read (already in SI units).
+    pub fn calibrated(&self, calibration: Option<&ImuCalibration>) -> ImuData {
+        let (acc, gyro) = match calibration.and_then(|c| c.corrector()) {
+            Some(c) => c.correct_recording(self),
+            None => (self.accel.clone(), self.gyro.clone()),
+        };
+        ImuData {
+            t: self.t.clone(),
+            gyro: gyro.into_iter().map(Vector3::from).collect(),
+            acc: acc.into_iter().map(Vector3::from).collect(),
+        }
+    }
 }

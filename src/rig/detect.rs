@@ -28,7 +28,7 @@
 //!   AprilGrid has no such ambiguity and is the better target.
 
 use super::init::homography;
-use super::input::{Corner, Target};
+use crate::model::target::{Corner, OrderVote, Target, ORDERS};
 use nalgebra::Vector3;
 
 /// Fewest tags, not all on one line, for a view to vote on the corner order.
@@ -48,12 +48,6 @@ pub struct TagDetection {
     /// The same corners after the sub-pixel refinement; None where it failed or moved too far.
     pub refined: [Option<[f64; 2]>; 4],
 }
-
-/// The eight orders of a square's corners: `ORDERS[k][j]` is the target's
-/// corner (Kalibr's 0–3, counter-clockwise from the lower left) of the
-/// detector's corner `j`.
-pub const ORDERS: [[usize; 4]; 8] =
-    [[0, 1, 2, 3], [1, 2, 3, 0], [2, 3, 0, 1], [3, 0, 1, 2], [0, 3, 2, 1], [3, 2, 1, 0], [2, 1, 0, 3], [1, 0, 3, 2]];
 
 /// How a view's tags fit the target's layout.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -121,7 +115,7 @@ pub fn view_order(tags: &[TagDetection], target: &Target) -> ViewOrder {
             dist(apply(&h, [o[0], o[1], 0.0]), mean(&t.raw)) / side.max(1e-9)
         })
         .collect();
-    if super::init::median(&mut off).is_none_or(|m| m > LAYOUT_TOLERANCE) {
+    if crate::model::numeric::median(&mut off).is_none_or(|m| m > LAYOUT_TOLERANCE) {
         return ViewOrder::OffLayout;
     }
     let cost = |order: &[usize; 4]| -> f64 {
@@ -135,19 +129,6 @@ pub fn view_order(tags: &[TagDetection], target: &Target) -> ViewOrder {
     };
     let best = (0..ORDERS.len()).min_by(|&a, &b| cost(&ORDERS[a]).total_cmp(&cost(&ORDERS[b]))).unwrap_or(0);
     ViewOrder::Votes(best)
-}
-
-/// The recording's corner order: the majority of the views' votes.
-#[derive(Debug, Clone, PartialEq)]
-pub struct OrderVote {
-    /// The order used ([`ORDERS`] index).
-    pub order: usize,
-    /// Views that voted for it.
-    pub agree: usize,
-    /// Views that voted.
-    pub voters: usize,
-    /// Views whose tags do not follow the target's layout.
-    pub off_layout: usize,
 }
 
 /// Count the views' votes (`voters` is 0 when no view could vote: too few
@@ -208,43 +189,6 @@ pub fn checkerboard_corners(target: &Target, pts: &[[f64; 2]], previous: Option<
     };
     let flip = previous.is_some_and(|p| !p.is_empty()) && gap(true) < gap(false);
     (0..n).filter_map(|id| Some(Corner { id, target: target.corner(id)?, uv: pts[index(flip, id)] })).collect()
-}
-
-/// What the detection found in one camera.
-#[derive(Debug, Clone, PartialEq)]
-pub struct DetectionStats {
-    /// Images read.
-    pub frames: usize,
-    /// Images with corners.
-    pub frames_with_target: usize,
-    /// Corners kept.
-    pub corners: usize,
-    /// Tag corners dropped by the refinement.
-    pub dropped: usize,
-    /// The AprilGrid's corner order and its vote.
-    pub order: Option<OrderVote>,
-    /// The images' size `[width, height]` \[px\] (all the same: an image of
-    /// another size is refused).
-    pub image_size: [u32; 2],
-    /// Wall time \[s\].
-    pub seconds: f64,
-}
-
-impl DetectionStats {
-    /// One line for the terminal and the report.
-    pub fn line(&self) -> String {
-        let mut s = format!(
-            "target in {} of {} images, {} corners ({} tag corners dropped by the sub-pixel refinement), {:.1} s",
-            self.frames_with_target, self.frames, self.corners, self.dropped, self.seconds
-        );
-        if let Some(v) = &self.order {
-            s.push_str(&format!("; tag corner order {:?} ({} of {} views agree)", ORDERS[v.order], v.agree, v.voters));
-            if v.off_layout > 0 {
-                s.push_str(&format!("; {} views off the target's layout left out", v.off_layout));
-            }
-        }
-        s
-    }
 }
 
 #[cfg(feature = "opencv")]

@@ -6,10 +6,10 @@
 //! rotations (VINS-Mono's `InitialEXRotation`), and gravity in the target
 //! frame from the mean specific force.
 
-use super::input::View;
-use crate::vio::geometry::pose;
-use crate::vio::residual_at;
-use crate::vio::ImuData;
+use crate::model::geometry::pose;
+use crate::model::numeric::median;
+use crate::model::target::View;
+use crate::model::ImuData;
 use nalgebra::{DMatrix, Matrix3, Matrix4, UnitQuaternion, Vector3, Vector4};
 use tumble_factors::camera::{CameraModel, DistortionKind};
 use tumble_factors::rig::CameraCorner;
@@ -195,7 +195,7 @@ pub fn refine_view_pose(v: &View, model: &CameraModel) -> Option<(Isometry3F64, 
     let (sol, _) = Optimizer::new(opts).optimize(&graph, &values).ok()?;
     let t = *sol.get::<Isometry3F64>(X(0)).ok()?;
     let squares: Vec<f64> =
-        graph.entries().iter().filter_map(|e| residual_at(&sol, e.factor.as_ref())).map(|r| r.norm_squared()).collect();
+        graph.entries().iter().filter_map(|e| sol.residual_of(e.factor.as_ref())).map(|r| r.norm_squared()).collect();
     let rms = (squares.iter().sum::<f64>() / squares.len().max(1) as f64).sqrt();
     Some((t, rms))
 }
@@ -305,23 +305,13 @@ pub fn calibrate_camera(
         model = CameraModel::from_vector(kind, kv.as_slice());
         let mut res = Vec::new();
         for e in graph.entries() {
-            if let Some(r) = residual_at(&sol, e.factor.as_ref()) {
+            if let Some(r) = sol.residual_of(e.factor.as_ref()) {
                 res.extend(r.iter().map(|x| x.abs()));
             }
         }
         pixel_sigma = 1.4826 * median(&mut res).ok_or("no corner residuals")?;
     }
     Ok(CameraStart { model, pixel_sigma, views: chosen.len() })
-}
-
-/// Median of a slice (reordered); None when empty.
-pub fn median(x: &mut [f64]) -> Option<f64> {
-    if x.is_empty() {
-        return None;
-    }
-    let m = x.len() / 2;
-    x.select_nth_unstable_by(m, f64::total_cmp);
-    Some(x[m])
 }
 
 /// Cumulative integral of the gyro over the IMU's samples (trapezoid), to
@@ -559,7 +549,7 @@ mod tests {
             // The pose from normalized coordinates.
             let norm: Vec<[f64; 2]> = img.iter().map(|p| [(p[0] - k[2]) / k[0], (p[1] - k[3]) / k[1]]).collect();
             let pose = pose_from_homography(&homography(&grid(), &norm).unwrap()).unwrap();
-            let (pr, pt) = crate::vio::geometry::parts(&pose);
+            let (pr, pt) = crate::model::geometry::parts(&pose);
             assert!((pr - r).norm() < 1e-9 && (pt - t).norm() < 1e-9);
         }
         let est = zhang(&homs).unwrap();

@@ -1,361 +1,132 @@
-//! What a rig calibration reads: the target (Kalibr's `target.yaml`), each
-//! camera's detected corners (`camN/corners.csv`), the IMU (`imu0/data.csv`)
-//! and its noise.
+//! Reading a rig's recording for calibration ([`RigInput::from_asl`]): the
+//! IMU and its noise, the target, and each camera's corners — read from
+//! `camN/corners.csv`, or detected in the images ([`super::detect`]).
 
 use crate::error::InputError;
-use crate::io::table::{read_table, TableSpec, TimeUnit};
-use crate::io::yaml::read_yaml;
-use serde::Deserialize;
+use crate::io::target::read_corners;
+use crate::io::ImuNoise;
+use crate::model::calibration::ImuCalibration;
+use crate::model::target::{CameraCorners, DetectionStats, RigInput, Target, View};
 use std::path::{Path, PathBuf};
+use tumble_factors::imu_preint::PreintegrationParams;
 
-/// A calibration target in Kalibr's terms.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Target {
-    /// AprilGrid: `cols`×`rows` tags of side `size` \[m\], `spacing` the gap as a fraction of `size`.
-    AprilGrid {
-        /// Tags per row.
-        cols: u32,
-        /// Tag rows.
-        rows: u32,
-        /// Tag side \[m\].
-        size: f64,
-        /// Gap between tags as a fraction of `size`.
-        spacing: f64,
-    },
-    /// Checkerboard: `cols`×`rows` inner corners, spaced `col_spacing` × `row_spacing` \[m\].
-    Checkerboard {
-        /// Inner corners per row.
-        cols: u32,
-        /// Inner-corner rows.
-        rows: u32,
-        /// Spacing along a row \[m\].
-        col_spacing: f64,
-        /// Spacing along a column \[m\].
-        row_spacing: f64,
-    },
-}
+use super::RigOptions;
 
-#[derive(Deserialize)]
-#[allow(non_snake_case)]
-struct TargetYaml {
-    target_type: String,
-    tagCols: Option<u32>,
-    tagRows: Option<u32>,
-    tagSize: Option<f64>,
-    tagSpacing: Option<f64>,
-    targetCols: Option<u32>,
-    targetRows: Option<u32>,
-    rowSpacingMeters: Option<f64>,
-    colSpacingMeters: Option<f64>,
-}
+impl RigInput {
+    /// Read an ASL folder (`mav0/imu0/data.csv`, `mav0/camN/corners.csv`) and
+    /// the target. The IMU noise is `noise` (Kalibr `imu.yaml`, e.g. from
+    /// `tumble allan`), else `imu0/sensor.yaml`'s; without either the input is
+    /// refused. `calibration` (`calibration.json` of `tumble calibrate`)
+    /// corrects the IMU samples first. Each camera's resolution comes from its
+    /// `sensor.yaml`, else from `options.resolution` (for images searched by
+    /// [`RigInput::from_asl_with_progress`], from the images, which must agree).
+    pub fn from_asl(
+        path: &Path,
+        target: &Path,
+        noise: Option<&Path>,
+        calibration: Option<&Path>,
+        options: &RigOptions,
+    ) -> Result<RigInput, InputError> {
+        Self::from_asl_with_progress(path, target, noise, calibration, options, &mut |_| {})
+    }
 
-impl Target {
-    /// Read Kalibr's `target.yaml` (`target_type: aprilgrid` with `tagCols`, `tagRows`,
-    /// `tagSize`, `tagSpacing`, or `checkerboard` with `targetCols`, `targetRows`,
-    /// `rowSpacingMeters`, `colSpacingMeters`).
-    pub fn read(path: &Path) -> Result<Target, InputError> {
-        let y: TargetYaml = read_yaml(path)?;
-        let need_u = |v: Option<u32>, key: &str| match v {
-            Some(n) if n > 0 => Ok(n),
-            Some(n) => Err(InputError::file(path, format!("{key} must be a positive count, found {n}"))),
-            None => Err(InputError::file(path, format!("missing {key}"))),
+    /// [`RigInput::from_asl`], for a folder that may have images instead of
+    /// `camN/corners.csv`: a camera whose folder has no `corners.csv` but
+    /// images (`camN/data.csv`) has its corners detected ([`detect`], feature
+    /// `opencv`; refused with a hint without it), with progress lines to `progress`.
+    pub fn from_asl_with_progress(
+        path: &Path,
+        target: &Path,
+        noise: Option<&Path>,
+        calibration: Option<&Path>,
+        options: &RigOptions,
+        progress: &mut dyn FnMut(&str),
+    ) -> Result<RigInput, InputError> {
+        let target_path = target;
+        let target = Target::read(target)?;
+        let ds = crate::io::asl::read_asl(path, &Default::default())?;
+        let calibration = calibration.map(ImuCalibration::read).transpose()?;
+        let mut params = PreintegrationParams::default();
+        let sensor_yaml = ds.root.join("imu0").join("sensor.yaml");
+        let noise_source = match (noise, ds.imu_noise()) {
+            (Some(p), _) => {
+                ImuNoise::read(p)?.apply(&mut params);
+                p.display().to_string()
+            }
+            (None, Some(n)) => {
+                n.apply(&mut params);
+                sensor_yaml.display().to_string()
+            }
+            (None, None) => {
+                return Err(InputError::file(&sensor_yaml, "absent or without the IMU's four noise figures").with_hint(
+                    "give --noise imu.yaml (from `tumble allan`, or Kalibr's imu.yaml with the datasheet's figures)",
+                ))
+            }
         };
-        let need_f = |v: Option<f64>, key: &str, zero_ok: bool| match v {
-            Some(x) if x.is_finite() && (x > 0.0 || (zero_ok && x == 0.0)) => Ok(x),
-            Some(x) => Err(InputError::file(path, format!("{key} must be a positive number of metres, found {x}"))),
-            None => Err(InputError::file(path, format!("missing {key}"))),
-        };
-        match y.target_type.trim_matches(['\'', '"']) {
-            "aprilgrid" => Ok(Target::AprilGrid {
-                cols: need_u(y.tagCols, "tagCols")?,
-                rows: need_u(y.tagRows, "tagRows")?,
-                size: need_f(y.tagSize, "tagSize", false)?,
-                spacing: need_f(y.tagSpacing, "tagSpacing", true)?,
-            }),
-            "checkerboard" => Ok(Target::Checkerboard {
-                cols: need_u(y.targetCols, "targetCols")?,
-                rows: need_u(y.targetRows, "targetRows")?,
-                col_spacing: need_f(y.colSpacingMeters, "colSpacingMeters", false)?,
-                row_spacing: need_f(y.rowSpacingMeters, "rowSpacingMeters", false)?,
-            }),
-            other => Err(InputError::file(path, format!("target_type '{other}' is not supported"))
-                .with_hint("aprilgrid or checkerboard (Kalibr's keys)")),
-        }
-    }
-
-    /// Number of corners: 4 per tag, or the inner corners of a checkerboard.
-    pub fn corner_count(&self) -> usize {
-        match *self {
-            Target::AprilGrid { cols, rows, .. } => 4 * (cols * rows) as usize,
-            Target::Checkerboard { cols, rows, .. } => (cols * rows) as usize,
-        }
-    }
-
-    /// Target-frame position \[m\] of corner `id` (z = 0): for an AprilGrid
-    /// `id = 4·tag + corner` with Kalibr's layout (tag `row·cols + col`, corners
-    /// counter-clockwise from the lower left: (0,0), (s,0), (s,s), (0,s));
-    /// for a checkerboard `id = row·cols + col`. None for an id beyond the target.
-    pub fn corner(&self, id: usize) -> Option<[f64; 3]> {
-        if id >= self.corner_count() {
-            return None;
-        }
-        Some(match *self {
-            Target::AprilGrid { cols, size, spacing, .. } => {
-                let (tag, c) = (id / 4, id % 4);
-                let pitch = size * (1.0 + spacing);
-                let (col, row) = ((tag % cols as usize) as f64, (tag / cols as usize) as f64);
-                let (dx, dy) = [(0.0, 0.0), (size, 0.0), (size, size), (0.0, size)][c];
-                [col * pitch + dx, row * pitch + dy, 0.0]
-            }
-            Target::Checkerboard { cols, col_spacing, row_spacing, .. } => {
-                let (col, row) = ((id % cols as usize) as f64, (id / cols as usize) as f64);
-                [col * col_spacing, row * row_spacing, 0.0]
-            }
-        })
-    }
-}
-
-/// One detected corner: its id on the target, its target-frame position \[m\] and its pixel.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Corner {
-    /// Corner id ([`Target::corner`]).
-    pub id: usize,
-    /// Position on the target \[m\].
-    pub target: [f64; 3],
-    /// Pixel in the raw (distorted) image \[px\].
-    pub uv: [f64; 2],
-}
-
-/// One image of a camera: its stamp and the corners detected in it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct View {
-    /// Camera stamp \[ns\].
-    pub t_ns: i64,
-    /// Corners detected (possibly none).
-    pub corners: Vec<Corner>,
-}
-
-/// One camera's detections.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CameraCorners {
-    /// Folder name (`cam0`).
-    pub name: String,
-    /// The corners file, or the images' `data.csv` when the corners were detected.
-    pub path: PathBuf,
-    /// Views in time order (every frame of `frames.csv`, or every stamp with corners).
-    pub views: Vec<View>,
-    /// Image size `[width, height]` \[px\] when known (`sensor.yaml` or the options).
-    pub resolution: Option<[u32; 2]>,
-    /// When the corners were detected in the images here (no `corners.csv`):
-    /// what the detection found. The rig's output then holds them as `camN/corners.csv`.
-    pub detection: Option<super::detect::DetectionStats>,
-}
-
-/// Tolerance between a corner's position in `corners.csv` and the target's geometry \[m\].
-const GEOMETRY_TOLERANCE_M: f64 = 1e-3;
-
-/// Read `camN/corners.csv` (`timestamp_ns,tag_id,corner_idx,u_px,v_px,x_m,y_m,z_m`;
-/// for a checkerboard `tag_id` is 0 and `corner_idx` the corner's index), check
-/// each corner against the target's geometry, and group them by frame. Frames
-/// of `frames.csv` (one stamp per line), when present, are kept even without corners.
-pub fn read_corners(cam_dir: &Path, target: &Target) -> Result<Vec<View>, InputError> {
-    let path = cam_dir.join("corners.csv");
-    let spec = TableSpec {
-        time: Some((0, TimeUnit::Ns)),
-        values: vec![1, 2, 3, 4, 5, 6, 7],
-        names: ["tag_id", "corner_idx", "u_px", "v_px", "x_m", "y_m", "z_m"].map(String::from).to_vec(),
-        ..TableSpec::default()
-    };
-    let t = read_table(&path, &spec)?;
-    let mut views: Vec<View> = Vec::new();
-    for i in 0..t.t_ns.len() {
-        let line = || t.lines.line(i);
-        let col = |c: usize| t.columns[c][i];
-        let (tag, idx) = (col(0), col(1));
-        if tag < 0.0 || tag.fract() != 0.0 || idx < 0.0 || idx.fract() != 0.0 {
-            return Err(InputError::at(
-                &path,
-                line(),
-                format!("tag_id {tag} and corner_idx {idx} must be non-negative integers"),
-            ));
-        }
-        let id = match target {
-            Target::AprilGrid { .. } => {
-                if idx > 3.0 {
-                    return Err(InputError::at(
-                        &path,
-                        line(),
-                        format!("corner_idx {idx} of an AprilGrid tag must be 0–3"),
-                    ));
-                }
-                4 * tag as usize + idx as usize
-            }
-            Target::Checkerboard { .. } => idx as usize,
-        };
-        let p = [col(4), col(5), col(6)];
-        let expected = target.corner(id).ok_or_else(|| {
-            InputError::at(
-                &path,
-                line(),
-                format!(
-                    "corner {id} (tag {tag}, corner {idx}) is beyond the target's {} corners",
-                    target.corner_count()
-                ),
-            )
-            .with_hint("check --target against the target the corners were detected on")
-        })?;
-        let off = (0..3).map(|k| (p[k] - expected[k]).powi(2)).sum::<f64>().sqrt();
-        if off > GEOMETRY_TOLERANCE_M {
-            return Err(InputError::at(
-                &path,
-                line(),
-                format!(
-                    "corner {id} at ({:.4}, {:.4}, {:.4}) m, but the target puts it at ({:.4}, {:.4}, {:.4}) m",
-                    p[0], p[1], p[2], expected[0], expected[1], expected[2]
-                ),
-            )
-            .with_hint("the target file does not describe the target of these corners"));
-        }
-        let uv = [col(2), col(3)];
-        let t_ns = t.t_ns[i];
-        match views.last_mut() {
-            Some(v) if v.t_ns == t_ns => v.corners.push(Corner { id, target: expected, uv }),
-            Some(v) if v.t_ns > t_ns => {
-                return Err(InputError::at(&path, line(), "corners must be in time order"));
-            }
-            _ => views.push(View { t_ns, corners: vec![Corner { id, target: expected, uv }] }),
-        }
-    }
-    let frames_csv = cam_dir.join("frames.csv");
-    if frames_csv.is_file() {
-        let spec = TableSpec { time: Some((0, TimeUnit::Ns)), ..TableSpec::default() };
-        let f = read_table(&frames_csv, &spec)?;
-        let mut all: Vec<View> = f.t_ns.iter().map(|&t_ns| View { t_ns, corners: Vec::new() }).collect();
-        for v in views {
-            match all.binary_search_by_key(&v.t_ns, |w| w.t_ns) {
-                Ok(k) => all[k] = v,
-                Err(_) => {
-                    return Err(InputError::file(
-                        &path,
-                        format!("corners stamped {} ns, a frame {} does not list", v.t_ns, frames_csv.display()),
-                    ))
-                }
-            }
-        }
-        views = all;
-    }
-    if views.iter().all(|v| v.corners.is_empty()) {
-        return Err(InputError::file(&path, "holds no corners"));
-    }
-    Ok(views)
-}
-
-/// The views as `corners.csv` text (the layout [`read_corners`] reads; for a
-/// checkerboard `tag_id` is 0) and as `frames.csv` text (every view's stamp).
-pub fn corners_csv(views: &[View], target: &Target) -> (String, String) {
-    use std::fmt::Write;
-    let mut corners = String::from("timestamp_ns,tag_id,corner_idx,u_px,v_px,x_m,y_m,z_m\n");
-    let mut frames = String::from("#timestamp [ns]\n");
-    for v in views {
-        let _ = writeln!(frames, "{}", v.t_ns);
-        for c in &v.corners {
-            let (tag, idx) = match target {
-                Target::AprilGrid { .. } => (c.id / 4, c.id % 4),
-                Target::Checkerboard { .. } => (0, c.id),
-            };
-            let _ = writeln!(
-                corners,
-                "{},{tag},{idx},{:.4},{:.4},{:.6},{:.6},{:.6}",
-                v.t_ns, c.uv[0], c.uv[1], c.target[0], c.target[1], c.target[2]
-            );
-        }
-    }
-    (corners, frames)
-}
-
-/// `dir/camN/sensor.yaml` read for N = 0, 1, … until one is missing, with their paths.
-fn camera_sensors(dir: &Path) -> Result<Vec<(PathBuf, crate::io::asl::CameraSensor)>, InputError> {
-    let mut out = Vec::new();
-    while let Some(p) = Some(dir.join(format!("cam{}", out.len())).join("sensor.yaml")).filter(|p| p.is_file()) {
-        let s = crate::io::asl::read_camera_sensor(&p)?;
-        out.push((p, s));
-    }
-    Ok(out)
-}
-
-/// The intrinsics of `dir/camN/sensor.yaml` (or `dir/mav0/camN/…`) for N = 0, 1, … until one is missing.
-pub fn read_intrinsics(dir: &Path) -> Result<Vec<tumble_factors::camera::CameraModel>, InputError> {
-    let base = if dir.join("mav0").is_dir() { dir.join("mav0") } else { dir.to_path_buf() };
-    let out: Vec<_> = camera_sensors(&base)?.into_iter().map(|(_, s)| s.0).collect();
-    if out.is_empty() {
-        return Err(InputError::file(dir, "holds no cam0/sensor.yaml with intrinsics"));
-    }
-    Ok(out)
-}
-
-/// A rig calibration as `tumble calibrate-rig` wrote it, read back for use:
-/// each camera's model and pose in the IMU frame, and the time offset.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RigCalibration {
-    /// The folder it was read from.
-    pub dir: PathBuf,
-    /// Per camera (`cam0`, `cam1`, …): model, IMU ← camera, image size \[px\].
-    pub cameras: Vec<(tumble_factors::camera::CameraModel, nalgebra::Isometry3<f64>, Option<[u32; 2]>)>,
-    /// Kalibr's `timeshift_cam_imu` \[s\]: `t_imu = t_cam + shift`.
-    pub time_offset_s: f64,
-}
-
-#[derive(Deserialize)]
-struct RigJsonOffset {
-    timeshift_cam_imu_s: f64,
-}
-
-impl RigCalibration {
-    /// Read `dir/camN/sensor.yaml` (N = 0, 1, … while present) and `dir/rig.json`'s time offset.
-    pub fn read(dir: &Path) -> Result<RigCalibration, InputError> {
-        let json = dir.join("rig.json");
-        let text = crate::io::tokens::read_text(&json)?;
-        let offset: RigJsonOffset = serde_json::from_str(&text)
-            .map_err(|e| InputError::at(&json, e.line(), format!("not a rig.json of `tumble calibrate-rig`: {e}")))?;
         let mut cameras = Vec::new();
-        for (p, (model, t_bs, resolution, _)) in camera_sensors(dir)? {
-            let t_bs = t_bs.ok_or_else(|| InputError::file(&p, "has no T_BS: the camera's pose in the IMU frame"))?;
-            cameras.push((model, t_bs, resolution));
+        let mut sources = vec![target_path.to_path_buf(), ds.imu.sources.first().cloned().unwrap_or_default()];
+        for k in 0..8 {
+            let name = format!("cam{k}");
+            let dir = ds.root.join(&name);
+            let camera = ds.cameras.iter().find(|c| c.name == name);
+            let resolution = camera.and_then(|c| c.resolution).or(options.resolution);
+            let csv = dir.join("corners.csv");
+            if csv.is_file() {
+                let views = read_corners(&dir, &target)?;
+                sources.push(csv.clone());
+                cameras.push(CameraCorners { name, path: csv, views, resolution, detection: None });
+            } else if let Some(cam) = camera.filter(|c| !c.frames.is_empty()) {
+                progress(&format!("{name}: no corners.csv; detecting the target in {} images", cam.frames.len()));
+                let (views, stats) = detect_corners(&cam.frames, &target, progress)?;
+                progress(&format!("{name}: {}", stats.line()));
+                let data_csv = dir.join("data.csv");
+                if let Some(r) = resolution.filter(|r| *r != stats.image_size) {
+                    return Err(InputError::file(
+                        &data_csv,
+                        format!(
+                            "the images are {}×{} px, but the camera's size is given as {}×{}",
+                            stats.image_size[0], stats.image_size[1], r[0], r[1]
+                        ),
+                    )
+                    .with_hint("check camN/sensor.yaml's resolution or --resolution"));
+                }
+                let resolution = Some(stats.image_size);
+                sources.push(data_csv.clone());
+                cameras.push(CameraCorners { name, path: data_csv, views, resolution, detection: Some(stats) });
+            }
         }
         if cameras.is_empty() {
+            return Err(InputError::file(&ds.root, "has neither camN/corners.csv nor camN/data.csv with images")
+                .with_hint("give the target's corners as camN/corners.csv, or the images with camN/data.csv (detected with the `opencv` feature)"));
+        }
+        if let Some(c) = cameras.iter().find(|c| c.resolution.is_none()) {
             return Err(InputError::file(
-                dir,
-                "holds no cam0/sensor.yaml: not an output folder of `tumble calibrate-rig`",
-            ));
+                &c.path,
+                "the camera's image size is unknown (no sensor.yaml with resolution)",
+            )
+            .with_hint("give --resolution WIDTHxHEIGHT"));
         }
-        if !offset.timeshift_cam_imu_s.is_finite() {
-            return Err(InputError::file(&json, "timeshift_cam_imu_s is not a finite number"));
-        }
-        Ok(RigCalibration { dir: dir.to_path_buf(), cameras, time_offset_s: offset.timeshift_cam_imu_s })
+        let imu = ds.imu.calibrated(calibration.as_ref());
+        Ok(RigInput { imu, imu_t0_ns: ds.imu.t0_ns, noise: params, noise_source, cameras, target, sources })
     }
+}
 
-    /// Put the rig's cameras into a dataset in place of its own `camN/sensor.yaml`
-    /// figures (intrinsics, distortion, image size, and `T_BS` through the
-    /// dataset's `imu0` `T_BS`, so that the IMU ← camera transform is the rig's).
-    /// Refuses a dataset with more cameras than the rig.
-    pub fn apply_to(&self, ds: &mut crate::io::asl::AslDataset) -> Result<(), InputError> {
-        if ds.cameras.len() > self.cameras.len() {
-            return Err(InputError::file(
-                &self.dir,
-                format!(
-                    "calibrates {} camera(s), the dataset {} has {}",
-                    self.cameras.len(),
-                    ds.root.display(),
-                    ds.cameras.len()
-                ),
-            ));
-        }
-        let body_imu = ds.imu_sensor.as_ref().map_or_else(nalgebra::Isometry3::identity, |s| s.t_bs);
-        for (cam, (model, t_bc, resolution)) in ds.cameras.iter_mut().zip(&self.cameras) {
-            cam.model = Some(*model);
-            cam.t_bs = Some(body_imu * t_bc);
-            cam.resolution = resolution.or(cam.resolution);
-        }
-        Ok(())
-    }
+#[cfg(feature = "opencv")]
+fn detect_corners(
+    frames: &[(i64, PathBuf)],
+    target: &Target,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<View>, DetectionStats), InputError> {
+    detect::detect_camera(frames, target, progress)
+}
+
+#[cfg(not(feature = "opencv"))]
+fn detect_corners(
+    frames: &[(i64, PathBuf)],
+    _target: &Target,
+    _progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<View>, DetectionStats), InputError> {
+    let folder = frames.first().and_then(|(_, p)| p.parent()).unwrap_or(Path::new("."));
+    Err(InputError::file(folder, "has images but no corners.csv, and this tumble was built without the target detector")
+        .with_hint("build with `--features opencv` (after `apt-get install libopencv-dev clang libclang-dev`), or give camN/corners.csv"))
 }

@@ -5,7 +5,8 @@
 
 use super::{rotation, BiasSample, CornerResidual, RigInput, RigResult};
 use crate::error::OutputError;
-use crate::export::{kalibr_camera_blocks, RigCamera};
+use crate::io::kalibr::camchain_blocks;
+use crate::model::target::RigCamera;
 use crate::plot::{write_panels, ScatterChart, Series, AXIS_COLORS};
 use nalgebra::Isometry3;
 use plotters::style::RGBColor;
@@ -84,7 +85,7 @@ pub fn rig_cameras(rig: &RigResult) -> Vec<RigCamera> {
 /// Kalibr's `camchain-imucam.yaml`.
 pub fn camchain_yaml(rig: &RigResult) -> String {
     let mut s = String::from("# Written by tumble calibrate-rig (Kalibr's keys: T_cam_imu maps IMU-frame points into the camera frame; t_imu = t_cam + timeshift_cam_imu).\n");
-    s.push_str(&kalibr_camera_blocks(&rig_cameras(rig), rig.time_offset_s, false));
+    s.push_str(&camchain_blocks(&rig_cameras(rig), rig.time_offset_s, false));
     s
 }
 
@@ -365,7 +366,7 @@ pub fn write_rig(rig: &RigResult, input: &RigInput, out: &Path) -> Result<Vec<Pa
         let mut md = String::from("# Rig calibration\n\n");
         for cam in &input.cameras {
             if let Some(stats) = &cam.detection {
-                let (corners, frames) = super::input::corners_csv(&cam.views, &input.target);
+                let (corners, frames) = crate::io::target::corners_csv(&cam.views, &input.target);
                 put(&format!("{}/corners.csv", cam.name), corners)?;
                 put(&format!("{}/frames.csv", cam.name), frames)?;
                 let _ = writeln!(md, "- {} corners detected in the images: {}", cam.name, stats.line());

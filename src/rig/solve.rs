@@ -5,9 +5,8 @@
 
 use super::init::{self, RateIntegral};
 use super::{CameraResult, CornerResidual, Reprojection, RigInput, RigOptions, RigResult};
-use crate::vio::geometry::{gravity_aligned, parts, pose, preintegrate};
-use crate::vio::input::to_nalgebra;
-use crate::vio::residual_at;
+use crate::model::geometry::to_nalgebra;
+use crate::model::geometry::{gravity_aligned, parts, pose, preintegrate};
 use nalgebra::{Matrix3, SVector, Vector1, Vector3, Vector6};
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -356,7 +355,7 @@ pub fn calibrate_rig(
         let mut chi2 = 0.0;
         for &i in &imu_factors {
             let e = &graph.entries()[i];
-            if let Some(mut r) = residual_at(&solution, e.factor.as_ref()) {
+            if let Some(mut r) = solution.residual_of(e.factor.as_ref()) {
                 e.noise.whiten(&mut r);
                 chi2 += r.norm_squared();
             }
@@ -422,7 +421,7 @@ pub fn calibrate_rig(
             resolution: cam.resolution.unwrap_or([0, 0]),
             rate_hz: {
                 let mut d: Vec<f64> = cam.views.windows(2).map(|w| (w[1].t_ns - w[0].t_ns) as f64 * 1e-9).collect();
-                init::median(&mut d).map_or(f64::NAN, |m| 1.0 / m)
+                crate::model::numeric::median(&mut d).map_or(f64::NAN, |m| 1.0 / m)
             },
             t_bc: to_nalgebra(e),
             rotation_sigma,
@@ -503,14 +502,14 @@ fn reprojection(
     let mut norms = Vec::new();
     let mut out = Vec::new();
     for ce in corners.iter().filter(|ce| ce.camera == c) {
-        let Some(r) = residual_at(values, graph.entries()[ce.entry].factor.as_ref()) else { continue };
+        let Some(r) = values.residual_of(graph.entries()[ce.entry].factor.as_ref()) else { continue };
         norms.push(r.norm());
         out.push((frames[ce.frame].t, ce.uv, [r[0], r[1]]));
     }
     let n = norms.len();
     let rms = (norms.iter().map(|x| x * x).sum::<f64>() / n.max(1) as f64).sqrt();
     let outliers = norms.iter().filter(|&&x| x > HUBER_SIGMAS * sigma).count();
-    let median = init::median(&mut norms).unwrap_or(f64::NAN);
+    let median = crate::model::numeric::median(&mut norms).unwrap_or(f64::NAN);
     (
         Reprojection {
             corners: n,

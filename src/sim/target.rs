@@ -17,8 +17,8 @@
 use super::camera::CameraSettings;
 use super::motion::{Loop, Motion};
 use super::{simulate_imu, Effects, ImuModel, TriadModel};
-use crate::rig::{CameraCorners, Corner, RigInput, Target, View};
-use crate::vio::ImuData;
+use crate::model::target::{CameraCorners, Corner, RigInput, Target, View};
+use crate::model::ImuData;
 use nalgebra::{Isometry3, Matrix3, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

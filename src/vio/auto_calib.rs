@@ -6,7 +6,7 @@
 //! identity. The window's data add information `A − I` there; a direction is
 //! *determined* when the data carry at least 3× the prior's information along
 //! it — its posterior σ below
-//! [`DETERMINED_FRACTION`](crate::calib::observability::DETERMINED_FRACTION)
+//! [`DETERMINED_FRACTION`](crate::model::DETERMINED_FRACTION)
 //! (½) of the prior's, the rule of the IMU calibration's misalignments —, an
 //! eigenvalue of `A` of at least `1/½² = 4`. The other directions are *held*:
 //! their prior information is raised [`HOLD_INFORMATION`]-fold, so they stay
@@ -15,7 +15,7 @@
 //! information the window has gathered only grows through its
 //! marginalization prior, and holding it later would pull it back).
 
-use crate::calib::observability::DETERMINED_FRACTION;
+use crate::model::DETERMINED_FRACTION;
 use nalgebra::DMatrix;
 
 /// How much more information than the prior's holds an undetermined

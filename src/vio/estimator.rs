@@ -5,7 +5,6 @@
 //! (`vio/marginalization.rs`) — that predicts each frame
 //! with the IMU, decides what it is, solves, and recovers from failures.
 
-use super::geometry::{parts, pose, preintegrate};
 use super::keyframe::{is_keyframe, FeatureMotion, FrameObs};
 use super::landmarks::{observation_factors, pixel_noise, Added, Landmarks};
 use super::marginalization::{marginalize_oldest, window_graph, ResidualTally};
@@ -15,6 +14,7 @@ use super::rest::RestDetector;
 use super::startup::Startup;
 use super::window::{add_rest_prior, InitState, State, StateValues, Window};
 use super::{Init, VioError, VioInput, VioOptions};
+use crate::model::geometry::{parts, pose, preintegrate};
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use std::time::Instant;
 use tumble_solvers::sophus_lie::Isometry3F64;

@@ -33,9 +33,9 @@
 //! 1e-4 m/s); with the default simulated noise, over 1.5 s of a one-minute
 //! walk, tilt within 1.5° and velocity within 0.12 m/s.
 
-use super::geometry::{gravity_aligned, parts, preintegrate};
 use super::VioError;
 use super::{VioInput, VioOptions};
+use crate::model::geometry::{gravity_aligned, parts, preintegrate};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use std::collections::BTreeMap;
 use tumble_factors::imu_preint::Preintegrated;
@@ -431,7 +431,8 @@ impl tumble_solvers::Factor for CoplanarityFactor {
         let mut lambda = 0.0;
         for _ in 0..2 {
             let mut miss: Vec<f64> = dirs.iter().map(|d| d.dot(&t).abs()).collect();
-            let limit = (3.0 * crate::rig::init::median(&mut miss.clone()).unwrap_or(0.0)).max(PAIR_ANGLE_FLOOR_RAD);
+            let limit =
+                (3.0 * crate::model::numeric::median(&mut miss.clone()).unwrap_or(0.0)).max(PAIR_ANGLE_FLOOR_RAD);
             miss.iter_mut().for_each(|m| *m = if *m <= limit { 1.0 } else { 0.0 });
             let (l, tn) = smallest(&mut dirs.iter().zip(&miss).filter(|(_, &k)| k > 0.0).map(|(d, _)| d));
             lambda = l;

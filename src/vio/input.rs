@@ -2,12 +2,13 @@
 //! observations, the camera model and extrinsic, optional ground truth — from a
 //! simulation, an ASL folder with a `tracks.csv`, or EqVIO's processed CSV.
 
-use super::geometry::pose;
 use super::ImuNoise;
 use super::VioError;
-use crate::calib::model::ImuCalibration;
 use crate::io::trajectory::read_asl_groundtruth;
 use crate::io::{asl, trajectory::Trajectory};
+use crate::model::calibration::ImuCalibration;
+use crate::model::geometry::pose;
+use crate::model::ImuData;
 use crate::InputError;
 use nalgebra::{UnitQuaternion, Vector3};
 use std::collections::BTreeMap;
@@ -15,29 +16,6 @@ use std::path::Path;
 use tumble_factors::camera::{CameraModel, Distortion};
 use tumble_factors::imu_preint::PreintegrationParams;
 use tumble_solvers::sophus_lie::Isometry3F64;
-
-/// Calibrated IMU samples in the body (IMU) frame.
-#[derive(Debug, Clone, Default)]
-pub struct ImuData {
-    /// Sample times \[s\] (input time axis, strictly increasing).
-    pub t: Vec<f64>,
-    /// Angular rate \[rad/s\].
-    pub gyro: Vec<Vector3<f64>>,
-    /// Specific force \[m/s²\].
-    pub acc: Vec<Vector3<f64>>,
-}
-
-impl ImuData {
-    /// Specific force and rate at `t` \[s\], interpolated linearly between the
-    /// samples around it (held at the ends); at least two samples.
-    pub fn at(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
-        let n = self.t.len();
-        let j = self.t.partition_point(|&s| s <= t).clamp(1, n.max(2) - 1);
-        let (t0, t1) = (self.t[j - 1], self.t[j]);
-        let w = if t1 > t0 { ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
-        (self.acc[j - 1] * (1.0 - w) + self.acc[j] * w, self.gyro[j - 1] * (1.0 - w) + self.gyro[j] * w)
-    }
-}
 
 /// One camera frame: its time and the features seen, as `(track id, pixel [u, v])`.
 #[derive(Debug, Clone, Default)]
@@ -194,8 +172,8 @@ impl VioInput {
     /// Distance between the two cameras \[m\], with a second one.
     pub fn stereo_baseline_m(&self) -> Option<f64> {
         let st = self.stereo.as_ref()?;
-        let (_, t0) = super::geometry::parts(&self.body_from_camera);
-        let (_, t1) = super::geometry::parts(&st.body_from_camera);
+        let (_, t0) = crate::model::geometry::parts(&self.body_from_camera);
+        let (_, t1) = crate::model::geometry::parts(&st.body_from_camera);
         Some((t1 - t0).norm())
     }
 
@@ -291,7 +269,7 @@ impl VioInput {
         let imu_t_bs = ds.imu_sensor.as_ref().map(|s| s.t_bs);
         let body_from = |cam_t_bs: Option<nalgebra::Isometry3<f64>>| {
             let cam_t_bs = cam_t_bs.unwrap_or_else(nalgebra::Isometry3::identity);
-            iso(&imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs))
+            crate::model::geometry::from_nalgebra(&imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs))
         };
         let body_from_camera = body_from(cam.t_bs);
         let stereo_path = cam_dir.join("tracks_cam1.csv");
@@ -317,8 +295,8 @@ impl VioInput {
                 Some(StereoCamera { camera, body_from_camera: body_from(cam1.t_bs), features })
             }
         };
-        let imu = imu_data(&ds.imu, calibration);
-        let noise = sensor_noise(&ds);
+        let imu = ds.imu.calibrated(calibration);
+        let noise = ds.imu_noise();
         let images = cam.frames.clone();
         Ok(with_calibrated_offsets(
             VioInput {
@@ -368,20 +346,6 @@ fn check_track_stamps(
     }
 }
 
-/// `T_BC` as the solver's SE(3).
-pub(crate) fn iso(t: &nalgebra::Isometry3<f64>) -> Isometry3F64 {
-    pose(t.rotation.to_rotation_matrix().matrix(), &t.translation.vector)
-}
-
-/// The solver's SE(3) as nalgebra's (the inverse of [`iso`]).
-pub(crate) fn to_nalgebra(x: &Isometry3F64) -> nalgebra::Isometry3<f64> {
-    let (r, t) = super::geometry::parts(x);
-    nalgebra::Isometry3::from_parts(
-        nalgebra::Translation3::from(t),
-        nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
-    )
-}
-
 /// `input` with the calibration's time offsets applied, when it has any.
 pub(crate) fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuCalibration>) -> VioInput {
     match calibration.and_then(|c| c.time_offsets) {
@@ -390,34 +354,6 @@ pub(crate) fn with_calibrated_offsets(input: VioInput, calibration: Option<&ImuC
         }
         _ => input,
     }
-}
-
-/// The noise figures of the dataset's `imu0/sensor.yaml`, when it gives all four.
-pub(crate) fn sensor_noise(ds: &asl::AslDataset) -> Option<ImuNoise> {
-    let s = ds.imu_sensor.as_ref()?;
-    Some(ImuNoise {
-        accelerometer_noise_density: s.accelerometer_noise_density?,
-        accelerometer_random_walk: s.accelerometer_random_walk?,
-        gyroscope_noise_density: s.gyroscope_noise_density?,
-        gyroscope_random_walk: s.gyroscope_random_walk?,
-        axes: s.axes,
-    })
-}
-
-/// Calibrated IMU samples from a recording (eq. 16 and the audit's effects when a calibration is given).
-pub fn imu_data(rec: &crate::io::ImuRecording, calibration: Option<&ImuCalibration>) -> ImuData {
-    let corr = calibration.and_then(|c| c.corrector());
-    let (gyro, acc) = match corr {
-        Some(c) => {
-            let (a, g) = c.correct_recording(rec);
-            (g.into_iter().map(Vector3::from).collect(), a.into_iter().map(Vector3::from).collect())
-        }
-        None => (
-            rec.gyro.iter().map(|g| Vector3::from(*g)).collect(),
-            rec.accel.iter().map(|a| Vector3::from(*a)).collect(),
-        ),
-    };
-    ImuData { t: rec.t.clone(), gyro, acc }
 }
 
 /// Read EqVIO's processed CSV (`row_type,t_abs,…`; IMU rows in rad/s and m/s²,

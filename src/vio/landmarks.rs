@@ -4,9 +4,9 @@
 //! removal after a solve, and the reprojection factors they add to a graph.
 //! A landmark is an inverse depth `L(lid)` along its anchor observation's ray.
 
-use super::geometry::{parts, triangulate};
 use super::online_calib::{body_at_exposure, body_from_camera, exposure_motion, EXTRINSIC, TIME_OFFSET};
 use super::{VioInput, VioOptions};
+use crate::model::geometry::{parts, triangulate};
 use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
@@ -192,22 +192,6 @@ pub(crate) fn observation_factors(
         out.push((f, true));
     }
     out
-}
-
-/// A factor's variables in `values`, in its keys' order (None when one is missing).
-fn vars_of<'a>(values: &'a Values, f: &dyn Factor) -> Option<Vec<&'a dyn tumble_solvers::DynVariable>> {
-    f.keys().iter().map(|&k| values.get_dyn(k).ok()).collect()
-}
-
-/// A factor's raw residual at `values` (None when a variable is missing or
-/// the factor cannot be evaluated).
-pub(crate) fn residual_at(values: &Values, f: &dyn Factor) -> Option<nalgebra::DVector<f64>> {
-    f.residual(tumble_solvers::Vars::new(&vars_of(values, f)?)).ok()
-}
-
-/// A factor's raw residual and Jacobians at `values` (None as [`residual_at`]).
-pub(crate) fn linearize_at(values: &Values, f: &dyn Factor) -> Option<tumble_solvers::Linearization> {
-    f.linearize(tumble_solvers::Vars::new(&vars_of(values, f)?)).ok()
 }
 
 /// The reprojection noise and robust loss of the window's observations.
@@ -458,7 +442,7 @@ impl Landmarks {
             let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
             for o in &tr.obs {
                 for (f, stereo) in observation_factors(input, opts, a, lid, o) {
-                    if residual_at(values, f.as_ref()).is_none_or(|r| r.norm() > limit) {
+                    if values.residual_of(f.as_ref()).is_none_or(|r| r.norm() > limit) {
                         drop_obs.push((id, o.sid, stereo));
                     }
                 }
@@ -519,8 +503,9 @@ impl Landmarks {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vio::geometry::pose;
-    use crate::vio::{Frame, ImuData};
+    use crate::model::geometry::pose;
+    use crate::model::ImuData;
+    use crate::vio::Frame;
 
     fn input(frames: Vec<Frame>) -> VioInput {
         VioInput::for_tests(ImuData::default(), frames)

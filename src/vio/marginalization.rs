@@ -3,7 +3,7 @@
 //! marginalization), and their measurement residuals are counted once, at the
 //! estimate they had when they left ([`ResidualTally`], for the audit).
 
-use super::landmarks::{observation_factors, residual_at, Landmarks};
+use super::landmarks::{observation_factors, Landmarks};
 use super::window::Window;
 use super::{VioInput, VioOptions};
 use tumble_solvers::{marginalize, Graph, SolveError, B, L, V, X};
@@ -106,7 +106,7 @@ fn count_leaving(
         let mut counted = false;
         for o in &tr.obs {
             for (f, _) in observation_factors(input, opts, a, lid, o) {
-                if let Some(r) = residual_at(&window.values, f.as_ref()) {
+                if let Some(r) = window.values.residual_of(f.as_ref()) {
                     // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
                     t.reprojection_chi2 += r.norm_squared() / (2.0 * opts.noise.pixel_sigma.powi(2));
                     t.reprojection_rows += 2;

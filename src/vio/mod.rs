@@ -34,15 +34,17 @@
 //! assert!(last.position.iter().all(|x| x.is_finite()));
 //! ```
 
+mod aids;
+mod auto_calib;
+mod open;
+pub use aids::{TargetTruth, TARGET_TRUTH_MAX_RMS_PX, TARGET_TRUTH_MIN_CORNERS};
+pub use open::{OpenError, OpenedVio, VioSource};
 pub mod estimator;
 pub mod frontend;
-pub mod geometry;
 pub mod init;
 pub mod input;
 mod keyframe;
 mod landmarks;
-pub(crate) use landmarks::residual_at;
-mod auto_calib;
 mod marginalization;
 mod online_calib;
 pub use online_calib::{AutoOutcome, CameraEstimate};
@@ -57,7 +59,7 @@ mod window;
 
 pub use crate::io::ImuNoise;
 pub use estimator::{run, run_observed, Estimator, FrameEstimate, VioResult, WindowState};
-pub use input::{read_eqvio, Frame, ImuData, NoiseSource, StereoCamera, VioInput};
+pub use input::{read_eqvio, Frame, NoiseSource, StereoCamera, VioInput};
 pub use marginalization::ResidualTally;
 pub use options::{
     CameraCalibrationOptions, Estimate, GateOptions, Init, InitOptions, NoiseOptions, RestOptions, SolverOptions,

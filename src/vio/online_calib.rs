@@ -13,10 +13,10 @@
 //! others (`super::auto_calib`).
 
 use super::auto_calib::HeldDirections;
-use super::geometry::{parts, pose};
-use super::ImuData;
 use super::{Estimate, VioInput, VioOptions};
-use crate::calib::observability::DETERMINED_FRACTION;
+use crate::model::geometry::{parts, pose};
+use crate::model::ImuData;
+use crate::model::DETERMINED_FRACTION;
 use nalgebra::{DMatrix, Matrix3, Vector1, Vector3, Vector6};
 use tumble_factors::reprojection::ExposureMotion;
 use tumble_factors::PriorFactor;

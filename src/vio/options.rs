@@ -181,7 +181,7 @@ pub enum Estimate {
     /// would free it, the window's covariance of the parameter — as if it
     /// were free under its plain prior — is compared with the prior's; a
     /// direction is determined when its σ there is below
-    /// [`DETERMINED_FRACTION`](crate::calib::observability::DETERMINED_FRACTION)
+    /// [`DETERMINED_FRACTION`](crate::model::DETERMINED_FRACTION)
     /// of the prior's (the data carry at least 3× the prior's information,
     /// the rule of the IMU calibration's misalignments). The parameter is
     /// free once one direction is; the others stay at the given value under

@@ -1,12 +1,12 @@
 //! Results of a VIO run: the summary figures (drift, IMU-only drift, ATE, bias
 //! errors, speed) and the files `tumble vio` writes.
 
-use super::geometry::preintegrate;
 use super::VioError;
 use super::{FrameEstimate, VioInput, VioOptions, VioResult};
 use crate::eval::{evaluate, write_report, Alignment, EvalOptions, Evaluation};
 use crate::io::biases::{write_biases, BiasTrack};
 use crate::io::trajectory::{write_tum, Trajectory};
+use crate::model::geometry::preintegrate;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
 use std::path::{Path, PathBuf};

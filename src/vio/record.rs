@@ -108,7 +108,7 @@ impl<'a> Recorder<'a> {
             warnings: Vec::new(),
         };
         let cam = &input.camera;
-        let (r_bc, p) = super::geometry::parts(&input.body_from_camera);
+        let (r_bc, p) = crate::model::geometry::parts(&input.body_from_camera);
         let q = UnitQuaternion::from_matrix(&r_bc);
         let result = (|| {
             r.rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;

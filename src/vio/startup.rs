@@ -2,9 +2,9 @@
 //! a static start (gyro bias, gravity direction, zero velocity from a window
 //! at rest), or the closed-form solution over a moving start ([`super::init`]).
 
-use super::geometry::{gravity_aligned, pose};
 use super::window::InitState;
 use super::{Init, VioInput, VioOptions};
+use crate::model::geometry::{gravity_aligned, pose};
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 
 /// Velocity prior σ of a start in motion (the closed form's accuracy) \[m/s\].
@@ -203,7 +203,8 @@ pub(crate) fn initialize_static(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vio::{Frame, ImuData};
+    use crate::model::ImuData;
+    use crate::vio::Frame;
     use nalgebra::Matrix3;
 
     /// `seconds` of IMU at 200 Hz, tilted 10° about x, gyro bias 0.01 rad/s, with `wiggle` rad/s after 1 s.
@@ -226,7 +227,7 @@ mod tests {
         let mut warnings = Vec::new();
         let (s, _) = initialize_static(&inp, &mut opts, &mut warnings, 1.4).unwrap();
         assert!((s.b[3] - 0.01).abs() < 1e-12 && s.b[4].abs() < 1e-12);
-        let (r, _) = crate::vio::geometry::parts(&s.x);
+        let (r, _) = crate::model::geometry::parts(&s.x);
         let up = r.transpose() * Vector3::z();
         assert!((up - Matrix3::identity().column(2)).norm() > 0.1, "tilted");
         assert!((r * (inp.imu.acc[0] / 9.81) - Vector3::z()).norm() < 1e-9);

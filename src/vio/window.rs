@@ -3,9 +3,9 @@
 //! states, the first state's prior (or, once it is gone, the marginalization
 //! prior), and the zero-velocity pseudo-measurements of states at rest.
 
-use super::geometry::parts;
 use super::landmarks::RayTally;
 use super::VioOptions;
+use crate::model::geometry::parts;
 use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector3, Vector6};
 use std::sync::Arc;
 use tumble_factors::imu_preint::Preintegrated;
@@ -389,7 +389,7 @@ impl Window {
         let (pim, scale) = self.links.get(i)?;
         let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
         let keys = [X(a), V(a), B(a), X(b), V(b)];
-        let lin = super::landmarks::linearize_at(&self.values, &ImuFactor::new(keys, pim.clone(), self.gravity))?;
+        let lin = self.values.linearize(&ImuFactor::new(keys, pim.clone(), self.gravity))?;
         let cols: usize = lin.jacobians.iter().map(|j| j.ncols()).sum();
         let mut j = DMatrix::zeros(9, cols);
         let mut c0 = 0;
@@ -471,7 +471,7 @@ pub(crate) fn add_rest_prior(g: &mut Graph, sid: u64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vio::geometry::pose;
+    use crate::model::geometry::pose;
     use tumble_factors::imu_preint::PreintegrationParams;
     use tumble_solvers::{LmOptions, Optimizer};
 

@@ -8,7 +8,7 @@
 //! of threads. The cut depends on the structure only, never on the threads.
 
 use super::{dot, Structure, System};
-use crate::linearized::Linearized;
+use crate::linearized::{split_at_ends, Linearized};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -79,18 +79,6 @@ pub(super) fn chunk_index(ranges: &[Range<usize>], n: usize) -> Vec<usize> {
         idx[r.clone()].fill(c);
     }
     idx
-}
-
-/// Split `s` into consecutive slices ending at `ends` (ascending, the last = `s.len()`).
-pub(crate) fn split_at_ends<T>(mut s: &mut [T], ends: impl Iterator<Item = usize>) -> Vec<&mut [T]> {
-    let (mut out, mut start) = (Vec::new(), 0);
-    for end in ends {
-        let (a, b) = std::mem::take(&mut s).split_at_mut(end - start);
-        out.push(a);
-        s = b;
-        start = end;
-    }
-    out
 }
 
 /// Stored entries of pair block (big, small) of the upper triangle.

@@ -13,10 +13,11 @@
 //! chunk's part of H and g in ascending eliminated-block order — the order the
 //! one-thread loop applies them in.
 
-use super::assembly::{chunk_index, cut, split_at_ends, CHUNKS, PARALLEL_MIN_FACTORS};
+use super::assembly::{chunk_index, cut, CHUNKS, PARALLEL_MIN_FACTORS};
 use super::{ReduceBuffers, Structure};
 use crate::error::SolveError;
 use crate::linear::System;
+use crate::linearized::split_at_ends;
 use rayon::prelude::*;
 use std::ops::Range;
 

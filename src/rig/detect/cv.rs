@@ -54,7 +54,7 @@ impl Detector {
     }
 
     fn detect(&self, target: &Target, path: &std::path::Path) -> ImageResult {
-        let img = crate::vio::frontend::read_gray(path).map_err(|e| InputError::file(path, e.0))?;
+        let img = crate::io::image::read_gray(path)?;
         let size = [img.cols().max(0) as u32, img.rows().max(0) as u32];
         let found = match *target {
             Target::AprilGrid { spacing, .. } => {

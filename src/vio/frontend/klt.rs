@@ -273,20 +273,9 @@ impl KltTracker {
     }
 }
 
-/// Read one image as 8-bit grayscale, with errors naming the file.
-pub fn read_gray(path: &Path) -> Result<Mat, FrontendError> {
-    let img = imgcodecs::imread(path, imgcodecs::IMREAD_GRAYSCALE).map_err(|e| format!("{}: {e}", path.display()))?;
-    if img.empty() {
-        return Err(
-            format!("{}: not a readable image (missing, truncated or an unknown format)", path.display()).into()
-        );
-    }
-    Ok(img)
-}
-
-/// [`read_gray`], refusing an image whose size is not `resolution` `[w, h]` (from sensor.yaml) when given.
+/// [`read_gray`](crate::io::image::read_gray), refusing an image whose size is not `resolution` `[w, h]` (from sensor.yaml) when given.
 fn read_sized(path: &Path, resolution: Option<[u32; 2]>) -> Result<Mat, FrontendError> {
-    let img = read_gray(path)?;
+    let img = crate::io::image::read_gray(path)?;
     if let Some([w, h]) = resolution {
         if img.cols() as u32 != w || img.rows() as u32 != h {
             return Err(format!(
@@ -331,7 +320,7 @@ pub fn draw_tracks(
     history: usize,
     out: &Path,
 ) -> Result<(), FrontendError> {
-    let gray = read_gray(image)?;
+    let gray = crate::io::image::read_gray(image)?;
     let mut img = Mat::default();
     imgproc::cvt_color(&gray, &mut img, imgproc::COLOR_GRAY2BGR, 0).map_err(cv)?;
     let mut times: Vec<i64> = obs.iter().map(|o| o.0).filter(|&t| t <= t_ns).collect();

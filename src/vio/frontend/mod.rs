@@ -13,7 +13,7 @@
 #[cfg(feature = "opencv")]
 mod klt;
 #[cfg(feature = "opencv")]
-pub use klt::{draw_tracks, match_stereo, moving_window, read_gray, track_camera, track_stereo, KltTracker};
+pub use klt::{draw_tracks, match_stereo, moving_window, track_camera, track_stereo, KltTracker};
 
 use crate::error::InputError;
 #[cfg(doc)]

@@ -1,5 +1,6 @@
-//! Small geometric helpers of the VIO: poses, gravity alignment, IMU
-//! preintegration over a time interval, multi-view triangulation.
+//! Small geometric helpers every estimator shares: poses and their
+//! conversions, gravity alignment, IMU preintegration over a time interval,
+//! multi-view triangulation.
 
 use super::ImuData;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
@@ -31,6 +32,20 @@ pub fn gravity_aligned(f: &Vector3<f64>) -> Matrix3<f64> {
         return if c > 0.0 { Matrix3::identity() } else { so3_exp(&Vector3::new(std::f64::consts::PI, 0.0, 0.0)) };
     }
     so3_exp(&(axis / s * s.atan2(c)))
+}
+
+/// nalgebra's isometry as the solver's SE(3).
+pub fn from_nalgebra(t: &nalgebra::Isometry3<f64>) -> Isometry3F64 {
+    pose(t.rotation.to_rotation_matrix().matrix(), &t.translation.vector)
+}
+
+/// The solver's SE(3) as nalgebra's (the inverse of [`from_nalgebra`]).
+pub fn to_nalgebra(x: &Isometry3F64) -> nalgebra::Isometry3<f64> {
+    let (r, t) = parts(x);
+    nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::from(t),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
+    )
 }
 
 /// Preintegrate the IMU over `[ta, tb]` \[s\] at bias `(b_a, b_g)`. Zero-order

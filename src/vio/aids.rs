@@ -3,12 +3,14 @@
 //! and estimator settings matching a simulation. They sit above both `sim`
 //! and `vio`, so that neither imports the other.
 
-use crate::calib::model::ImuCalibration;
 use crate::io::{asl, trajectory::Trajectory};
+use crate::model::calibration::ImuCalibration;
+use crate::model::geometry::{from_nalgebra, to_nalgebra};
+use crate::model::ImuData;
 use crate::sim::{CameraSettings, SimConfig, Simulation, TriadModel};
-use crate::vio::input::{imu_data, iso, sensor_noise, to_nalgebra, with_calibrated_offsets};
+use crate::vio::input::with_calibrated_offsets;
 use crate::vio::VioError;
-use crate::vio::{Frame, ImuData, ImuNoise, StereoCamera, VioInput, VioOptions};
+use crate::vio::{Frame, ImuNoise, StereoCamera, VioInput, VioOptions};
 use crate::InputError;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -47,7 +49,7 @@ impl VioInput {
             Some(cal) => {
                 let ma = cal.accel.inverse_matrix().ok_or("calibration: singular accelerometer T K")?;
                 let mg = cal.gyro.inverse_matrix().ok_or("calibration: singular gyro T K")?;
-                (ma, mg, cal.accel.b, cal.gyro.b, imu_data(&sim.imu.to_recording(), Some(cal)))
+                (ma, mg, cal.accel.b, cal.gyro.b, sim.imu.to_recording().calibrated(Some(cal)))
             }
             None => {
                 let (ma, mg) = (inv(&m.accel)?, inv(&m.gyro)?);
@@ -68,7 +70,7 @@ impl VioInput {
             frames[fi].features.push((o.track, o.uv));
         }
         let cs = &sim.config.camera;
-        let body_from_camera = iso(&cs.body_from_camera());
+        let body_from_camera = from_nalgebra(&cs.body_from_camera());
         let stereo = simulated_stereo(cs, &frames, &tracks.stereo);
         let mut gt = Trajectory::default();
         let (mut bga, mut baa) = (Vec::new(), Vec::new());
@@ -134,10 +136,10 @@ impl VioInput {
                 _ => frames.push(Frame { t: o.t, features: vec![(o.track, o.uv)] }),
             }
         }
-        let body_from_camera = iso(&cam.body_from_camera());
+        let body_from_camera = from_nalgebra(&cam.body_from_camera());
         let stereo = simulated_stereo(&cam, &frames, &tracks.stereo);
-        let imu = imu_data(&ds.imu, calibration);
-        let noise = sensor_noise(&ds);
+        let imu = ds.imu.calibrated(calibration);
+        let noise = ds.imu_noise();
         Ok(with_calibrated_offsets(
             VioInput {
                 name: format!("{} (simulated camera)", ds.root.display()),
@@ -195,7 +197,7 @@ impl VioInput {
         target: &std::path::Path,
         cameras: &std::path::Path,
     ) -> Result<(VioInput, TargetTruth), VioError> {
-        let target = crate::rig::input::Target::read(target)?;
+        let target = crate::model::target::Target::read(target)?;
         let ds = asl::read_asl(dir, &Default::default())?;
         let cams = asl::read_asl(cameras, &Default::default())?;
         let cam = cams.cameras.first().ok_or_else(|| InputError::file(cameras, "holds no cam0/sensor.yaml"))?;
@@ -205,9 +207,9 @@ impl VioInput {
             * cam.t_bs.ok_or_else(|| {
                 InputError::file(cameras, "cam0/sensor.yaml has no T_BS (its pose in the body frame)")
             })?;
-        let views = crate::rig::input::read_corners(&ds.root.join("cam0"), &target)?;
+        let views = crate::io::target::read_corners(&ds.root.join("cam0"), &target)?;
         let t0 = ds.imu.t0_ns;
-        let imu = imu_data(&ds.imu, None);
+        let imu = ds.imu.calibrated(None);
         let mut frames = Vec::new();
         let mut poses: Vec<(i64, nalgebra::Isometry3<f64>)> = Vec::new();
         let mut rms = Vec::new();
@@ -254,10 +256,10 @@ impl VioInput {
             imu,
             frames,
             camera: model,
-            body_from_camera: iso(&t_bc),
+            body_from_camera: from_nalgebra(&t_bc),
             stereo: None,
             groundtruth: Some(gt),
-            noise: sensor_noise(&cams),
+            noise: cams.imu_noise(),
             images: Vec::new(),
         };
         Ok((input, truth))
@@ -281,7 +283,11 @@ fn simulated_stereo(
             features[k].push((o.track, o.uv));
         }
     }
-    Some(StereoCamera { camera: cam.model(), body_from_camera: iso(&cam.body_from_second_camera()), features })
+    Some(StereoCamera {
+        camera: cam.model(),
+        body_from_camera: from_nalgebra(&cam.body_from_second_camera()),
+        features,
+    })
 }
 
 impl VioInput {
@@ -298,7 +304,7 @@ impl VioInput {
         shift: f64,
     ) -> (VioInput, tumble_solvers::sophus_lie::Isometry3F64) {
         let correct = self.body_from_camera;
-        let delta = crate::vio::geometry::pose(
+        let delta = crate::model::geometry::pose(
             UnitQuaternion::from_scaled_axis(rotation).to_rotation_matrix().matrix(),
             &translation,
         );

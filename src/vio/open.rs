@@ -1,0 +1,130 @@
+//! Opening a VIO input by its path, as `tumble vio`, `audit --vio` and `run`
+//! take it: an EqVIO `.csv`, or an ASL folder with feature tracks, with
+//! images (tracked by the visual frontend into a folder), or with only an
+//! IMU and a ground truth (seen by a simulated camera, an evaluation aid).
+//!
+
+use super::frontend::{track_asl_into, FrontendOptions, FrontendReport};
+use super::VioInput;
+use crate::calib::ImuCalibration;
+use crate::InputError;
+use std::path::{Path, PathBuf};
+
+/// How to open a VIO input (see [`VioInput::open`]).
+#[derive(Debug, Clone, Default)]
+pub struct VioSource {
+    /// Calibration applied to every IMU sample (eq. 16; not to EqVIO files,
+    /// which hold corrected samples).
+    pub calibration: Option<ImuCalibration>,
+    /// Ground truth (ASL CSV) instead of the folder's own.
+    pub groundtruth: Option<PathBuf>,
+    /// No camera data: a simulated camera (EuRoC cam0 model) flies the ground
+    /// truth, with this seed for its landmarks and noise.
+    pub simulate_camera: Option<u64>,
+    /// Ignore `cam0/tracks_cam1.csv` (initialize from cam0 alone).
+    pub mono: bool,
+    /// The frontend's settings, used when cam0 has images but no `tracks.csv`.
+    pub frontend: FrontendOptions,
+    /// Where the frontend writes its tracks and figures.
+    pub frontend_dir: PathBuf,
+    /// A rig calibration (`tumble calibrate-rig`) whose cameras and time
+    /// offset replace the dataset's own.
+    pub rig: Option<crate::io::target::RigCalibration>,
+}
+
+/// An opened VIO input and what opening it did.
+#[derive(Debug)]
+pub struct OpenedVio {
+    /// The input.
+    pub input: VioInput,
+    /// What was chosen (e.g. the simulated camera), for the user.
+    pub notes: Vec<String>,
+    /// What was ignored or doubtful, for the user.
+    pub warnings: Vec<String>,
+    /// The frontend's report when it tracked the images.
+    pub frontend: Option<FrontendReport>,
+}
+
+/// Why a VIO input cannot be opened.
+#[derive(Debug, thiserror::Error)]
+pub enum OpenError {
+    /// A file of the input is wrong (named with its line).
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// The visual frontend failed on the images.
+    #[error("{}: the visual frontend failed: {message}", path.display())]
+    Frontend {
+        /// The dataset.
+        path: PathBuf,
+        /// What failed.
+        message: String,
+    },
+}
+
+impl VioInput {
+    /// Open `path` as a VIO input, as `tumble vio` takes it; `progress(done, total)`
+    /// follows the frontend when it has to track images.
+    pub fn open(
+        path: &Path,
+        source: &VioSource,
+        progress: &mut dyn FnMut(usize, usize),
+    ) -> Result<OpenedVio, OpenError> {
+        let cal = source.calibration.as_ref();
+        let is_csv = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv"));
+        let (mut notes, mut warnings, mut frontend) = (Vec::new(), Vec::new(), None);
+        let mut input = if is_csv {
+            if cal.is_some() {
+                warnings.push("EqVIO files hold corrected samples already; the calibration is not applied".to_string());
+            }
+            crate::vio::read_eqvio(path, source.groundtruth.as_deref())?
+        } else {
+            let mut ds = crate::io::asl::read_asl(path, &Default::default())?;
+            if let Some(rig) = &source.rig {
+                rig.apply_to(&mut ds)?;
+                notes.push(format!(
+                    "cameras: the rig calibration of {} (time offset {:.3} ms)",
+                    rig.dir.display(),
+                    rig.time_offset_s * 1e3
+                ));
+            }
+            if let Some(seed) = source.simulate_camera {
+                let cam = crate::sim::CameraSettings::default();
+                notes.push(format!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}"));
+                VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?
+            } else {
+                let needs_frontend = ds
+                    .cameras
+                    .first()
+                    .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
+                let tracks = if needs_frontend {
+                    let (obs, report) = track_asl_into(&ds, 0, &source.frontend, &source.frontend_dir, progress)
+                        .map_err(|e| OpenError::Frontend { path: ds.root.clone(), message: e.0 })?;
+                    frontend = Some(report);
+                    Some(obs)
+                } else {
+                    None
+                };
+                // Stereo matches next to cam0's tracks.csv (not with the tracks
+                // the frontend just made).
+                let stereo = !source.mono && tracks.is_none();
+                let input = VioInput::from_dataset(ds, cal, tracks, stereo)?;
+                match &source.rig {
+                    Some(rig) if rig.time_offset_s != 0.0 => input.with_time_offsets(rig.time_offset_s, 0.0),
+                    _ => input,
+                }
+            }
+        };
+        if let (Some(rig), true) = (&source.rig, is_csv) {
+            warnings.push(format!(
+                "{}: not applied (an EqVIO file carries normalized features of its own camera)",
+                rig.dir.display()
+            ));
+        }
+        if let (Some(g), false) = (&source.groundtruth, is_csv) {
+            input.groundtruth = Some(crate::io::trajectory::read_asl_groundtruth(g)?);
+        }
+        input.name = path.display().to_string();
+        warnings.extend(input.limit_to_imu()?);
+        Ok(OpenedVio { input, notes, warnings, frontend })
+    }
+}
