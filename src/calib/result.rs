@@ -47,6 +47,13 @@ impl fmt::Display for CalibError {
 
 impl std::error::Error for CalibError {}
 
+impl CalibError {
+    /// An error on recording `rec` with an optional hint (no diagnosis).
+    pub(crate) fn new(rec: &crate::io::ImuRecording, message: String, hint: Option<&str>) -> CalibError {
+        CalibError { source: rec.source_name(), message, hint: hint.map(str::to_string), diagnosis: None }
+    }
+}
+
 /// One detected static interval in the output.
 #[derive(Debug, Clone, Serialize)]
 pub struct StaticInterval {

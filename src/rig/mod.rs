@@ -36,6 +36,39 @@ use crate::error::OptionError;
 use nalgebra::{Isometry3, Matrix3, Vector3};
 use tumble_factors::camera::{CameraModel, DistortionKind};
 
+/// Why a rig calibration could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum RigError {
+    /// An option cannot work.
+    #[error(transparent)]
+    Options(#[from] OptionError),
+    /// The recording cannot calibrate the rig (too few frames, views or
+    /// rotation; the message says which).
+    #[error("{0}")]
+    Recording(String),
+    /// The solver failed on the joint graph or its covariances.
+    #[error("{what}: {source}")]
+    Solver {
+        /// What was being solved.
+        what: &'static str,
+        /// The solver's error.
+        #[source]
+        source: tumble_solvers::SolveError,
+    },
+    /// A noise model could not be built from the IMU's figures.
+    #[error("the IMU's noise: {0}")]
+    Noise(#[from] tumble_solvers::NoiseError),
+    /// A bug: something every stage before guarantees was missing.
+    #[error("internal error of the rig calibration: {0}")]
+    Internal(String),
+}
+
+impl From<tumble_solvers::ValueError> for RigError {
+    fn from(e: tumble_solvers::ValueError) -> RigError {
+        RigError::Internal(e.to_string())
+    }
+}
+
 /// Options of a rig calibration (validated by [`RigOptions::validate`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RigOptions {

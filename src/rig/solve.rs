@@ -4,17 +4,21 @@
 //! bias), and the covariances of the calibration parameters.
 
 use super::init::{self, RateIntegral};
-use super::{CameraResult, CornerResidual, Reprojection, RigInput, RigOptions, RigResult};
+use super::{CameraResult, CornerResidual, Reprojection, RigError, RigInput, RigOptions, RigResult};
 use crate::model::geometry::to_nalgebra;
 use crate::model::geometry::{gravity_aligned, parts, pose, preintegrate};
 use nalgebra::{Matrix3, SVector, Vector1, Vector3, Vector6};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::Instant;
+use tumble_factors::camera::CameraModel;
+use tumble_factors::imu_preint::PreintegrationParams;
 use tumble_factors::rig::{TargetCorner, TargetGauge};
 use tumble_factors::{bias_random_walk_axes, ImuFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
-use tumble_solvers::{AutoDiff, Graph, Huber, Key, LmOptions, NoiseModel, Optimizer, Values, B, V, X};
+use tumble_solvers::{
+    AutoDiff, Graph, Huber, Key, LmOptions, NoiseModel, Optimizer, RobustCovariances, Values, B, V, X,
+};
 
 /// The target's pose `T_WT`.
 const TARGET: Key = Key::new('t', 0);
@@ -64,34 +68,88 @@ fn mean_rotation(rs: &[Matrix3<f64>]) -> Matrix3<f64> {
 }
 
 /// Calibrate the rig; `progress` receives one line per stage.
-pub fn calibrate_rig(
-    input: &RigInput,
-    o: &RigOptions,
-    progress: &mut dyn FnMut(&str),
-) -> Result<RigResult, crate::error::OutputError> {
-    o.validate().map_err(|e| e.to_string())?;
+///
+/// The stages, each a function below: every camera alone (intrinsics, view
+/// poses) → the coarse time offset (rotation rates) → the frames → the
+/// camera–IMU rotations (hand–eye) → the starting state (gravity, world,
+/// body poses, velocities) → the joint solve → the results and their verdicts.
+pub fn calibrate_rig(input: &RigInput, o: &RigOptions, progress: &mut dyn FnMut(&str)) -> Result<RigResult, RigError> {
+    o.validate()?;
     let t0 = Instant::now();
-    let kind = o.distortion;
-    let mut notes = Vec::new();
     let n_cams = input.cameras.len();
     if input.imu.t.len() < 2 || n_cams == 0 {
-        return Err(format!("{} IMU sample(s) and {n_cams} camera(s): nothing to calibrate", input.imu.t.len()).into());
+        return Err(RigError::Recording(format!(
+            "{} IMU sample(s) and {n_cams} camera(s): nothing to calibrate",
+            input.imu.t.len()
+        )));
     }
-    let stamp = |t_ns: i64| (t_ns - input.imu_t0_ns) as f64 * 1e-9;
+    let mut notes = Vec::new();
     // Samples are point samples at their stamps: the midpoint rule, not a
     // zero-order hold, which would lag the IMU by half a sample period
     // (2.5 ms at 200 Hz) and bias the time offset by as much.
     let mut params = input.noise;
     params.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
+    let (starts, view_poses) = calibrate_cameras(input, o, progress)?;
+    let gyro_integral = RateIntegral::new(&input.imu);
+    let coarse = coarse_time_offset(input, o, &view_poses[0], &gyro_integral, &mut notes, progress);
+    let td0 = coarse.as_ref().map_or(0.0, |c| c.0);
+    let frames = frame_slots(input, &view_poses, td0)?;
+    let (r_bc, hand_eye_rms) = hand_eye_rotations(input, &frames, &view_poses, params, progress)?;
+    let state = starting_state(input, &frames, &view_poses, &r_bc)?;
+    let start = Start { cameras: starts, frames, hand_eye_rms, state, params };
+    let joint = joint_solve(input, o, &start, &gyro_integral, progress)?;
+    let mut rig = results(input, o, &start, &joint, coarse, notes)?;
+    rig.seconds = t0.elapsed().as_secs_f64();
+    note_weak_parameters(&mut rig);
+    Ok(rig)
+}
 
-    // 1. Each camera alone: intrinsics, then every view's target pose.
+/// What the stages before the joint solve found.
+struct Start {
+    /// Each camera's intrinsics and pixel σ from its views alone.
+    cameras: Vec<init::CameraStart>,
+    /// The frames of the estimate.
+    frames: Vec<FrameSlot>,
+    /// Each camera's hand–eye residual \[rad\].
+    hand_eye_rms: Vec<f64>,
+    /// The state the joint solve starts from.
+    state: StartingState,
+    /// The IMU's preintegration parameters (midpoint rule).
+    params: PreintegrationParams,
+}
+
+/// The joint solve's starting values.
+struct StartingState {
+    /// Each camera's `T_BC`.
+    t_bc: Vec<Isometry3F64>,
+    /// The target's pose in the gravity-aligned world.
+    t_wt: Isometry3F64,
+    /// Body poses at the frames.
+    body: Vec<Isometry3F64>,
+    /// Velocities at the frames \[m/s\].
+    vel: Vec<Vector3<f64>>,
+}
+
+/// Seconds on the IMU's axis of a stamp \[ns\].
+fn stamp(input: &RigInput, t_ns: i64) -> f64 {
+    (t_ns - input.imu_t0_ns) as f64 * 1e-9
+}
+
+/// Stage 1: each camera alone — its intrinsics (or the ones held), every
+/// view's target pose, and the view poses the gyro cannot reach set aside.
+type CameraStarts = (Vec<init::CameraStart>, Vec<Vec<Option<Isometry3F64>>>);
+fn calibrate_cameras(
+    input: &RigInput,
+    o: &RigOptions,
+    progress: &mut dyn FnMut(&str),
+) -> Result<CameraStarts, RigError> {
     let mut starts = Vec::new();
     let mut view_poses: Vec<Vec<Option<Isometry3F64>>> = Vec::new();
     for cam in &input.cameras {
         progress(&format!("{}: intrinsics from {} views (Zhang, then bundle adjustment)", cam.name, cam.views.len()));
         let fixed = o.fixed_intrinsics.get(starts.len());
-        let s = init::calibrate_camera(&cam.views, kind, fixed, cam.resolution)
-            .map_err(|e| format!("{}: {e}", cam.path.display()))?;
+        let s = init::calibrate_camera(&cam.views, o.distortion, fixed, cam.resolution)
+            .map_err(|e| RigError::Recording(format!("{}: {e}", cam.path.display())))?;
         progress(&format!(
             "{}: fx {:.1} fy {:.1} cx {:.1} cy {:.1} px, corner σ {:.3} px",
             cam.name, s.model.fx, s.model.fy, s.model.cx, s.model.cy, s.pixel_sigma
@@ -99,51 +157,66 @@ pub fn calibrate_rig(
         view_poses.push(cam.views.iter().map(|v| init::view_pose(v, &s.model)).collect());
         starts.push(s);
     }
-
     for (c, cam) in input.cameras.iter().enumerate() {
-        let stamps: Vec<f64> = cam.views.iter().map(|v| stamp(v.t_ns)).collect();
+        let stamps: Vec<f64> = cam.views.iter().map(|v| stamp(input, v.t_ns)).collect();
         let n =
             init::drop_unreachable_poses(&stamps, &mut view_poses[c], &input.imu, RATE_MAX_GAP_S, o.max_time_offset_s);
         if n > 0 {
             progress(&format!("{}: {n} view pose(s) the gyro cannot reach from their neighbours set aside", cam.name));
         }
     }
+    Ok((starts, view_poses))
+}
 
-    // 2. Coarse time offset from the rotation rates of the first camera.
-    let gyro_integral = RateIntegral::new(&input.imu);
-    let coarse = if o.estimate_time_offset {
-        let stamps: Vec<f64> = input.cameras[0].views.iter().map(|v| stamp(v.t_ns)).collect();
-        let rates = init::camera_rates(&stamps, &view_poses[0], RATE_MAX_GAP_S);
-        let c = init::correlate_time_offset(&rates, &gyro_integral, o.max_time_offset_s);
-        match &c {
-            Some((tau, r, _)) => {
-                progress(&format!("coarse time offset {:.1} ms (rate correlation {r:.3})", tau * 1e3));
-                if *r < WEAK_RATE_CORRELATION {
-                    notes.push(format!(
-                        "the camera's and the gyro's rotation rates correlate only {r:.2} at the best shift ({:.1} ms): \
-                         the coarse time offset is doubtful (views too noisy, or too little rotation)",
-                        tau * 1e3
-                    ));
-                }
-            }
-            None => {
-                notes.push("too little rotation to correlate camera and gyro rates: the time offset starts at 0".into())
+/// Stage 2: the coarse time offset from the first camera's rotation rates
+/// against the gyro's (None when not estimated or nothing to correlate, with a note).
+fn coarse_time_offset(
+    input: &RigInput,
+    o: &RigOptions,
+    view_poses: &[Option<Isometry3F64>],
+    gyro: &RateIntegral,
+    notes: &mut Vec<String>,
+    progress: &mut dyn FnMut(&str),
+) -> Option<init::OffsetSearch> {
+    if !o.estimate_time_offset {
+        return None;
+    }
+    let stamps: Vec<f64> = input.cameras[0].views.iter().map(|v| stamp(input, v.t_ns)).collect();
+    let rates = init::camera_rates(&stamps, view_poses, RATE_MAX_GAP_S);
+    let c = init::correlate_time_offset(&rates, gyro, o.max_time_offset_s);
+    match &c {
+        Some((tau, r, _)) => {
+            progress(&format!("coarse time offset {:.1} ms (rate correlation {r:.3})", tau * 1e3));
+            if *r < WEAK_RATE_CORRELATION {
+                notes.push(format!(
+                    "the camera's and the gyro's rotation rates correlate only {r:.2} at the best shift ({:.1} ms): \
+                     the coarse time offset is doubtful (views too noisy, or too little rotation)",
+                    tau * 1e3
+                ));
             }
         }
-        c
-    } else {
-        None
-    };
-    let td0 = coarse.as_ref().map_or(0.0, |c| c.0);
+        None => {
+            notes.push("too little rotation to correlate camera and gyro rates: the time offset starts at 0".into())
+        }
+    }
+    c
+}
 
-    // 3. Frames: every stamp at which some camera has a pose, on the IMU axis.
+/// Stage 3: the frames — every stamp at which some camera has a pose, on the
+/// IMU's axis shifted by the coarse offset `td0`, within the IMU's span.
+fn frame_slots(
+    input: &RigInput,
+    view_poses: &[Vec<Option<Isometry3F64>>],
+    td0: f64,
+) -> Result<Vec<FrameSlot>, RigError> {
+    let n_cams = input.cameras.len();
     let mut slots: BTreeMap<i64, FrameSlot> = BTreeMap::new();
     for (c, cam) in input.cameras.iter().enumerate() {
         for (i, v) in cam.views.iter().enumerate() {
             if view_poses[c][i].is_some() {
                 let s = slots
                     .entry(v.t_ns)
-                    .or_insert_with(|| FrameSlot { t: stamp(v.t_ns) + td0, views: vec![None; n_cams] });
+                    .or_insert_with(|| FrameSlot { t: stamp(input, v.t_ns) + td0, views: vec![None; n_cams] });
                 s.views[c] = Some(i);
             }
         }
@@ -151,16 +224,27 @@ pub fn calibrate_rig(
     let (t_first, t_last) = (input.imu.t.first().copied().unwrap_or(0.0), input.imu.t.last().copied().unwrap_or(0.0));
     let frames: Vec<FrameSlot> = slots.into_values().filter(|s| s.t > t_first && s.t < t_last).collect();
     if frames.len() < 10 {
-        return Err(
-            format!("{} frame(s) with the target in view within the IMU's time span: too few", frames.len()).into()
-        );
+        return Err(RigError::Recording(format!(
+            "{} frame(s) with the target in view within the IMU's time span: too few",
+            frames.len()
+        )));
     }
+    Ok(frames)
+}
 
-    // 4. Camera–IMU rotations by hand–eye.
+/// Stage 4: each camera's rotation in the IMU frame by hand–eye over pairs
+/// [`HAND_EYE_SPAN`] frames apart, with its residual \[rad\].
+fn hand_eye_rotations(
+    input: &RigInput,
+    frames: &[FrameSlot],
+    view_poses: &[Vec<Option<Isometry3F64>>],
+    params: PreintegrationParams,
+    progress: &mut dyn FnMut(&str),
+) -> Result<(Vec<Matrix3<f64>>, Vec<f64>), RigError> {
     let zero_bias = (Vector3::zeros(), Vector3::zeros());
     let mut r_bc = Vec::new();
     let mut hand_eye_rms = Vec::new();
-    for c in 0..n_cams {
+    for (c, cam) in input.cameras.iter().enumerate() {
         let seen: Vec<usize> = (0..frames.len()).filter(|&k| frames[k].views[c].is_some()).collect();
         let mut pairs = Vec::new();
         for w in seen.windows(HAND_EYE_SPAN + 1) {
@@ -177,19 +261,29 @@ pub fn calibrate_rig(
             }
         }
         let (r, rms) = init::hand_eye_rotation(&pairs).ok_or_else(|| {
-            format!("{}: too few views to relate the camera's rotation to the gyro's", input.cameras[c].name)
+            RigError::Recording(format!("{}: too few views to relate the camera's rotation to the gyro's", cam.name))
         })?;
         progress(&format!(
             "{}: camera–IMU rotation from {} hand–eye pairs, residual {:.2}°",
-            input.cameras[c].name,
+            cam.name,
             pairs.len(),
             rms.to_degrees()
         ));
         r_bc.push(r);
         hand_eye_rms.push(rms);
     }
+    Ok((r_bc, hand_eye_rms))
+}
 
-    // 5. Gravity in the target frame, the world, body poses, velocities.
+/// Stage 5: gravity in the target frame (the first camera's views and the
+/// accelerometer), the world it sets, the other cameras' `T_BC` from the
+/// frames both see, and the body poses and velocities at the frames.
+fn starting_state(
+    input: &RigInput,
+    frames: &[FrameSlot],
+    view_poses: &[Vec<Option<Isometry3F64>>],
+    r_bc: &[Matrix3<f64>],
+) -> Result<StartingState, RigError> {
     let body_in_target = |k: usize, c: usize, t_bc: &Isometry3F64| -> Option<Isometry3F64> {
         let t_ct = view_poses[c][frames[k].views[c]?]?;
         Some(t_ct.inverse().group_mul(t_bc.inverse()))
@@ -204,10 +298,8 @@ pub fn calibrate_rig(
         }
     }
     let g_t = g_sum / g_n.max(1) as f64;
-    let r_wt = gravity_aligned(&(-g_t));
-    let t_wt = pose(&r_wt, &Vector3::zeros());
-    // Cameras after the first: T_BC from the frames both see.
-    for c in 1..n_cams {
+    let t_wt = pose(&gravity_aligned(&(-g_t)), &Vector3::zeros());
+    for c in 1..input.cameras.len() {
         let (mut rs, mut ts) = (Vec::new(), Vec::new());
         for (k, f) in frames.iter().enumerate() {
             if let (Some(tb), Some(v)) = (body_in_target(k, 0, &t_bc[0]), f.views[c]) {
@@ -225,7 +317,9 @@ pub fn calibrate_rig(
     }
     let mut body: Vec<Isometry3F64> = Vec::with_capacity(frames.len());
     for k in 0..frames.len() {
-        let tb = (0..n_cams).find_map(|c| body_in_target(k, c, &t_bc[c])).ok_or("a frame without a pose (internal)")?;
+        let tb = (0..input.cameras.len())
+            .find_map(|c| body_in_target(k, c, &t_bc[c]))
+            .ok_or_else(|| RigError::Internal("a frame without a pose".into()))?;
         body.push(t_wt.group_mul(tb));
     }
     let position = |k: usize| parts(&body[k]).1;
@@ -239,107 +333,165 @@ pub fn calibrate_rig(
             }
         })
         .collect();
+    Ok(StartingState { t_bc, t_wt, body, vel })
+}
 
-    // 6. The joint graph, solved twice.
+/// What the joint solve found.
+struct Joint {
+    /// The solution.
+    solution: Values,
+    /// The last pass's graph, and its corner factors.
+    graph: Graph,
+    corners: Vec<CornerEntry>,
+    /// The covariances of `cov_keys`: the noise model's and the cluster-robust.
+    cov: RobustCovariances,
+    cov_keys: Vec<Key>,
+    /// Frames per cluster of the robust covariance.
+    block: usize,
+    /// Every pass converged; iterations over all passes.
+    converged: bool,
+    iterations: usize,
+    /// Whitened χ²/dof of the IMU factors.
+    imu_chi2_per_dof: f64,
+}
+
+/// Stage 6 (one pass): the joint graph — IMU preintegration and bias walks
+/// between frames (preintegrated at `solution`'s biases), the target's
+/// gauge, every corner with its rate at exposure less `gyro_bias` — with the
+/// corners' entries and the IMU factors' indices.
+fn joint_graph(
+    input: &RigInput,
+    start: &Start,
+    solution: &Values,
+    gyro_integral: &RateIntegral,
+    gyro_bias: &[Vector3<f64>],
+    gravity: Vector3<f64>,
+) -> Result<(Graph, Vec<CornerEntry>, Vec<usize>), RigError> {
+    let frames = &start.frames;
+    let params = start.params;
+    let mut graph = Graph::new();
+    let mut corners = Vec::new();
+    let mut imu_factors = Vec::new();
+    for k in 0..frames.len() - 1 {
+        let b = solution.get::<Vector6<f64>>(B(k as u64))?;
+        let bias = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
+        let (pim, _) = preintegrate(&input.imu, frames[k].t, frames[k + 1].t, bias, params);
+        let (i, j) = (k as u64, k as u64 + 1);
+        let f = ImuFactor::new([X(i), V(i), B(i), X(j), V(j)], Arc::new(pim), gravity);
+        let noise = f.noise_model()?;
+        imu_factors.push(graph.add(f, noise));
+        let dt = frames[k + 1].t - frames[k].t;
+        let (f, noise) = bias_random_walk_axes(B(i), B(j), params.accel_walk().into(), params.gyro_walk().into(), dt)?;
+        graph.add(f, noise);
+    }
+    graph.add(AutoDiff::new(TargetGauge::new(TARGET, &start.state.t_wt)), NoiseModel::isotropic(4, GAUGE_SIGMA)?);
+    for (k, f) in frames.iter().enumerate() {
+        let rate = gyro_integral.mean(f.t - 2.5e-3, f.t + 2.5e-3).unwrap_or_else(Vector3::zeros) - gyro_bias[k];
+        for (c, cam) in input.cameras.iter().enumerate() {
+            let Some(v) = f.views[c] else { continue };
+            let noise = NoiseModel::isotropic(2, start.cameras[c].pixel_sigma)?;
+            for corner in &cam.views[v].corners {
+                let keys = [X(k as u64), V(k as u64), TARGET, extrinsic(c), intrinsics(c), OFFSET];
+                corners.push(CornerEntry { entry: graph.len(), camera: c, frame: k, uv: corner.uv });
+                let kind = start.cameras[c].model.distortion.kind();
+                graph.add_robust(
+                    TargetCorner::new(keys, corner.target, corner.uv, rate.into(), kind),
+                    noise.clone(),
+                    Huber(HUBER_SIGMAS),
+                );
+            }
+        }
+    }
+    Ok((graph, corners, imu_factors))
+}
+
+/// The joint solve's starting values (intrinsics held where given, the
+/// time offset held at 0 when not estimated).
+fn starting_values(o: &RigOptions, start: &Start) -> Values {
+    let s = &start.state;
     let mut values = Values::new();
-    for k in 0..frames.len() {
-        values.insert(X(k as u64), body[k]);
-        values.insert(V(k as u64), vel[k]);
+    for k in 0..start.frames.len() {
+        values.insert(X(k as u64), s.body[k]);
+        values.insert(V(k as u64), s.vel[k]);
         values.insert(B(k as u64), Vector6::<f64>::zeros());
     }
-    values.insert(TARGET, t_wt);
+    values.insert(TARGET, s.t_wt);
     values.insert(OFFSET, Vector1::new(0.0));
     if !o.estimate_time_offset {
         values.set_constant(OFFSET, true);
     }
-    for c in 0..n_cams {
-        values.insert(extrinsic(c), t_bc[c]);
-        values.insert(intrinsics(c), SVector::<f64, 8>::from_column_slice(&starts[c].model.to_vector()));
+    for (c, cam) in start.cameras.iter().enumerate() {
+        values.insert(extrinsic(c), s.t_bc[c]);
+        values.insert(intrinsics(c), SVector::<f64, 8>::from_column_slice(&cam.model.to_vector()));
         values.set_constant(intrinsics(c), c < o.fixed_intrinsics.len());
     }
+    values
+}
+
+/// A factor's cluster for the robust covariance: the block of `block` frames
+/// of the first frame whose pose, velocity or bias it holds (a corner's
+/// frame, an IMU link's or a bias walk's first); the target's gauge is a
+/// cluster of its own.
+fn clusters(graph: &Graph, block: usize) -> Vec<Option<usize>> {
+    graph
+        .entries()
+        .iter()
+        .map(|e| {
+            let per_frame = |k: &&Key| [X(0), V(0), B(0)].iter().any(|f| f.chr() == k.chr());
+            let frame = e.factor.keys().iter().find(per_frame)?;
+            Some(frame.index() as usize / block)
+        })
+        .collect()
+}
+
+/// Whitened χ² per degree of freedom of the IMU factors `imu_factors` at `values`.
+fn imu_chi2_per_dof(graph: &Graph, values: &Values, imu_factors: &[usize]) -> f64 {
+    let mut chi2 = 0.0;
+    for &i in imu_factors {
+        let e = &graph.entries()[i];
+        if let Some(mut r) = values.residual_of(e.factor.as_ref()) {
+            e.noise.whiten(&mut r);
+            chi2 += r.norm_squared();
+        }
+    }
+    chi2 / (9 * imu_factors.len()).max(1) as f64
+}
+
+/// Stage 6: the joint solve, twice when the corners' rates need the gyro
+/// bias the first solve found; the covariances of the calibration.
+///
+/// The σ are the larger of the noise model's and the cluster-robust one over
+/// blocks of √N consecutive frames (batch means' rule): corner errors that
+/// depend on the view's geometry (the detector's bias, the target's
+/// flatness, the lens model's misfit) are alike in neighbouring views, and
+/// the corners' scatter alone does not show them.
+fn joint_solve(
+    input: &RigInput,
+    o: &RigOptions,
+    start: &Start,
+    gyro_integral: &RateIntegral,
+    progress: &mut dyn FnMut(&str),
+) -> Result<Joint, RigError> {
+    let frames = &start.frames;
+    let n_cams = input.cameras.len();
     let gravity = Vector3::new(0.0, 0.0, -o.gravity);
     let mut gyro_bias: Vec<Vector3<f64>> = vec![Vector3::zeros(); frames.len()];
-    let mut converged = true;
-    let mut iterations = 0;
-    let mut imu_chi2_per_dof = f64::NAN;
-    let mut solution = values.clone();
-    let mut cov = None;
-    let mut graph = Graph::new();
-    let mut corners: Vec<CornerEntry> = Vec::new();
-    // The σ: the larger of the noise model's and the cluster-robust one over
-    // blocks of √N consecutive frames (batch means' rule): corner errors that
-    // depend on the view's geometry (the detector's bias, the target's
-    // flatness, the lens model's misfit) are alike in neighbouring views, and
-    // the corners' scatter alone does not show them.
     let block = ((frames.len() as f64).sqrt().floor() as usize).max(1);
-    let mut cov_keys: Vec<Key> = Vec::new();
+    let mut keys: Vec<Key> = Vec::new();
+    let mut solution = starting_values(o, start);
+    let (mut converged, mut iterations) = (true, 0);
+    let mut last = None;
     for pass in 0..2 {
         progress(&format!("joint solve {}: {} frames, {} cameras", pass + 1, frames.len(), n_cams));
-        graph = Graph::new();
-        corners.clear();
-        let mut imu_factors = Vec::new();
-        for k in 0..frames.len() - 1 {
-            let b = solution.get::<Vector6<f64>>(B(k as u64)).map_err(|e| e.to_string())?;
-            let bias = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
-            let (pim, _) = preintegrate(&input.imu, frames[k].t, frames[k + 1].t, bias, params);
-            let (i, j) = (k as u64, k as u64 + 1);
-            let f = ImuFactor::new([X(i), V(i), B(i), X(j), V(j)], Arc::new(pim), gravity);
-            let noise = f.noise_model().map_err(|e| e.to_string())?;
-            imu_factors.push(graph.add(f, noise));
-            let p = &params;
-            let dt = frames[k + 1].t - frames[k].t;
-            let (f, noise) = bias_random_walk_axes(B(i), B(j), p.accel_walk().into(), p.gyro_walk().into(), dt)
-                .map_err(|e| e.to_string())?;
-            graph.add(f, noise);
-        }
-        graph.add(
-            AutoDiff::new(TargetGauge::new(TARGET, &t_wt)),
-            NoiseModel::isotropic(4, GAUGE_SIGMA).map_err(|e| e.to_string())?,
-        );
-        for (k, f) in frames.iter().enumerate() {
-            let rate = gyro_integral.mean(f.t - 2.5e-3, f.t + 2.5e-3).unwrap_or_else(Vector3::zeros) - gyro_bias[k];
-            for (c, cam) in input.cameras.iter().enumerate() {
-                let Some(v) = f.views[c] else { continue };
-                let noise = NoiseModel::isotropic(2, starts[c].pixel_sigma).map_err(|e| e.to_string())?;
-                for corner in &cam.views[v].corners {
-                    let keys = [X(k as u64), V(k as u64), TARGET, extrinsic(c), intrinsics(c), OFFSET];
-                    corners.push(CornerEntry { entry: graph.len(), camera: c, frame: k, uv: corner.uv });
-                    graph.add_robust(
-                        TargetCorner::new(
-                            keys,
-                            corner.target,
-                            corner.uv,
-                            rate.into(),
-                            starts[c].model.distortion.kind(),
-                        ),
-                        noise.clone(),
-                        Huber(HUBER_SIGMAS),
-                    );
-                }
-            }
-        }
+        let (graph, corners, imu_factors) = joint_graph(input, start, &solution, gyro_integral, &gyro_bias, gravity)?;
         let opts = LmOptions { max_iterations: o.max_iterations, log_iterations: false, ..LmOptions::default() };
-        let mut keys: Vec<Key> =
-            (0..n_cams).flat_map(|c| [extrinsic(c), intrinsics(c)]).filter(|k| !solution.is_constant(*k)).collect();
+        keys = (0..n_cams).flat_map(|c| [extrinsic(c), intrinsics(c)]).filter(|k| !solution.is_constant(*k)).collect();
         if o.estimate_time_offset {
             keys.push(OFFSET);
         }
-        cov_keys.clone_from(&keys);
-        // A factor's block: that of the first frame whose pose, velocity or
-        // bias it holds (a corner's frame, an IMU link's or a bias walk's
-        // first); the target's gauge is a cluster of its own.
-        let clusters: Vec<Option<usize>> = graph
-            .entries()
-            .iter()
-            .map(|e| {
-                let per_frame = |k: &&Key| [X(0), V(0), B(0)].iter().any(|f| f.chr() == k.chr());
-                let frame = e.factor.keys().iter().find(per_frame)?;
-                Some(frame.index() as usize / block)
-            })
-            .collect();
         let (sol, summary, c) = Optimizer::new(opts)
-            .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters)
-            .map_err(|e| e.to_string())?;
+            .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters(&graph, block))
+            .map_err(|e| RigError::Solver { what: "joint solve", source: e })?;
         progress(&format!(
             "  {} iterations, cost {:.4e} → {:.4e} ({:?}, {:.1} s)",
             summary.iterations, summary.initial_cost, summary.final_cost, summary.termination, summary.time_total
@@ -347,107 +499,126 @@ pub fn calibrate_rig(
         converged &= summary.converged();
         iterations += summary.iterations;
         solution = sol;
-        cov = Some(c);
         for (k, b) in gyro_bias.iter_mut().enumerate() {
-            let v = solution.get::<Vector6<f64>>(B(k as u64)).map_err(|e| e.to_string())?;
-            *b = v.fixed_rows::<3>(3).into_owned();
+            *b = solution.get::<Vector6<f64>>(B(k as u64))?.fixed_rows::<3>(3).into_owned();
         }
-        let mut chi2 = 0.0;
-        for &i in &imu_factors {
-            let e = &graph.entries()[i];
-            if let Some(mut r) = solution.residual_of(e.factor.as_ref()) {
-                e.noise.whiten(&mut r);
-                chi2 += r.norm_squared();
-            }
-        }
-        imu_chi2_per_dof = chi2 / (9 * imu_factors.len()).max(1) as f64;
+        let chi2 = imu_chi2_per_dof(&graph, &solution, &imu_factors);
+        last = Some((graph, corners, c, chi2));
         // The corners' rates were taken without the gyro bias: solve again
         // only if the bias moves the exposure-time rotation `b_g · td` by
         // more than a small fraction of a pixel's angle.
-        let td = solution.get::<Vector1<f64>>(OFFSET).map_err(|e| e.to_string())?[0];
+        let td = solution.get::<Vector1<f64>>(OFFSET)?[0];
         let largest_bias = gyro_bias.iter().map(|b| b.norm()).fold(0.0, f64::max);
         if largest_bias * td.abs() < RATE_BIAS_TOLERANCE_RAD {
             break;
         }
     }
-    let cov = cov.ok_or("no solve ran (internal)")?.map_err(|e| format!("covariances: {e}"))?;
+    let (graph, corners, cov, imu_chi2_per_dof) = last.ok_or_else(|| RigError::Internal("no solve ran".into()))?;
+    let cov = cov.map_err(|e| RigError::Solver { what: "covariances", source: e })?;
+    Ok(Joint { solution, graph, corners, cov, cov_keys: keys, block, converged, iterations, imu_chi2_per_dof })
+}
 
-    // 7. Results.
-    let td = solution.get::<Vector1<f64>>(OFFSET).map_err(|e| e.to_string())?[0];
-    // Each σ is the larger of the two covariances' (see `block`).
-    let both = [&cov.model, &cov.robust];
+/// Stage 7, one camera: its calibration with σ (the larger of the two
+/// covariances'), reprojection statistics and residuals.
+fn camera_result(
+    input: &RigInput,
+    o: &RigOptions,
+    start: &Start,
+    joint: &Joint,
+    c: usize,
+) -> Result<CameraResult, RigError> {
+    let cam = &input.cameras[c];
+    let solution = &joint.solution;
+    let e: &Isometry3F64 = solution.get(extrinsic(c))?;
+    let kv: &SVector<f64, 8> = solution.get(intrinsics(c))?;
+    let fixed = c < o.fixed_intrinsics.len();
+    let model = CameraModel::from_vector(start.cameras[c].model.distortion.kind(), kv.as_slice());
+    let r = e.rotation().matrix();
+    let sd = |m: &Matrix3<f64>| Vector3::new(m[(0, 0)].sqrt(), m[(1, 1)].sqrt(), m[(2, 2)].sqrt());
+    let (mut rotation_sigma, mut translation_sigma) = (Vector3::zeros(), Vector3::zeros());
+    let mut model_sigma = [0.0f64; 8];
+    for cv in [&joint.cov.model, &joint.cov.robust] {
+        let ce = cv.get(extrinsic(c)).ok_or_else(|| RigError::Internal("no covariance of T_BC".into()))?;
+        // Tangent [ω, ν] on the right: rotation about camera axes, translation along them.
+        rotation_sigma = rotation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(0, 0) * r.transpose())));
+        translation_sigma = translation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(3, 3) * r.transpose())));
+        if !fixed {
+            let ck =
+                cv.get(intrinsics(c)).ok_or_else(|| RigError::Internal("no covariance of the intrinsics".into()))?;
+            for (i, s) in model_sigma.iter_mut().enumerate() {
+                *s = s.max(ck[(i, i)].sqrt());
+            }
+        }
+    }
+    let pixel_sigma = start.cameras[c].pixel_sigma;
+    let (reprojection, residuals) = reprojection(&joint.graph, solution, &joint.corners, c, &start.frames, pixel_sigma);
+    let mut d: Vec<f64> = cam.views.windows(2).map(|w| (w[1].t_ns - w[0].t_ns) as f64 * 1e-9).collect();
+    Ok(CameraResult {
+        name: cam.name.clone(),
+        model,
+        model_sigma,
+        intrinsics_fixed: fixed,
+        resolution: cam.resolution.unwrap_or([0, 0]),
+        rate_hz: crate::model::numeric::median(&mut d).map_or(f64::NAN, |m| 1.0 / m),
+        t_bc: to_nalgebra(e),
+        rotation_sigma,
+        translation_sigma,
+        pixel_sigma,
+        reprojection,
+        residuals,
+        hand_eye_rms: start.hand_eye_rms[c],
+    })
+}
+
+/// Stage 7: the rig's calibration from the joint solve (its `seconds` left at 0).
+fn results(
+    input: &RigInput,
+    o: &RigOptions,
+    start: &Start,
+    joint: &Joint,
+    coarse: Option<init::OffsetSearch>,
+    mut notes: Vec<String>,
+) -> Result<RigResult, RigError> {
+    let solution = &joint.solution;
+    let td0 = coarse.as_ref().map_or(0.0, |c| c.0);
+    let td = solution.get::<Vector1<f64>>(OFFSET)?[0];
+    let cov = &joint.cov;
     let mut largest_ratio: f64 = 0.0;
-    for k in &cov_keys {
+    for k in &joint.cov_keys {
         if let (Some(m), Some(r)) = (cov.model.get(*k), cov.robust.get(*k)) {
             for i in 0..m.nrows() {
                 largest_ratio = largest_ratio.max((r[(i, i)] / m[(i, i)]).sqrt());
             }
         }
     }
-    let sigma_source = super::SigmaSource { block_frames: block, blocks: cov.clusters, largest_ratio };
+    let sigma_source = super::SigmaSource { block_frames: joint.block, blocks: cov.clusters, largest_ratio };
     let td_sigma = if o.estimate_time_offset {
-        both.iter().map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt())).fold(0.0, f64::max)
+        [&cov.model, &cov.robust]
+            .iter()
+            .map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()))
+            .fold(0.0, f64::max)
     } else {
         f64::NAN
     };
-    let mut cameras = Vec::new();
-    for (c, cam) in input.cameras.iter().enumerate() {
-        let e: &Isometry3F64 = solution.get(extrinsic(c)).map_err(|e| e.to_string())?;
-        let kv: &SVector<f64, 8> = solution.get(intrinsics(c)).map_err(|e| e.to_string())?;
-        let fixed = c < o.fixed_intrinsics.len();
-        let model = tumble_factors::camera::CameraModel::from_vector(starts[c].model.distortion.kind(), kv.as_slice());
-        let r = e.rotation().matrix();
-        let sd = |m: &Matrix3<f64>| Vector3::new(m[(0, 0)].sqrt(), m[(1, 1)].sqrt(), m[(2, 2)].sqrt());
-        let (mut rotation_sigma, mut translation_sigma) = (Vector3::zeros(), Vector3::zeros());
-        let mut model_sigma = [0.0f64; 8];
-        for cv in both {
-            let ce = cv.get(extrinsic(c)).ok_or("no covariance of T_BC (internal)")?;
-            // Tangent [ω, ν] on the right: rotation about camera axes, translation along them.
-            rotation_sigma = rotation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(0, 0) * r.transpose())));
-            translation_sigma = translation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(3, 3) * r.transpose())));
-            if !fixed {
-                let ck = cv.get(intrinsics(c)).ok_or("no covariance of the intrinsics (internal)")?;
-                for (i, s) in model_sigma.iter_mut().enumerate() {
-                    *s = s.max(ck[(i, i)].sqrt());
-                }
-            }
-        }
-        let (reprojection, residuals) = reprojection(&graph, &solution, &corners, c, &frames, starts[c].pixel_sigma);
-        cameras.push(CameraResult {
-            name: cam.name.clone(),
-            model,
-            model_sigma,
-            intrinsics_fixed: fixed,
-            resolution: cam.resolution.unwrap_or([0, 0]),
-            rate_hz: {
-                let mut d: Vec<f64> = cam.views.windows(2).map(|w| (w[1].t_ns - w[0].t_ns) as f64 * 1e-9).collect();
-                crate::model::numeric::median(&mut d).map_or(f64::NAN, |m| 1.0 / m)
-            },
-            t_bc: to_nalgebra(e),
-            rotation_sigma,
-            translation_sigma,
-            pixel_sigma: starts[c].pixel_sigma,
-            reprojection,
-            residuals,
-            hand_eye_rms: hand_eye_rms[c],
-        });
-    }
-    let chain = (1..n_cams).map(|c| cameras[c].t_bc.inverse() * cameras[c - 1].t_bc).collect();
+    let cameras =
+        (0..input.cameras.len()).map(|c| camera_result(input, o, start, joint, c)).collect::<Result<Vec<_>, _>>()?;
+    let chain = (1..cameras.len()).map(|c| cameras[c].t_bc.inverse() * cameras[c - 1].t_bc).collect();
+    let frames = &start.frames;
     let biases = (0..frames.len())
         .filter_map(|k| {
             let b = solution.get::<Vector6<f64>>(B(k as u64)).ok()?;
             Some((frames[k].t, b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned()))
         })
         .collect();
-    let t_wt_final: &Isometry3F64 = solution.get(TARGET).map_err(|e| e.to_string())?;
-    let gravity_in_target = t_wt_final.rotation().matrix().transpose() * gravity;
-    if imu_chi2_per_dof > 4.0 {
+    let t_wt_final: &Isometry3F64 = solution.get(TARGET)?;
+    let gravity_in_target = t_wt_final.rotation().matrix().transpose() * Vector3::new(0.0, 0.0, -o.gravity);
+    if joint.imu_chi2_per_dof > 4.0 {
         notes.push(format!(
-            "the IMU residuals are {imu_chi2_per_dof:.1}× what the noise model predicts: the noise figures ({}) are too small for this IMU, so the σ given here are too small as well",
-            input.noise_source
+            "the IMU residuals are {:.1}× what the noise model predicts: the noise figures ({}) are too small for this IMU, so the σ given here are too small as well",
+            joint.imu_chi2_per_dof, input.noise_source
         ));
     }
-    let mut rig = RigResult {
+    Ok(RigResult {
         cameras,
         time_offset_s: td0 + td,
         time_offset_sigma_s: td_sigma,
@@ -456,16 +627,19 @@ pub fn calibrate_rig(
         gravity_in_target,
         chain,
         biases,
-        imu_chi2_per_dof,
+        imu_chi2_per_dof: joint.imu_chi2_per_dof,
         sigma_source,
         frames: frames.len(),
-        iterations,
-        converged,
-        seconds: t0.elapsed().as_secs_f64(),
+        iterations: joint.iterations,
+        converged: joint.converged,
+        seconds: 0.0,
         noise_source: input.noise_source.clone(),
         notes,
-    };
-    // Weak parameters are written (a VIO refines them, or tolerates them), but said.
+    })
+}
+
+/// Weak parameters are written (a VIO refines them, or tolerates them), but said.
+fn note_weak_parameters(rig: &mut RigResult) {
     let weak: Vec<String> = rig
         .verdicts()
         .into_iter()
@@ -479,7 +653,6 @@ pub fn calibrate_rig(
             weak.join(", ")
         ));
     }
-    Ok(rig)
 }
 
 /// A corner factor of the graph: its entry, camera, frame and pixel.

@@ -1,0 +1,105 @@
+//! The trust-region strategy of Levenberg–Marquardt: the damping λ and its
+//! updates (Nielsen's after a good step, doubling growth after a bad one),
+//! the per-unknown scale D it multiplies, and MINPACK's step bound.
+
+use super::{LmOptions, Method};
+
+/// The damping state of one solve.
+pub(super) struct TrustRegion {
+    /// Damping λ (relative to the scale D).
+    pub lambda: f64,
+    /// Growth factor of λ after a rejected step (Nielsen's ν).
+    nu: f64,
+    /// Running maximum of diag H ([`LmOptions::keep_largest_scale`]).
+    largest: Vec<f64>,
+    /// Trust radius in the scaled norm ([`LmOptions::trust_radius`]).
+    radius: f64,
+    /// Undamped Gauss–Newton: every step is taken.
+    gauss_newton: bool,
+}
+
+/// Why λ cannot grow any more: [`LmOptions::max_lambda`] passed.
+pub(super) struct DampingExhausted;
+
+impl TrustRegion {
+    pub fn new(o: &LmOptions) -> TrustRegion {
+        TrustRegion {
+            lambda: o.initial_lambda,
+            nu: 2.0,
+            largest: Vec::new(),
+            radius: f64::INFINITY,
+            gauss_newton: o.method == Method::GaussNewton,
+        }
+    }
+
+    /// Whether steps are undamped (Gauss–Newton).
+    pub fn undamped(&self) -> bool {
+        self.gauss_newton
+    }
+
+    /// The scale D of each unknown at this linearization, from its curvature
+    /// `raw_diag` (diag H), clamped to the options' bounds.
+    pub fn scale(&mut self, raw_diag: &[f64], o: &LmOptions) -> Vec<f64> {
+        if o.keep_largest_scale {
+            if self.largest.len() != raw_diag.len() {
+                self.largest = raw_diag.to_vec();
+            }
+            for (m, d) in self.largest.iter_mut().zip(raw_diag) {
+                *m = m.max(*d);
+            }
+        }
+        let scale = if o.keep_largest_scale { &self.largest[..] } else { raw_diag };
+        scale.iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect()
+    }
+
+    /// The damping added to the diagonal (None for Gauss–Newton).
+    pub fn damping(&self, diag: &[f64]) -> Option<Vec<f64>> {
+        (!self.gauss_newton).then(|| diag.iter().map(|d| d * self.lambda).collect())
+    }
+
+    /// A step failed (not factorizable, or rejected): grow λ.
+    pub fn grow(&mut self, o: &LmOptions) -> Result<(), DampingExhausted> {
+        self.lambda *= self.nu;
+        self.nu *= 2.0;
+        if self.lambda > o.max_lambda {
+            return Err(DampingExhausted);
+        }
+        Ok(())
+    }
+
+    /// A step of scaled length `scaled_len` longer than the radius allows:
+    /// raise λ to about the value that brings the step to it (one dominant
+    /// direction of scaled curvature `mu`, along which the length goes as
+    /// 1 / (μ + λ)) and return true; false when the step may be tried.
+    pub fn bound(&mut self, scaled_len: f64, mu: f64, o: &LmOptions) -> Result<bool, DampingExhausted> {
+        if !(o.trust_radius && !self.gauss_newton && scaled_len > 1.5 * self.radius) {
+            return Ok(false);
+        }
+        self.lambda = (2.0 * self.lambda).max((mu + self.lambda) * scaled_len / self.radius - mu);
+        if self.lambda > o.max_lambda {
+            return Err(DampingExhausted);
+        }
+        Ok(true)
+    }
+
+    /// The radius after a step of gain ratio `rho` (accepted or not) and
+    /// scaled length `scaled_len`: doubled past a good one, halved after a poor one.
+    pub fn update_radius(&mut self, accepted: bool, rho: f64, scaled_len: f64, o: &LmOptions) {
+        if o.trust_radius {
+            if accepted && rho >= 0.75 {
+                self.radius = 2.0 * scaled_len;
+            } else if rho < 0.25 {
+                self.radius = 0.5 * self.radius.min(10.0 * scaled_len);
+            }
+        }
+    }
+
+    /// A step of gain ratio `rho` was accepted: shrink λ (Nielsen).
+    pub fn accept(&mut self, rho: f64, o: &LmOptions) {
+        if !self.gauss_newton {
+            self.lambda *= o.min_lambda_decrease.max(1.0 - (2.0 * rho - 1.0).powi(3));
+            self.lambda = self.lambda.max(1e-16);
+            self.nu = 2.0;
+        }
+    }
+}

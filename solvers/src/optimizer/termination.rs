@@ -1,0 +1,98 @@
+//! When a solve may stop: the scaled gradient, the decrease still to come,
+//! and the check that a proposed stop is at a minimum.
+
+use super::{LmOptions, Summary, Termination};
+use crate::linear::{Structure, System};
+
+/// Damping (relative to diag H) of the Gauss–Newton step that checks a
+/// small decrease: small enough to leave the step undamped, large enough to
+/// keep a semi-definite H factorizable.
+const GAUSS_NEWTON_CHECK_DAMPING: f64 = 1e-12;
+
+/// The largest cosine of the angle between the whitened residual (cost
+/// `cost` = ½‖r‖²) and a Jacobian column: `|g_j| / sqrt(H_jj · 2 cost)`, with
+/// `g = Jᵀr` and `H_jj = ‖J_j‖²` (0 where a column or the residual vanishes).
+pub(super) fn scaled_gradient(g: &[f64], diag: &[f64], cost: f64) -> f64 {
+    let r2 = 2.0 * cost;
+    g.iter()
+        .zip(diag)
+        .map(|(gj, hj)| if *hj > 0.0 && r2 > 0.0 { gj.abs() / (hj * r2).sqrt() } else { 0.0 })
+        .fold(0.0, f64::max)
+}
+
+/// The decrease still to come after an accepted step that lowered the cost
+/// by `decrease` (the one before by `previous`, NaN for the first): the
+/// geometric series of the two when they shrink, else the decrease itself.
+pub(super) fn remaining_decrease(decrease: f64, previous: f64) -> f64 {
+    let q = decrease / previous;
+    if q > 0.0 && q < 1.0 {
+        decrease * q / (1.0 - q)
+    } else {
+        decrease
+    }
+}
+
+/// Predicted decrease −gᵀδ − ½ δᵀHδ of step `delta`, given `hd` = Hδ.
+pub(super) fn predicted_decrease(delta: &[f64], g: &[f64], hd: &[f64]) -> f64 {
+    -delta.iter().zip(g).map(|(a, b)| a * b).sum::<f64>() - 0.5 * delta.iter().zip(hd).map(|(a, b)| a * b).sum::<f64>()
+}
+
+/// The stationarity check ([`LmOptions::check_stationarity`]) of a stop that
+/// `test` proposes at the assembled system `sys` (cost `cost`, parameter
+/// norm `x_norm`, damping scale `diag`): the termination to end the solve
+/// with, or `None` to go on with damped steps.
+///
+/// - The squared scaled gradient must be within `function_tolerance`: it
+///   bounds the relative decrease to come from below whatever a solve's
+///   accuracy, and a column that has all but vanished (a saturated
+///   parameter, below the damping floor) still shows. Else a small step has
+///   stalled and a cost test goes on.
+/// - A small damped step needs no more: at a first-order stationary point the
+///   undamped model can still promise a decrease along directions where the
+///   columns cancel (identical columns at a symmetric minimum), which no step
+///   delivers.
+/// - A cost test also needs one undamped solve whose predicted decrease (or
+///   step) is within the tolerances.
+/// - A cost at the rounding level of the start is a zero-residual fit, where
+///   the residual stays aligned with the columns: converged.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn check_stop(
+    test: Termination,
+    structure: &mut Structure,
+    sys: &System,
+    diag: &[f64],
+    g: &[f64],
+    (cost, x_norm): (f64, f64),
+    o: &LmOptions,
+    summary: &mut Summary,
+) -> Option<Termination> {
+    if cost <= f64::EPSILON * summary.initial_cost {
+        return Some(test);
+    }
+    let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
+    if test != Termination::FunctionTolerance {
+        return Some(if aligned { test } else { Termination::Stalled });
+    }
+    if !aligned {
+        return None;
+    }
+    let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
+    summary.linear_solves += 1;
+    let solved = structure.solve(sys, Some(&tiny)).ok().and_then(|(delta, fs, ss, bs)| {
+        summary.time_factorize += fs;
+        summary.time_solve += ss;
+        summary.time_build += bs;
+        let d = predicted_decrease(&delta, g, &structure.h_times(sys, &delta));
+        // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
+        (d.is_finite() && d >= 0.0).then(|| (d, delta.iter().map(|v| v * v).sum::<f64>().sqrt()))
+    });
+    let small = match solved {
+        Some((d, step)) => {
+            summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
+            d <= o.function_tolerance * cost || step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance)
+        }
+        // No undamped step (H singular there): the scaled gradient decided.
+        None => true,
+    };
+    small.then_some(test)
+}
