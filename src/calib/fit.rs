@@ -320,96 +320,155 @@ pub(super) struct GyroInputs<'a> {
     pub edge: usize,
 }
 
-pub(super) fn fit_gyro(
-    rec: &ImuRecording,
-    intervals: &[Interval],
-    means: &[Vector3<f64>],
-    accel: &AccelFit,
-    inputs: &GyroInputs,
+/// The turns between consecutive static intervals, as integrated-rotation
+/// factors, with the gravity directions they carry one into the other.
+struct Turns {
+    factors: Vec<IntegratedRotationFactor>,
+    /// Each factor's intervals `(before, after)`.
+    pairs: Vec<(usize, usize)>,
+    /// Calibrated gravity direction of every interval (accelerometer fit).
+    dirs: Vec<Vector3<f64>>,
+}
+
+/// The gravity directions of the intervals' mean raw readings `means` under
+/// accelerometer parameters `pa`.
+fn directions(means: &[Vector3<f64>], pa: &AccelParams) -> Vec<Vector3<f64>> {
+    let (ma, ba) = (accel_matrix(pa), Vector3::new(pa[6], pa[7], pa[8]));
+    means.iter().map(|m| ma * (m - ba)).collect()
+}
+
+impl Turns {
+    fn new(rec: &ImuRecording, intervals: &[Interval], dirs: Vec<Vector3<f64>>, edge: usize) -> Result<Turns, String> {
+        let mut factors = Vec::new();
+        let mut pairs = Vec::new();
+        for k in 1..intervals.len() {
+            let (a, b) = turn_span(&intervals[k - 1], &intervals[k], edge);
+            let raw = rec.gyro[a..=b].to_vec();
+            let dt = rec.t[a..=b].windows(2).map(|w| w[1] - w[0]).collect();
+            let f = IntegratedRotationFactor::new([KEY_GYRO, KEY_GYRO_BIAS], raw, dt, dirs[k - 1], dirs[k])
+                .map_err(|e| format!("motion between static intervals {} and {k}: {e}", k - 1))?;
+            factors.push(f);
+            pairs.push((k - 1, k));
+        }
+        Ok(Turns { factors, pairs, dirs })
+    }
+
+    /// Starts: isotropic scales s·I at the local minima of the isotropic cost
+    /// on a log grid. Every turn's gravity angle θ ≤ s ∫|ω̃ − b| dt, so the
+    /// ratios θ/∫ locate s; the grid spans well beyond them because the cost
+    /// is not convex in s: a quarter turn taken as three quarters explains
+    /// gravity's direction nearly as well (aliases at 3s, 5s). Ranking a
+    /// detection (not `final_fit`) needs one start, found on a coarser grid.
+    fn starts(
+        &self,
+        rec: &ImuRecording,
+        intervals: &[Interval],
+        b0: &Vector3<f64>,
+        edge: usize,
+        final_fit: bool,
+    ) -> Result<Vec<f64>, String> {
+        let dirs = &self.dirs;
+        let ratios: Vec<f64> = self
+            .pairs
+            .iter()
+            .filter_map(|&(i, j)| {
+                let theta = dirs[i].normalize().dot(&dirs[j].normalize()).clamp(-1.0, 1.0).acos();
+                let (a, b) = turn_span(&intervals[i], &intervals[j], edge);
+                let len = integrated_raw_angle(rec, a, b, b0);
+                (len > 0.0 && theta > 0.2).then_some(theta / len)
+            })
+            .filter(|r| r.is_finite())
+            .collect();
+        if ratios.is_empty() {
+            return Err("no turn between static intervals rotates gravity by more than 11°: nothing to calibrate the \
+                        gyroscope with"
+                .into());
+        }
+        let s_max = ratios.iter().copied().fold(0.0, f64::max);
+        let mut sorted = ratios.clone();
+        sorted.sort_by(f64::total_cmp);
+        let s_med = sorted[sorted.len() / 2];
+        let iso_cost = |s: f64| -> f64 {
+            let m = Matrix3::identity() * s;
+            self.factors
+                .par_iter()
+                .map(|f| {
+                    let vars: [&dyn tumble_solvers::DynVariable; 2] = [&gyro_vec(&m), b0];
+                    f.residual(Vars::new(&vars)).map(|r| r.norm_squared()).unwrap_or(f64::MAX)
+                })
+                .sum()
+        };
+        // A gyro that reports rad/s is within a factor of 2 of it; beyond that the units are
+        // wrong (deg/s is 57×), which no calibration should paper over.
+        let (lo, hi) = if rec.gyro_units == Stored::RawCounts { (0.25 * s_med, 4.0 * s_max) } else { (0.5, 2.0) };
+        Ok(if final_fit {
+            isotropic_starts(&iso_cost, lo, hi, GYRO_STARTS, 32)
+        } else {
+            isotropic_starts(&iso_cost, lo, hi, 1, 16)
+        })
+    }
+
+    /// Noise of each turn: the gyro's white noise integrated over it (per
+    /// axis, through the steps' Jacobians, at the start scale `s0`) plus the
+    /// two gravity directions' noise.
+    fn noise(
+        &self,
+        intervals: &[Interval],
+        ma: &Matrix3<f64>,
+        inputs: &GyroInputs,
+        s0: f64,
+        gravity: f64,
+    ) -> Vec<DMatrix<f64>> {
+        let m0 = Matrix3::identity() * s0;
+        let var_acc: f64 = (0..3).map(|k| ma[(k, k)].powi(2) * inputs.var_a[k]).sum::<f64>() / 3.0;
+        let g2 = gravity * gravity;
+        let raw_var = Vector3::from(*inputs.var_g);
+        self.factors
+            .par_iter()
+            .zip(&self.pairs)
+            .map(|(f, &(i, j))| {
+                let dir = var_acc / g2 * (1.0 / intervals[i].len() as f64 + 1.0 / intervals[j].len() as f64);
+                let c = f.noise_covariance(&m0, inputs.bias, &raw_var) + nalgebra::Matrix2::identity() * dir.max(1e-24);
+                DMatrix::from_column_slice(2, 2, c.as_slice())
+            })
+            .collect()
+    }
+
+    /// Every turn's rotation and the angle between the gravity it carries and
+    /// the one measured after it; with the RMS angle and imu_tk's cost.
+    fn residuals(&self, m: &Matrix3<f64>, b: &Vector3<f64>) -> (Vec<RotationResidual>, f64, f64) {
+        let mut rotations = Vec::new();
+        let (mut sq, mut tk) = (0.0, 0.0);
+        for (f, &(i, j)) in self.factors.iter().zip(&self.pairs) {
+            let r = f.rotation(m, b);
+            let (g0, g1) = (self.dirs[i].normalize(), self.dirs[j].normalize());
+            let pred = r.transpose() * g0;
+            let e = pred.cross(&g1).norm().atan2(pred.dot(&g1));
+            sq += e * e;
+            tk += 0.5 * (pred - g1).norm_squared();
+            let turn = nalgebra::Rotation3::from_matrix_unchecked(r).angle().to_degrees();
+            rotations.push(RotationResidual { from: i, to: j, rotation_deg: turn, error_rad: e });
+        }
+        (rotations, (sq / self.factors.len() as f64).sqrt(), tk)
+    }
+}
+
+/// One solve per start; the one that explains the data best (lowest χ² with
+/// the predicted noise) is kept and finished. The other starts get few
+/// iterations: a start that has not converged by then is wandering (an alias
+/// start can take 300). Returns the kept fit with its prior, and the
+/// ambiguity when another start explains the data nearly as well at a clearly
+/// different scale (single-axis turns alias at 1, 5, 9, … × a quarter turn).
+type GyroSolve = (MisalignmentPrior, FloorFit, Option<(f64, f64, f64)>);
+fn solve_starts(
+    turns: &Turns,
+    base: &[DMatrix<f64>],
+    starts: &[f64],
+    b0: &Vector3<f64>,
     opts: &CalibOptions,
     final_fit: bool,
-) -> Result<GyroFit, String> {
-    let GyroInputs { var_a, var_g, bias: b0, n_init, edge } = *inputs;
-    let directions = |pa: &AccelParams| -> Vec<Vector3<f64>> {
-        let (ma, ba) = (accel_matrix(pa), Vector3::new(pa[6], pa[7], pa[8]));
-        means.iter().map(|m| ma * (m - ba)).collect()
-    };
-    let dirs = directions(&accel.params);
-    let ma = &accel_matrix(&accel.params);
-    let mut factors = Vec::new();
-    let mut pairs = Vec::new();
-    for k in 1..intervals.len() {
-        let (a, b) = turn_span(&intervals[k - 1], &intervals[k], edge);
-        let raw = rec.gyro[a..=b].to_vec();
-        let dt = rec.t[a..=b].windows(2).map(|w| w[1] - w[0]).collect();
-        let f = IntegratedRotationFactor::new([KEY_GYRO, KEY_GYRO_BIAS], raw, dt, dirs[k - 1], dirs[k])
-            .map_err(|e| format!("motion between static intervals {} and {k}: {e}", k - 1))?;
-        factors.push(f);
-        pairs.push((k - 1, k));
-    }
-    // Starts: isotropic scales s·I at the local minima of the isotropic cost on a log grid.
-    // Every turn's gravity angle θ ≤ s ∫|ω̃ − b| dt, so the ratios θ/∫ locate s; the grid
-    // spans well beyond them because the cost is not convex in s: a quarter turn taken
-    // as three quarters explains gravity's direction nearly as well (aliases at 3s, 5s).
-    let ratios: Vec<f64> = pairs
-        .iter()
-        .filter_map(|&(i, j)| {
-            let theta = dirs[i].normalize().dot(&dirs[j].normalize()).clamp(-1.0, 1.0).acos();
-            let (a, b) = turn_span(&intervals[i], &intervals[j], edge);
-            let len = integrated_raw_angle(rec, a, b, b0);
-            (len > 0.0 && theta > 0.2).then_some(theta / len)
-        })
-        .filter(|r| r.is_finite())
-        .collect();
-    if ratios.is_empty() {
-        return Err("no turn between static intervals rotates gravity by more than 11°: nothing to calibrate the \
-                    gyroscope with"
-            .into());
-    }
-    let s_max = ratios.iter().copied().fold(0.0, f64::max);
-    let mut sorted = ratios.clone();
-    sorted.sort_by(f64::total_cmp);
-    let s_med = sorted[sorted.len() / 2];
-    let iso_cost = |s: f64| -> f64 {
-        let m = Matrix3::identity() * s;
-        factors
-            .par_iter()
-            .map(|f| {
-                let vars: [&dyn tumble_solvers::DynVariable; 2] = [&gyro_vec(&m), b0];
-                f.residual(Vars::new(&vars)).map(|r| r.norm_squared()).unwrap_or(f64::MAX)
-            })
-            .sum()
-    };
-    // A gyro that reports rad/s is within a factor of 2 of it; beyond that the units are
-    // wrong (deg/s is 57×), which no calibration should paper over.
-    let (lo, hi) = if rec.gyro_units == Stored::RawCounts { (0.25 * s_med, 4.0 * s_max) } else { (0.5, 2.0) };
-    // Ranking a detection needs one start, found on a coarser grid.
-    let starts = if final_fit {
-        isotropic_starts(&iso_cost, lo, hi, GYRO_STARTS, 32)
-    } else {
-        isotropic_starts(&iso_cost, lo, hi, 1, 16)
-    };
-    let s0 = starts[0];
-    // Noise: the gyro's white noise integrated over each turn (per axis, through the
-    // steps' Jacobians) plus the two gravity directions' noise.
-    let m0 = Matrix3::identity() * s0;
-    let var_acc: f64 = (0..3).map(|k| ma[(k, k)].powi(2) * var_a[k]).sum::<f64>() / 3.0;
-    let g2 = opts.gravity * opts.gravity;
-    let raw_var = Vector3::from(*var_g);
-    let base: Vec<DMatrix<f64>> = factors
-        .par_iter()
-        .zip(&pairs)
-        .map(|(f, &(i, j))| {
-            let dir = var_acc / g2 * (1.0 / intervals[i].len() as f64 + 1.0 / intervals[j].len() as f64);
-            let c = f.noise_covariance(&m0, b0, &raw_var) + nalgebra::Matrix2::identity() * dir.max(1e-24);
-            DMatrix::from_column_slice(2, 2, c.as_slice())
-        })
-        .collect();
+) -> Result<GyroSolve, String> {
     let n_params = 9 + 3 * opts.estimate_gyro_bias as usize;
-    // One solve per start; the one that explains the data best (lowest χ² with the
-    // predicted noise) is kept.
-    // The other starts get few iterations: a start that has not converged by then
-    // is wandering (an alias start can take 300); the kept one is finished below.
     let full = LmOptions::default().max_iterations;
     let mut fits: Vec<(usize, MisalignmentPrior, FloorFit)> = starts
         .par_iter()
@@ -423,18 +482,16 @@ pub(super) fn fit_gyro(
             values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
             // The other starts are compared on their first solve; the kept one is refined below.
             let (cap, refine) = if i == 0 { (full, final_fit) } else { (OTHER_START_ITERATIONS, false) };
-            solve_with_floor(&factors, &base, &values, n_params, &prior, cap, refine).ok().map(|f| (i, prior, f))
+            solve_with_floor(&turns.factors, base, &values, n_params, &prior, cap, refine).ok().map(|f| (i, prior, f))
         })
         .collect();
     fits.sort_by(|a, b| a.2.chi2_white.total_cmp(&b.2.chi2_white));
     if let Some((_, prior, f)) = fits.first_mut().filter(|(i, _, f)| f.capped || (*i != 0 && final_fit)) {
-        let more = solve_with_floor(&factors, &base, &f.values, n_params, prior, full, true)?;
+        let more = solve_with_floor(&turns.factors, base, &f.values, n_params, prior, full, true)?;
         f.iterations += more.iterations;
         (f.values, f.graph, f.chi2_final, f.floor, f.capped) =
             (more.values, more.graph, more.chi2_final, more.floor, more.capped);
     }
-    // Another start that explains the data nearly as well at a clearly different scale:
-    // the turns cannot tell the scales apart (single-axis turns alias at 1, 5, 9, … × a quarter turn).
     let scale_of =
         |f: &FloorFit| f.values.get::<GyroMatrix>(KEY_GYRO).map(|p| gyro_matrix(p).determinant().abs().cbrt());
     let mut ambiguity = None;
@@ -448,15 +505,15 @@ pub(super) fn fit_gyro(
             }
         }
     }
-    let Some((_, prior, fit)) = fits.into_iter().next() else {
-        return Err("gyroscope fit failed from every start".into());
-    };
-    let (sol, graph) = (&fit.values, &fit.graph);
-    let p = *sol.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
-    let b = *sol.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
-    let m = gyro_matrix(&p);
+    let (_, prior, fit) = fits.into_iter().next().ok_or("gyroscope fit failed from every start")?;
+    Ok((prior, fit, ambiguity))
+}
+
+/// The fit's covariance of `[M_g (9), b_g (3)]`, inflated by its χ²/dof; the
+/// bias's white-noise standard error when it is the initial rest's mean.
+fn gyro_covariance(fit: &FloorFit, inputs: &GyroInputs, opts: &CalibOptions) -> Result<DMatrix<f64>, String> {
     let keys: Vec<Key> = if opts.estimate_gyro_bias { vec![KEY_GYRO, KEY_GYRO_BIAS] } else { vec![KEY_GYRO] };
-    let cv = covariances(graph, sol, &keys).map_err(|e| format!("gyroscope covariance: {e}"))?;
+    let cv = covariances(&fit.graph, &fit.values, &keys).map_err(|e| format!("gyroscope covariance: {e}"))?;
     let inflation = fit.chi2_final.max(1.0);
     let mut cov = DMatrix::zeros(12, 12);
     cov.view_mut((0, 0), (9, 9)).copy_from(&(cv.get(KEY_GYRO).ok_or("no covariance")? * inflation));
@@ -466,32 +523,43 @@ pub(super) fn fit_gyro(
         cov.view_mut((0, 9), (9, 3)).copy_from(&cross);
         cov.view_mut((9, 0), (3, 9)).copy_from(&cross.transpose());
     } else {
-        // Mean of the initial static period: white-noise standard error.
         for k in 0..3 {
-            cov[(9 + k, 9 + k)] = var_g[k] / n_init as f64;
+            cov[(9 + k, 9 + k)] = inputs.var_g[k] / inputs.n_init as f64;
         }
     }
-    // The gravity directions come from the accelerometer fit: carry its uncertainty
-    // into the gyro parameters, ∂x_g/∂x_a by re-solving with each accelerometer
-    // parameter moved by ±1σ (central differences). Skipped (18 solves) when only
-    // ranking detections (not `final_fit`, which also tries one start instead of several).
+    Ok(cov)
+}
+
+/// The gravity directions come from the accelerometer fit: its uncertainty
+/// carried into the gyro parameters, `J Σ_a Jᵀ` with `J = ∂x_g/∂x_a` by
+/// re-solving with each accelerometer parameter moved by ±1σ (central
+/// differences, 18 solves).
+fn accel_uncertainty_in_gyro(
+    turns: &Turns,
+    base: &[DMatrix<f64>],
+    means: &[Vector3<f64>],
+    accel: &AccelFit,
+    prior: &MisalignmentPrior,
+    fit: &FloorFit,
+) -> Result<DMatrix<f64>, String> {
     let acc_cov = &accel.cov * accel.stats.covariance_inflation;
     let resolve = |pa: &AccelParams| -> Option<[f64; 12]> {
-        let d = directions(pa);
+        let d = directions(means, pa);
         let mut g = Graph::new();
-        for ((f, &(i, j)), c) in factors.iter().zip(&pairs).zip(&base) {
+        for ((f, &(i, j)), c) in turns.factors.iter().zip(&turns.pairs).zip(base) {
             let c = c + DMatrix::identity(2, 2) * fit.floor.powi(2);
             g.add(f.with_directions(d[i], d[j]), NoiseModel::from_covariance(&c).ok()?);
         }
-        add_prior(&mut g, &prior).ok()?;
-        let (s, _) =
-            Optimizer::new(LmOptions { function_tolerance: 1e-12, ..LmOptions::default() }).optimize(&g, sol).ok()?;
+        add_prior(&mut g, prior).ok()?;
+        let (s, _) = Optimizer::new(LmOptions { function_tolerance: 1e-12, ..LmOptions::default() })
+            .optimize(&g, &fit.values)
+            .ok()?;
         let mut x = [0.0; 12];
         x[..9].copy_from_slice(s.get::<GyroMatrix>(KEY_GYRO).ok()?.as_slice());
         x[9..].copy_from_slice(s.get::<Vector3<f64>>(KEY_GYRO_BIAS).ok()?.as_slice());
         Some(x)
     };
-    let columns: Vec<Option<Vec<f64>>> = (0..9 * final_fit as usize)
+    let columns: Option<Vec<Vec<f64>>> = (0..9)
         .into_par_iter()
         .map(|k| {
             let h = acc_cov[(k, k)].max(0.0).sqrt();
@@ -505,27 +573,37 @@ pub(super) fn fit_gyro(
             Some((0..12).map(|i| (b[i] - a[i]) / (2.0 * h)).collect())
         })
         .collect();
-    if let Some(cols) = columns.into_iter().collect::<Option<Vec<_>>>() {
-        if final_fit {
-            let j = DMatrix::from_fn(12, 9, |r, c| cols[c][r]);
-            cov += &j * acc_cov * j.transpose();
-        }
-    } else {
-        return Err("gyroscope fit does not converge when the accelerometer parameters move by 1σ".into());
+    let cols = columns.ok_or("gyroscope fit does not converge when the accelerometer parameters move by 1σ")?;
+    let j = DMatrix::from_fn(12, 9, |r, c| cols[c][r]);
+    Ok(&j * acc_cov * j.transpose())
+}
+
+/// Fit the gyroscope to the turns between the static intervals `intervals`
+/// (mean raw readings `means`, gravity directions from `accel`): from
+/// several isotropic starts (one when only ranking a detection, not
+/// `final_fit`), then its covariance, with the accelerometer's uncertainty
+/// carried in on the `final_fit`.
+pub(super) fn fit_gyro(
+    rec: &ImuRecording,
+    intervals: &[Interval],
+    means: &[Vector3<f64>],
+    accel: &AccelFit,
+    inputs: &GyroInputs,
+    opts: &CalibOptions,
+    final_fit: bool,
+) -> Result<GyroFit, String> {
+    let turns = Turns::new(rec, intervals, directions(means, &accel.params), inputs.edge)?;
+    let starts = turns.starts(rec, intervals, inputs.bias, inputs.edge, final_fit)?;
+    let base = turns.noise(intervals, &accel_matrix(&accel.params), inputs, starts[0], opts.gravity);
+    let (prior, fit, ambiguity) = solve_starts(&turns, &base, &starts, inputs.bias, opts, final_fit)?;
+    let p = *fit.values.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
+    let b = *fit.values.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
+    let mut cov = gyro_covariance(&fit, inputs, opts)?;
+    if final_fit {
+        cov += accel_uncertainty_in_gyro(&turns, &base, means, accel, &prior, &fit)?;
     }
     let not_determined = undetermined(&p, &cov, &GYRO_OFF_DIAGONAL);
-    let mut rotations = Vec::new();
-    let (mut sq, mut tk) = (0.0, 0.0);
-    for (f, &(i, j)) in factors.iter().zip(&pairs) {
-        let r = f.rotation(&m, &b);
-        let (g0, g1) = (dirs[i].normalize(), dirs[j].normalize());
-        let pred = r.transpose() * g0;
-        let e = pred.cross(&g1).norm().atan2(pred.dot(&g1));
-        sq += e * e;
-        tk += 0.5 * (pred - g1).norm_squared();
-        let turn = nalgebra::Rotation3::from_matrix_unchecked(r).angle().to_degrees();
-        rotations.push(RotationResidual { from: i, to: j, rotation_deg: turn, error_rad: e });
-    }
+    let (rotations, rms, imu_tk_cost) = turns.residuals(&gyro_matrix(&p), &b);
     let mut x = [0.0; 12];
     x[..9].copy_from_slice(p.as_slice());
     x[9..].copy_from_slice(b.as_slice());
@@ -533,13 +611,13 @@ pub(super) fn fit_gyro(
         x,
         cov,
         stats: FitStats {
-            residuals: 2 * factors.len(),
-            parameters: n_params,
+            residuals: 2 * turns.factors.len(),
+            parameters: 9 + 3 * opts.estimate_gyro_bias as usize,
             chi2_per_dof: fit.chi2_white,
             unmodelled_sigma: fit.floor,
-            covariance_inflation: inflation,
-            rms: (sq / factors.len() as f64).sqrt(),
-            imu_tk_cost: tk,
+            covariance_inflation: fit.chi2_final.max(1.0),
+            rms,
+            imu_tk_cost,
             iterations: fit.iterations,
             converged: !fit.capped,
         },

@@ -18,7 +18,8 @@
 //! Two things spoil it and are guarded against. A mismatched observation
 //! enters every row of its track; mismatches are removed first, free of the
 //! unknown scale, by the coplanarity of each frame pair's parallax with the
-//!X
+//! camera's translation (one mismatch anchoring a track bent the whole
+//! solution), then rows that miss far more than the others. The equations
 //! also vanish for the trivial solution — nothing moves, every landmark at
 //! the camera — which noise favours when the window's parallax is small (a
 //! walk at 0.1 m/s over 1.5 s): a solution whose median depth comes out
@@ -38,6 +39,7 @@ use super::{VioInput, VioOptions};
 use crate::model::geometry::{gravity_aligned, parts, preintegrate};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use std::collections::BTreeMap;
+use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::Preintegrated;
 
 /// What the closed-form initialization found, at the window's last frame.
@@ -99,39 +101,107 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
     if frames.len() < 4 {
         return Err(format!("{} frames in the window, 4 needed", frames.len()).into());
     }
-    let t0 = input.frames[frames[0]].t;
-    // Observations by track: (window position, undistorted normalized xy).
-    let mut by_track: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
+    let by_track = bearings(frames, |k| input.frames[k].features.iter(), &input.camera);
+    let (r_bc, t_bc) = parts(&input.body_from_camera);
+    let (bias_gyro, determined) = window_gyro_bias(input, frames, &by_track, &r_bc, opts);
+    let motion = Motion::integrate(input, frames, bias_gyro, opts);
+    // The second camera's matches of the same tracks, when there is one.
+    let stereo = match &input.stereo {
+        Some(st) => bearings(frames, |k| st.features.get(k).into_iter().flatten(), &st.camera),
+        None => BTreeMap::new(),
+    };
+    // Camera c's (R_BC, t_BC): 0 the first, 1 the second.
+    let extrinsics = [(r_bc, t_bc), input.stereo.as_ref().map_or((r_bc, t_bc), |st| parts(&st.body_from_camera))];
+    let used = landmarks(by_track, &stereo, &motion.rot, &r_bc);
+    if used.len() < MIN_LANDMARKS {
+        return Err(format!("{} landmarks seen 3 or more times, {MIN_LANDMARKS} needed", used.len()).into());
+    }
+    let (rows, stereo_rows) = rows(&used, &motion, &extrinsics);
+    let (x, kept_rows) = solve_robustly(&rows, used.len())?;
+    let mut active = vec![false; used.len()];
+    for ((j, ..), _) in rows.iter().zip(&kept_rows).filter(|(_, &k)| k) {
+        active[*j] = true;
+    }
+    let kept = active.iter().filter(|&&a| a).count();
+    let stereo_observations = kept_rows.iter().zip(&stereo_rows).filter(|(&k, &st)| k && st).count();
+    if kept < MIN_LANDMARKS {
+        return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed").into());
+    }
+    let depths: Vec<f64> = (0..used.len()).filter(|&j| active[j]).map(|j| x[6 + j]).collect();
+    check_scale_observed(depths, Vector3::new(x[3], x[4], x[5]).norm(), opts.noise.gravity)?;
+    let free_g = Vector3::new(x[3], x[4], x[5]);
+    let free_gravity = free_g.norm();
+    // Gravity on its sphere: g = |g| ĝ + B w, w in the tangent plane, solved
+    // again a few times.
+    let mut g = free_g * (opts.noise.gravity / free_gravity);
+    let mut v0 = Vector3::new(x[0], x[1], x[2]);
+    for _ in 0..4 {
+        let y = solve_rows(&rows, used.len(), &kept_rows, Some(&g))?;
+        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.noise.gravity;
+        v0 = Vector3::new(y[0], y[1], y[2]);
+    }
+    let last = frames.len() - 1;
+    // World ← first body: gravity down, yaw 0.
+    let r_w0 = gravity_aligned(&(-g));
+    Ok(MotionInit {
+        rotation: r_w0 * motion.rot[last],
+        velocity: r_w0 * (v0 + g * motion.time[last] + motion.dv[last]),
+        bias_gyro: determined.then_some(bias_gyro),
+        free_gravity,
+        landmarks: kept,
+        stereo_observations,
+    })
+}
+
+/// The features of the window's frames by track: (window position,
+/// undistorted normalized `[x, y, 1]`), through `camera`.
+fn bearings<'a, I>(frames: &[usize], features: impl Fn(usize) -> I, camera: &CameraModel) -> BTreeMap<u64, Vec<Bearing>>
+where
+    I: Iterator<Item = &'a (u64, [f64; 2])>,
+{
+    let mut by_track: BTreeMap<u64, Vec<Bearing>> = BTreeMap::new();
     for (w, &k) in frames.iter().enumerate() {
-        for (id, uv) in &input.frames[k].features {
-            if let Some(xy) = input.camera.unproject(*uv) {
+        for (id, uv) in features(k) {
+            if let Some(xy) = camera.unproject(*uv) {
                 by_track.entry(*id).or_default().push((w, Vector3::new(xy[0], xy[1], 1.0)));
             }
         }
     }
-    let (r_bc, t_bc) = parts(&input.body_from_camera);
-    // The gyro bias from the features, then the IMU integrated with it.
-    let integrate = |bg: Vector3<f64>| -> Vec<Option<Preintegrated>> {
-        frames
-            .iter()
-            .map(|&k| {
-                let t = input.frames[k].t;
-                (t > t0).then(|| preintegrate(&input.imu, t0, t, (Vector3::zeros(), bg), opts.noise.imu).0)
-            })
-            .collect()
-    };
+    by_track
+}
+
+/// The window's IMU preintegrated from its first frame to each frame at gyro
+/// bias `bg` (None for the first frame).
+fn integrate(input: &VioInput, frames: &[usize], bg: Vector3<f64>, opts: &VioOptions) -> Vec<Option<Preintegrated>> {
+    let t0 = input.frames[frames[0]].t;
+    frames
+        .iter()
+        .map(|&k| {
+            let t = input.frames[k].t;
+            (t > t0).then(|| preintegrate(&input.imu, t0, t, (Vector3::zeros(), bg), opts.noise.imu).0)
+        })
+        .collect()
+}
+
+/// The gyro bias from the features, then the IMU integrated with it, a few
+/// rounds; used only where the features determine it to better than the
+/// window's start prior on the gyro bias assumes (else 0, and false).
+fn window_gyro_bias(
+    input: &VioInput,
+    frames: &[usize],
+    by_track: &BTreeMap<u64, Vec<Bearing>>,
+    r_bc: &Matrix3<f64>,
+    opts: &VioOptions,
+) -> (Vector3<f64>, bool) {
     let mut bias_gyro = Vector3::zeros();
-    let mut determined = true;
     for _ in 0..GYRO_BIAS_ROUNDS {
-        let pims = integrate(bias_gyro);
+        let pims = integrate(input, frames, bias_gyro, opts);
         let rot: Vec<Matrix3<f64>> =
             pims.iter().map(|p| p.as_ref().map_or(Matrix3::identity(), |p| p.delta_rotation())).collect();
         let mut cleaned: Vec<Vec<Bearing>> = by_track.values().cloned().collect();
-        drop_mismatches(&mut cleaned, &rot, &r_bc);
+        drop_mismatches(&mut cleaned, &rot, r_bc);
         let tracks: Vec<&Vec<Bearing>> = cleaned.iter().collect();
-        match gyro_bias(&pims, &tracks, &r_bc, bias_gyro) {
-            // Used only where the features determine it to better than the
-            // window's start prior on the gyro bias assumes.
+        match gyro_bias(&pims, &tracks, r_bc, bias_gyro) {
             Some((b, sigma)) if sigma < GYRO_BIAS_PRIOR_SIGMA => {
                 let done = (b - bias_gyro).norm() < 1e-6;
                 bias_gyro = b;
@@ -139,50 +209,62 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
                     break;
                 }
             }
-            _ => {
-                bias_gyro = Vector3::zeros();
-                determined = false;
-                break;
-            }
+            _ => return (Vector3::zeros(), false),
         }
     }
-    // Body rotation, metric displacement and velocity change since the first frame.
-    let mut rot = Vec::with_capacity(frames.len());
-    let mut dp = Vec::with_capacity(frames.len());
-    let mut dv = Vec::with_capacity(frames.len());
-    let mut time = Vec::with_capacity(frames.len());
-    for (&k, pim) in frames.iter().zip(integrate(bias_gyro)) {
-        match pim {
-            None => {
-                rot.push(Matrix3::identity());
-                dp.push(Vector3::zeros());
-                dv.push(Vector3::zeros());
-            }
-            Some(pim) => {
-                rot.push(pim.delta_rotation());
-                dp.push(pim.delta_position());
-                dv.push(pim.delta_velocity());
-            }
-        }
-        time.push(input.frames[k].t - t0);
-    }
-    // The second camera's matches of the same tracks, when there is one.
-    let mut stereo: BTreeMap<u64, Vec<(usize, Vector3<f64>)>> = BTreeMap::new();
-    if let Some(st) = &input.stereo {
-        for (w, &k) in frames.iter().enumerate() {
-            for (id, uv) in st.features.get(k).into_iter().flatten() {
-                if let Some(xy) = st.camera.unproject(*uv) {
-                    stereo.entry(*id).or_default().push((w, Vector3::new(xy[0], xy[1], 1.0)));
+    (bias_gyro, true)
+}
+
+/// The body's rotation, metric displacement and velocity change since the
+/// window's first frame, and the time since it \[s\], at each frame.
+struct Motion {
+    rot: Vec<Matrix3<f64>>,
+    dp: Vec<Vector3<f64>>,
+    dv: Vec<Vector3<f64>>,
+    time: Vec<f64>,
+}
+
+impl Motion {
+    fn integrate(input: &VioInput, frames: &[usize], bias_gyro: Vector3<f64>, opts: &VioOptions) -> Motion {
+        let t0 = input.frames[frames[0]].t;
+        let n = frames.len();
+        let mut m = Motion {
+            rot: Vec::with_capacity(n),
+            dp: Vec::with_capacity(n),
+            dv: Vec::with_capacity(n),
+            time: Vec::with_capacity(n),
+        };
+        for (&k, pim) in frames.iter().zip(integrate(input, frames, bias_gyro, opts)) {
+            match pim {
+                None => {
+                    m.rot.push(Matrix3::identity());
+                    m.dp.push(Vector3::zeros());
+                    m.dv.push(Vector3::zeros());
+                }
+                Some(pim) => {
+                    m.rot.push(pim.delta_rotation());
+                    m.dp.push(pim.delta_position());
+                    m.dv.push(pim.delta_velocity());
                 }
             }
+            m.time.push(input.frames[k].t - t0);
         }
+        m
     }
-    // Camera c's (R_BC, t_BC): 0 the first, 1 the second.
-    let extrinsics = [(r_bc, t_bc), input.stereo.as_ref().map_or((r_bc, t_bc), |st| parts(&st.body_from_camera))];
+}
+
+/// The landmarks the solution uses: per track its anchor (the first camera's
+/// first observation) and every other observation as (window position,
+/// camera, bearing), mismatches dropped, at least two others; the
+/// [`MAX_LANDMARKS`] longest.
+fn landmarks(
+    by_track: BTreeMap<u64, Vec<Bearing>>,
+    stereo: &BTreeMap<u64, Vec<Bearing>>,
+    rot: &[Matrix3<f64>],
+    r_bc: &Matrix3<f64>,
+) -> Vec<(Bearing, Vec<CameraBearing>)> {
     let (ids, mut tracks): (Vec<u64>, Vec<Vec<Bearing>>) = by_track.into_iter().unzip();
-    drop_mismatches(&mut tracks, &rot, &r_bc);
-    // Per landmark: its anchor (the first camera's first observation) and
-    // every other observation as (window position, camera, bearing).
+    drop_mismatches(&mut tracks, rot, r_bc);
     let mut used: Vec<(Bearing, Vec<CameraBearing>)> = ids
         .iter()
         .zip(tracks)
@@ -195,75 +277,88 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         .collect();
     used.sort_by_key(|(_, others)| std::cmp::Reverse(others.len()));
     used.truncate(MAX_LANDMARKS);
-    if used.len() < MIN_LANDMARKS {
-        return Err(format!("{} landmarks seen 3 or more times, {MIN_LANDMARKS} needed", used.len()).into());
-    }
-    // The rows [û_k]× R_ckᵀ (…) = 0, linear in (v₀, g, λ_j): per observation
-    // the 3×6 block of (v₀, g), the column of λ_j and the constant. An
-    // observation of the second camera sees the landmark from `t_BC1`
-    // instead: one at the anchor's own frame fixes λ_j by the baseline alone.
+    used
+}
+
+/// The rows `[û_k]× R_ckᵀ (…) = 0`, linear in `(v₀, g, λ_j)`: per observation
+/// the 3×6 block of `(v₀, g)`, the column of `λ_j` and the constant; and
+/// whether each is the second camera's. An observation of the second camera
+/// sees the landmark from `t_BC1` instead: one at the anchor's own frame
+/// fixes `λ_j` by the baseline alone.
+fn rows(
+    used: &[(Bearing, Vec<CameraBearing>)],
+    m: &Motion,
+    extrinsics: &[(Matrix3<f64>, Vector3<f64>); 2],
+) -> (Vec<Row>, Vec<bool>) {
+    let (r_bc, t_bc) = &extrinsics[0];
+    let (time, rot) = (&m.time, &m.rot);
     let mut rows: Vec<Row> = Vec::new();
     let mut stereo_rows = Vec::new();
     for (j, ((a, ua), others)) in used.iter().enumerate() {
         let ray = rot[*a] * r_bc * ua;
         for &(k, c, uk) in others {
             let (r_c, t_c) = &extrinsics[c];
-            let m = cross(&uk.normalize()) * (rot[k] * r_c).transpose();
+            let mm = cross(&uk.normalize()) * (rot[k] * r_c).transpose();
             let mut jvg = Matrix3x6::zeros();
-            jvg.fixed_view_mut::<3, 3>(0, 0).copy_from(&(m * (time[*a] - time[k])));
-            jvg.fixed_view_mut::<3, 3>(0, 3).copy_from(&(m * (0.5 * (time[*a] * time[*a] - time[k] * time[k]))));
+            jvg.fixed_view_mut::<3, 3>(0, 0).copy_from(&(mm * (time[*a] - time[k])));
+            jvg.fixed_view_mut::<3, 3>(0, 3).copy_from(&(mm * (0.5 * (time[*a] * time[*a] - time[k] * time[k]))));
             // The camera's lever arm between the two frames.
             let lever = if c == 0 { (rot[*a] - rot[k]) * t_bc } else { rot[*a] * t_bc - rot[k] * t_c };
             stereo_rows.push(c == 1);
-            rows.push((j, jvg, m * ray, m * ((dp[*a] - dp[k]) + lever)));
+            rows.push((j, jvg, mm * ray, mm * ((m.dp[*a] - m.dp[k]) + lever)));
         }
     }
-    // Least squares over the observations still kept (a landmark left
-    // without any has its depth pinned to 0 by a unit diagonal). `fixed_g`
-    // moves a known gravity to the constants and solves for its
-    // tangent-plane correction instead (5 columns, not 6).
-    let solve = |kept: &[bool], fixed_g: Option<&Vector3<f64>>| -> Result<DVector<f64>, String> {
-        let cols = if fixed_g.is_some() { 5 } else { 6 };
-        let m = cols + used.len();
-        let mut h = DMatrix::<f64>::zeros(m, m);
-        let mut b = DVector::<f64>::zeros(m);
-        let mut seen = vec![false; used.len()];
-        let basis = fixed_g.map(tangent_basis);
-        for ((j, jvg, jl, c), _) in rows.iter().zip(kept).filter(|(_, &k)| k) {
-            seen[*j] = true;
-            let (jr, cr) = match (fixed_g, &basis) {
-                (Some(g), Some(basis)) => {
-                    let mut jr = DMatrix::<f64>::zeros(3, 5);
-                    jr.view_mut((0, 0), (3, 3)).copy_from(&jvg.fixed_view::<3, 3>(0, 0));
-                    jr.view_mut((0, 3), (3, 2)).copy_from(&(jvg.fixed_view::<3, 3>(0, 3) * basis));
-                    (jr, c + jvg.fixed_view::<3, 3>(0, 3) * g)
-                }
-                _ => (DMatrix::from_column_slice(3, 6, jvg.as_slice()), *c),
-            };
-            let l = cols + j;
-            let mut hvg = h.view_mut((0, 0), (cols, cols));
-            hvg += jr.transpose() * &jr;
-            let cross_term = jr.transpose() * jl;
-            for i in 0..cols {
-                h[(i, l)] += cross_term[i];
-                h[(l, i)] += cross_term[i];
+    (rows, stereo_rows)
+}
+
+/// Least squares over the rows still `kept`, with `n` landmark depths (a
+/// landmark left without any row has its depth pinned to 0 by a unit
+/// diagonal). `fixed_g` moves a known gravity to the constants and solves
+/// for its tangent-plane correction instead (5 columns, not 6).
+fn solve_rows(rows: &[Row], n: usize, kept: &[bool], fixed_g: Option<&Vector3<f64>>) -> Result<DVector<f64>, String> {
+    let cols = if fixed_g.is_some() { 5 } else { 6 };
+    let m = cols + n;
+    let mut h = DMatrix::<f64>::zeros(m, m);
+    let mut b = DVector::<f64>::zeros(m);
+    let mut seen = vec![false; n];
+    let basis = fixed_g.map(tangent_basis);
+    for ((j, jvg, jl, c), _) in rows.iter().zip(kept).filter(|(_, &k)| k) {
+        seen[*j] = true;
+        let (jr, cr) = match (fixed_g, &basis) {
+            (Some(g), Some(basis)) => {
+                let mut jr = DMatrix::<f64>::zeros(3, 5);
+                jr.view_mut((0, 0), (3, 3)).copy_from(&jvg.fixed_view::<3, 3>(0, 0));
+                jr.view_mut((0, 3), (3, 2)).copy_from(&(jvg.fixed_view::<3, 3>(0, 3) * basis));
+                (jr, c + jvg.fixed_view::<3, 3>(0, 3) * g)
             }
-            h[(l, l)] += jl.norm_squared();
-            let mut bvg = b.rows_mut(0, cols);
-            bvg -= jr.transpose() * cr;
-            b[l] -= jl.dot(&cr);
+            _ => (DMatrix::from_column_slice(3, 6, jvg.as_slice()), *c),
+        };
+        let l = cols + j;
+        let mut hvg = h.view_mut((0, 0), (cols, cols));
+        hvg += jr.transpose() * &jr;
+        let cross_term = jr.transpose() * jl;
+        for i in 0..cols {
+            h[(i, l)] += cross_term[i];
+            h[(l, i)] += cross_term[i];
         }
-        for (j, _) in seen.iter().enumerate().filter(|(_, &s)| !s) {
-            h[(cols + j, cols + j)] = 1.0;
-        }
-        h.cholesky().map(|ch| ch.solve(&b)).ok_or_else(|| "the window's equations are singular".to_string())
-    };
-    // Rows are the ray's miss at the landmark in metres. Rows missing by more
-    // than 3× the median are dropped (what `drop_mismatches` could not see)
-    // and the solution repeated, a few rounds, until the set kept no longer
-    // changes.
+        h[(l, l)] += jl.norm_squared();
+        let mut bvg = b.rows_mut(0, cols);
+        bvg -= jr.transpose() * cr;
+        b[l] -= jl.dot(&cr);
+    }
+    for (j, _) in seen.iter().enumerate().filter(|(_, &s)| !s) {
+        h[(cols + j, cols + j)] = 1.0;
+    }
+    h.cholesky().map(|ch| ch.solve(&b)).ok_or_else(|| "the window's equations are singular".to_string())
+}
+
+/// The free solution `(v₀, g, λ…)` over every row, then again without the
+/// rows that miss by more than 3× the median (rows are the ray's miss at the
+/// landmark in metres: what [`drop_mismatches`] could not see), a few
+/// rounds, until the set kept no longer changes. Returns it and the rows kept.
+fn solve_robustly(rows: &[Row], n: usize) -> Result<(DVector<f64>, Vec<bool>), String> {
     let mut kept_rows = vec![true; rows.len()];
-    let mut x = solve(&kept_rows, None)?;
+    let mut x = solve_rows(rows, n, &kept_rows, None)?;
     for _ in 0..MISMATCH_ROUNDS {
         let xvg = x.fixed_rows::<6>(0).into_owned();
         let miss: Vec<f64> = rows.iter().map(|(j, jvg, jl, c)| (jvg * xvg + jl * x[6 + j] + c).norm()).collect();
@@ -275,59 +370,32 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
             break;
         }
         kept_rows = next;
-        x = solve(&kept_rows, None)?;
+        x = solve_rows(rows, n, &kept_rows, None)?;
     }
-    let mut active = vec![false; used.len()];
-    for ((j, ..), _) in rows.iter().zip(&kept_rows).filter(|(_, &k)| k) {
-        active[*j] = true;
-    }
-    let kept = active.iter().filter(|&&a| a).count();
-    let stereo_observations = kept_rows.iter().zip(&stereo_rows).filter(|(&k, &st)| k && st).count();
-    if kept < MIN_LANDMARKS {
-        return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed").into());
-    }
-    let mut depths: Vec<f64> = (0..used.len()).filter(|&j| active[j]).map(|j| x[6 + j]).collect();
+    Ok((x, kept_rows))
+}
+
+/// Refuse a solution that did not observe scale: the landmarks' `depths`
+/// near the trivial solution — nothing moves, every landmark at the camera,
+/// which noise favours when the parallax is small — or a free gravity
+/// magnitude far from `gravity`.
+fn check_scale_observed(mut depths: Vec<f64>, free_gravity: f64, gravity: f64) -> Result<(), String> {
+    let kept = depths.len();
     depths.sort_by(f64::total_cmp);
     let median_depth = depths[depths.len() / 2];
     let positive = depths.iter().filter(|&&d| d > 0.0).count();
     if median_depth < MIN_DEPTH_M || positive * 5 < kept * 4 {
-        // Near the trivial solution — nothing moves, every landmark at the
-        // camera — which noise favours when the parallax is small.
         return Err(format!(
             "the landmarks came out {median_depth:.2} m from the camera ({positive} of {kept} in front): \
              too little parallax to observe scale"
-        )
-        .into());
+        ));
     }
-    let free_g = Vector3::new(x[3], x[4], x[5]);
-    let free_gravity = free_g.norm();
-    if !free_gravity.is_finite() || (free_gravity / opts.noise.gravity - 1.0).abs() > MAX_GRAVITY_ERROR {
+    if !free_gravity.is_finite() || (free_gravity / gravity - 1.0).abs() > MAX_GRAVITY_ERROR {
         return Err(format!(
-            "gravity came out {free_gravity:.2} m/s² (expected {:.2}): too little motion to observe scale",
-            opts.noise.gravity
-        )
-        .into());
+            "gravity came out {free_gravity:.2} m/s² (expected {gravity:.2}): too little motion to observe scale"
+        ));
     }
-    // Gravity on its sphere: g = |g| ĝ + B w, w in the tangent plane, solved
-    // again a few times.
-    let mut g = free_g * (opts.noise.gravity / free_gravity);
-    let mut v0 = Vector3::new(x[0], x[1], x[2]);
-    for _ in 0..4 {
-        let y = solve(&kept_rows, Some(&g))?;
-        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.noise.gravity;
-        v0 = Vector3::new(y[0], y[1], y[2]);
-    }
-    let last = frames.len() - 1;
-    // World ← first body: gravity down, yaw 0.
-    let r_w0 = gravity_aligned(&(-g));
-    Ok(MotionInit {
-        rotation: r_w0 * rot[last],
-        velocity: r_w0 * (v0 + g * time[last] + dv[last]),
-        bias_gyro: determined.then_some(bias_gyro),
-        free_gravity,
-        landmarks: kept,
-        stereo_observations,
-    })
+    Ok(())
 }
 
 /// The gyro bias that makes the window's rotations agree with its features
