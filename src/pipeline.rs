@@ -259,94 +259,154 @@ pub fn run_chain(
         crate::vio::rerun_available(r)?;
     }
     std::fs::create_dir_all(out).map_err(|e| format!("{}: cannot create: {e}", out.display()))?;
-    let wanted = |s: Stage| !opts.skip.contains(&s);
-    let mut stages = Vec::new();
-    let mut warnings = Vec::new();
     let ChainInputs { tumble, still, vio, calibration: given_cal, noise: given_noise } = inputs;
+    let mut run = Run { out, opts, stages: Vec::new(), warnings: Vec::new() };
+    let (calibration, cal) = run.calibrate(tumble.as_ref(), given_cal, progress)?;
+    let (allan, noise) = run.allan(still.as_ref(), given_noise, progress)?;
+    let (audited, final_cal) = run.audit(tumble.as_ref(), calibration.is_some(), cal, noise.clone(), progress)?;
+    let vio_out = run.vio(vio, final_cal.as_ref(), noise.clone(), progress)?;
+    let report_path = out.join("report.md");
+    let report = ChainReport {
+        stages: run.stages,
+        calibration,
+        allan,
+        audit: audited,
+        vio: vio_out,
+        final_calibration: final_cal.map(|(c, _)| c),
+        noise,
+        warnings: run.warnings,
+        report_path: report_path.clone(),
+    };
+    std::fs::write(&report_path, report.markdown()).map_err(|e| format!("{}: {e}", report_path.display()))?;
+    Ok(report)
+}
 
-    // 1. calibrate
-    let dir = out.join(Stage::Calibrate.id());
-    let mut calibration = None;
-    let mut cal: Option<(ImuCalibration, String)> = None;
-    if let (true, Some(rec)) = (wanted(Stage::Calibrate), &tumble) {
-        progress(Progress::Stage(Stage::Calibrate, "calibrating the hand tumble (paper eq. 1)"));
-        let t = Instant::now();
-        let r = match calibrate(rec, &opts.calib) {
-            Ok(r) => r,
-            Err(e) => {
-                // A failed calibration stops the chain; its diagnosis is kept for the user.
-                let kept = e.diagnosis.as_ref().and_then(|d| d.write_diagnosis(rec, &opts.calib, &dir).ok());
-                let note = kept.map_or(String::new(), |f| format!(" (diagnosis: {})", f[0].display()));
-                return Err(format!("calibrate: {}{note}", e.message).into());
-            }
-        };
-        let files = r.write_all(rec, &opts.calib, &dir).map_err(|e| format!("calibrate: {e}"))?;
-        let secs = t.elapsed().as_secs_f64();
-        warnings.extend(r.warnings.iter().map(|w| format!("calibrate: {w}")));
-        let headline = format!(
-            "{} static intervals; residual RMS accel {:.2e} m/s², gyro {:.2e} rad",
-            r.static_intervals.len(),
-            r.accel_fit.rms,
-            r.gyro_fit.rms
-        );
-        let md = format!("{}{}", code(&r.summary_table()), figures(out, &files));
-        stages.push(StageReport { stage: Stage::Calibrate, status: Status::Ran(secs), headline, markdown: md });
-        cal = Some((r.calibration.clone(), "calibrate".into()));
-        calibration = Some(r);
-    } else if let Some(c) = given_cal {
-        stages.push(reused(Stage::Calibrate, "given".into(), out));
-        cal = Some((c, "given".into()));
-    } else if let Some(p) = earlier(dir.join("calibration.json")) {
-        let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
-        stages.push(reused(Stage::Calibrate, p.display().to_string(), out));
-        cal = Some((c, p.display().to_string()));
-    } else {
-        let why = if wanted(Stage::Calibrate) { "no tumble recording" } else { "skipped" };
-        stages.push(skipped(Stage::Calibrate, format!("{why}; no calibration given or found in {}", dir.display())));
+/// A calibration in use and where it came from (`calibrate`, `given`, a file).
+type SourcedCalibration = (ImuCalibration, String);
+
+/// The chain's run: its folder, options, and the stages' reports and warnings so far.
+struct Run<'a> {
+    out: &'a Path,
+    opts: &'a ChainOptions,
+    stages: Vec<StageReport>,
+    warnings: Vec<String>,
+}
+
+impl Run<'_> {
+    fn wanted(&self, s: Stage) -> bool {
+        !self.opts.skip.contains(&s)
     }
 
-    // 2. allan
-    let dir = out.join(Stage::Allan.id());
-    let mut allan = None;
-    let mut noise: Option<ImuNoise> = None;
-    if let (true, Some(rec)) = (wanted(Stage::Allan), &still) {
-        progress(Progress::Stage(Stage::Allan, "identifying the noise by Allan variance"));
-        let t = Instant::now();
-        let r = allan_with_progress(rec, &opts.allan, progress).map_err(|e| format!("allan: {e}"))?;
-        let files = r.write_all(&dir).map_err(|e| format!("allan: {e}"))?;
+    fn ran(&mut self, stage: Stage, t: Instant, headline: String, markdown: String) {
         let secs = t.elapsed().as_secs_f64();
-        warnings.extend(r.warnings.iter().map(|w| format!("allan: {w}")));
-        let headline = match &r.kalibr {
-            Some(k) => format!(
-                "gyro N {:.2e} rad/s/√Hz, K {:.2e}; accel N {:.2e} m/s²/√Hz, K {:.2e}",
-                k.gyroscope_noise_density,
-                k.gyroscope_random_walk,
-                k.accelerometer_noise_density,
-                k.accelerometer_random_walk
-            ),
-            None => "curves only (raw counts: no imu.yaml)".into(),
-        };
-        noise = r.kalibr.as_ref().map(|k| k.imu_noise());
-        let md = format!("{}{}", code(&r.summary_table()), figures(out, &files));
-        stages.push(StageReport { stage: Stage::Allan, status: Status::Ran(secs), headline, markdown: md });
-        allan = Some(r);
-    } else if let Some(n) = given_noise {
-        stages.push(reused(Stage::Allan, "given".into(), out));
-        noise = Some(n);
-    } else if let Some(p) = earlier(dir.join("imu.yaml")) {
-        noise = Some(ImuNoise::read(&p).map_err(|e| e.to_string())?);
-        stages.push(reused(Stage::Allan, p.display().to_string(), out));
-    } else {
-        let why = if wanted(Stage::Allan) { "no static recording" } else { "skipped" };
-        stages.push(skipped(Stage::Allan, format!("{why}; no noise given or found in {}", dir.display())));
+        self.stages.push(StageReport { stage, status: Status::Ran(secs), headline, markdown });
     }
 
-    // 3. audit
-    let dir = out.join(Stage::Audit.id());
-    let mut audited = None;
-    let mut final_cal = cal.clone();
-    match (wanted(Stage::Audit), &tumble, &cal) {
-        (true, Some(rec), Some((c, _))) => {
+    /// 1. Calibrate the hand tumble, or take the calibration given, or an earlier run's.
+    fn calibrate(
+        &mut self,
+        tumble: Option<&ImuRecording>,
+        given: Option<ImuCalibration>,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<(Option<CalibrationResult>, Option<SourcedCalibration>), ChainError> {
+        let (out, opts) = (self.out, self.opts);
+        let dir = out.join(Stage::Calibrate.id());
+        if let (true, Some(rec)) = (self.wanted(Stage::Calibrate), tumble) {
+            progress(Progress::Stage(Stage::Calibrate, "calibrating the hand tumble (paper eq. 1)"));
+            let t = Instant::now();
+            let r = match calibrate(rec, &opts.calib) {
+                Ok(r) => r,
+                Err(e) => {
+                    // A failed calibration stops the chain; its diagnosis is kept for the user.
+                    let kept = e.diagnosis.as_ref().and_then(|d| d.write_diagnosis(rec, &opts.calib, &dir).ok());
+                    let note = kept.map_or(String::new(), |f| format!(" (diagnosis: {})", f[0].display()));
+                    return Err(format!("calibrate: {}{note}", e.message).into());
+                }
+            };
+            let files = r.write_all(rec, &opts.calib, &dir).map_err(|e| format!("calibrate: {e}"))?;
+            self.warnings.extend(r.warnings.iter().map(|w| format!("calibrate: {w}")));
+            let headline = format!(
+                "{} static intervals; residual RMS accel {:.2e} m/s², gyro {:.2e} rad",
+                r.static_intervals.len(),
+                r.accel_fit.rms,
+                r.gyro_fit.rms
+            );
+            self.ran(Stage::Calibrate, t, headline, format!("{}{}", code(&r.summary_table()), figures(out, &files)));
+            let cal = (r.calibration.clone(), "calibrate".into());
+            return Ok((Some(r), Some(cal)));
+        }
+        if let Some(c) = given {
+            self.stages.push(reused(Stage::Calibrate, "given".into(), out));
+            return Ok((None, Some((c, "given".into()))));
+        }
+        if let Some(p) = earlier(dir.join("calibration.json")) {
+            let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
+            self.stages.push(reused(Stage::Calibrate, p.display().to_string(), out));
+            return Ok((None, Some((c, p.display().to_string()))));
+        }
+        let why = if self.wanted(Stage::Calibrate) { "no tumble recording" } else { "skipped" };
+        self.stages
+            .push(skipped(Stage::Calibrate, format!("{why}; no calibration given or found in {}", dir.display())));
+        Ok((None, None))
+    }
+
+    /// 2. Identify the noise of the static recording, or take the noise given, or an earlier run's.
+    fn allan(
+        &mut self,
+        still: Option<&ImuRecording>,
+        given: Option<ImuNoise>,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<(Option<AllanReport>, Option<ImuNoise>), ChainError> {
+        let (out, opts) = (self.out, self.opts);
+        let dir = out.join(Stage::Allan.id());
+        if let (true, Some(rec)) = (self.wanted(Stage::Allan), still) {
+            progress(Progress::Stage(Stage::Allan, "identifying the noise by Allan variance"));
+            let t = Instant::now();
+            let r = allan_with_progress(rec, &opts.allan, progress).map_err(|e| format!("allan: {e}"))?;
+            let files = r.write_all(&dir).map_err(|e| format!("allan: {e}"))?;
+            self.warnings.extend(r.warnings.iter().map(|w| format!("allan: {w}")));
+            let headline = match &r.kalibr {
+                Some(k) => format!(
+                    "gyro N {:.2e} rad/s/√Hz, K {:.2e}; accel N {:.2e} m/s²/√Hz, K {:.2e}",
+                    k.gyroscope_noise_density,
+                    k.gyroscope_random_walk,
+                    k.accelerometer_noise_density,
+                    k.accelerometer_random_walk
+                ),
+                None => "curves only (raw counts: no imu.yaml)".into(),
+            };
+            let noise = r.kalibr.as_ref().map(|k| k.imu_noise());
+            self.ran(Stage::Allan, t, headline, format!("{}{}", code(&r.summary_table()), figures(out, &files)));
+            return Ok((Some(r), noise));
+        }
+        if let Some(n) = given {
+            self.stages.push(reused(Stage::Allan, "given".into(), out));
+            return Ok((None, Some(n)));
+        }
+        if let Some(p) = earlier(dir.join("imu.yaml")) {
+            let noise = ImuNoise::read(&p).map_err(|e| e.to_string())?;
+            self.stages.push(reused(Stage::Allan, p.display().to_string(), out));
+            return Ok((None, Some(noise)));
+        }
+        let why = if self.wanted(Stage::Allan) { "no static recording" } else { "skipped" };
+        self.stages.push(skipped(Stage::Allan, format!("{why}; no noise given or found in {}", dir.display())));
+        Ok((None, None))
+    }
+
+    /// 3. Audit the calibration in use on the tumble, or take an earlier
+    /// run's audited calibration (when the calibration is still the one it
+    /// audited: `calibrated` says this run made a new one).
+    fn audit(
+        &mut self,
+        tumble: Option<&ImuRecording>,
+        calibrated: bool,
+        cal: Option<SourcedCalibration>,
+        noise: Option<ImuNoise>,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<(Option<Audit>, Option<SourcedCalibration>), ChainError> {
+        let (out, opts) = (self.out, self.opts);
+        let dir = out.join(Stage::Audit.id());
+        if let (true, Some(rec), Some((c, _))) = (self.wanted(Stage::Audit), tumble, &cal) {
             progress(Progress::Stage(Stage::Audit, "auditing the calibration for a missing effect"));
             let t = Instant::now();
             let mut aopts = opts.audit.clone();
@@ -356,109 +416,87 @@ pub fn run_chain(
             let a = audit(rec, c, &aopts).map_err(|e| format!("audit: {e}"))?;
             let files = crate::audit::report::write(&a, &dir).map_err(|e| format!("audit: {e}"))?;
             let files: Vec<PathBuf> = files.iter().map(|f| dir.join(f)).collect();
-            let secs = t.elapsed().as_secs_f64();
-            warnings.extend(a.notes.iter().map(|n| format!("audit: {n}")));
+            self.warnings.extend(a.notes.iter().map(|n| format!("audit: {n}")));
             let md = format!(
                 "**{}**\n\n{}{}",
                 a.verdict(),
                 code(&crate::audit::report::summary_table(&a)),
                 figures(out, &files)
             );
-            stages.push(StageReport {
-                stage: Stage::Audit,
-                status: Status::Ran(secs),
-                headline: a.verdict(),
-                markdown: md,
-            });
-            final_cal = Some((a.calibration.clone(), "audit".into()));
-            audited = Some(a);
+            self.ran(Stage::Audit, t, a.verdict(), md);
+            let audited = (a.calibration.clone(), "audit".into());
+            return Ok((Some(a), Some(audited)));
         }
-        (want, rec, c) => {
-            // An earlier audit is stale when the calibration it audited is no longer the one in use.
-            let stale = calibration.is_some() || cal.as_ref().is_some_and(|(_, from)| from == "given");
-            match earlier(dir.join("calibration.json")).filter(|_| !stale) {
-                Some(p) => {
-                    let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
-                    stages.push(reused(Stage::Audit, p.display().to_string(), out));
-                    final_cal = Some((c, p.display().to_string()));
-                }
-                None => {
-                    let why = match (want, rec, c) {
-                        (false, ..) => "skipped",
-                        (_, None, _) => "no tumble recording",
-                        _ => "no calibration to audit",
-                    };
-                    stages.push(skipped(Stage::Audit, why.into()));
-                }
-            }
+        // An earlier audit is stale when the calibration it audited is no longer the one in use.
+        let stale = calibrated || cal.as_ref().is_some_and(|(_, from)| from == "given");
+        if let Some(p) = earlier(dir.join("calibration.json")).filter(|_| !stale) {
+            let c = ImuCalibration::read(&p).map_err(|e| e.to_string())?;
+            self.stages.push(reused(Stage::Audit, p.display().to_string(), out));
+            return Ok((None, Some((c, p.display().to_string()))));
         }
+        let why = match (self.wanted(Stage::Audit), tumble, &cal) {
+            (false, ..) => "skipped",
+            (_, None, _) => "no tumble recording",
+            _ => "no calibration to audit",
+        };
+        self.stages.push(skipped(Stage::Audit, why.into()));
+        Ok((None, cal))
     }
 
-    // 4. vio
-    let dir = out.join(Stage::Vio.id());
-    let mut vio_out = None;
-    match (wanted(Stage::Vio), vio) {
-        (true, Some(source)) => {
-            let input = source(final_cal.as_ref().map(|(c, _)| c)).map_err(|e| format!("vio: {e}"))?;
-            let mut vopts = opts.vio.clone();
-            let noise_from = match input.apply_noise(noise, &mut vopts.noise.imu) {
-                NoiseSource::Given => "the Allan stage",
-                NoiseSource::Input => "the dataset's sensor.yaml",
-                NoiseSource::Default => "the built-in defaults",
-            };
-            let cal_from = final_cal.as_ref().map_or("none (samples used as read)".to_string(), |(_, f)| f.clone());
-            let line = format!("fusing IMU and camera ({} frames); calibration: {cal_from}", input.frames.len());
-            progress(Progress::Stage(Stage::Vio, &line));
-            let t = Instant::now();
-            let mut tick = |done: usize, total: usize| progress(Progress::Frames(done, total));
-            let (result, recorded) = crate::vio::run_recorded(&input, &vopts, Some(&mut tick), opts.rerun.as_deref())
-                .map_err(|e| format!("vio: {e}"))?;
-            let summary = summarize(&input, &vopts, &result, opts.bias_after_s);
-            let files = write_outputs(&dir, &input, &result, &summary).map_err(|e| format!("vio: {e}"))?;
-            let recorded = recorded.map_or(String::new(), |p| {
-                format!("\n\nRecorded for the rerun viewer: `{}` (`rerun {}`).", p.display(), p.display())
-            });
-            let secs = t.elapsed().as_secs_f64();
-            warnings.extend(summary.warnings.iter().map(|w| format!("vio: {w}")));
-            let mut headline = format!(
-                "{:.1} m in {:.0} s, closed loop {:.3} m (IMU only {:.1} m)",
-                summary.walked_m(),
-                summary.duration_s,
-                summary.closed_loop_error_m,
-                summary.imu_only_closed_loop_error_m
-            );
-            if let Some(ate) = summary.ate_rmse_m {
-                let _ = write!(headline, ", ATE {ate:.3} m");
-            }
-            let md = format!(
-                "Input `{}`; calibration: {cal_from}; noise from {noise_from}.\n\n{}{}{recorded}",
-                input.name,
-                code(&summary.table()),
-                figures(out, &files)
-            );
-            stages.push(StageReport { stage: Stage::Vio, status: Status::Ran(secs), headline, markdown: md });
-            vio_out = Some((input, result, summary));
+    /// 4. Run the VIO with the final calibration and the noise.
+    fn vio(
+        &mut self,
+        source: Option<VioSource>,
+        final_cal: Option<&SourcedCalibration>,
+        noise: Option<ImuNoise>,
+        progress: &mut dyn FnMut(Progress),
+    ) -> Result<Option<(VioInput, VioResult, Summary)>, ChainError> {
+        let (out, opts) = (self.out, self.opts);
+        let (true, Some(source)) = (self.wanted(Stage::Vio), source) else {
+            let why = if self.wanted(Stage::Vio) { "no VIO data given" } else { "skipped" };
+            self.stages.push(skipped(Stage::Vio, why.into()));
+            return Ok(None);
+        };
+        let input = source(final_cal.map(|(c, _)| c)).map_err(|e| format!("vio: {e}"))?;
+        let mut vopts = opts.vio.clone();
+        let noise_from = match input.apply_noise(noise, &mut vopts.noise.imu) {
+            NoiseSource::Given => "the Allan stage",
+            NoiseSource::Input => "the dataset's sensor.yaml",
+            NoiseSource::Default => "the built-in defaults",
+        };
+        let cal_from = final_cal.map_or("none (samples used as read)".to_string(), |(_, f)| f.clone());
+        let line = format!("fusing IMU and camera ({} frames); calibration: {cal_from}", input.frames.len());
+        progress(Progress::Stage(Stage::Vio, &line));
+        let t = Instant::now();
+        let mut tick = |done: usize, total: usize| progress(Progress::Frames(done, total));
+        let (result, recorded) = crate::vio::run_recorded(&input, &vopts, Some(&mut tick), opts.rerun.as_deref())
+            .map_err(|e| format!("vio: {e}"))?;
+        let summary = summarize(&input, &vopts, &result, opts.bias_after_s);
+        let files =
+            write_outputs(&out.join(Stage::Vio.id()), &input, &result, &summary).map_err(|e| format!("vio: {e}"))?;
+        let recorded = recorded.map_or(String::new(), |p| {
+            format!("\n\nRecorded for the rerun viewer: `{}` (`rerun {}`).", p.display(), p.display())
+        });
+        self.warnings.extend(summary.warnings.iter().map(|w| format!("vio: {w}")));
+        let mut headline = format!(
+            "{:.1} m in {:.0} s, closed loop {:.3} m (IMU only {:.1} m)",
+            summary.walked_m(),
+            summary.duration_s,
+            summary.closed_loop_error_m,
+            summary.imu_only_closed_loop_error_m
+        );
+        if let Some(ate) = summary.ate_rmse_m {
+            let _ = write!(headline, ", ATE {ate:.3} m");
         }
-        (want, _) => {
-            let why = if want { "no VIO data given" } else { "skipped" };
-            stages.push(skipped(Stage::Vio, why.into()));
-        }
+        let md = format!(
+            "Input `{}`; calibration: {cal_from}; noise from {noise_from}.\n\n{}{}{recorded}",
+            input.name,
+            code(&summary.table()),
+            figures(out, &files)
+        );
+        self.ran(Stage::Vio, t, headline, md);
+        Ok(Some((input, result, summary)))
     }
-
-    let report_path = out.join("report.md");
-    let report = ChainReport {
-        stages,
-        calibration,
-        allan,
-        audit: audited,
-        vio: vio_out,
-        final_calibration: final_cal.map(|(c, _)| c),
-        noise,
-        warnings,
-        report_path: report_path.clone(),
-    };
-    std::fs::write(&report_path, report.markdown()).map_err(|e| format!("{}: {e}", report_path.display()))?;
-    Ok(report)
 }
 
 /// A stage that did not run; `from` names where its result came from. When
