@@ -274,44 +274,20 @@ impl Layout {
     }
 }
 
-impl Structure {
-    /// Build the structure. `factor_roles[f]` gives the role of each key position of factor f.
-    pub fn new(
-        kept_dims: Vec<usize>,
-        elim_dims: Vec<usize>,
-        factor_roles: &[Roles],
-        solver: LinearSolver,
-    ) -> Result<Self, SolveError> {
-        let nk = kept_dims.len();
-        let n: usize = kept_dims.iter().sum();
-        let dense = match solver {
-            LinearSolver::DenseCholesky => true,
-            LinearSolver::SparseCholesky => false,
-            LinearSolver::Auto => n <= DENSE_THRESHOLD,
-        };
-        // A dense factorization does not care about the order.
-        let rank = if dense { (0..nk).collect() } else { block_amd(nk, factor_roles) };
-        let mut dims_new = vec![0; nk];
-        for (b, &d) in kept_dims.iter().enumerate() {
-            dims_new[rank[b]] = d;
-        }
-        let kept_dims = dims_new;
-        let remapped: Vec<Roles> = factor_roles
-            .iter()
-            .map(|roles| roles.iter().map(|r| if let Role::Kept(b) = r { Role::Kept(rank[*b]) } else { *r }).collect())
-            .collect();
-        let factor_roles = &remapped[..];
-        let mut kept_offsets = Vec::with_capacity(nk + 1);
-        let mut n = 0;
-        for d in &kept_dims {
-            kept_offsets.push(n);
-            n += d;
-        }
-        kept_offsets.push(n);
+/// The block pattern of the reduced system's upper triangle: per column
+/// block its row blocks (sorted, ≤ the column), and per eliminated block the
+/// kept blocks it connects (which its Schur complement fills in).
+struct BlockPattern {
+    cols: Vec<Vec<usize>>,
+    elim_cams: Vec<Vec<usize>>,
+    /// Pair (j, i), i ≤ j, has id `first_pair[j] + position of i in cols[j]`.
+    first_pair: Vec<usize>,
+}
 
-        // Block pattern (upper triangle): col block → sorted row blocks ≤ col.
+impl BlockPattern {
+    fn new(nk: usize, n_elim: usize, factor_roles: &[Roles]) -> Result<BlockPattern, SolveError> {
         let mut cols: Vec<Vec<usize>> = (0..nk).map(|b| vec![b]).collect();
-        let mut elim_cams: Vec<Vec<usize>> = vec![Vec::new(); elim_dims.len()];
+        let mut elim_cams: Vec<Vec<usize>> = vec![Vec::new(); n_elim];
         for (fi, roles) in factor_roles.iter().enumerate() {
             let kept = roles.iter().filter_map(|r| if let Role::Kept(b) = r { Some(*b) } else { None });
             for a in kept.clone() {
@@ -350,58 +326,66 @@ impl Structure {
             c.sort_unstable();
             c.dedup();
         }
-        // Pair (j, i), i ≤ j, has id `first_pair[j] + position of i in cols[j]`.
         let mut first_pair = Vec::with_capacity(nk + 1);
         let mut np = 0;
         for c in &cols {
             first_pair.push(np);
             np += c.len();
         }
-        let pair_id = |j: usize, i: usize| -> usize {
-            first_pair[j] + cols[j].binary_search(&i).expect("pair in the block pattern")
-        };
+        first_pair.push(np);
+        Ok(BlockPattern { cols, elim_cams, first_pair })
+    }
 
-        // Scalar CSC pattern and per-pair bases.
-        let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::new();
-        let mut pairs = Vec::with_capacity(np);
-        let mut bases = Vec::new();
-        let mut diag_positions = vec![0; n];
-        // Pair (big, small) lives in the columns of `big`; `bases[b0 + r]` is the
-        // position of row `offset(small)` in column `offset(big) + r`.
-        for (j, rows) in cols.iter().enumerate() {
-            let first_base = bases.len();
+    fn pair_id(&self, j: usize, i: usize) -> usize {
+        self.first_pair[j] + self.cols[j].binary_search(&i).expect("pair in the block pattern")
+    }
+
+    /// The scalar CSC pattern of the upper triangle (column pointers, row
+    /// indices), each pair's `(big, small, base)` and the bases (`bases[b0 +
+    /// r]` is the position of row `offset(small)` in column `offset(big) + r`;
+    /// pair (big, small) lives in the columns of `big`), and the positions of
+    /// the diagonal entries.
+    fn scalar_pattern(&self, kept_dims: &[usize], kept_offsets: &[usize]) -> ScalarPattern {
+        let n = *kept_offsets.last().unwrap_or(&0);
+        let mut p = ScalarPattern {
+            col_ptr: Vec::with_capacity(n + 1),
+            row_idx: Vec::new(),
+            pairs: Vec::with_capacity(*self.first_pair.last().unwrap_or(&0)),
+            bases: Vec::new(),
+            diag_positions: vec![0; n],
+        };
+        for (j, rows) in self.cols.iter().enumerate() {
+            let first_base = p.bases.len();
             for &i in rows {
-                pairs.push((j, i, bases.len()));
-                bases.extend(std::iter::repeat_n(0, kept_dims[j]));
+                p.pairs.push((j, i, p.bases.len()));
+                p.bases.extend(std::iter::repeat_n(0, kept_dims[j]));
             }
             for c in 0..kept_dims[j] {
-                col_ptr.push(row_idx.len());
+                p.col_ptr.push(p.row_idx.len());
                 for (slot, &i) in rows.iter().enumerate() {
-                    bases[first_base + slot * kept_dims[j] + c] = row_idx.len();
+                    p.bases[first_base + slot * kept_dims[j] + c] = p.row_idx.len();
                     if i == j {
-                        diag_positions[kept_offsets[j] + c] = row_idx.len() + c;
-                        row_idx.extend(kept_offsets[j]..=kept_offsets[j] + c);
+                        p.diag_positions[kept_offsets[j] + c] = p.row_idx.len() + c;
+                        p.row_idx.extend(kept_offsets[j]..=kept_offsets[j] + c);
                     } else {
-                        row_idx.extend(kept_offsets[i]..kept_offsets[i + 1]);
+                        p.row_idx.extend(kept_offsets[i]..kept_offsets[i + 1]);
                     }
                 }
             }
         }
-        col_ptr.push(row_idx.len());
+        p.col_ptr.push(p.row_idx.len());
+        p
+    }
 
-        let mut hll_offsets = Vec::with_capacity(elim_dims.len() + 1);
-        let mut hcl_offsets = Vec::with_capacity(elim_dims.len() + 1);
-        let (mut ho, mut co) = (0, 0);
-        for (cams, &d) in elim_cams.iter().zip(&elim_dims) {
-            hll_offsets.push(ho);
-            hcl_offsets.push(co);
-            ho += d * d;
-            co += cams.iter().map(|&c| kept_dims[c] * d).sum::<usize>();
-        }
-        hll_offsets.push(ho);
-        hcl_offsets.push(co);
-
+    /// Each factor's plan: its kept blocks, the pairs its JᵀJ adds to, and its
+    /// eliminated block's slots in the camera–landmark blocks (`hcl_offsets`).
+    fn factor_plans(
+        &self,
+        factor_roles: &[Roles],
+        kept_dims: &[usize],
+        elim_dims: &[usize],
+        hcl_offsets: &[usize],
+    ) -> Vec<FactorPlan> {
         let mut plans = Vec::with_capacity(factor_roles.len());
         for roles in factor_roles {
             let mut plan = FactorPlan::default();
@@ -413,7 +397,7 @@ impl Structure {
             for &(p, bp) in &plan.kept {
                 for &(q, bq) in &plan.kept {
                     if bp >= bq {
-                        plan.pairs.push((p, q, pair_id(bp, bq)));
+                        plan.pairs.push((p, q, self.pair_id(bp, bq)));
                     }
                 }
             }
@@ -424,7 +408,7 @@ impl Structure {
                         .kept
                         .iter()
                         .map(|&(q, bq)| {
-                            let cams = &elim_cams[*e];
+                            let cams = &self.elim_cams[*e];
                             let slot = cams.iter().position(|&c| c == bq).unwrap_or(0);
                             (q, hcl_offsets[*e] + cams[..slot].iter().map(|&c| kept_dims[c] * d).sum::<usize>())
                         })
@@ -434,28 +418,84 @@ impl Structure {
             }
             plans.push(plan);
         }
-        let elim_pairs = elim_cams
+        plans
+    }
+
+    /// Per eliminated block, the pairs of kept blocks its Schur complement
+    /// adds to: `(slot a, slot b, pair id)`.
+    fn elim_pairs(&self) -> Vec<Vec<(usize, usize, usize)>> {
+        self.elim_cams
             .iter()
             .map(|cams| {
                 let mut v = Vec::new();
                 for (sa, &a) in cams.iter().enumerate() {
                     for (sb, &b) in cams.iter().enumerate() {
                         if a >= b {
-                            v.push((sa, sb, pair_id(a, b)));
+                            v.push((sa, sb, self.pair_id(a, b)));
                         }
                     }
                 }
                 v
             })
-            .collect();
-        let elim_offsets = elim_dims
+            .collect()
+    }
+}
+
+/// See [`BlockPattern::scalar_pattern`].
+struct ScalarPattern {
+    col_ptr: Vec<usize>,
+    row_idx: Vec<usize>,
+    pairs: Vec<(usize, usize, usize)>,
+    bases: Vec<usize>,
+    diag_positions: Vec<usize>,
+}
+
+/// Offsets of running sums of `sizes`, with the total last.
+fn offsets(sizes: impl Iterator<Item = usize>) -> Vec<usize> {
+    let mut out = vec![0];
+    for s in sizes {
+        out.push(out[out.len() - 1] + s);
+    }
+    out
+}
+
+impl Structure {
+    /// Build the structure. `factor_roles[f]` gives the role of each key position of factor f.
+    pub fn new(
+        kept_dims: Vec<usize>,
+        elim_dims: Vec<usize>,
+        factor_roles: &[Roles],
+        solver: LinearSolver,
+    ) -> Result<Self, SolveError> {
+        let nk = kept_dims.len();
+        let n: usize = kept_dims.iter().sum();
+        let dense = match solver {
+            LinearSolver::DenseCholesky => true,
+            LinearSolver::SparseCholesky => false,
+            LinearSolver::Auto => n <= DENSE_THRESHOLD,
+        };
+        // A dense factorization does not care about the order.
+        let rank = if dense { (0..nk).collect() } else { block_amd(nk, factor_roles) };
+        let mut dims_new = vec![0; nk];
+        for (b, &d) in kept_dims.iter().enumerate() {
+            dims_new[rank[b]] = d;
+        }
+        let kept_dims = dims_new;
+        let remapped: Vec<Roles> = factor_roles
             .iter()
-            .scan(n, |o, d| {
-                let here = *o;
-                *o += d;
-                Some(here)
-            })
+            .map(|roles| roles.iter().map(|r| if let Role::Kept(b) = r { Role::Kept(rank[*b]) } else { *r }).collect())
             .collect();
+        let kept_offsets = offsets(kept_dims.iter().copied());
+        let pattern = BlockPattern::new(nk, elim_dims.len(), &remapped)?;
+        let ScalarPattern { col_ptr, row_idx, pairs, bases, diag_positions } =
+            pattern.scalar_pattern(&kept_dims, &kept_offsets);
+        let hll_offsets = offsets(elim_dims.iter().map(|d| d * d));
+        let hcl_offsets = offsets(
+            pattern.elim_cams.iter().zip(&elim_dims).map(|(cams, &d)| cams.iter().map(|&c| kept_dims[c] * d).sum()),
+        );
+        let plans = pattern.factor_plans(&remapped, &kept_dims, &elim_dims, &hcl_offsets);
+        let elim_pairs = pattern.elim_pairs();
+        let elim_offsets = offsets(elim_dims.iter().copied()).iter().take(elim_dims.len()).map(|o| o + n).collect();
         let mut s = Structure {
             kept_dims,
             kept_offsets,
@@ -468,7 +508,7 @@ impl Structure {
             bases,
             diag_positions,
             plans,
-            elim_cams,
+            elim_cams: pattern.elim_cams,
             elim_pairs,
             hll_offsets,
             hcl_offsets,
