@@ -22,7 +22,7 @@ fn recovers_velocity_and_tilt_without_noise() {
     let mut opts = VioOptions::for_simulation(&cfg);
     opts.noise.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
     let frames: Vec<usize> = (0..input.frames.len()).filter(|&k| (20.0..21.5).contains(&input.frames[k].t)).collect();
-    let m = closed_form(&input, &frames, &opts).unwrap();
+    let m = closed_form(&input, &frames, &opts.noise.imu, opts.noise.gravity).unwrap();
     let gt = input.groundtruth.as_ref().unwrap();
     let t_last = input.t0_ns + (input.frames[*frames.last().unwrap()].t * 1e9).round() as i64;
     let k = gt.t_ns.partition_point(|&t| t < t_last);
@@ -55,7 +55,7 @@ fn is_close_enough_on_noisy_windows() {
         let input = VioInput::from_simulation(&sim).unwrap();
         for end in [8.0, 12.0, 31.5] {
             let frames = window(&input, end - 1.5, end);
-            let m = closed_form(&input, &frames, &opts).unwrap();
+            let m = closed_form(&input, &frames, &opts.noise.imu, opts.noise.gravity).unwrap();
             let (tilt_deg, dv) = errors_at_end(&sim, &input, &frames, &m);
             println!(
                 "seed {seed}, {end} s: free gravity {:.3}, tilt {tilt_deg:.2}°, velocity {dv:.3} m/s",
@@ -97,7 +97,7 @@ fn finds_a_large_gyro_bias_where_the_features_determine_it() {
         let mut tried = 0;
         for end in [8.0, 12.0, 31.5] {
             let frames = window(&input, end - 1.5, end);
-            let Ok(m) = closed_form(&input, &frames, &opts) else { continue };
+            let Ok(m) = closed_form(&input, &frames, &opts.noise.imu, opts.noise.gravity) else { continue };
             tried += 1;
             let t0 = input.t0_ns + (input.frames[frames[0]].t * 1e9).round() as i64;
             let k = gt.t_ns.partition_point(|&t| t < t0).min(gt.len() - 1);
@@ -134,7 +134,8 @@ fn refuses_the_trivial_solution_of_a_slow_window() {
     let sim = simulate(Scenario::Walk, &cfg, 1).unwrap();
     let input = VioInput::from_simulation(&sim).unwrap();
     let opts = VioOptions::for_simulation(&cfg);
-    let err = closed_form(&input, &window(&input, 30.0, 31.5), &opts).unwrap_err().to_string();
+    let err =
+        closed_form(&input, &window(&input, 30.0, 31.5), &opts.noise.imu, opts.noise.gravity).unwrap_err().to_string();
     assert!(err.contains("too little parallax"), "{err}");
 }
 
@@ -157,7 +158,7 @@ fn stereo_initializes_the_slow_window() {
         let input = VioInput::from_simulation(&sim).unwrap();
         input.check().unwrap();
         let frames = window(&input, 30.0, 31.5);
-        let m = closed_form(&input, &frames, &opts).unwrap();
+        let m = closed_form(&input, &frames, &opts.noise.imu, opts.noise.gravity).unwrap();
         let (tilt_deg, dv) = errors_at_end(&sim, &input, &frames, &m);
         println!(
             "noisy {noisy}: {} landmarks, {} stereo matches, free gravity {:.3}, tilt {tilt_deg:.3}°, velocity {dv:.4} m/s",
@@ -191,10 +192,16 @@ fn refuses_too_few_frames_and_landmarks() {
     let sim = simulate(Scenario::Walk, &cfg, 2).unwrap();
     let mut input = VioInput::from_simulation(&sim).unwrap();
     let opts = VioOptions::for_simulation(&cfg);
-    assert!(closed_form(&input, &[10, 11, 12], &opts).unwrap_err().to_string().contains("4 needed"));
+    assert!(closed_form(&input, &[10, 11, 12], &opts.noise.imu, opts.noise.gravity)
+        .unwrap_err()
+        .to_string()
+        .contains("4 needed"));
     for f in &mut input.frames {
         f.features.truncate(5);
     }
     let frames: Vec<usize> = (160..190).collect();
-    assert!(closed_form(&input, &frames, &opts).unwrap_err().to_string().contains("landmarks"));
+    assert!(closed_form(&input, &frames, &opts.noise.imu, opts.noise.gravity)
+        .unwrap_err()
+        .to_string()
+        .contains("landmarks"));
 }

@@ -35,12 +35,12 @@
 //! walk, tilt within 1.5° and velocity within 0.12 m/s.
 
 use super::VioError;
-use super::{VioInput, VioOptions};
+use super::VioInput;
 use crate::model::geometry::{gravity_aligned, parts, preintegrate};
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Vector3};
 use std::collections::BTreeMap;
 use tumble_factors::camera::CameraModel;
-use tumble_factors::imu_preint::Preintegrated;
+use tumble_factors::imu_preint::{Preintegrated, PreintegrationParams};
 
 /// What the closed-form initialization found, at the window's last frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -93,18 +93,24 @@ const GYRO_BIAS_ROUNDS: usize = 3;
 
 /// Solve the closed-form initialization over the frames `frames` (indices
 /// into `input.frames`, in time order, at least 4), the IMU already corrected
-/// by the calibration. With [`VioInput::stereo`] the second camera's matches
+/// by the calibration, preintegrated with the noise `imu`, under local
+/// `gravity` \[m/s²\]. With [`VioInput::stereo`] the second camera's matches
 /// in those frames join the equations. An error says why the window cannot
 /// initialize (too few landmarks, too little motion) — the caller tries a
 /// later window.
-pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Result<MotionInit, VioError> {
+pub fn closed_form(
+    input: &VioInput,
+    frames: &[usize],
+    imu: &PreintegrationParams,
+    gravity: f64,
+) -> Result<MotionInit, VioError> {
     if frames.len() < 4 {
         return Err(format!("{} frames in the window, 4 needed", frames.len()).into());
     }
     let by_track = bearings(frames, |k| input.frames[k].features.iter(), &input.camera);
     let (r_bc, t_bc) = parts(&input.body_from_camera);
-    let (bias_gyro, determined) = window_gyro_bias(input, frames, &by_track, &r_bc, opts);
-    let motion = Motion::integrate(input, frames, bias_gyro, opts);
+    let (bias_gyro, determined) = window_gyro_bias(input, frames, &by_track, &r_bc, imu);
+    let motion = Motion::integrate(input, frames, bias_gyro, imu);
     // The second camera's matches of the same tracks, when there is one.
     let stereo = match &input.stereo {
         Some(st) => bearings(frames, |k| st.features.get(k).into_iter().flatten(), &st.camera),
@@ -128,16 +134,16 @@ pub fn closed_form(input: &VioInput, frames: &[usize], opts: &VioOptions) -> Res
         return Err(format!("{kept} landmarks fit the motion, {MIN_LANDMARKS} needed").into());
     }
     let depths: Vec<f64> = (0..used.len()).filter(|&j| active[j]).map(|j| x[6 + j]).collect();
-    check_scale_observed(depths, Vector3::new(x[3], x[4], x[5]).norm(), opts.noise.gravity)?;
+    check_scale_observed(depths, Vector3::new(x[3], x[4], x[5]).norm(), gravity)?;
     let free_g = Vector3::new(x[3], x[4], x[5]);
     let free_gravity = free_g.norm();
     // Gravity on its sphere: g = |g| ĝ + B w, w in the tangent plane, solved
     // again a few times.
-    let mut g = free_g * (opts.noise.gravity / free_gravity);
+    let mut g = free_g * (gravity / free_gravity);
     let mut v0 = Vector3::new(x[0], x[1], x[2]);
     for _ in 0..4 {
         let y = solve_rows(&rows, used.len(), &kept_rows, Some(&g))?;
-        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * opts.noise.gravity;
+        g = (g + tangent_basis(&g) * nalgebra::Vector2::new(y[3], y[4])).normalize() * gravity;
         v0 = Vector3::new(y[0], y[1], y[2]);
     }
     let last = frames.len() - 1;
@@ -172,13 +178,18 @@ where
 
 /// The window's IMU preintegrated from its first frame to each frame at gyro
 /// bias `bg` (None for the first frame).
-fn integrate(input: &VioInput, frames: &[usize], bg: Vector3<f64>, opts: &VioOptions) -> Vec<Option<Preintegrated>> {
+fn integrate(
+    input: &VioInput,
+    frames: &[usize],
+    bg: Vector3<f64>,
+    imu: &PreintegrationParams,
+) -> Vec<Option<Preintegrated>> {
     let t0 = input.frames[frames[0]].t;
     frames
         .iter()
         .map(|&k| {
             let t = input.frames[k].t;
-            (t > t0).then(|| preintegrate(&input.imu, t0, t, (Vector3::zeros(), bg), opts.noise.imu).0)
+            (t > t0).then(|| preintegrate(&input.imu, t0, t, (Vector3::zeros(), bg), *imu).0)
         })
         .collect()
 }
@@ -191,11 +202,11 @@ fn window_gyro_bias(
     frames: &[usize],
     by_track: &BTreeMap<u64, Vec<Bearing>>,
     r_bc: &Matrix3<f64>,
-    opts: &VioOptions,
+    imu: &PreintegrationParams,
 ) -> (Vector3<f64>, bool) {
     let mut bias_gyro = Vector3::zeros();
     for _ in 0..GYRO_BIAS_ROUNDS {
-        let pims = integrate(input, frames, bias_gyro, opts);
+        let pims = integrate(input, frames, bias_gyro, imu);
         let rot: Vec<Matrix3<f64>> =
             pims.iter().map(|p| p.as_ref().map_or(Matrix3::identity(), |p| p.delta_rotation())).collect();
         let mut cleaned: Vec<Vec<Bearing>> = by_track.values().cloned().collect();
@@ -225,7 +236,7 @@ struct Motion {
 }
 
 impl Motion {
-    fn integrate(input: &VioInput, frames: &[usize], bias_gyro: Vector3<f64>, opts: &VioOptions) -> Motion {
+    fn integrate(input: &VioInput, frames: &[usize], bias_gyro: Vector3<f64>, imu: &PreintegrationParams) -> Motion {
         let t0 = input.frames[frames[0]].t;
         let n = frames.len();
         let mut m = Motion {
@@ -234,7 +245,7 @@ impl Motion {
             dv: Vec::with_capacity(n),
             time: Vec::with_capacity(n),
         };
-        for (&k, pim) in frames.iter().zip(integrate(input, frames, bias_gyro, opts)) {
+        for (&k, pim) in frames.iter().zip(integrate(input, frames, bias_gyro, imu)) {
             match pim {
                 None => {
                     m.rot.push(Matrix3::identity());

@@ -59,7 +59,7 @@ impl ResidualTally {
 /// then the landmarks' reprojections.
 pub(crate) fn window_graph(window: &Window, landmarks: &Landmarks, input: &VioInput, opts: &VioOptions) -> Graph {
     let mut g = Graph::new();
-    window.add_factors(&mut g, opts);
+    window.add_factors(&mut g);
     landmarks.add_factors(&mut g, input, opts);
     g
 }
@@ -118,7 +118,7 @@ fn count_leaving(
     }
     if !window.links.is_empty() {
         let mut g = Graph::new();
-        window.add_link(&mut g, 0, opts);
+        window.add_link(&mut g, 0);
         if let Ok(c) = g.chi2(&window.values) {
             t.imu_chi2 += c;
             t.imu_rows += g.entries().iter().map(|e| e.factor.residual_dim()).sum::<usize>();

@@ -13,7 +13,7 @@
 //! others (`super::auto_calib`).
 
 use super::auto_calib::HeldDirections;
-use super::{Estimate, VioInput, VioOptions};
+use super::{CameraCalibrationOptions, Estimate, VioInput};
 use crate::model::geometry::{parts, pose};
 use crate::model::ImuData;
 use crate::model::DETERMINED_FRACTION;
@@ -167,9 +167,8 @@ pub(crate) struct CameraPrior {
 const GROUPS: [Key; 2] = [EXTRINSIC, TIME_OFFSET];
 
 impl CameraPrior {
-    /// The prior for `input` under `opts`; None when nothing is estimated.
-    pub fn new(input: &VioInput, opts: &VioOptions) -> Option<CameraPrior> {
-        let c = &opts.camera;
+    /// The prior for `input` under `c`; None when nothing is estimated.
+    pub fn new(input: &VioInput, c: &CameraCalibrationOptions) -> Option<CameraPrior> {
         if !c.online() {
             return None;
         }
@@ -501,6 +500,7 @@ pub(crate) fn exposure_motion(imu: &ImuData, t: f64, bias: &Vector6<f64>, half_w
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::vio::VioOptions;
 
     #[test]
     fn the_fit_recovers_a_quadratic_rate_and_the_specific_force() {
@@ -528,7 +528,7 @@ mod tests {
         let mut opts = VioOptions::default();
         opts.camera.extrinsics = Estimate::On;
         opts.camera.time_offset = Estimate::On;
-        let prior = CameraPrior::new(&input, &opts).unwrap();
+        let prior = CameraPrior::new(&input, &opts.camera).unwrap();
         let mut values = Values::new();
         prior.insert(&mut values, None);
         assert!(prior.implausible(&values).is_none());

@@ -3,9 +3,10 @@
 //! at rest), or the closed-form solution over a moving start ([`super::init`]).
 
 use super::window::InitState;
-use super::{Init, VioInput, VioOptions};
+use super::{Init, InitOptions, NoiseOptions, VioInput};
 use crate::model::geometry::{gravity_aligned, pose};
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
+use tumble_factors::imu_preint::PreintegrationParams;
 
 /// Velocity prior σ of a start in motion (the closed form's accuracy) \[m/s\].
 const MOTION_V_SIGMA: f64 = 0.1;
@@ -30,9 +31,15 @@ pub(crate) enum AtRest {
     Moving,
 }
 
-/// The initializer and why its last attempt in motion failed.
-#[derive(Debug, Default)]
+/// The initializer, its options, and why its last attempt in motion failed.
+#[derive(Debug)]
 pub(crate) struct Startup {
+    /// How to initialize.
+    init: InitOptions,
+    /// Gravity \[m/s²\] and whether a static start's measured noise is used
+    /// ([`NoiseOptions::from_static`]).
+    gravity: f64,
+    from_static: bool,
     /// Why the last initialization in motion failed (for the error when none worked).
     pub failure: Option<String>,
     /// The white-noise densities a static start measured, `[gyro, accel]`.
@@ -40,19 +47,31 @@ pub(crate) struct Startup {
 }
 
 impl Startup {
-    /// Try to initialize at frame `index` (time `t`) by `opts.init.mode`.
-    /// A static start may raise `opts`' white-noise densities to what it
-    /// measured (with [`super::NoiseOptions::from_static`]); what it measured
-    /// and what it did go to `warnings`.
+    /// An initializer with the run's options.
+    pub fn new(init: &InitOptions, noise: &NoiseOptions) -> Startup {
+        Startup {
+            init: init.clone(),
+            gravity: noise.gravity,
+            from_static: noise.from_static,
+            failure: None,
+            at_rest: None,
+        }
+    }
+
+    /// Try to initialize at frame `index` (time `t`) by the mode of the
+    /// [`InitOptions`], with the IMU noise `imu` in use. A static start may
+    /// raise `imu`'s white-noise densities to what it measured (with
+    /// [`NoiseOptions::from_static`]); what it measured and what it did go to
+    /// `warnings`.
     pub fn initialize(
         &mut self,
         input: &VioInput,
-        opts: &mut VioOptions,
+        imu: &mut PreintegrationParams,
         warnings: &mut Vec<String>,
         index: usize,
         t: f64,
     ) -> Option<InitState> {
-        match &opts.init.mode {
+        match &self.init.mode {
             Init::Given { q, p, v, bias_accel, bias_gyro, t: t0 } => {
                 if t < *t0 {
                     return None;
@@ -66,17 +85,19 @@ impl Startup {
                     b,
                 ))
             }
-            Init::Static => initialize_static(input, opts, warnings, t).ok().map(|(s, m)| {
-                self.at_rest = Some(m);
-                s
-            }),
-            Init::Motion => self.initialize_moving(input, opts, warnings, index, t),
-            Init::Auto => match initialize_static(input, opts, warnings, t) {
+            Init::Static => {
+                initialize_static(input, &self.init, self.from_static, imu, warnings, t).ok().map(|(s, m)| {
+                    self.at_rest = Some(m);
+                    s
+                })
+            }
+            Init::Motion => self.initialize_moving(input, imu, warnings, index, t),
+            Init::Auto => match initialize_static(input, &self.init, self.from_static, imu, warnings, t) {
                 Ok((state, measured)) => {
                     self.at_rest = Some(measured);
                     Some(state)
                 }
-                Err(AtRest::Moving) => self.initialize_moving(input, opts, warnings, index, t),
+                Err(AtRest::Moving) => self.initialize_moving(input, imu, warnings, index, t),
                 Err(AtRest::TooEarly) => None,
             },
         }
@@ -89,20 +110,20 @@ impl Startup {
     fn initialize_moving(
         &mut self,
         input: &VioInput,
-        opts: &VioOptions,
+        imu: &PreintegrationParams,
         warnings: &mut Vec<String>,
         index: usize,
         t: f64,
     ) -> Option<InitState> {
         let frames = &input.frames;
         let mut failure = None;
-        for span in [opts.init.motion_window_s, 2.0 * opts.init.motion_window_s] {
+        for span in [self.init.motion_window_s, 2.0 * self.init.motion_window_s] {
             let first = frames.partition_point(|f| f.t < t - span);
             if frames.first().is_none_or(|f| t - f.t < span - 1e-9) || index < first + 3 {
                 break;
             }
             let window: Vec<usize> = (first..=index).collect();
-            match super::init::closed_form(input, &window, opts) {
+            match super::init::closed_form(input, &window, imu, self.gravity) {
                 Ok(m) => {
                     let bias_gyro = m.bias_gyro.unwrap_or_else(Vector3::zeros);
                     let stereo = match m.stereo_observations {
@@ -144,15 +165,18 @@ impl Startup {
 /// [`Init::Static`] at time `t`: the last `static_window_s` of IMU data must
 /// be at rest (means over its quarters agree, so vibration averages out).
 /// Returns the start and the white-noise densities `[gyro, accel]` the
-/// samples' spread shows.
+/// samples' spread shows; with `from_static`, the densities of the noise
+/// `in_use` raised to them where they exceed them.
 pub(crate) fn initialize_static(
     input: &VioInput,
-    opts: &mut VioOptions,
+    init: &InitOptions,
+    from_static: bool,
+    in_use: &mut PreintegrationParams,
     warnings: &mut Vec<String>,
     t: f64,
 ) -> Result<(InitState, [f64; 2]), AtRest> {
     let imu = &input.imu;
-    let w = opts.init.static_window_s;
+    let w = init.static_window_s;
     let (i0, i1) = (imu.t.partition_point(|&s| s < t - w), imu.t.partition_point(|&s| s <= t));
     if t - w < imu.t.first().copied().unwrap_or(f64::INFINITY) - 1e-9 || i1 < i0 + 10 {
         return Err(AtRest::TooEarly);
@@ -178,9 +202,9 @@ pub(crate) fn initialize_static(
         (s / (i1 - i0) as f64).sqrt()
     };
     let (sa, sg) = (std(false, &am) / rate.sqrt(), std(true, &gm) / rate.sqrt());
-    let apply = opts.noise.from_static;
+    let apply = from_static;
     let action = if apply { "using the measured value" } else { "kept (--noise-from-static uses it)" };
-    let params = &mut opts.noise.imu;
+    let params = in_use;
     for (what, unit, measured, density) in [
         ("accelerometer", "m/s²/√Hz, vibration?", sa, &mut params.accel_noise_density),
         ("gyroscope", "rad/s/√Hz", sg, &mut params.gyro_noise_density),
@@ -205,6 +229,7 @@ mod tests {
     use super::*;
     use crate::model::ImuData;
     use crate::vio::Frame;
+    use crate::vio::VioOptions;
     use nalgebra::Matrix3;
 
     /// `seconds` of IMU at 200 Hz, tilted 10° about x, gyro bias 0.01 rad/s, with `wiggle` rad/s after 1 s.
@@ -225,7 +250,7 @@ mod tests {
         let inp = input(1.5, 0.0);
         let mut opts = VioOptions::default();
         let mut warnings = Vec::new();
-        let (s, _) = initialize_static(&inp, &mut opts, &mut warnings, 1.4).unwrap();
+        let (s, _) = initialize_static(&inp, &opts.init, false, &mut opts.noise.imu, &mut warnings, 1.4).unwrap();
         assert!((s.b[3] - 0.01).abs() < 1e-12 && s.b[4].abs() < 1e-12);
         let (r, _) = crate::model::geometry::parts(&s.x);
         let up = r.transpose() * Vector3::z();
@@ -238,11 +263,17 @@ mod tests {
     fn a_static_start_waits_for_data_and_refuses_motion() {
         let inp = input(1.5, 0.0);
         let mut opts = VioOptions::default();
-        assert_eq!(initialize_static(&inp, &mut opts, &mut Vec::new(), 0.5).err(), Some(AtRest::TooEarly));
+        assert_eq!(
+            initialize_static(&inp, &opts.init, false, &mut opts.noise.imu, &mut Vec::new(), 0.5).err(),
+            Some(AtRest::TooEarly)
+        );
         let moving = input(1.5, 0.2);
-        assert_eq!(initialize_static(&moving, &mut opts, &mut Vec::new(), 1.4).err(), Some(AtRest::Moving));
+        assert_eq!(
+            initialize_static(&moving, &opts.init, false, &mut opts.noise.imu, &mut Vec::new(), 1.4).err(),
+            Some(AtRest::Moving)
+        );
         // Auto falls back to the motion start, which has no frames to work with yet.
-        let mut startup = Startup::default();
-        assert!(startup.initialize(&moving, &mut opts, &mut Vec::new(), 0, 1.4).is_none());
+        let mut startup = Startup::new(&opts.init, &opts.noise);
+        assert!(startup.initialize(&moving, &mut opts.noise.imu, &mut Vec::new(), 0, 1.4).is_none());
     }
 }

@@ -4,7 +4,7 @@
 //! prior), and the zero-velocity pseudo-measurements of states at rest.
 
 use super::landmarks::RayTally;
-use super::VioOptions;
+use super::InitOptions;
 use crate::model::geometry::parts;
 use nalgebra::{DMatrix, Matrix3, UnitQuaternion, Vector3, Vector6};
 use std::sync::Arc;
@@ -206,8 +206,8 @@ impl Window {
     /// Whether the estimate is contradicted by the features at time `t`, and
     /// since when \[s\] (its estimates from then on are wrong), with why;
     /// `min_landmarks` is the fewest features (and landmarks) that carry an
-    /// estimate, and `opts.init.motion_window_s` the span of evidence (the
-    /// span a start in motion is estimated from).
+    /// estimate, and `span` \[s\] the span of evidence (the span a start in
+    /// motion is estimated from, [`super::InitOptions::motion_window_s`]).
     ///
     /// - A start in motion whose window, for longer than that span, never
     ///   held `min_landmarks` landmarks while the frames had that many
@@ -227,8 +227,7 @@ impl Window {
     ///   count as missing. On a simulated walk whose gyro read 2 rad/s too
     ///   much over 1 s (a shock) they missed at up to 62 %, and the estimate
     ///   flew on for 17 s at up to 250 m/s until a position jump reset it.
-    pub fn contradicted(&self, t: f64, min_landmarks: usize, opts: &VioOptions) -> Option<(f64, String)> {
-        let span = opts.init.motion_window_s;
+    pub fn contradicted(&self, t: f64, min_landmarks: usize, span: f64) -> Option<(f64, String)> {
         if self.started_in_motion && self.most_landmarks < min_landmarks {
             // This frame had the features (and, as the window never held
             // them, too few landmarks).
@@ -279,7 +278,7 @@ impl Window {
     /// Start the window afresh at time `t` from `init`: one state with a
     /// prior. Roll and pitch are as uncertain as an accelerometer bias makes
     /// them (or `init.tilt_sigma`); yaw and position are fixed (the gauge of VIO).
-    pub fn start(&mut self, t: f64, init: InitState, opts: &VioOptions) {
+    pub fn start(&mut self, t: f64, init: InitState, opts: &InitOptions) {
         let InitState { x, v, b, v_sigma, tilt_sigma, gyro_bias_sigma, in_motion } = init;
         let sid = self.next_id();
         self.clear();
@@ -290,12 +289,12 @@ impl Window {
         self.started_in_motion = in_motion;
         self.started_at = t;
         let (r, _) = parts(&x);
-        let tilt = tilt_sigma.unwrap_or((opts.init.bias_accel_sigma / opts.noise.gravity).max(1e-3));
+        let tilt = tilt_sigma.unwrap_or((opts.bias_accel_sigma / -self.gravity.z).max(1e-3));
         let u = r.transpose() * Vector3::z();
         let rot_cov = Matrix3::identity() * tilt * tilt + u * u.transpose() * (1e-6 - tilt * tilt);
         let mut pose_cov = DMatrix::identity(6, 6) * 1e-6;
         pose_cov.view_mut((0, 0), (3, 3)).copy_from(&rot_cov);
-        let sa = opts.init.bias_accel_sigma;
+        let sa = opts.bias_accel_sigma;
         let sg = gyro_bias_sigma.unwrap_or(START_GYRO_BIAS_SIGMA);
         self.init_prior = Some(InitPrior { sid, pose: x, pose_cov, v, v_sigma, b, b_sigma: [sa, sa, sa, sg, sg, sg] });
     }
@@ -336,7 +335,7 @@ impl Window {
     }
 
     /// Add the priors, the IMU links and the rest pseudo-measurements to `g`.
-    pub fn add_factors(&self, g: &mut Graph, opts: &VioOptions) {
+    pub fn add_factors(&self, g: &mut Graph) {
         if let Some(p) = &self.init_prior {
             if let Ok(n) = NoiseModel::from_covariance(&p.pose_cov) {
                 g.add(PriorFactor::new(X(p.sid), p.pose), n);
@@ -351,7 +350,7 @@ impl Window {
             c.add_factors(g);
         }
         for i in 0..self.links.len() {
-            self.add_link(g, i, opts);
+            self.add_link(g, i);
         }
         for (i, s) in self.states.iter().enumerate() {
             let Some(rest_since) = s.rest_since else { continue };
@@ -367,8 +366,9 @@ impl Window {
         }
     }
 
-    /// Add link `i`'s IMU factor and bias random walk (state `i` to `i + 1`) to `g`.
-    pub fn add_link(&self, g: &mut Graph, i: usize, opts: &VioOptions) {
+    /// Add link `i`'s IMU factor and bias random walk (state `i` to `i + 1`,
+    /// the walks of the noise it was preintegrated with) to `g`.
+    pub fn add_link(&self, g: &mut Graph, i: usize) {
         let (pim, scale) = &self.links[i];
         let (a, b) = (self.states[i].sid, self.states[i + 1].sid);
         let f = ImuFactor::new([X(a), V(a), B(a), X(b), V(b)], pim.clone(), self.gravity);
@@ -376,7 +376,7 @@ impl Window {
             g.add(f, n);
         }
         let dt = pim.delta_t().max(1e-3);
-        let imu = &opts.noise.imu;
+        let imu = pim.params();
         if let Ok((rw, n)) = bias_random_walk_axes(B(a), B(b), imu.accel_walk().into(), imu.gyro_walk().into(), dt) {
             g.add(rw, n);
         }
@@ -472,6 +472,7 @@ pub(crate) fn add_rest_prior(g: &mut Graph, sid: u64) {
 mod tests {
     use super::*;
     use crate::model::geometry::pose;
+    use crate::vio::VioOptions;
     use tumble_factors::imu_preint::PreintegrationParams;
     use tumble_solvers::{LmOptions, Optimizer};
 
@@ -482,7 +483,7 @@ mod tests {
         w.start(
             0.0,
             InitState::at_rest(pose(&Matrix3::identity(), &Vector3::zeros()), Vector3::zeros(), Vector6::zeros()),
-            &opts,
+            &opts.init,
         );
         for k in 1..n {
             let mut pim = Preintegrated::new(PreintegrationParams::default(), Vector3::zeros(), Vector3::zeros());
@@ -499,12 +500,12 @@ mod tests {
 
     #[test]
     fn a_window_at_rest_stays_at_rest() {
-        let (mut w, opts) = at_rest(5, true);
+        let (mut w, _) = at_rest(5, true);
         // Disturb the newest state; the IMU links and rest priors pull it back.
         let newest = w.states.last().unwrap().sid;
         w.values.insert(V(newest), Vector3::new(0.3, 0.0, 0.0));
         let mut g = Graph::new();
-        w.add_factors(&mut g, &opts);
+        w.add_factors(&mut g);
         let (solved, _) = Optimizer::new(LmOptions::default()).optimize(&g, &w.values).unwrap();
         let v = solved.get::<Vector3<f64>>(V(newest)).unwrap();
         let (_, p) = parts(solved.get::<Isometry3F64>(X(newest)).unwrap());
@@ -519,7 +520,7 @@ mod tests {
         assert_eq!(dropped, 3);
         assert!(!w.values.contains(X(3)));
         let mut g = Graph::new();
-        w.add_link(&mut g, 0, &VioOptions::default());
+        w.add_link(&mut g, 0);
         let m = tumble_solvers::marginalize(&g, &w.values, &[X(0), V(0), B(0)]).unwrap();
         w.remove_oldest(m.prior, &[X(0), V(0), B(0)]);
         assert_eq!(w.ids(), vec![1, 2]);

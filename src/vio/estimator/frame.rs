@@ -60,7 +60,7 @@ impl Estimator<'_> {
             ));
             return None;
         }
-        self.rest.push(t, &obs, p.rotation, &self.opts);
+        self.rest.push(t, &obs, p.rotation);
         // A frame the window's landmarks cannot place while a start in motion
         // fills the window stays in it (Window::filling).
         let enough_landmarks = self.landmarks.count() >= MIN_LANDMARKS_TO_TRACK;
@@ -94,17 +94,17 @@ impl Estimator<'_> {
     /// run: a new start after a withdrawn one carries the scales its meter had
     /// in use, not figures scaled again) and start measuring the noise.
     fn begin(&mut self, index: usize, t: f64, t_start: Instant) -> Option<FrameEstimate> {
-        self.opts.noise.imu = self.noise_given;
-        let init = self.startup.initialize(self.input, &mut self.opts, &mut self.warnings, index, t)?;
+        self.imu = self.opts.noise.imu;
+        let init = self.startup.initialize(self.input, &mut self.imu, &mut self.warnings, index, t)?;
         let x = init.x;
         self.init_time = Some(t);
         self.starts.push(t);
         if self.opts.noise.measure_in_motion {
             let meter = match &self.noise {
-                Some(previous) => NoiseMeter::continuing(self.opts.noise.imu, previous),
-                None => NoiseMeter::new(self.opts.noise.imu),
+                Some(previous) => NoiseMeter::continuing(self.imu, previous),
+                None => NoiseMeter::new(self.imu),
             };
-            self.opts.noise.imu = meter.params();
+            self.imu = meter.params();
             self.noise = Some(meter);
         }
         self.start(t, init);
@@ -127,7 +127,7 @@ impl Estimator<'_> {
         }
         let (xl, vl, bl) = self.window.state_values(last_sid);
         let bias = (bl.fixed_rows::<3>(0).into_owned(), bl.fixed_rows::<3>(3).into_owned());
-        let (pim, gap) = preintegrate(&self.input.imu, ta, t, bias, self.opts.noise.imu);
+        let (pim, gap) = preintegrate(&self.input.imu, ta, t, bias, self.imu);
         let mut scale = 1.0;
         if gap > self.opts.noise.max_imu_gap_s {
             self.warn(format!(
@@ -142,7 +142,7 @@ impl Estimator<'_> {
         }
         let tracked = self.last_tracked.filter(|(tt, ..)| *tt > ta && *tt < t).map(|(tt, xt, vt, bt)| {
             let bias = (bt.fixed_rows::<3>(0).into_owned(), bt.fixed_rows::<3>(3).into_owned());
-            (xt, vt, preintegrate(&self.input.imu, tt, t, bias, self.opts.noise.imu).0)
+            (xt, vt, preintegrate(&self.input.imu, tt, t, bias, self.imu).0)
         });
         let (x0, v0, p0) = match &tracked {
             Some((xt, vt, pt)) => (*xt, *vt, pt),
@@ -169,7 +169,7 @@ impl Estimator<'_> {
             fx: self.input.camera.fx,
         };
         let (par_kf, common_kf) = motion.parallax(&self.keyframe_obs, &p.newest_rotation);
-        let rest_since = self.rest.update(t, &motion, &self.opts);
+        let rest_since = self.rest.update(t, &motion);
         let kf_t = self.window.states.last().map_or(t, |s| s.t);
         let keyframe = is_keyframe(&self.opts.window, par_kf, t - kf_t, common_kf, self.keyframe_obs.len());
         (keyframe, rest_since)
@@ -181,7 +181,7 @@ impl Estimator<'_> {
         let rays = self.landmarks.triangulate(self.input, &self.window.ids(), &mut self.window.values, &self.opts);
         let span = self.opts.init.motion_window_s;
         self.window.watch_landmarks(t, self.landmarks.count(), features, rays, BLIND_FEATURES, span);
-        if let Some((since, why)) = self.window.contradicted(t, BLIND_FEATURES, &self.opts) {
+        if let Some((since, why)) = self.window.contradicted(t, BLIND_FEATURES, span) {
             self.withdraw(since, why);
             return false;
         }
@@ -311,7 +311,7 @@ impl Estimator<'_> {
         let n = self.window.states.len();
         let prev = self.window.states[n - 2].sid;
         let mut g = Graph::new();
-        self.window.add_link(&mut g, n - 2, &self.opts);
+        self.window.add_link(&mut g, n - 2);
         if self.window.states[n - 1].rest_since.is_some() {
             add_rest_prior(&mut g, sid);
         }

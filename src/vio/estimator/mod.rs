@@ -118,8 +118,9 @@ pub struct Estimator<'a> {
     residuals: ResidualTally,
     /// The IMU noise in motion ([`super::NoiseOptions::measure_in_motion`]), from initialization on.
     noise: Option<NoiseMeter>,
-    /// The IMU noise given to the run, before any start raised or scaled it.
-    noise_given: tumble_factors::imu_preint::PreintegrationParams,
+    /// The IMU noise in use: the run's (`opts.noise.imu`) at each start,
+    /// raised by a static start's measurement or the noise meter.
+    imu: tumble_factors::imu_preint::PreintegrationParams,
     /// The camera's online calibration after each keyframe solve.
     camera_track: Vec<(f64, CameraEstimate)>,
     /// Keyframes for which the camera's calibration stays held after an implausible estimate.
@@ -152,12 +153,12 @@ impl<'a> Estimator<'a> {
     /// An estimator over `input` (frames are given to [`Estimator::process`] by index).
     pub fn new(input: &'a VioInput, opts: &VioOptions) -> Self {
         Estimator {
-            window: Window::new(opts.noise.gravity).with_camera(CameraPrior::new(input, opts)),
+            window: Window::new(opts.noise.gravity).with_camera(CameraPrior::new(input, &opts.camera)),
             opts: opts.clone(),
             input,
             landmarks: Landmarks::default(),
-            rest: RestDetector::default(),
-            startup: Startup::default(),
+            rest: RestDetector::new(&opts.rest, opts.noise.pixel_sigma),
+            startup: Startup::new(&opts.init, &opts.noise),
             keyframe_obs: FrameObs::new(),
             last_good: None,
             warnings: Vec::new(),
@@ -169,7 +170,7 @@ impl<'a> Estimator<'a> {
             blind_spans: Vec::new(),
             residuals: ResidualTally::default(),
             noise: None,
-            noise_given: opts.noise.imu,
+            imu: opts.noise.imu,
             camera_track: Vec::new(),
             camera_held: 0,
             withdrawals: Vec::new(),
@@ -221,7 +222,7 @@ impl<'a> Estimator<'a> {
     /// Start the window at time `t` from `init`.
     fn start(&mut self, t: f64, init: InitState) {
         let (x, v, b) = (init.x, init.v, init.b);
-        self.window.start(t, init, &self.opts);
+        self.window.start(t, init, &self.opts.init);
         self.landmarks.clear();
         self.last_good = Some((x, v, b));
     }
@@ -355,8 +356,8 @@ impl<'a> Estimator<'a> {
         ];
         meter.measure(t, &link.residual, &link.jacobian, &sigma, &link.covariance, scales);
         if meter.update(t) {
-            self.opts.noise.imu = meter.params();
-            self.window.reweight_links(self.opts.noise.imu);
+            self.imu = meter.params();
+            self.window.reweight_links(self.imu);
         }
     }
 
