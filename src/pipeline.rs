@@ -263,8 +263,8 @@ pub fn run_chain(
     let mut run = Run { out, opts, stages: Vec::new(), warnings: Vec::new() };
     let (calibration, cal) = run.calibrate(tumble.as_ref(), given_cal, progress)?;
     let (allan, noise) = run.allan(still.as_ref(), given_noise, progress)?;
-    let (audited, final_cal) = run.audit(tumble.as_ref(), calibration.is_some(), cal, noise.clone(), progress)?;
-    let vio_out = run.vio(vio, final_cal.as_ref(), noise.clone(), progress)?;
+    let (audited, final_cal) = run.audit(tumble.as_ref(), calibration.is_some(), cal, noise, progress)?;
+    let vio_out = run.vio(vio, final_cal.as_ref(), noise, progress)?;
     let report_path = out.join("report.md");
     let report = ChainReport {
         stages: run.stages,
