@@ -302,7 +302,7 @@ impl Run<'_> {
         self.stages.push(StageReport { stage, status: Status::Ran(secs), headline, markdown });
     }
 
-    /// 1. Calibrate the hand tumble, or take the calibration given, or an earlier run's.
+    /// Stage 1: calibrate the hand tumble, or take the calibration given, or an earlier run's.
     fn calibrate(
         &mut self,
         tumble: Option<&ImuRecording>,
@@ -350,7 +350,7 @@ impl Run<'_> {
         Ok((None, None))
     }
 
-    /// 2. Identify the noise of the static recording, or take the noise given, or an earlier run's.
+    /// Stage 2: identify the noise of the static recording, or take the noise given, or an earlier run's.
     fn allan(
         &mut self,
         still: Option<&ImuRecording>,
@@ -393,7 +393,7 @@ impl Run<'_> {
         Ok((None, None))
     }
 
-    /// 3. Audit the calibration in use on the tumble, or take an earlier
+    /// Stage 3: audit the calibration in use on the tumble, or take an earlier
     /// run's audited calibration (when the calibration is still the one it
     /// audited: `calibrated` says this run made a new one).
     fn audit(
@@ -443,7 +443,7 @@ impl Run<'_> {
         Ok((None, cal))
     }
 
-    /// 4. Run the VIO with the final calibration and the noise.
+    /// Stage 4: run the VIO with the final calibration and the noise.
     fn vio(
         &mut self,
         source: Option<VioSource>,
