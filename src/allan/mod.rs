@@ -31,10 +31,12 @@ pub mod edf;
 pub mod identify;
 pub mod in_motion;
 pub mod report;
+mod run;
 
 pub use deviation::DeviationKind;
 pub use identify::{identify, Coefficient, Identification, NoiseTerms};
-pub use report::{run_allan, run_allan_with_progress, AllanReport, AllanRunOptions, AxisStat};
+pub use report::{AllanReport, AllanRunOptions, AxisStat};
+pub use run::{run_allan, run_allan_with_progress};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;
