@@ -596,29 +596,7 @@ pub fn evaluate(
         );
     }
     let t0_ns = est.t_ns[0];
-    let max_gap_ns = opts.max_gap_s * 1e9;
-    // Seconds of an epoch clock resolve ~0.2 µs in f64: a pose within 1 µs
-    // of a piece's start is its first.
-    let starts_ns: Vec<i64> = opts.piece_starts_s.iter().map(|s| (s * 1e9).round() as i64 - 1_000).collect();
-    let mut pairs = Vec::with_capacity(est.len());
-    for i in 0..est.len() {
-        if let Some(g) = pose_at(gt, est.t_ns[i], max_gap_ns) {
-            let piece = starts_ns.partition_point(|&s| s <= est.t_ns[i]);
-            pairs.push(Pair { t: (est.t_ns[i] - t0_ns) as f64 * 1e-9, piece, est: iso(est.p[i], est.q[i]), gt: g });
-        }
-    }
-    let span = |t: &[i64]| format!("{:.3}–{:.3} s", t[0] as f64 * 1e-9, t[t.len() - 1] as f64 * 1e-9);
-    if pairs.len() < 3 {
-        return Err(format!(
-            "only {} of {} estimated poses fall inside the ground truth (estimate {}, ground truth {}); \
-             are both on the same clock and in the same time unit?",
-            pairs.len(),
-            est.len(),
-            span(&est.t_ns),
-            span(&gt.t_ns)
-        )
-        .into());
-    }
+    let pairs = pair_poses(est, gt, opts)?;
     let paired = pairs.len();
     let mut warnings = Vec::new();
     let (pairs, similarities) = align_pieces(pairs, opts.alignment, &mut warnings)?;
@@ -631,12 +609,7 @@ pub fn evaluate(
         .map(|p| (p.gt.rotation.inverse() * align_q[p.piece] * p.est.rotation).angle().to_degrees())
         .collect();
     let slices: Vec<&[Pair]> = pairs.chunk_by(|a, b| a.piece == b.piece).collect();
-    let mut rot_err_oriented = Vec::with_capacity(pairs.len());
-    for piece in &slices {
-        let oriented = orientation_alignment(piece, opts.alignment);
-        rot_err_oriented
-            .extend(piece.iter().map(|p| (p.gt.rotation.inverse() * oriented * p.est.rotation).angle().to_degrees()));
-    }
+    let rot_err_oriented = oriented_rotation_errors(&slices, opts.alignment);
     let travelled = |piece: &[Pair]| -> f64 {
         piece.windows(2).map(|w| (w[1].gt.translation.vector - w[0].gt.translation.vector).norm()).sum()
     };
@@ -644,21 +617,7 @@ pub fn evaluate(
     let distances =
         if opts.rpe_distances.is_empty() { default_distances(distance_m) } else { opts.rpe_distances.clone() };
     let (ate_rmse_m, ate_mean_m, ate_median_m, ate_max_m) = stats(&position_errors);
-    let mut first = 0;
-    let pieces: Vec<Piece> = slices
-        .iter()
-        .map(|piece| {
-            let errors = &position_errors[first..first + piece.len()];
-            first += piece.len();
-            Piece {
-                from_s: piece[0].t,
-                to_s: piece[piece.len() - 1].t,
-                matched: piece.len(),
-                ate_rmse_m: stats(errors).0,
-                scale: similarities[piece[0].piece].scale,
-            }
-        })
-        .collect();
+    let pieces = pieces(&slices, &position_errors, &similarities);
     let longest = pieces.iter().max_by_key(|p| p.matched).map_or(1.0, |p| p.scale);
     let matched = pairs.len();
     let mut metrics = Metrics {
@@ -686,27 +645,7 @@ pub fn evaluate(
         bias_from_s: opts.bias_after_s,
         warnings,
     };
-    if paired < est.len() {
-        metrics.warnings.push(format!(
-            "{} of {} estimated poses lie outside the ground truth ({}) or in its gaps > {} s; they are not counted",
-            est.len() - paired,
-            est.len(),
-            span(&gt.t_ns),
-            opts.max_gap_s
-        ));
-    }
-    if metrics.rpe.len() < distances.len() {
-        metrics.warnings.push(format!(
-            "relative errors over {} m skipped: the paired path is only {:.2} m long",
-            distances
-                .iter()
-                .filter(|d| !metrics.rpe.iter().any(|r| r.distance_m == **d))
-                .map(|d| format!("{d}"))
-                .collect::<Vec<_>>()
-                .join(", "),
-            distance_m
-        ));
-    }
+    coverage_warnings(&mut metrics, (paired, est.len()), gt, opts, &distances);
     let bias_rows = match biases {
         Some(b) => compare_biases(b, gt, t0_ns, opts, &mut metrics),
         None => Vec::new(),
@@ -714,6 +653,102 @@ pub fn evaluate(
     let mut groundtruth = gt.clone();
     groundtruth.t_ns.iter_mut().for_each(|t| *t -= t0_ns);
     Ok(Evaluation { metrics, pairs, similarities, position_errors, rotation_errors, groundtruth, bias_rows })
+}
+
+/// A stamp span for messages.
+fn span(t: &[i64]) -> String {
+    format!("{:.3}–{:.3} s", t[0] as f64 * 1e-9, t[t.len() - 1] as f64 * 1e-9)
+}
+
+/// Each estimated pose with the ground truth at its stamp (interpolated,
+/// within `max_gap_s`) and the piece it belongs to; at least three.
+fn pair_poses(est: &Trajectory, gt: &Trajectory, opts: &EvalOptions) -> Result<Vec<Pair>, EvalError> {
+    let t0_ns = est.t_ns[0];
+    let max_gap_ns = opts.max_gap_s * 1e9;
+    // Seconds of an epoch clock resolve ~0.2 µs in f64: a pose within 1 µs
+    // of a piece's start is its first.
+    let starts_ns: Vec<i64> = opts.piece_starts_s.iter().map(|s| (s * 1e9).round() as i64 - 1_000).collect();
+    let mut pairs = Vec::with_capacity(est.len());
+    for i in 0..est.len() {
+        if let Some(g) = pose_at(gt, est.t_ns[i], max_gap_ns) {
+            let piece = starts_ns.partition_point(|&s| s <= est.t_ns[i]);
+            pairs.push(Pair { t: (est.t_ns[i] - t0_ns) as f64 * 1e-9, piece, est: iso(est.p[i], est.q[i]), gt: g });
+        }
+    }
+    if pairs.len() < 3 {
+        return Err(format!(
+            "only {} of {} estimated poses fall inside the ground truth (estimate {}, ground truth {}); \
+             are both on the same clock and in the same time unit?",
+            pairs.len(),
+            est.len(),
+            span(&est.t_ns),
+            span(&gt.t_ns)
+        )
+        .into());
+    }
+    Ok(pairs)
+}
+
+/// Rotation errors \[deg\] with each piece's orientations aligned on their own
+/// ([`orientation_alignment`]).
+fn oriented_rotation_errors(slices: &[&[Pair]], alignment: Alignment) -> Vec<f64> {
+    let mut out = Vec::new();
+    for piece in slices {
+        let oriented = orientation_alignment(piece, alignment);
+        out.extend(piece.iter().map(|p| (p.gt.rotation.inverse() * oriented * p.est.rotation).angle().to_degrees()));
+    }
+    out
+}
+
+/// Each piece's span, pairs, ATE and scale.
+fn pieces(slices: &[&[Pair]], position_errors: &[f64], similarities: &[Similarity]) -> Vec<Piece> {
+    let mut first = 0;
+    slices
+        .iter()
+        .map(|piece| {
+            let errors = &position_errors[first..first + piece.len()];
+            first += piece.len();
+            Piece {
+                from_s: piece[0].t,
+                to_s: piece[piece.len() - 1].t,
+                matched: piece.len(),
+                ate_rmse_m: stats(errors).0,
+                scale: similarities[piece[0].piece].scale,
+            }
+        })
+        .collect()
+}
+
+/// Warnings on what was not compared: poses outside the ground truth
+/// (`paired` of `total`), relative errors over distances longer than the path.
+fn coverage_warnings(
+    metrics: &mut Metrics,
+    (paired, total): (usize, usize),
+    gt: &Trajectory,
+    opts: &EvalOptions,
+    distances: &[f64],
+) {
+    if paired < total {
+        metrics.warnings.push(format!(
+            "{} of {} estimated poses lie outside the ground truth ({}) or in its gaps > {} s; they are not counted",
+            total - paired,
+            total,
+            span(&gt.t_ns),
+            opts.max_gap_s
+        ));
+    }
+    if metrics.rpe.len() < distances.len() {
+        let skipped: Vec<String> = distances
+            .iter()
+            .filter(|d| !metrics.rpe.iter().any(|r| r.distance_m == **d))
+            .map(|d| format!("{d}"))
+            .collect();
+        metrics.warnings.push(format!(
+            "relative errors over {} m skipped: the paired path is only {:.2} m long",
+            skipped.join(", "),
+            metrics.distance_m
+        ));
+    }
 }
 
 impl Metrics {

@@ -135,136 +135,179 @@ pub fn read_g2o(path: &Path, opts: &G2oOptions) -> Result<PoseGraph, InputError>
 
 /// Parse g2o text; `path` is only used in messages.
 pub fn parse_g2o(path: &Path, text: &str, opts: &G2oOptions) -> Result<PoseGraph, InputError> {
-    let mut kind: Option<PoseKind> = None;
-    let mut values = Values::new();
-    let mut vertex_lines: BTreeMap<u64, usize> = BTreeMap::new();
-    let mut edges = Vec::new();
-    let mut fixed = Vec::new();
-    let mut warnings = Vec::new();
-    let mut set_kind = |k: PoseKind, line: usize| -> Result<(), InputError> {
-        match kind {
-            Some(old) if old != k => Err(InputError::at(path, line, "file mixes SE(2) and SE(3) elements")),
-            _ => {
-                kind = Some(k);
-                Ok(())
-            }
-        }
+    let mut r = G2oReader {
+        path,
+        opts,
+        kind: None,
+        values: Values::new(),
+        vertex_lines: BTreeMap::new(),
+        edges: Vec::new(),
+        fixed: Vec::new(),
+        warnings: Vec::new(),
     };
     for (i, raw) in text.lines().enumerate() {
-        let ln = i + 1;
         let l = raw.trim();
         if l.is_empty() || l.starts_with('#') {
             continue;
         }
         let tag = l.split_whitespace().next().unwrap_or("");
-        let mut t = LineTokens::new(path, ln, &l[tag.len()..]);
+        r.element(tag, LineTokens::new(path, i + 1, &l[tag.len()..]), i + 1)?;
+    }
+    r.finish()
+}
+
+/// An edge as read: its line, the vertices it joins, its measurement and noise.
+type EdgeRead = (usize, u64, u64, EdgeMeas, NoiseModel);
+
+/// What a g2o file has given so far.
+struct G2oReader<'a> {
+    path: &'a Path,
+    opts: &'a G2oOptions,
+    kind: Option<PoseKind>,
+    values: Values,
+    /// Each vertex's line.
+    vertex_lines: BTreeMap<u64, usize>,
+    edges: Vec<EdgeRead>,
+    /// `FIX` lines: line and vertex.
+    fixed: Vec<(usize, u64)>,
+    warnings: Vec<String>,
+}
+
+impl G2oReader<'_> {
+    fn set_kind(&mut self, k: PoseKind, line: usize) -> Result<(), InputError> {
+        match self.kind {
+            Some(old) if old != k => Err(InputError::at(self.path, line, "file mixes SE(2) and SE(3) elements")),
+            _ => {
+                self.kind = Some(k);
+                Ok(())
+            }
+        }
+    }
+
+    fn vertex(&mut self, id: u64, ln: usize) -> Result<(), InputError> {
+        if self.vertex_lines.insert(id, ln).is_some() {
+            return Err(InputError::at(self.path, ln, format!("vertex {id} defined twice")));
+        }
+        Ok(())
+    }
+
+    /// A unit quaternion `(qx, qy, qz, qw)` read from `t`, refused off the unit sphere.
+    fn quaternion(&self, t: &mut LineTokens, ln: usize) -> Result<[f64; 4], InputError> {
+        let (qx, qy, qz, qw) = (t.f64("qx")?, t.f64("qy")?, t.f64("qz")?, t.f64("qw")?);
+        let qn = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
+        if (qn - 1.0).abs() > 1e-3 {
+            return Err(InputError::at(self.path, ln, format!("quaternion norm is {qn}, not 1")));
+        }
+        Ok([qw, qx, qy, qz])
+    }
+
+    /// One element (line `ln`, its tag and the tokens after it).
+    fn element(&mut self, tag: &str, mut t: LineTokens, ln: usize) -> Result<(), InputError> {
+        let (path, opts) = (self.path, self.opts);
         match tag {
             "VERTEX_SE2" => {
-                set_kind(PoseKind::Se2, ln)?;
+                self.set_kind(PoseKind::Se2, ln)?;
                 let id = t.usize("vertex id")? as u64;
                 let (x, y, th) = (t.f64("x")?, t.f64("y")?, t.f64("theta")?);
                 t.finish()?;
-                if vertex_lines.insert(id, ln).is_some() {
-                    return Err(InputError::at(path, ln, format!("vertex {id} defined twice")));
-                }
-                values.insert(X(id), se2(x, y, th));
+                self.vertex(id, ln)?;
+                self.values.insert(X(id), se2(x, y, th));
             }
             "VERTEX_SE3:QUAT" => {
-                set_kind(PoseKind::Se3, ln)?;
+                self.set_kind(PoseKind::Se3, ln)?;
                 let id = t.usize("vertex id")? as u64;
                 let p = Vector3::new(t.f64("x")?, t.f64("y")?, t.f64("z")?);
-                let (qx, qy, qz, qw) = (t.f64("qx")?, t.f64("qy")?, t.f64("qz")?, t.f64("qw")?);
+                let q = self.quaternion(&mut t, ln)?;
                 t.finish()?;
-                let qn = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
-                if (qn - 1.0).abs() > 1e-3 {
-                    return Err(InputError::at(path, ln, format!("quaternion norm is {qn}, not 1")));
-                }
-                if vertex_lines.insert(id, ln).is_some() {
-                    return Err(InputError::at(path, ln, format!("vertex {id} defined twice")));
-                }
-                values.insert(X(id), se3_from_quaternion([qw, qx, qy, qz], p));
+                self.vertex(id, ln)?;
+                self.values.insert(X(id), se3_from_quaternion(q, p));
             }
             "EDGE_SE2" => {
-                set_kind(PoseKind::Se2, ln)?;
+                self.set_kind(PoseKind::Se2, ln)?;
                 let (a, b) = (t.usize("from id")? as u64, t.usize("to id")? as u64);
                 let (x, y, th) = (t.f64("dx")?, t.f64("dy")?, t.f64("dtheta")?);
                 let info: Vec<f64> =
                     (0..6).map(|k| t.f64(&format!("information entry {}", k + 1))).collect::<Result<_, _>>()?;
                 t.finish()?;
-                let noise = information(path, ln, &info, 3, &[2, 0, 1], opts, &mut warnings)?;
-                edges.push((ln, a, b, EdgeMeas::Se2(se2(x, y, th)), noise));
+                let noise = information(path, ln, &info, 3, &[2, 0, 1], opts, &mut self.warnings)?;
+                self.edges.push((ln, a, b, EdgeMeas::Se2(se2(x, y, th)), noise));
             }
             "EDGE_SE3:QUAT" => {
-                set_kind(PoseKind::Se3, ln)?;
+                self.set_kind(PoseKind::Se3, ln)?;
                 let (a, b) = (t.usize("from id")? as u64, t.usize("to id")? as u64);
                 let p = Vector3::new(t.f64("x")?, t.f64("y")?, t.f64("z")?);
-                let (qx, qy, qz, qw) = (t.f64("qx")?, t.f64("qy")?, t.f64("qz")?, t.f64("qw")?);
+                let q = self.quaternion(&mut t, ln)?;
                 let info: Vec<f64> =
                     (0..21).map(|k| t.f64(&format!("information entry {}", k + 1))).collect::<Result<_, _>>()?;
                 t.finish()?;
-                let qn = (qx * qx + qy * qy + qz * qz + qw * qw).sqrt();
-                if (qn - 1.0).abs() > 1e-3 {
-                    return Err(InputError::at(path, ln, format!("quaternion norm is {qn}, not 1")));
-                }
                 // Ceres' error is ordered as g2o's matrix, [position, rotation].
                 let perm: &[usize] =
                     if opts.edge_error == EdgeError::Log { &[3, 4, 5, 0, 1, 2] } else { &[0, 1, 2, 3, 4, 5] };
-                let noise = information(path, ln, &info, 6, perm, opts, &mut warnings)?;
-                edges.push((ln, a, b, EdgeMeas::Se3(se3_from_quaternion([qw, qx, qy, qz], p)), noise));
+                let noise = information(path, ln, &info, 6, perm, opts, &mut self.warnings)?;
+                self.edges.push((ln, a, b, EdgeMeas::Se3(se3_from_quaternion(q, p)), noise));
             }
             "FIX" => {
                 let id = t.usize("vertex id")? as u64;
                 t.finish()?;
-                fixed.push((ln, id));
+                self.fixed.push((ln, id));
             }
             other => {
                 return Err(InputError::at(path, ln, format!("unknown tag '{other}'"))
                     .with_hint("supported: VERTEX_SE2, EDGE_SE2, VERTEX_SE3:QUAT, EDGE_SE3:QUAT, FIX"))
             }
         }
+        Ok(())
     }
-    let kind =
-        kind.ok_or_else(|| InputError::file(path, "no vertex or edge found").with_hint("is this a g2o file?"))?;
-    if kind == PoseKind::Se2 && opts.edge_error != EdgeError::Log {
-        return Err(InputError::file(
-            path,
-            "Ceres' quaternion edge error applies to 3-D pose graphs; this one is planar",
-        ));
-    }
-    let mut graph = Graph::new();
-    let n_edges = edges.len();
-    for (ln, a, b, meas, noise) in edges {
-        for id in [a, b] {
-            if !vertex_lines.contains_key(&id) {
-                return Err(InputError::at(path, ln, format!("edge refers to vertex {id}, which is not defined")));
+
+    /// The graph of the edges read, with the fixed vertices (the first when
+    /// none is) held constant.
+    fn finish(mut self) -> Result<PoseGraph, InputError> {
+        let (path, opts) = (self.path, self.opts);
+        let kind = self
+            .kind
+            .ok_or_else(|| InputError::file(path, "no vertex or edge found").with_hint("is this a g2o file?"))?;
+        if kind == PoseKind::Se2 && opts.edge_error != EdgeError::Log {
+            return Err(InputError::file(
+                path,
+                "Ceres' quaternion edge error applies to 3-D pose graphs; this one is planar",
+            ));
+        }
+        let mut graph = Graph::new();
+        let n_edges = self.edges.len();
+        for (ln, a, b, meas, noise) in self.edges {
+            for id in [a, b] {
+                if !self.vertex_lines.contains_key(&id) {
+                    return Err(InputError::at(path, ln, format!("edge refers to vertex {id}, which is not defined")));
+                }
+            }
+            if a == b {
+                return Err(InputError::at(path, ln, format!("edge connects vertex {a} to itself")));
+            }
+            match meas {
+                EdgeMeas::Se2(z) => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
+                EdgeMeas::Se3(z) => match opts.edge_error {
+                    EdgeError::Log => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
+                    EdgeError::CeresQuaternion => graph.add(QuaternionPoseError::new(X(a), X(b), &z), noise),
+                },
+            };
+        }
+        if self.fixed.is_empty() {
+            if let Some((&id, _)) = self.vertex_lines.iter().next() {
+                self.values.set_constant(X(id), true);
             }
         }
-        if a == b {
-            return Err(InputError::at(path, ln, format!("edge connects vertex {a} to itself")));
+        for (ln, id) in self.fixed {
+            if !self.vertex_lines.contains_key(&id) {
+                return Err(InputError::at(path, ln, format!("FIX names vertex {id}, which is not defined")));
+            }
+            self.values.set_constant(X(id), true);
         }
-        match meas {
-            EdgeMeas::Se2(z) => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
-            EdgeMeas::Se3(z) => match opts.edge_error {
-                EdgeError::Log => graph.add(BetweenFactor::new(X(a), X(b), z), noise),
-                EdgeError::CeresQuaternion => graph.add(QuaternionPoseError::new(X(a), X(b), &z), noise),
-            },
-        };
-    }
-    if fixed.is_empty() {
-        if let Some((&id, _)) = vertex_lines.iter().next() {
-            values.set_constant(X(id), true);
+        if n_edges == 0 {
+            return Err(InputError::file(path, "has no edges: a pose graph without measurements has nothing to solve"));
         }
+        let vertices = self.vertex_lines.len();
+        Ok(PoseGraph { graph, values: self.values, kind, vertices, edges: n_edges, warnings: self.warnings })
     }
-    for (ln, id) in fixed {
-        if !vertex_lines.contains_key(&id) {
-            return Err(InputError::at(path, ln, format!("FIX names vertex {id}, which is not defined")));
-        }
-        values.set_constant(X(id), true);
-    }
-    if n_edges == 0 {
-        return Err(InputError::file(path, "has no edges: a pose graph without measurements has nothing to solve"));
-    }
-    Ok(PoseGraph { graph, values, kind, vertices: vertex_lines.len(), edges: n_edges, warnings })
 }
 
 enum EdgeMeas {
