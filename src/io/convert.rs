@@ -189,6 +189,11 @@ fn camera_yaml(info: &msgs::CameraInfo, rate_hz: f64) -> Result<String, String> 
 /// Convert the ROS recording `input` into an ASL folder `out` (see the module
 /// doc). `progress(done, total)` is called as messages are written (total from
 /// the file's index, 0 when unknown).
+///
+/// The steps: the topics chosen (IMU, images, their camera_info, a ground
+/// truth) → the IMU written → the other messages streamed (frames written as
+/// they come) → each camera's index and `sensor.yaml` → the ground truth;
+/// all into a staging folder moved into place when everything succeeded.
 pub fn convert_to_asl(
     input: &Path,
     out: &Path,
@@ -206,138 +211,25 @@ pub fn convert_to_asl(
     let images = pick_images(input, &all, &opts.images)?;
     let (gt_topic, gt_note) = pick_groundtruth(input, &all, &opts.groundtruth)?;
     let infos: Vec<Option<String>> = images.iter().map(|t| info_topic(t, &all)).collect();
+    let topics = Topics { images, infos, groundtruth: gt_topic };
     let mut report = ConvertReport { imu: (imu.len(), imu.topic.clone().unwrap_or_default()), ..Default::default() };
     report.notes.extend(imu.warnings.iter().cloned());
     report.notes.extend(gt_note);
     let total: usize = all
         .iter()
-        .filter(|t| images.contains(&t.name) || Some(&t.name) == gt_topic.as_ref())
+        .filter(|t| topics.images.contains(&t.name) || Some(&t.name) == topics.groundtruth.as_ref())
         .filter_map(|t| t.count)
         .sum::<u64>() as usize;
     let files = super::staging::write_staged(out, |stage| -> Result<Vec<PathBuf>, OutputError> {
         let mav0 = stage.join("mav0");
-        let mut files = Vec::new();
-        let imu_dir = mav0.join("imu0");
-        std::fs::create_dir_all(&imu_dir).map_err(|e| format!("{}: {e}", imu_dir.display()))?;
-        write_asl_imu(&imu_dir.join("data.csv"), &imu)?;
-        let yaml = format!(
-            "# from {} ({})\nsensor_type: imu\nrate_hz: {:.3}\n",
-            input.display(),
-            imu.topic.as_deref().unwrap_or(""),
-            imu.mean_rate()
-        );
-        std::fs::write(imu_dir.join("sensor.yaml"), yaml).map_err(|e| format!("{}: {e}", imu_dir.display()))?;
-        files.extend([imu_dir.join("data.csv"), imu_dir.join("sensor.yaml")]);
-        // Camera folders: frames written as they stream by; the index sorted at the end.
-        let cam_of: BTreeMap<&str, usize> = images.iter().enumerate().map(|(i, t)| (t.as_str(), i)).collect();
-        let info_of: BTreeMap<&str, usize> =
-            infos.iter().enumerate().filter_map(|(i, t)| t.as_deref().map(|t| (t, i))).collect();
-        let mut frames: Vec<Vec<(i64, String)>> = vec![Vec::new(); images.len()];
-        let mut info: Vec<Option<msgs::CameraInfo>> = vec![None; images.len()];
-        let mut gt = Trajectory::default();
-        for i in 0..images.len() {
-            let d = mav0.join(format!("cam{i}")).join("data");
-            std::fs::create_dir_all(&d).map_err(|e| format!("{}: {e}", d.display()))?;
+        let mut files = write_imu(&mav0, input, &imu)?;
+        let streamed = stream(&storage, input, &mav0, &topics, total, progress)?;
+        for (c, frames) in streamed.frames.into_iter().enumerate() {
+            files.extend(write_camera(&mav0, c, frames, &topics, streamed.info[c].as_ref(), &mut report)?);
         }
-        let mut topics: Vec<&str> = images.iter().map(String::as_str).collect();
-        topics.extend(infos.iter().flatten().map(String::as_str));
-        topics.extend(gt_topic.as_deref());
-        let mut done = 0usize;
-        let mut write_error: Option<OutputError> = None;
-        storage
-            .for_each(&topics, &mut |m: &RawMessage| {
-                let bad = |what: &str| InputError::file(input, format!("a message on {} is not a {what}", m.topic));
-                if let Some(&c) = cam_of.get(m.topic) {
-                    let (t, name, bytes) = match m.msg_type {
-                        "sensor_msgs/Image" => {
-                            let img =
-                                msgs::image(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Image (too short)"))?;
-                            let png = png_of(&img).map_err(|e| InputError::file(input, format!("{}: {e}", m.topic)))?;
-                            (img.t_ns, format!("{}.png", img.t_ns), png)
-                        }
-                        _ => {
-                            let (t, format, data) = msgs::compressed_image(m.encoding, m.data)
-                                .ok_or_else(|| bad("sensor_msgs/CompressedImage (too short)"))?;
-                            let ext = if format.contains("png") { "png" } else { "jpg" };
-                            (t, format!("{t}.{ext}"), data.to_vec())
-                        }
-                    };
-                    let p = mav0.join(format!("cam{c}")).join("data").join(&name);
-                    if let Err(e) = std::fs::write(&p, bytes) {
-                        write_error = Some(OutputError::Failed(format!("{}: {e}", p.display())));
-                        return Err(InputError::file(&p, "cannot be written"));
-                    }
-                    frames[c].push((t, name));
-                } else if let Some(&c) = info_of.get(m.topic) {
-                    if info[c].is_none() {
-                        info[c] =
-                            Some(msgs::camera_info(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/CameraInfo"))?);
-                    }
-                } else if Some(m.topic) == gt_topic.as_deref() {
-                    let (t, p, q) = msgs::pose(m.msg_type, m.encoding, m.data).ok_or_else(|| bad(m.msg_type))?;
-                    gt.t_ns.push(t);
-                    gt.p.push(p);
-                    gt.q.push(q);
-                }
-                done += 1;
-                progress(done, total);
-                Ok(())
-            })
-            .map_err(|e| write_error.take().unwrap_or(OutputError::Input(e)))?;
-        for (c, f) in frames.iter_mut().enumerate() {
-            f.sort_by_key(|x| x.0);
-            let before = f.len();
-            f.dedup_by_key(|x| x.0);
-            if f.len() < before {
-                report.notes.push(format!(
-                    "{}: {} frames repeat a stamp: one image kept per stamp",
-                    images[c],
-                    before - f.len()
-                ));
-            }
-            let dir = mav0.join(format!("cam{c}"));
-            let mut csv = String::from("#timestamp [ns],filename\n");
-            for (t, name) in f.iter() {
-                csv.push_str(&format!("{t},{name}\n"));
-            }
-            std::fs::write(dir.join("data.csv"), csv).map_err(|e| format!("{}: {e}", dir.display()))?;
-            files.push(dir.join("data.csv"));
-            // Frames: moved with their folder's index (listed so staging moves them).
-            files.extend(f.iter().map(|(_, name)| dir.join("data").join(name)));
-            let rate =
-                if f.len() > 1 { (f.len() - 1) as f64 / ((f[f.len() - 1].0 - f[0].0) as f64 * 1e-9) } else { 0.0 };
-            let wrote_yaml = match (&info[c], &infos[c]) {
-                (Some(i), Some(topic)) => match camera_yaml(i, rate) {
-                    Ok(y) => {
-                        std::fs::write(dir.join("sensor.yaml"), y).map_err(|e| format!("{}: {e}", dir.display()))?;
-                        files.push(dir.join("sensor.yaml"));
-                        true
-                    }
-                    Err(why) => {
-                        report.notes.push(format!("{topic}: no sensor.yaml: {why}"));
-                        false
-                    }
-                },
-                _ => {
-                    report
-                        .notes
-                        .push(format!("{}: no camera_info beside it: no sensor.yaml (intrinsics unknown)", images[c]));
-                    false
-                }
-            };
-            report.cameras.push((format!("cam{c}"), images[c].clone(), f.len(), wrote_yaml));
-        }
-        if let Some(topic) = &gt_topic {
-            let mut idx: Vec<usize> = (0..gt.len()).collect();
-            idx.sort_by_key(|&i| gt.t_ns[i]);
-            idx.dedup_by_key(|i| gt.t_ns[*i]);
-            let sorted = Trajectory {
-                t_ns: idx.iter().map(|&i| gt.t_ns[i]).collect(),
-                p: idx.iter().map(|&i| gt.p[i]).collect(),
-                q: idx.iter().map(|&i| gt.q[i]).collect(),
-                ..Default::default()
-            };
+        if let Some(topic) = &topics.groundtruth {
             let d = mav0.join("state_groundtruth_estimate0");
+            let sorted = sorted_unique(&streamed.groundtruth);
             std::fs::create_dir_all(&d).map_err(|e| format!("{}: {e}", d.display()))?;
             write_asl_groundtruth(&d.join("data.csv"), &sorted)?;
             files.push(d.join("data.csv"));
@@ -347,6 +239,178 @@ pub fn convert_to_asl(
     })?;
     report.files = files.into_iter().filter(|f| !f.components().any(|c| c.as_os_str() == "data")).collect();
     Ok(report)
+}
+
+/// The topics a conversion reads besides the IMU's.
+struct Topics {
+    /// Image topics, camera by camera.
+    images: Vec<String>,
+    /// Each camera's camera_info topic, when there is one.
+    infos: Vec<Option<String>>,
+    groundtruth: Option<String>,
+}
+
+/// `mav0/imu0/data.csv` and a `sensor.yaml` with its rate.
+fn write_imu(mav0: &Path, input: &Path, imu: &super::ImuRecording) -> Result<Vec<PathBuf>, OutputError> {
+    let imu_dir = mav0.join("imu0");
+    std::fs::create_dir_all(&imu_dir).map_err(|e| format!("{}: {e}", imu_dir.display()))?;
+    write_asl_imu(&imu_dir.join("data.csv"), imu)?;
+    let yaml = format!(
+        "# from {} ({})\nsensor_type: imu\nrate_hz: {:.3}\n",
+        input.display(),
+        imu.topic.as_deref().unwrap_or(""),
+        imu.mean_rate()
+    );
+    std::fs::write(imu_dir.join("sensor.yaml"), yaml).map_err(|e| format!("{}: {e}", imu_dir.display()))?;
+    Ok(vec![imu_dir.join("data.csv"), imu_dir.join("sensor.yaml")])
+}
+
+/// What streaming the messages gave: per camera its frames (stamp, file
+/// name), written as they came; its first camera_info; the ground truth.
+struct Streamed {
+    frames: Vec<Vec<(i64, String)>>,
+    info: Vec<Option<msgs::CameraInfo>>,
+    groundtruth: Trajectory,
+}
+
+/// Stream the images, camera_info and ground-truth messages, writing each
+/// image into `mav0/camN/data/` as it comes.
+fn stream(
+    storage: &Storage,
+    input: &Path,
+    mav0: &Path,
+    topics: &Topics,
+    total: usize,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Streamed, OutputError> {
+    let cam_of: BTreeMap<&str, usize> = topics.images.iter().enumerate().map(|(i, t)| (t.as_str(), i)).collect();
+    let info_of: BTreeMap<&str, usize> =
+        topics.infos.iter().enumerate().filter_map(|(i, t)| t.as_deref().map(|t| (t, i))).collect();
+    let n = topics.images.len();
+    let mut out = Streamed { frames: vec![Vec::new(); n], info: vec![None; n], groundtruth: Trajectory::default() };
+    for i in 0..n {
+        let d = mav0.join(format!("cam{i}")).join("data");
+        std::fs::create_dir_all(&d).map_err(|e| format!("{}: {e}", d.display()))?;
+    }
+    let mut names: Vec<&str> = topics.images.iter().map(String::as_str).collect();
+    names.extend(topics.infos.iter().flatten().map(String::as_str));
+    names.extend(topics.groundtruth.as_deref());
+    let mut done = 0usize;
+    let mut write_error: Option<OutputError> = None;
+    storage
+        .for_each(&names, &mut |m: &RawMessage| {
+            let bad = |what: &str| InputError::file(input, format!("a message on {} is not a {what}", m.topic));
+            if let Some(&c) = cam_of.get(m.topic) {
+                let (t, name, bytes) = image_file(input, m)?;
+                let p = mav0.join(format!("cam{c}")).join("data").join(&name);
+                if let Err(e) = std::fs::write(&p, bytes) {
+                    write_error = Some(OutputError::Failed(format!("{}: {e}", p.display())));
+                    return Err(InputError::file(&p, "cannot be written"));
+                }
+                out.frames[c].push((t, name));
+            } else if let Some(&c) = info_of.get(m.topic) {
+                if out.info[c].is_none() {
+                    out.info[c] =
+                        Some(msgs::camera_info(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/CameraInfo"))?);
+                }
+            } else if Some(m.topic) == topics.groundtruth.as_deref() {
+                let (t, p, q) = msgs::pose(m.msg_type, m.encoding, m.data).ok_or_else(|| bad(m.msg_type))?;
+                out.groundtruth.t_ns.push(t);
+                out.groundtruth.p.push(p);
+                out.groundtruth.q.push(q);
+            }
+            done += 1;
+            progress(done, total);
+            Ok(())
+        })
+        .map_err(|e| write_error.take().unwrap_or(OutputError::Input(e)))?;
+    Ok(out)
+}
+
+/// An image message as a file: its stamp, file name and bytes (a raw image
+/// encoded as PNG, a compressed one as it came).
+fn image_file(input: &Path, m: &RawMessage) -> Result<(i64, String, Vec<u8>), InputError> {
+    let bad = |what: &str| InputError::file(input, format!("a message on {} is not a {what}", m.topic));
+    Ok(match m.msg_type {
+        "sensor_msgs/Image" => {
+            let img = msgs::image(m.encoding, m.data).ok_or_else(|| bad("sensor_msgs/Image (too short)"))?;
+            let png = png_of(&img).map_err(|e| InputError::file(input, format!("{}: {e}", m.topic)))?;
+            (img.t_ns, format!("{}.png", img.t_ns), png)
+        }
+        _ => {
+            let (t, format, data) = msgs::compressed_image(m.encoding, m.data)
+                .ok_or_else(|| bad("sensor_msgs/CompressedImage (too short)"))?;
+            let ext = if format.contains("png") { "png" } else { "jpg" };
+            (t, format!("{t}.{ext}"), data.to_vec())
+        }
+    })
+}
+
+/// Camera `c`'s index (`data.csv`, one frame per stamp) and, from its
+/// camera_info, its `sensor.yaml`; noted in `report`. Returns the files
+/// (its frames included, so that staging moves them).
+fn write_camera(
+    mav0: &Path,
+    c: usize,
+    mut f: Vec<(i64, String)>,
+    topics: &Topics,
+    info: Option<&msgs::CameraInfo>,
+    report: &mut ConvertReport,
+) -> Result<Vec<PathBuf>, OutputError> {
+    let mut files = Vec::new();
+    f.sort_by_key(|x| x.0);
+    let before = f.len();
+    f.dedup_by_key(|x| x.0);
+    if f.len() < before {
+        report.notes.push(format!(
+            "{}: {} frames repeat a stamp: one image kept per stamp",
+            topics.images[c],
+            before - f.len()
+        ));
+    }
+    let dir = mav0.join(format!("cam{c}"));
+    let mut csv = String::from("#timestamp [ns],filename\n");
+    for (t, name) in f.iter() {
+        csv.push_str(&format!("{t},{name}\n"));
+    }
+    std::fs::write(dir.join("data.csv"), csv).map_err(|e| format!("{}: {e}", dir.display()))?;
+    files.push(dir.join("data.csv"));
+    files.extend(f.iter().map(|(_, name)| dir.join("data").join(name)));
+    let rate = if f.len() > 1 { (f.len() - 1) as f64 / ((f[f.len() - 1].0 - f[0].0) as f64 * 1e-9) } else { 0.0 };
+    let wrote_yaml = match (info, &topics.infos[c]) {
+        (Some(i), Some(topic)) => match camera_yaml(i, rate) {
+            Ok(y) => {
+                std::fs::write(dir.join("sensor.yaml"), y).map_err(|e| format!("{}: {e}", dir.display()))?;
+                files.push(dir.join("sensor.yaml"));
+                true
+            }
+            Err(why) => {
+                report.notes.push(format!("{topic}: no sensor.yaml: {why}"));
+                false
+            }
+        },
+        _ => {
+            report
+                .notes
+                .push(format!("{}: no camera_info beside it: no sensor.yaml (intrinsics unknown)", topics.images[c]));
+            false
+        }
+    };
+    report.cameras.push((format!("cam{c}"), topics.images[c].clone(), f.len(), wrote_yaml));
+    Ok(files)
+}
+
+/// The poses in time order, one per stamp.
+fn sorted_unique(gt: &Trajectory) -> Trajectory {
+    let mut idx: Vec<usize> = (0..gt.len()).collect();
+    idx.sort_by_key(|&i| gt.t_ns[i]);
+    idx.dedup_by_key(|i| gt.t_ns[*i]);
+    Trajectory {
+        t_ns: idx.iter().map(|&i| gt.t_ns[i]).collect(),
+        p: idx.iter().map(|&i| gt.p[i]).collect(),
+        q: idx.iter().map(|&i| gt.q[i]).collect(),
+        ..Default::default()
+    }
 }
 
 #[cfg(test)]
