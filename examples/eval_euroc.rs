@@ -44,82 +44,78 @@ use tumble::io::ImuNoise;
 use tumble::vio::VioSource;
 use tumble::vio::{piece_starts_s, run, summarize, trajectory, Summary, VioInput, VioOptions};
 
-fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let has = |f: &str| args.iter().any(|a| a == f);
-    let value = |f: &str| args.iter().position(|a| a == f).and_then(|i| args.get(i + 1)).cloned();
-    let seed = value("--seed").and_then(|v| v.parse().ok()).unwrap_or(1);
-    let only = value("--only");
-    let out = value("--out").map(PathBuf::from);
-    let known = |i: usize, a: &str| {
-        matches!(
-            a,
-            "--noise-from-static"
-                | "--noise-in-flight"
-                | "--zoh"
-                | "--fixed-noise"
-                | "--markdown"
-                | "--seed"
-                | "--only"
-                | "--out"
-                | "--walk-scale"
-                | "--online"
-                | "--blackout"
-                | "--from"
-        ) || (i > 0
-            && matches!(
-                args[i - 1].as_str(),
-                "--seed" | "--only" | "--out" | "--walk-scale" | "--online" | "--blackout" | "--from"
-            ))
-    };
-    if let Some((_, bad)) = args.iter().enumerate().find(|(i, a)| !known(*i, a)) {
-        eprintln!("unknown argument {bad}; see the example's doc comment");
-        std::process::exit(2);
+/// The command line.
+struct Args {
+    flags: Vec<String>,
+    seed: u64,
+    only: Option<String>,
+    out: Option<PathBuf>,
+    walk_scale: [f64; 2],
+    cuts: Cuts,
+    online: tumble::vio::Estimate,
+}
+
+impl Args {
+    fn has(&self, f: &str) -> bool {
+        self.flags.iter().any(|a| a == f)
     }
-    let walk_scale = match value("--walk-scale").map(|v| parse_walk_scale(&v)).transpose() {
-        Ok(w) => w.unwrap_or([1.0, 1.0]),
+
+    fn parse() -> Result<Args, String> {
+        let args: Vec<String> = std::env::args().skip(1).collect();
+        let value = |f: &str| args.iter().position(|a| a == f).and_then(|i| args.get(i + 1)).cloned();
+        const FLAGS: [&str; 5] = ["--noise-from-static", "--noise-in-flight", "--zoh", "--fixed-noise", "--markdown"];
+        const VALUED: [&str; 7] = ["--seed", "--only", "--out", "--walk-scale", "--online", "--blackout", "--from"];
+        let known = |i: usize, a: &str| {
+            FLAGS.contains(&a) || VALUED.contains(&a) || (i > 0 && VALUED.contains(&args[i - 1].as_str()))
+        };
+        if let Some((_, bad)) = args.iter().enumerate().find(|(i, a)| !known(*i, a)) {
+            return Err(format!("unknown argument {bad}; see the example's doc comment"));
+        }
+        let walk_scale = value("--walk-scale").map(|v| parse_walk_scale(&v)).transpose();
+        let walk_scale = walk_scale.map_err(|e| format!("--walk-scale: {e}"))?.unwrap_or([1.0, 1.0]);
+        let blackout =
+            value("--blackout").map(|v| parse_blackout(&v)).transpose().map_err(|e| format!("--blackout: {e}"))?;
+        let from = match value("--from").map(|v| v.parse::<f64>()).transpose() {
+            Ok(f) if f.is_none_or(|f| f.is_finite() && f >= 0.0) => f,
+            _ => return Err("--from: expected a time in seconds (≥ 0)".into()),
+        };
+        let online = match value("--online").as_deref() {
+            None | Some("on") => tumble::vio::Estimate::On,
+            Some("auto") => tumble::vio::Estimate::Auto,
+            Some(v) => return Err(format!("--online: `{v}` is neither on nor auto")),
+        };
+        Ok(Args {
+            seed: value("--seed").and_then(|v| v.parse().ok()).unwrap_or(1),
+            only: value("--only"),
+            out: value("--out").map(PathBuf::from),
+            walk_scale,
+            cuts: Cuts { blackout, from },
+            online,
+            flags: args,
+        })
+    }
+}
+
+fn main() {
+    let args = match Args::parse() {
+        Ok(a) => a,
         Err(e) => {
-            eprintln!("--walk-scale: {e}");
-            std::process::exit(2);
-        }
-    };
-    let blackout = match value("--blackout").map(|v| parse_blackout(&v)).transpose() {
-        Ok(b) => b,
-        Err(e) => {
-            eprintln!("--blackout: {e}");
-            std::process::exit(2);
-        }
-    };
-    let from = match value("--from").map(|v| v.parse::<f64>()).transpose() {
-        Ok(f) if f.is_none_or(|f| f.is_finite() && f >= 0.0) => f,
-        _ => {
-            eprintln!("--from: expected a time in seconds (≥ 0)");
-            std::process::exit(2);
-        }
-    };
-    let cuts = Cuts { blackout, from };
-    let online = match value("--online").as_deref() {
-        None | Some("on") => tumble::vio::Estimate::On,
-        Some("auto") => tumble::vio::Estimate::Auto,
-        Some(v) => {
-            eprintln!("--online: `{v}` is neither on nor auto");
+            eprintln!("{e}");
             std::process::exit(2);
         }
     };
     let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/euroc");
     let mut opts = VioOptions::default();
-    opts.noise.from_static = has("--noise-from-static");
-    opts.noise.measure_in_motion = !has("--fixed-noise");
-    if has("--zoh") {
+    opts.noise.from_static = args.has("--noise-from-static");
+    opts.noise.measure_in_motion = !args.has("--fixed-noise");
+    if args.has("--zoh") {
         opts.noise.imu.scheme = tumble_factors::imu_preint::Scheme::ZeroOrderHold;
     }
-    let mut cases: Vec<(String, Case, VioOptions)> = Vec::new();
-    let full = data.join("full_imu");
-    let mut seqs: Vec<PathBuf> = std::fs::read_dir(&full)
+    let mut seqs: Vec<PathBuf> = std::fs::read_dir(data.join("full_imu"))
         .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.join("mav0").is_dir()).collect())
         .unwrap_or_default();
     seqs.sort();
-    let flight: Vec<(PathBuf, ImuNoise)> = if has("--noise-in-flight") {
+    let flight: Vec<(PathBuf, ImuNoise)> = if args.has("--noise-in-flight") {
         match seqs.iter().map(|s| noise_in_flight(s, opts.noise.gravity).map(|n| (s.clone(), n))).collect() {
             Ok(f) => f,
             Err(e) => {
@@ -130,9 +126,26 @@ fn main() {
     } else {
         Vec::new()
     };
+    let cases = cases(&args, &data, seqs, &opts);
+    if cases.is_empty() {
+        println!("SKIPPED: no EuRoC data under {}", data.display());
+        return;
+    }
+    let (rows, notes) = run_cases(&args, &cases, &flight, &data);
+    print_table(&rows, args.has("--markdown"));
+    for n in notes {
+        println!("{n}");
+    }
+}
+
+/// Every case: each whole sequence with a simulated camera, V1_01 with
+/// EqVIO's tracks, imu_april against its PnP truth (and with its camera
+/// estimated online from EuRoC's calibration and from a wrong one).
+fn cases(args: &Args, data: &Path, seqs: Vec<PathBuf>, opts: &VioOptions) -> Vec<(String, Case, VioOptions)> {
+    let mut cases: Vec<(String, Case, VioOptions)> = Vec::new();
     for s in seqs {
         let name = format!("{} (sim. camera)", s.file_name().unwrap_or_default().to_string_lossy());
-        let source = VioSource { simulate_camera: Some(seed), ..Default::default() };
+        let source = VioSource { simulate_camera: Some(args.seed), ..Default::default() };
         cases.push((name, Case::Source(s, Box::new(source)), opts.clone()));
     }
     let eqvio = data.join("eqvio_V1_01_30s.csv");
@@ -150,25 +163,31 @@ fn main() {
         // T_BC and the time offset estimated online: from EuRoC's values, and from
         // EuRoC's T_BC turned by 2° and moved by 3 cm with the stamps 8 ms late.
         let mut o = opts.clone();
-        o.camera.extrinsics = online;
-        o.camera.time_offset = online;
+        o.camera.extrinsics = args.online;
+        o.camera.time_offset = args.online;
         let name = "imu_april, T_BC and time offset estimated online";
         cases.push((name.into(), Case::Target(april.clone(), Some(0.0)), o.clone()));
         let name = "imu_april, T_BC 2°/3 cm and stamps 8 ms off, estimated online";
         cases.push((name.into(), Case::Target(april, Some(1.0)), o));
     }
-    if cases.is_empty() {
-        println!("SKIPPED: no EuRoC data under {}", data.display());
-        return;
-    }
+    cases
+}
+
+/// Run the cases `--only` selects: a table row per case and the notes.
+fn run_cases(
+    args: &Args,
+    cases: &[(String, Case, VioOptions)],
+    flight: &[(PathBuf, ImuNoise)],
+    data: &Path,
+) -> (Vec<(String, Summary)>, Vec<String>) {
     let mut rows = Vec::new();
     let mut notes = Vec::new();
-    for (name, case, o) in &cases {
-        if only.as_ref().is_some_and(|t| !name.contains(t.as_str())) {
+    for (name, case, o) in cases {
+        if args.only.as_ref().is_some_and(|t| !name.contains(t.as_str())) {
             continue;
         }
         eprintln!("running {name} …");
-        let dir = out.as_ref().map(|d| d.join(folder_name(name)));
+        let dir = args.out.as_ref().map(|d| d.join(folder_name(name)));
         // The flights' noise for a flight (every sequence's but the case's own);
         // imu_april is moved by hand, rotors off, and keeps its own figures.
         let noise = match case {
@@ -178,22 +197,21 @@ fn main() {
             }
             Case::Target(..) => None,
         };
-        match evaluate(case, o, noise, walk_scale, &cuts, &data, dir.as_deref()) {
+        match evaluate(case, o, noise, args.walk_scale, &args.cuts, data, dir.as_deref()) {
             Ok(Some((s, note))) => {
                 notes.extend(note.map(|n| format!("{name}: {n}")));
                 rows.push((name.clone(), s));
             }
-            Ok(None) => notes.push(format!("{name}: ends before {} s (--from): not run", cuts.from.unwrap_or(0.0))),
+            Ok(None) => {
+                notes.push(format!("{name}: ends before {} s (--from): not run", args.cuts.from.unwrap_or(0.0)))
+            }
             Err(e) => {
                 eprintln!("{name}: {e}");
                 std::process::exit(1);
             }
         }
     }
-    print_table(&rows, has("--markdown"));
-    for n in notes {
-        println!("{n}");
-    }
+    (rows, notes)
 }
 
 /// The noise the IMU of the ASL sequence `dir` shows in flight against its

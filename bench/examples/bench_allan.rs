@@ -135,11 +135,26 @@ fn main() {
         println!("allantools: not run (--no-peer)");
         return;
     }
+    allantools(&axes, &taus, rate, peer_axes, &curves, ours);
+}
+
+/// allantools.oadev on the first `peer_axes` of `axes` at the same `taus`:
+/// its time, its agreement with tumble's `curves`, and the ratio to
+/// tumble's time `ours` \[s\].
+fn allantools(
+    axes: &[Vec<f64>],
+    taus: &[f64],
+    rate: f64,
+    peer_axes: usize,
+    curves: &[tumble::allan::AllanCurve],
+    ours: f64,
+) {
+    let n = axes[0].len();
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/bench-data");
     std::fs::create_dir_all(&dir).expect("target dir writable");
     let path = dir.join(format!("allan_{n}x6.f64"));
     let mut raw = Vec::with_capacity(6 * n * 8);
-    for y in &axes {
+    for y in axes {
         for v in y {
             raw.extend_from_slice(&v.to_le_bytes());
         }

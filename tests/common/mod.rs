@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 pub mod cdr;
+pub mod vio;
 
 use std::path::{Path, PathBuf};
 
