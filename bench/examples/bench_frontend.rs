@@ -11,7 +11,8 @@
 use opencv::core::{self, Mat};
 use std::time::Instant;
 use tumble::io::asl::read_asl;
-use tumble::vio::frontend::{moving_window, read_gray, FrontendOptions, KltTracker};
+use tumble::io::image::read_gray;
+use tumble::vio::frontend::{moving_window, FrontendOptions, KltTracker};
 
 const TARGET_FPS: f64 = 100.0;
 

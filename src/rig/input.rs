@@ -117,7 +117,7 @@ fn detect_corners(
     target: &Target,
     progress: &mut dyn FnMut(&str),
 ) -> Result<(Vec<View>, DetectionStats), InputError> {
-    detect::detect_camera(frames, target, progress)
+    super::detect::detect_camera(frames, target, progress)
 }
 
 #[cfg(not(feature = "opencv"))]

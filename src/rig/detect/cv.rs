@@ -1,8 +1,9 @@
 //! The detector itself, on OpenCV (feature `opencv`).
 
-use super::{checkerboard_corners, tag_corners, view_order, vote, DetectionStats, TagDetection};
+use super::{checkerboard_corners, tag_corners, view_order, vote, TagDetection};
 use crate::error::InputError;
-use crate::rig::input::{Target, View};
+use crate::model::target::DetectionStats;
+use crate::model::target::{Target, View};
 use opencv::core::{Mat, Point2f, Ptr, Size, TermCriteria, TermCriteria_Type, Vector};
 use opencv::prelude::*;
 use opencv::{aruco, calib3d, imgproc};
