@@ -333,3 +333,38 @@ fn unstamped_imu_messages_take_the_receive_time() {
     assert!((r.mean_rate() - 400.0).abs() < 1e-9);
     assert!(r.warnings.iter().any(|w| w.contains("500 IMU messages have header.stamp = 0")), "{:?}", r.warnings);
 }
+
+/// The fuzz targets' seed corpora (`fuzz/seeds/`, docs/development.md): small
+/// valid files for each reader, so the fuzzer starts inside the formats.
+/// Written only when asked: `cargo test --test ros2 -- --ignored write_fuzz_seeds`.
+#[test]
+#[ignore = "writes fuzz/seeds/ (run by hand before fuzzing)"]
+fn write_fuzz_seeds() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("fuzz/seeds");
+    let msgs = root.join("cdr");
+    std::fs::create_dir_all(&msgs).unwrap();
+    let t = 1_700_000_000_000_000_000;
+    let mut few: Vec<cdr::BagMessage> = imu_messages("/imu0").into_iter().take(8).collect();
+    few.push(("/temp".into(), "sensor_msgs/msg/Temperature".into(), t, cdr::temperature(t, 25.0)));
+    few.push((
+        "/gt".into(),
+        "geometry_msgs/msg/PoseStamped".into(),
+        t,
+        cdr::pose_stamped(t, [1.0, 2.0, 3.0], [1.0, 0.0, 0.0, 0.0]),
+    ));
+    few.push(("/cam0".into(), "sensor_msgs/msg/Image".into(), t, cdr::image_mono8(t, 4, 2, &[0, 1, 2, 3, 4, 5, 6, 7])));
+    let tmp = dir("seeds");
+    for ext in ["db3", "mcap"] {
+        let file = tmp.join(format!("seed.{ext}"));
+        if ext == "db3" {
+            cdr::write_db3(&file, &few);
+        } else {
+            cdr::write_mcap(&file, &few);
+        }
+        std::fs::create_dir_all(root.join(ext)).unwrap();
+        std::fs::copy(&file, root.join(ext).join("seed")).unwrap();
+    }
+    for (i, (_, _, _, data)) in few.iter().enumerate().skip(6) {
+        std::fs::write(msgs.join(format!("seed_{i}")), data).unwrap();
+    }
+}
