@@ -315,6 +315,15 @@ fn bad_input_is_refused_clearly() {
     // A TUM estimate with a bad number names the file and line.
     let err = read_trajectory(&tmp("est.txt", "1.0 0 0 0 0 0 0 1\n1.1 0 x 0 0 0 0 1\n")).unwrap_err().to_string();
     assert!(err.contains("est.txt:2:"), "{err}");
+    // Nanosecond stamps counted from a start (fewer than 13 digits) are not
+    // read as seconds 50 million seconds apart.
+    let ns = "# t x y z qx qy qz qw\n0 0 0 0 0 0 0 1\n50000000 0 0 0 0 0 0 1\n";
+    let err = read_trajectory(&tmp("rel_ns.txt", ns)).unwrap_err().to_string();
+    assert!(err.contains("rel_ns.txt:3:") && err.contains("seconds"), "{err}");
+    // Absolute nanoseconds (19 digits) are read as such.
+    let abs = "1403636579000000000 0 0 0 0 0 0 1\n1403636579050000000 0 0 0 0 0 0 1\n";
+    let tr = read_trajectory(&tmp("abs_ns.txt", abs)).unwrap();
+    assert_eq!(tr.t_ns[1] - tr.t_ns[0], 50_000_000);
 }
 
 /// The real EuRoC V1_01 run (EqVIO tracks) evaluated against its ground truth.

@@ -214,6 +214,13 @@ fn column_maps_and_units_parse_with_clear_errors() {
     assert!(ImuColumns::parse("t,foo").unwrap_err().to_string().contains("unknown column name 'foo'"));
     assert_eq!(GyroUnit::parse("counts:0.001:32768"), Ok(GyroUnit::Counts { scale: Some(0.001), offset: 32768.0 }));
     assert!(AccelUnit::parse("furlongs").is_err());
+    // A zero, infinite or missing-number scale would make every sample 0 or NaN.
+    for bad in ["counts:0", "counts:-0", "counts:inf", "counts:1:nan", "counts:1:2:3", "counts:x"] {
+        assert!(GyroUnit::parse(bad).is_err(), "{bad}");
+        assert!(AccelUnit::parse(bad).is_err(), "{bad}");
+    }
+    assert!(GyroUnit::parse("counts:0").unwrap_err().to_string().contains("non-zero"));
+    assert_eq!(GyroUnit::parse("counts:-0.5"), Ok(GyroUnit::Counts { scale: Some(-0.5), offset: 0.0 }));
     // Counts with a scale convert to SI.
     let mut s = String::new();
     for i in 0..300 {

@@ -339,3 +339,18 @@ fn hidden_effects_keep_their_own_strengths() {
     }
     assert!(cfg.imu.effects.g_sensitivity && cfg.imu.effects.temperature && cfg.imu.effects.nonlinearity);
 }
+
+/// A simulation the simulator refuses (a walk too short for real
+/// accelerations) writes nothing: no file, not even the folder.
+#[test]
+fn a_refused_simulation_leaves_no_files() {
+    let out = std::env::temp_dir().join(format!("tumble-sim-refused-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&out);
+    let cfg = tumble::sim::SimConfig { duration_s: Some(20.0), ..tumble::sim::SimConfig::default() };
+    let err = match tumble::sim::simulate_and_write(tumble::sim::Scenario::Walk, &cfg, 1, &out) {
+        Ok(_) => panic!("a 20 s walk was simulated"),
+        Err(e) => e.to_string(),
+    };
+    assert!(err.contains("at least"), "{err}");
+    assert!(!out.exists(), "{} was left behind", out.display());
+}

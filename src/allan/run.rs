@@ -27,7 +27,10 @@ fn gap_free_segment(
 ) -> Result<(std::ops::Range<usize>, f64), AllanError> {
     let tau0 = crate::io::validate::median_period(&rec.t);
     if !(tau0.is_finite() && tau0 > 0.0) {
-        return Err(AllanError(format!("{}: cannot tell the sample rate from the timestamps", rec.source_name())));
+        return Err(AllanError::Invalid(format!(
+            "{}: cannot tell the sample rate from the timestamps",
+            rec.source_name()
+        )));
     }
     let splits: Vec<usize> =
         (1..rec.len()).filter(|&i| rec.t[i] - rec.t[i - 1] > (MAX_BRIDGED_GAP_SAMPLES + 1.0) * tau0).collect();
@@ -48,7 +51,7 @@ fn gap_free_segment(
         rec.t[gap_at]
     );
     if (longest.len() as f64) < MIN_SEGMENT_SHARE * rec.len() as f64 {
-        return Err(AllanError(format!(
+        return Err(AllanError::Invalid(format!(
             "{}: {describe}; no gap-free stretch holds half the samples (longest: {} of {}). Allan deviations need \
              evenly spaced samples: analyse the stretches separately",
             rec.source_name(),
@@ -86,7 +89,7 @@ pub fn run_allan_with_progress(
 ) -> Result<AllanReport, AllanError> {
     opts.validate()?;
     if rec.len() < 10 {
-        return Err(AllanError(format!(
+        return Err(AllanError::Invalid(format!(
             "{}: {} samples are too few for an Allan analysis",
             rec.source_name(),
             rec.len()
@@ -96,7 +99,9 @@ pub fn run_allan_with_progress(
     let (segment, tau0) = gap_free_segment(rec, &mut warnings)?;
     let whole = rec;
     let rec = &whole.slice_time(whole.t[segment.start], whole.t[segment.end - 1] + 0.5 * tau0);
-    super::disturbance::check_static(rec).map_err(|m| AllanError(format!("{}: {m}", rec.source_name())))?;
+    if let Some(drift) = super::disturbance::check_static(rec)? {
+        warnings.push(drift);
+    }
     let disturbances = super::disturbance::find_disturbances(rec);
     for d in &disturbances {
         warnings.push(format!("disturbance: {d}"));
@@ -204,7 +209,7 @@ fn curves(
     for (k, c) in columns.iter().enumerate() {
         let (lo, hi) = c.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)));
         if lo == hi {
-            return Err(AllanError(format!(
+            return Err(AllanError::Invalid(format!(
                 "{}: the {} {} axis reads {lo} in every sample: there is no noise to analyse \
                  (a stuck sensor, a quantization coarser than the noise, or a column of constants)",
                 rec.source_name(),
@@ -220,7 +225,7 @@ fn curves(
             let refs: Vec<&[f64]> = columns[3 * sensor..3 * sensor + 3].iter().map(|c| &c[r.clone()]).collect();
             per_span.push(
                 super::allan_deviation_axes(&refs, tau0, &opts.allan, &tick)
-                    .map_err(|e| AllanError(format!("{}: {e}", rec.source_name())))?,
+                    .map_err(|e| AllanError::Invalid(format!("{}: {e}", rec.source_name())))?,
             );
         }
         for k in 0..3 {

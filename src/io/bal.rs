@@ -58,6 +58,7 @@ pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
         ));
     }
     let mut graph = Graph::new();
+    let mut observation_lines = Vec::with_capacity(no);
     for _ in 0..no {
         let tc = next("observation camera index")?;
         let c = int(path, tc, "camera index")?;
@@ -71,6 +72,7 @@ pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
         let x = num(path, next("observation x")?, "observation x")?;
         let y = num(path, next("observation y")?, "observation y")?;
         graph.add(SnavelyReprojection::new(C(c as u64), L(p as u64), [x, y]), NoiseModel::Unit);
+        observation_lines.push((tc.0, c, p));
     }
     // Camera and point parameters: `n` numbers named "<what> <k>".
     let mut read_block = |what: &str, n: usize| -> Result<Vec<f64>, InputError> {
@@ -93,5 +95,31 @@ pub fn parse_bal(path: &Path, text: &str) -> Result<BalProblem, InputError> {
     if let Some((l, t)) = toks.next() {
         return Err(InputError::at(path, l, format!("unexpected extra data '{t}' after the last point")));
     }
+    check_projections(path, &graph, &values, &observation_lines)?;
     Ok(BalProblem { graph, values, cameras: nc, points: np, observations: no })
+}
+
+/// Every observation's projection at the file's values must be finite, with
+/// its derivatives: a point at its camera's centre (depth 0) has none, and
+/// the solver could only say which factor failed, not which line.
+fn check_projections(
+    path: &Path,
+    graph: &Graph,
+    values: &Values,
+    observations: &[(usize, usize, usize)],
+) -> Result<(), InputError> {
+    for (k, (entry, &(line, c, p))) in graph.entries().iter().zip(observations).enumerate() {
+        let finite = values.linearize(entry.factor.as_ref()).is_some_and(|l| {
+            l.residual.iter().all(|v| v.is_finite()) && l.jacobians.iter().all(|j| j.iter().all(|v| v.is_finite()))
+        });
+        if !finite {
+            return Err(InputError::at(
+                path,
+                line,
+                format!("observation {k}: point {p} cannot be projected by camera {c} (it lies at the camera's centre, depth 0, or the projection overflows)"),
+            )
+            .with_hint("move the point off the camera centre in the file's initial values, or drop the observation"));
+        }
+    }
+    Ok(())
 }

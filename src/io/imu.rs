@@ -74,6 +74,11 @@ impl ImuRecording {
     pub fn source_name(&self) -> String {
         self.sources.first().map(|p| p.display().to_string()).unwrap_or_else(|| "<memory>".into())
     }
+    /// An error at sample `i`: the first source file and the sample's line.
+    pub fn error_at(&self, i: usize, message: impl std::fmt::Display) -> crate::InputError {
+        let file = self.sources.first().cloned().unwrap_or_else(|| "<memory>".into());
+        crate::InputError::at(&file, self.lines.line(i), message)
+    }
     /// Mean and standard deviation per axis of the accelerometer and the
     /// gyro (in the stored units), and the temperature range \[°C\].
     pub fn stats(&self) -> RecordingStats {

@@ -124,7 +124,16 @@ fn parse_counts(s: &str) -> Result<(Option<f64>, f64), String> {
     };
     let scale = num(it.next(), "scale")?;
     let offset = num(it.next(), "offset")?.unwrap_or(0.0);
-    Ok((scale, offset))
+    if let Some(extra) = it.next() {
+        return Err(format!("'{s}': `counts:SCALE:OFFSET` takes two numbers, `{extra}` is a third"));
+    }
+    match scale {
+        Some(k) if !(k.is_finite() && k != 0.0) => {
+            Err(format!("counts scale must be a finite non-zero number (units per count), got {k}"))
+        }
+        _ if !offset.is_finite() => Err(format!("counts offset must be finite, got {offset}")),
+        _ => Ok((scale, offset)),
+    }
 }
 
 /// 0-based column indices of time, gyro, accelerometer and temperature.

@@ -13,6 +13,7 @@ pub fn write_staged<E: From<String>>(
     dir: &Path,
     write: impl FnOnce(&Path) -> Result<Vec<PathBuf>, E>,
 ) -> Result<Vec<PathBuf>, E> {
+    let existed = dir.exists();
     std::fs::create_dir_all(dir).map_err(|e| E::from(format!("{}: cannot create: {e}", dir.display())))?;
     // One folder per call: threads of one process may write into one folder.
     static CALLS: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
@@ -24,6 +25,10 @@ pub fn write_staged<E: From<String>>(
         Ok(files) => files,
         Err(e) => {
             let _ = std::fs::remove_dir_all(&stage);
+            if !existed {
+                // Only when empty: the folder this call created.
+                let _ = std::fs::remove_dir(dir);
+            }
             return Err(e);
         }
     };
@@ -43,6 +48,22 @@ pub fn write_staged<E: From<String>>(
     Ok(out)
 }
 
+/// Every file under `dir`, recursively, in name order (what a writer that
+/// lays out a folder tree hands back to [`write_staged`]).
+pub fn files_under(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)?.map(|e| e.map(|e| e.path())).collect::<Result<_, _>>()?;
+    entries.sort();
+    for p in entries {
+        if p.is_dir() {
+            out.extend(files_under(&p)?);
+        } else {
+            out.push(p);
+        }
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -56,7 +77,10 @@ mod tests {
             Err("the figure failed".to_string())
         });
         assert!(failed.is_err());
-        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "nothing left behind");
+        assert!(!dir.exists(), "nothing left behind, not even the folder it created");
+        std::fs::create_dir_all(&dir).unwrap();
+        let failed: Result<Vec<PathBuf>, String> = write_staged(&dir, |_| Err("again".to_string()));
+        assert!(failed.is_err() && dir.is_dir(), "a folder that was there stays");
         let ok: Result<Vec<PathBuf>, String> = write_staged(&dir, |s| {
             std::fs::create_dir_all(s.join("eval")).unwrap();
             std::fs::write(s.join("a.json"), "{}").unwrap();

@@ -100,6 +100,15 @@ pub fn read_asl_groundtruth(path: &Path) -> Result<Trajectory, InputError> {
 pub fn read_tum(path: &Path) -> Result<Trajectory, InputError> {
     let text = std::fs::read(path).map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
     let unit = if first_field(&text).is_some_and(is_ns_stamp) { TimeUnit::Ns } else { TimeUnit::S };
+    let stamps = first_stamps(&text);
+    if let [(_, a), (line, b)] = stamps[..] {
+        if unit == TimeUnit::S && (b - a).abs() > MAX_POSE_STEP_S {
+            return Err(InputError::at(path, line, format!("the stamp steps by {} from the line before", b - a))
+                .with_hint(
+                    "TUM stamps are seconds (or nanoseconds of more than 12 digits); convert other units to seconds",
+                ));
+        }
+    }
     let spec = TableSpec {
         time: Some((0, unit)),
         values: (1..8).collect(),
@@ -130,6 +139,26 @@ fn first_line(text: &[u8]) -> Option<(&[u8], bool)> {
 
 fn first_field(text: &[u8]) -> Option<&[u8]> {
     first_line(text).map(|(f, _)| f)
+}
+
+/// The largest step between a trajectory's first two stamps read as seconds
+/// \[s\]: poses an hour apart are stamps in another unit (nanoseconds or
+/// microseconds since a start), which would otherwise be read as seconds.
+const MAX_POSE_STEP_S: f64 = 3600.0;
+
+/// The first fields of the first two data lines as numbers, with their
+/// 1-based line numbers.
+fn first_stamps(text: &[u8]) -> Vec<(usize, f64)> {
+    text.split(|&c| c == b'\n')
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim_ascii()))
+        .filter(|(_, l)| !l.is_empty() && (l[0].is_ascii_digit() || l[0] == b'-' || l[0] == b'.'))
+        .take(2)
+        .filter_map(|(i, l)| {
+            let field = l.split(|c| c.is_ascii_whitespace() || *c == b',').next()?;
+            Some((i, std::str::from_utf8(field).ok()?.parse::<f64>().ok()?))
+        })
+        .collect()
 }
 
 /// An integer of more than 12 digits: a time stamp in nanoseconds.

@@ -17,7 +17,7 @@ use crate::error::InputError;
 use crate::io::trajectory::{write_asl_groundtruth, Trajectory};
 use rayon::prelude::*;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 fn werr(path: &Path, e: std::io::Error) -> InputError {
     InputError::file(path, format!("cannot write: {e}"))
@@ -70,6 +70,21 @@ fn format_imu_rows(imu: &SimulatedImu, t0_ns: i64, rate_hz: f64, range: std::ops
 /// Errors: a configuration or motion the simulator refuses reads
 /// `simulation: …`; a file that cannot be written is named with its path.
 pub fn simulate_and_write(
+    scenario: super::Scenario,
+    config: &super::SimConfig,
+    seed: u64,
+    out: &Path,
+) -> Result<Simulation, SimError> {
+    let mut done = None;
+    crate::io::staging::write_staged(out, |stage| -> Result<Vec<PathBuf>, SimError> {
+        done = Some(simulate_and_write_into(scenario, config, seed, stage)?);
+        crate::io::staging::files_under(stage).map_err(|e| SimError::from(format!("{}: {e}", stage.display())))
+    })?;
+    done.ok_or_else(|| SimError::from("the simulation wrote nothing"))
+}
+
+/// [`simulate_and_write`] into `out` directly (a staging folder).
+fn simulate_and_write_into(
     scenario: super::Scenario,
     config: &super::SimConfig,
     seed: u64,
