@@ -3,7 +3,7 @@
 //! 30 s target (the benchmark of `tumble calibrate-rig`).
 //!
 //! `cargo run --release --example calibrate_rig [-- <data dir>] [--timed-only]`
-//! (default `../shared/data/euroc`; `--timed-only` skips the second
+//! (default `$TUMBLE_DATA/euroc`, docs/datasets.md; `--timed-only` skips the second
 //! calibration, with EuRoC's intrinsics held).
 
 use std::path::PathBuf;
@@ -12,7 +12,13 @@ use tumble::rig::{calibrate_rig, RigInput, RigOptions};
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let timed_only = args.iter().any(|a| a == "--timed-only");
-    let root = PathBuf::from(args.iter().find(|a| !a.starts_with("--")).map_or("../shared/data/euroc", |s| s.as_str()));
+    let root = match args.iter().find(|a| !a.starts_with("--")) {
+        Some(dir) => PathBuf::from(dir),
+        None => match tumble::io::datasets::dataset("euroc") {
+            Some(dir) => dir,
+            None => return Ok(()),
+        },
+    };
     let seq = root.join("imu_april");
     if !seq.is_dir() {
         println!("skipped: {} is absent", seq.display());
@@ -24,7 +30,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let input = RigInput::from_asl(&seq, &seq.join("target.yaml"), Some(&micro.join("imu0/sensor.yaml")), None, &opts)?;
     let rig = calibrate_rig(&input, &opts, &mut |m| eprintln!("{m}"))?;
     let seconds = t.elapsed().as_secs_f64();
-    println!("{}", tumble::rig::output::summary_markdown(&rig));
+    println!("{}", tumble::rig::summary_markdown(&rig));
     let mut reference = Vec::new();
     for c in &rig.cameras {
         let (m, t_bs, _, _) = tumble::io::asl::read_camera_sensor(&micro.join(&c.name).join("sensor.yaml"))?;

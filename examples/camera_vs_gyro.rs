@@ -3,7 +3,7 @@
 //! `camN/corners.csv` and a target).
 //!
 //! `cargo run --release --example camera_vs_gyro -- [DATA_DIR]` (default
-//! `../shared/data/euroc`: `imu_april/` and EuRoC's published calibration in
+//! `$TUMBLE_DATA/euroc`, docs/datasets.md: `imu_april/` and EuRoC's published calibration in
 //! `V1_01_easy_micro/`).
 //!
 //! Each frame's pose comes from its corners alone (PnP with the calibration's
@@ -44,7 +44,13 @@ const MAX_RMS_PX: f64 = 2.0 * TARGET_TRUTH_MAX_RMS_PX;
 const SPAN_S: f64 = 0.25;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let root = std::env::args().nth(1).map(PathBuf::from).unwrap_or_else(|| PathBuf::from("../shared/data/euroc"));
+    let root = match std::env::args().nth(1) {
+        Some(dir) => PathBuf::from(dir),
+        None => match tumble::io::datasets::dataset("euroc") {
+            Some(dir) => dir,
+            None => return Ok(()),
+        },
+    };
     let seq = root.join("imu_april");
     let micro = root.join("V1_01_easy_micro/mav0");
     if !seq.is_dir() || !micro.is_dir() {

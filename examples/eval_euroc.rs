@@ -104,7 +104,9 @@ fn main() {
             std::process::exit(2);
         }
     };
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/euroc");
+    let Some(data) = tumble::io::datasets::dataset("euroc") else {
+        return;
+    };
     let mut opts = VioOptions::default();
     opts.noise.from_static = args.has("--noise-from-static");
     opts.noise.measure_in_motion = !args.has("--fixed-noise");

@@ -1,7 +1,7 @@
 //! Solve a g2o pose graph (SE(2) or SE(3)) and print the solver summary.
 //!
 //! ```sh
-//! cargo run --example pose_graph_g2o -- ../shared/data/pose_graphs/sphere2500.g2o
+//! cargo run --example pose_graph_g2o -- sphere2500.g2o
 //! cargo run --example pose_graph_g2o            # a simulated helix when no file is given
 //! ```
 

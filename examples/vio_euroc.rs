@@ -1,20 +1,22 @@
 //! Run the estimator on real EuRoC V1_01 data: EqVIO's processed file (real IMU
 //! and real feature tracks, first 30 s) against the EuRoC ground truth.
 //!
-//! `cargo run --example vio_euroc -- [eqvio.csv] [groundtruth.csv]`
+//! `cargo run --example vio_euroc -- [eqvio.csv] [groundtruth.csv]` (default:
+//! the files under `$TUMBLE_DATA/euroc`, docs/datasets.md)
 
 use std::path::PathBuf;
+use tumble::io::datasets::dataset;
 use tumble::vio::{read_eqvio, run, summarize, VioOptions};
 
 fn main() {
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/euroc");
     let args: Vec<String> = std::env::args().collect();
-    let csv = args.get(1).map(PathBuf::from).unwrap_or_else(|| data.join("eqvio_V1_01_30s.csv"));
-    let gt = args.get(2).map(PathBuf::from).unwrap_or_else(|| data.join("groundtruth/V1_01_easy.csv"));
-    if !csv.is_file() {
-        println!("SKIPPED: {} is absent", csv.display());
-        return;
-    }
+    let (csv, gt) = match (args.get(1), args.get(2)) {
+        (Some(csv), gt) => (PathBuf::from(csv), gt.map(PathBuf::from).unwrap_or_default()),
+        (None, _) => match (dataset("euroc/eqvio_V1_01_30s.csv"), dataset("euroc/groundtruth/V1_01_easy.csv")) {
+            (Some(csv), Some(gt)) => (csv, gt),
+            _ => return,
+        },
+    };
     let input = match read_eqvio(&csv, gt.is_file().then_some(gt.as_path())) {
         Ok(i) => i,
         Err(e) => {

@@ -2,7 +2,7 @@
 //! tumble, against imu_tk's wall time on the same machine.
 //!
 //! imu_tk (C++, Ceres) is not buildable here without Ceres; its figure is the
-//! median of 3 runs recorded in `../shared/data/README.md` (≈ 2.3 s), printed
+//! median of 3 runs of imu_tk's `test_imu_calib` on this machine class (≈ 2.3 s), printed
 //! as the peer's. `cargo run --release -p tumble-bench --example bench_calibrate [-- --repeat N]`
 
 use std::time::Instant;
@@ -15,11 +15,9 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let repeat: usize =
         args.iter().position(|a| a == "--repeat").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(5);
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/imu_tk_xsens");
-    if !dir.exists() {
-        println!("SKIPPED: {} is absent", dir.display());
+    let Some(dir) = tumble::io::datasets::dataset("imu_tk_xsens") else {
         return;
-    }
+    };
     let mut o = RecordingOptions::default();
     o.format.time_unit = TimeUnit::S;
     o.format.accel_unit = AccelUnit::Counts { scale: None, offset: 0.0 };
@@ -38,6 +36,6 @@ fn main() {
     let ours = times[times.len() / 2];
     println!("Xsens calibration (51,175 samples, read + detect + accel sweep + gyro + covariances)");
     println!("  tumble: {ours:.4} s (median of {})", times.len());
-    println!("  imu_tk: {IMU_TK_SECONDS:.1} s (recorded on this machine class; see ../shared/data/README.md)");
+    println!("  imu_tk: {IMU_TK_SECONDS:.1} s (recorded on this machine class)");
     println!("  ratio:  {:.1}× faster (target ≥ 10×)", IMU_TK_SECONDS / ours);
 }

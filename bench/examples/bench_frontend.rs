@@ -44,11 +44,9 @@ fn main() {
     let repeat: usize =
         args.iter().position(|a| a == "--repeat").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(3);
     core::set_num_threads(1).expect("opencv threads");
-    let micro = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/euroc/V1_01_easy_micro");
-    if !micro.is_dir() {
-        println!("SKIPPED: {} is absent", micro.display());
+    let Some(micro) = tumble::io::datasets::dataset("euroc/V1_01_easy_micro") else {
         return;
-    }
+    };
     let ds = read_asl(&micro, &Default::default()).expect("dataset");
     let cam = &ds.cameras[0];
     let model = cam.model.expect("intrinsics");

@@ -3,7 +3,7 @@
 //! process (so peak memory is its own).
 //!
 //! ```sh
-//! cargo run --release -p tumble-bench --example bench_solver -- ../shared/data/pose_graphs/*.g2o ../shared/data/bal/*.txt
+//! cargo run --release -p tumble-bench --example bench_solver -- $TUMBLE_DATA/pose_graphs/*.g2o $TUMBLE_DATA/bal/*.txt
 //! cargo run --release -p tumble-bench --example bench_solver -- --json --repeat 1 FILE...
 //! ```
 //! Prints per problem and solver: variables, factors, iterations, initial and

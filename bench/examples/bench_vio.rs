@@ -55,13 +55,9 @@ fn main() {
         every,
         tracked / every
     );
-    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/euroc");
-    let csv = data.join("eqvio_V1_01_30s.csv");
-    if csv.is_file() {
-        let gt = data.join("groundtruth/V1_01_easy.csv");
+    if let Some(csv) = tumble::io::datasets::dataset("euroc/eqvio_V1_01_30s.csv") {
+        let gt = csv.with_file_name("groundtruth/V1_01_easy.csv");
         let real = read_eqvio(&csv, gt.is_file().then_some(gt.as_path())).expect("eqvio");
         report("EuRoC V1_01 (EqVIO tracks, 12–38 per frame)", &real, &VioOptions::with_pixel_sigma(1.93));
-    } else {
-        println!("SKIPPED the real-data run: {} is absent", csv.display());
     }
 }

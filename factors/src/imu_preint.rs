@@ -3,7 +3,8 @@
 //! - [`Scheme::ZeroOrderHold`]: GTSAM's `PreintegratedImuMeasurements` with its
 //!   default tangent-space integration — sample k held over `[t_k, t_k + dt]`,
 //!   state `[θ, p, v]` with `ΔR = Exp(θ)`, `θ ← θ + Jr(θ)⁻¹ ω dt`. Equal to GTSAM
-//!   to rounding (tested against `../shared/data/anchors/gtsam_preint/`).
+//!   to rounding (tested against GTSAM's own numbers, `anchors/gtsam_preint/` of the
+//!   datasets in docs/datasets.md).
 //! - [`Scheme::Midpoint`]: VINS-Mono's midpoint rule on the manifold,
 //!   `ΔR ← ΔR Exp(½(ω_k + ω_{k+1}) dt)`, acceleration averaged over both ends.
 //!

@@ -10,7 +10,7 @@
 //! cargo run --release -p tumble-solvers --example nist [-- DIR] [--no-peer]
 //! ```
 //!
-//! DIR defaults to `../shared/data/nist` (the files as NIST publishes them).
+//! DIR defaults to `$TUMBLE_DATA/nist` (the files as NIST publishes them).
 
 use nalgebra::SVector;
 use std::path::{Path, PathBuf};
@@ -235,16 +235,22 @@ fn solve_any(p: &Problem, start: &[f64], options: &LmOptions) -> Outcome {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let no_peer = args.iter().any(|a| a == "--no-peer");
-    let dir = args
-        .iter()
-        .find(|a| !a.starts_with("--"))
-        .map_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/nist"), PathBuf::from);
+    let dir = match args.iter().find(|a| !a.starts_with("--")) {
+        Some(dir) => PathBuf::from(dir),
+        None => match std::env::var_os("TUMBLE_DATA") {
+            Some(root) => Path::new(&root).join("nist"),
+            None => {
+                println!("SKIPPED: give the NIST folder, or set TUMBLE_DATA (docs/datasets.md)");
+                return;
+            }
+        },
+    };
     let mut files: Vec<PathBuf> = match std::fs::read_dir(&dir) {
         Ok(d) => {
             d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.extension().is_some_and(|e| e == "dat")).collect()
         }
         Err(e) => {
-            println!("SKIPPED: {}: {e} (the NIST files live in ../shared/data/nist)", dir.display());
+            println!("SKIPPED: {}: {e} (the NIST StRD files, docs/datasets.md)", dir.display());
             return;
         }
     };

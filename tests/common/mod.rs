@@ -7,14 +7,17 @@ pub mod vio;
 
 use std::path::{Path, PathBuf};
 
-/// A path under `../shared/data/`, or None (with a printed SKIPPED line) when
-/// the shared data folder is not beside the project.
+/// A path under the datasets' folder (`$TUMBLE_DATA`, else `../shared/data/`
+/// beside the project), or None (with a printed SKIPPED line) when it is absent.
 pub fn shared(rel: &str) -> Option<PathBuf> {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel);
+    let root = std::env::var_os(tumble::io::datasets::DATA_VAR)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data"));
+    let p = root.join(rel);
     if p.exists() {
         Some(p)
     } else {
-        println!("SKIPPED: {} is absent (the shared data folder is not beside the project)", p.display());
+        println!("SKIPPED: {} is absent (docs/datasets.md)", p.display());
         None
     }
 }
