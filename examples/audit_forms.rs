@@ -49,7 +49,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         for &mode in &modes {
             let n = if case.expect == Expect::Nothing { 2 * seeds } else { seeds };
             let t0 = std::time::Instant::now();
-            let trials: Vec<Result<Trial, String>> =
+            let trials: Vec<Result<Trial, tumble::audit::AuditError>> =
                 (first..first + n).into_par_iter().map(|s| run_trial(case, s, mode)).collect();
             let ok: Vec<&Trial> = trials.iter().filter_map(|t| t.as_ref().ok()).collect();
             for (s, t) in (first..).zip(&trials) {

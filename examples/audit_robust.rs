@@ -66,7 +66,7 @@ fn main() -> Result<(), String> {
             let found: Vec<Result<Vec<Effect>, String>> = seeds
                 .par_iter()
                 .map(|&seed| {
-                    let (mut cfg, _, _) = config(case, seed)?;
+                    let (mut cfg, _, _) = config(case, seed).map_err(|e| e.to_string())?;
                     change(&mut cfg);
                     let rec = simulate(Scenario::Tumble, &cfg, seed).map_err(|e| e.to_string())?.imu.to_recording();
                     let cal = calibrate(&rec, &CalibOptions { gravity: cfg.gravity, ..Default::default() })

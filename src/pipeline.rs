@@ -75,9 +75,9 @@ impl std::str::FromStr for Stage {
     }
 }
 
-/// Builds the VIO's input once the chain knows the calibration to correct the
+/// Makes the VIO's input once the chain knows the calibration to correct the
 /// IMU with (None: no calibration available, samples used as read).
-pub type VioSource = Box<dyn FnOnce(Option<&ImuCalibration>) -> Result<VioInput, Box<dyn std::error::Error>>>;
+pub type VioInputMaker = Box<dyn FnOnce(Option<&ImuCalibration>) -> Result<VioInput, Box<dyn std::error::Error>>>;
 
 /// What the chain works on; every part optional.
 #[derive(Default)]
@@ -87,7 +87,7 @@ pub struct ChainInputs {
     /// The static recording (for `allan`), hours long for the bias random walk.
     pub still: Option<ImuRecording>,
     /// The VIO data (for `vio`).
-    pub vio: Option<VioSource>,
+    pub vio: Option<VioInputMaker>,
     /// A calibration to use when `calibrate` does not run (e.g. `--calibration FILE`).
     pub calibration: Option<ImuCalibration>,
     /// Noise to use when `allan` does not run (e.g. `--noise imu.yaml`).
@@ -125,7 +125,7 @@ impl ChainOptions {
     /// Check every stage's options once, before any work ([`run_chain`] calls it).
     pub fn validate(&self) -> Result<(), crate::OptionError> {
         self.calib.validate()?;
-        self.allan.validate().map_err(|e| crate::OptionError::new("allan stage:", e.0))?;
+        self.allan.validate().map_err(|e| crate::OptionError::new("allan stage:", e.to_string()))?;
         self.audit.validate()?;
         self.vio.validate()?;
         if !self.bias_after_s.is_finite() {
@@ -446,7 +446,7 @@ impl Run<'_> {
     /// Stage 4: run the VIO with the final calibration and the noise.
     fn vio(
         &mut self,
-        source: Option<VioSource>,
+        source: Option<VioInputMaker>,
         final_cal: Option<&SourcedCalibration>,
         noise: Option<ImuNoise>,
         progress: &mut dyn FnMut(Progress),

@@ -411,7 +411,7 @@ fn a_rig_is_calibrated_from_its_images() {
     assert!((rig.time_offset_s - t.time_offset_s).abs() < 5e-4);
     // What the detection found is written with the calibration.
     let out = dir.join("out");
-    let files = tumble::rig::output::write_rig(&rig, &input, &out).unwrap();
+    let files = tumble::rig::write_rig(&rig, &input, &out).unwrap();
     assert!(files.contains(&out.join("cam0/corners.csv")) && out.join("cam0/frames.csv").is_file());
     let back = tumble::io::target::read_corners(&out.join("cam0"), &input.target).unwrap();
     assert_eq!(back.len(), cam.views.len());

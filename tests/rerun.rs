@@ -36,7 +36,7 @@ fn asking_for_a_recording_without_the_feature_says_how_to_get_it() {
 #[cfg(feature = "rerun")]
 mod recording {
     use super::*;
-    use tumble::vio::record::read_rrd;
+    use tumble::vio::read_rrd;
 
     /// A real PNG of `w`×`h` pixels.
     fn png(path: &std::path::Path, w: u32, h: u32) {

@@ -204,10 +204,13 @@ fn imu_gaps_warn_and_recover() {
 }
 
 #[test]
+#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
 fn pure_rotation_triangulates_nothing_and_stays_finite() {
     let (mut input, opts) = walk(40.0, 7);
     // Every feature keeps its pixel: no parallax at all (a camera that only rotates
-    // about its centre sees the same — no depth can be triangulated).
+    // about its centre sees the same — no depth can be triangulated). 15 s of it: the
+    // start in motion is tried again at every frame (docs/vio.md, "Starting").
+    input.frames.retain(|f| f.t < 15.0);
     let first = input.frames[0].features.clone();
     for f in input.frames.iter_mut() {
         f.features = first.clone();

@@ -48,7 +48,7 @@ impl std::str::FromStr for DeviationKind {
     type Err = super::AllanError;
     fn from_str(s: &str) -> Result<DeviationKind, super::AllanError> {
         let k = DeviationKind::NAMES.iter().position(|n| *n == s.trim()).ok_or_else(|| {
-            super::AllanError(format!("unknown deviation `{s}` (kinds: {})", DeviationKind::NAMES.join(", ")))
+            super::AllanError::Invalid(format!("unknown deviation `{s}` (kinds: {})", DeviationKind::NAMES.join(", ")))
         })?;
         Ok(DeviationKind::ALL[k])
     }

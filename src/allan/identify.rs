@@ -216,14 +216,14 @@ const SLOPES: [f64; 5] = [-1.0, -0.5, 0.0, 0.5, 1.0];
 /// Identify the noise terms of an Allan (overlapping or not) deviation curve.
 pub fn identify(curve: &AllanCurve) -> Result<Identification, super::AllanError> {
     if !matches!(curve.kind, DeviationKind::Oadev | DeviationKind::Adev) {
-        return Err(super::AllanError(format!(
+        return Err(super::AllanError::Invalid(format!(
             "noise identification needs an Allan deviation curve, not the {}",
             curve.kind.name()
         )));
     }
     let pts: Vec<usize> = (0..curve.tau.len()).filter(|&i| curve.edf[i] >= 1.0 && curve.dev[i] > 0.0).collect();
     if pts.len() < 3 {
-        return Err(super::AllanError(format!("only {} usable τ points; the record is too short", pts.len())));
+        return Err(super::AllanError::Invalid(format!("only {} usable τ points; the record is too short", pts.len())));
     }
     let mut notes = Vec::new();
     let best = fit_best(curve, &pts, &mut notes);

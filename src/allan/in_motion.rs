@@ -95,27 +95,31 @@ pub fn error_in_motion(
     imu: &ImuRecording,
     truth: &Trajectory,
     gravity: f64,
-) -> Result<(ImuRecording, MotionSpan), String> {
+) -> Result<(ImuRecording, MotionSpan), super::AllanError> {
     let name = imu.source_name();
     if imu.gyro_units != Stored::Si || imu.accel_units != Stored::Si {
-        return Err(format!("{name}: the IMU is in raw counts; its error against a ground truth needs SI units"));
+        return Err(super::AllanError::Invalid(format!(
+            "{name}: the IMU is in raw counts; its error against a ground truth needs SI units"
+        )));
     }
     let n = truth.len();
     if n < 3 || truth.q.len() != n || truth.p.len() != n {
-        return Err(format!("{name}: the ground truth has {n} poses; at least 3 are needed"));
+        return Err(super::AllanError::Invalid(format!(
+            "{name}: the ground truth has {n} poses; at least 3 are needed"
+        )));
     }
     let t: Vec<f64> = truth.t_ns.iter().map(|s| (s - imu.t0_ns) as f64 * 1e-9).collect();
     if t.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(format!("{name}: the ground truth's stamps do not increase"));
+        return Err(super::AllanError::Invalid(format!("{name}: the ground truth's stamps do not increase")));
     }
     let imu_end = imu.duration();
     if t[n - 1].min(imu_end) - t[0].max(0.0) < MIN_SPAN_S {
-        return Err(format!(
+        return Err(super::AllanError::Invalid(format!(
             "{name}: the ground truth covers {:.1}–{:.1} s on the IMU's clock and the IMU 0–{imu_end:.1} s: they \
              share less than {MIN_SPAN_S} s (is the truth on another clock?)",
             t[0],
             t[n - 1]
-        ));
+        )));
     }
     let q = |i: usize| {
         let [w, x, y, z] = truth.q[i];
@@ -133,18 +137,20 @@ pub fn error_in_motion(
     };
     let moving: Vec<f64> = t.iter().zip(&v).filter(|(_, v)| v.norm() > MOVING_SPEED_M_S).map(|(t, _)| *t).collect();
     let (Some(first), Some(last)) = (moving.first(), moving.last()) else {
-        return Err(format!("{name}: the ground truth never moves faster than {MOVING_SPEED_M_S} m/s"));
+        return Err(super::AllanError::Invalid(format!(
+            "{name}: the ground truth never moves faster than {MOVING_SPEED_M_S} m/s"
+        )));
     };
     // The derivatives live at the midpoints between truth stamps.
     let mid: Vec<f64> = t.windows(2).map(|w| 0.5 * (w[0] + w[1])).collect();
     let from = (first + MOVING_MARGIN_S).max(mid[0]).max(imu.t.first().copied().unwrap_or(f64::INFINITY));
     let to = (last - MOVING_MARGIN_S).min(mid[mid.len() - 1]).min(imu_end);
     if to - from < MIN_SPAN_S {
-        return Err(format!(
+        return Err(super::AllanError::Invalid(format!(
             "{name}: the ground truth and the IMU share {:.1} s of motion (from {from:.1} to {to:.1} s on the IMU's \
              clock); at least {MIN_SPAN_S} s are needed",
             (to - from).max(0.0),
-        ));
+        )));
     }
     let g = Vector3::new(0.0, 0.0, gravity);
     let (rate, force): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = (0..n - 1)
@@ -206,8 +212,8 @@ pub fn run_allan_in_motion(
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<(super::AllanReport, MotionSpan), super::AllanError> {
     crate::error::OptionError::earth_gravity(gravity, "the accelerometer's error is taken against it")
-        .map_err(|e| super::AllanError(e.to_string()))?;
-    let (error, span) = error_in_motion(imu, truth, gravity).map_err(super::AllanError)?;
+        .map_err(|e| super::AllanError::Invalid(e.to_string()))?;
+    let (error, span) = error_in_motion(imu, truth, gravity)?;
     let opts = super::AllanRunOptions { cut_disturbances: false, ..opts.clone() };
     let mut report = super::run_allan_with_progress(&error, &opts, progress)?;
     report.source = format!("{}, in motion against its ground truth", report.source);

@@ -6,8 +6,8 @@
 //!   equivalent degrees of freedom, χ² intervals), as Stable32 computes them.
 //! * [`identify`](mod@identify): the noise coefficients Q, N, B, K, R by the IEEE read-offs
 //!   and by a weighted non-negative least-squares fit, each with an interval.
-//! * [`disturbance`]: knocks and steps in a static log, and the longest span free of them.
-//! * [`report`]: a whole static recording → `allan.json`, Kalibr `imu.yaml`,
+//! * `disturbance`: knocks and steps in a static log, and the longest span free of them.
+//! * `report`: a whole static recording → `allan.json`, Kalibr `imu.yaml`,
 //!   plots and a terminal table (what `tumble allan` runs).
 //!
 //! ```
@@ -26,20 +26,23 @@
 //! ```
 
 pub mod deviation;
-pub mod disturbance;
+pub(crate) mod disturbance;
 pub mod edf;
+#[doc(hidden)]
 pub mod identify;
 pub mod in_motion;
-pub mod report;
+pub(crate) mod report;
 mod run;
 
 pub use deviation::DeviationKind;
+pub use disturbance::{
+    check_static, static_disturbances, Disturbance, DisturbanceKind, MAX_STATIC_TILT_DEG, MOTION_SPAN_S,
+};
 pub use identify::{identify, Coefficient, Identification, NoiseTerms};
 pub use report::{AllanReport, AllanRunOptions, AxisStat};
 pub use run::{run_allan, run_allan_with_progress};
 
 use serde::{Deserialize, Serialize};
-use std::fmt;
 
 /// Which averaging times τ to evaluate.
 #[derive(Clone, Debug, PartialEq)]
@@ -82,21 +85,23 @@ impl AllanOptions {
     /// log-spaced grid has at least one τ per decade, explicit τ are positive.
     pub fn validate(&self) -> Result<(), AllanError> {
         if !(self.confidence > 0.0 && self.confidence < 1.0) {
-            return Err(AllanError(format!(
+            return Err(AllanError::Invalid(format!(
                 "the confidence level (--confidence) must lie strictly between 0 and 1, got {}",
                 self.confidence
             )));
         }
         if self.max_tau_fraction.is_nan() || self.max_tau_fraction <= 0.0 {
-            return Err(AllanError(format!(
+            return Err(AllanError::Invalid(format!(
                 "the largest τ fraction (--max-tau-fraction) must be positive, got {}",
                 self.max_tau_fraction
             )));
         }
         match &self.taus {
-            TauGrid::LogSpaced(0) => Err(AllanError("a log-spaced τ grid needs at least one τ per decade".into())),
+            TauGrid::LogSpaced(0) => {
+                Err(AllanError::Invalid("a log-spaced τ grid needs at least one τ per decade".into()))
+            }
             TauGrid::Explicit(t) if t.iter().any(|x| !(x.is_finite() && *x > 0.0)) => {
-                Err(AllanError(format!("explicit τ must be positive numbers of seconds, got {t:?}")))
+                Err(AllanError::Invalid(format!("explicit τ must be positive numbers of seconds, got {t:?}")))
             }
             _ => Ok(()),
         }
@@ -110,12 +115,9 @@ impl std::str::FromStr for TauGrid {
         match v {
             "octave" => Ok(TauGrid::Octave),
             "all" => Ok(TauGrid::All),
-            v => v
-                .parse()
-                .ok()
-                .filter(|&p: &usize| p > 0)
-                .map(TauGrid::LogSpaced)
-                .ok_or_else(|| AllanError(format!("--taus takes a count per decade, `octave` or `all`, got `{v}`"))),
+            v => v.parse().ok().filter(|&p: &usize| p > 0).map(TauGrid::LogSpaced).ok_or_else(|| {
+                AllanError::Invalid(format!("--taus takes a count per decade, `octave` or `all`, got `{v}`"))
+            }),
         }
     }
 }
@@ -133,8 +135,9 @@ impl std::str::FromStr for TimeSpan {
     type Err = AllanError;
     /// `A:B` seconds from the start of the recording (either end may be empty).
     fn from_str(s: &str) -> Result<TimeSpan, AllanError> {
-        let (a, b) =
-            s.split_once(':').ok_or_else(|| AllanError(format!("--span: expected START:END in seconds, got `{s}`")))?;
+        let (a, b) = s
+            .split_once(':')
+            .ok_or_else(|| AllanError::Invalid(format!("--span: expected START:END in seconds, got `{s}`")))?;
         let num = |v: &str, default: f64| -> Result<f64, AllanError> {
             if v.trim().is_empty() {
                 return Ok(default);
@@ -143,11 +146,11 @@ impl std::str::FromStr for TimeSpan {
                 .parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
-                .ok_or_else(|| AllanError(format!("--span: `{v}` is not a number of seconds")))
+                .ok_or_else(|| AllanError::Invalid(format!("--span: `{v}` is not a number of seconds")))
         };
         let (a, b) = (num(a, 0.0)?, num(b, f64::INFINITY)?);
         if b <= a {
-            return Err(AllanError(format!("--span: end {b} is not after start {a}")));
+            return Err(AllanError::Invalid(format!("--span: end {b} is not after start {a}")));
         }
         Ok(TimeSpan { start_s: a, end_s: b })
     }
@@ -238,19 +241,21 @@ impl AllanCurve {
     }
 }
 
-/// Why a deviation could not be computed.
-#[derive(Clone, Debug, PartialEq)]
-pub struct AllanError(pub String);
-
-crate::error::message_error_conversions!(AllanError, AllanError);
-
-impl fmt::Display for AllanError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(&self.0)
-    }
+/// Why an Allan analysis could not be made.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum AllanError {
+    /// An option cannot work.
+    #[error(transparent)]
+    Options(#[from] crate::OptionError),
+    /// The recording is not what an Allan analysis needs (named with its file and line).
+    #[error(transparent)]
+    Input(#[from] crate::InputError),
+    /// The data cannot give a deviation (too few samples, no common span, …).
+    #[error("{0}")]
+    Invalid(String),
 }
 
-impl std::error::Error for AllanError {}
+crate::error::message_error_conversions!(AllanError, AllanError::Invalid);
 
 /// The distinct cluster sizes of a grid for `n` samples of period `tau0`.
 pub fn cluster_sizes(grid: &TauGrid, n: usize, tau0: f64, kind: DeviationKind, max_tau_fraction: f64) -> Vec<usize> {
@@ -354,13 +359,13 @@ pub fn allan_deviation_from_phase(x: &[f64], tau0: f64, opts: &AllanOptions) -> 
 /// Finite values, a positive period and enough samples for the estimator.
 fn check_input(v: &[f64], tau0: f64, need: usize, what: &str, kind: DeviationKind) -> Result<(), AllanError> {
     if !(tau0.is_finite() && tau0 > 0.0) {
-        return Err(AllanError(format!("sample period must be positive and finite, got {tau0}")));
+        return Err(AllanError::Invalid(format!("sample period must be positive and finite, got {tau0}")));
     }
     if let Some(i) = v.iter().position(|x| !x.is_finite()) {
-        return Err(AllanError(format!("{what} {i} is not a finite number ({})", v[i])));
+        return Err(AllanError::Invalid(format!("{what} {i} is not a finite number ({})", v[i])));
     }
     if v.len() < need {
-        return Err(AllanError(format!(
+        return Err(AllanError::Invalid(format!(
             "{} {what}s are too few for the {} (need at least {need})",
             v.len(),
             kind.name()
@@ -380,7 +385,7 @@ fn curve_from_phase(
     let n = x.len() - 1;
     let ms = cluster_sizes(&opts.taus, n, tau0, kind, opts.max_tau_fraction);
     if ms.is_empty() {
-        return Err(AllanError("no averaging time τ falls inside the record".into()));
+        return Err(AllanError::Invalid("no averaging time τ falls inside the record".into()));
     }
     let vars = deviation::variances(x, &ms, kind, progress);
     let d = kind.difference_order();

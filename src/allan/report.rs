@@ -32,12 +32,12 @@ impl std::str::FromStr for AxisStat {
         match s.trim() {
             "max" => Ok(AxisStat::Max),
             "mean" => Ok(AxisStat::Mean),
-            _ => Err(AllanError(format!("unknown axis statistic `{s}` (use max or mean)"))),
+            _ => Err(AllanError::Invalid(format!("unknown axis statistic `{s}` (use max or mean)"))),
         }
     }
 }
 
-/// Options of [`run_allan`].
+/// Options of [`run_allan`](crate::allan::run_allan).
 #[derive(Clone, Debug)]
 pub struct AllanRunOptions {
     /// Estimator, τ grid and confidence level.
@@ -45,7 +45,7 @@ pub struct AllanRunOptions {
     /// Combination of axes for `imu.yaml`.
     pub axis_stat: AxisStat,
     /// Analyse only the longest span free of knocks and steps
-    /// ([`super::disturbance`]); they are reported either way. `tumble allan
+    /// (`super::disturbance`); they are reported either way. `tumble allan
     /// --span` turns it off (the span given is analysed as it is).
     pub cut_disturbances: bool,
 }
@@ -479,7 +479,7 @@ impl AllanReport {
     }
 
     /// Write `allan.json`, `imu.yaml` (when SI) and the plots into `dir`
-    /// (created if needed), all or nothing ([`crate::io::staging`]); returns
+    /// (created if needed), all or nothing (`crate::io::staging`); returns
     /// the files written.
     pub fn write_all(&self, dir: &Path) -> Result<Vec<PathBuf>, AllanError> {
         crate::io::staging::write_staged(dir, |stage| self.write_unstaged(stage))

@@ -193,6 +193,16 @@ impl Fit {
     }
 }
 
+/// The audit's solves stop at a relative decrease to come of 10⁻¹²: it
+/// compares χ² between models that differ by one effect (differences of a few
+/// units on costs of 10⁴–10⁶), so each cost must be resolved far below 1.
+const AUDIT_FUNCTION_TOLERANCE: f64 = 1e-12;
+
+/// The audit's iteration cap: its solves start from the calibration's
+/// minimum and converge in a few iterations; one that needs more is a model
+/// the data do not support, and is reported as such rather than waited for.
+const AUDIT_MAX_ITERATIONS: usize = 60;
+
 /// Solve with the effects of `layout`, starting from `start` (missing effect
 /// values start at zero).
 pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -> Result<Fit, AuditError> {
@@ -203,7 +213,11 @@ pub fn solve(data: &AuditData, noise: &Noise, layout: &Layout, start: &Values) -
         }
     }
     let graph = build(data, noise, layout)?;
-    let lm = Optimizer::new(LmOptions { function_tolerance: 1e-12, max_iterations: 60, ..LmOptions::default() });
+    let lm = Optimizer::new(LmOptions {
+        function_tolerance: AUDIT_FUNCTION_TOLERANCE,
+        max_iterations: AUDIT_MAX_ITERATIONS,
+        ..LmOptions::default()
+    });
     let (values, _) = lm.optimize(&graph, &values).map_err(|e| e.to_string())?;
     // χ² per group, in the order the factors were added.
     let n = [data.statics.len(), data.motions.len(), data.motions.len(), data.motions.len()];

@@ -26,7 +26,7 @@
 //! not absorbed by the walk; the search then runs at these walks.
 //!
 //! After the search the whitened residuals left are tested for structure
-//! against their regressors ([`structure`]); what no effect explains is
+//! against their regressors (`structure`); what no effect explains is
 //! reported with its share of the gap, and two effects that explain the same
 //! residual are reported as confounded.
 //!
@@ -43,15 +43,17 @@
 //! println!("{}", result.verdict());
 //! ```
 
-pub mod data;
+pub(crate) mod data;
+#[doc(hidden)]
 pub mod fit;
-pub mod report;
+pub(crate) mod report;
 mod run;
-pub mod structure;
+pub(crate) mod structure;
 pub mod trials;
 pub mod vio;
 
 pub use data::AuditData;
+pub use report::{summary_table, write as write_report};
 pub use run::{audit, audit_with_progress, MAX_STATIC_RATE};
 pub use tumble_factors::imu_effects::Effect;
 

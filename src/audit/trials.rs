@@ -11,7 +11,7 @@
 //! println!("{}: first {:?}, shrink {:.0} %", case.name, t.found.first(), 100.0 * t.shrink);
 //! ```
 
-use super::{audit, Audit, AuditOptions, Effect};
+use super::{audit, Audit, AuditError, AuditOptions, Effect};
 use crate::calib::{calibrate, CalibOptions};
 use crate::io::ImuNoise;
 use crate::sim::{hide_effect, simulate, Motion, Scenario, SimConfig, TemperatureTrace, Tumble};
@@ -152,7 +152,7 @@ fn unit(seed: u64, salt: u64) -> f64 {
 }
 
 /// Simulate the case for `seed`, calibrate without the effects, audit.
-pub fn run_trial(case: &Case, seed: u64, mode: NoiseMode) -> Result<Trial, String> {
+pub fn run_trial(case: &Case, seed: u64, mode: NoiseMode) -> Result<Trial, AuditError> {
     let (cfg, strengths, warmup_c) = config(case, seed)?;
     let a = simulate_and_audit(&cfg, seed, mode, AuditOptions::default().max_effects)?;
     let gap_clean = match case.expect {
@@ -167,19 +167,19 @@ pub fn run_trial(case: &Case, seed: u64, mode: NoiseMode) -> Result<Trial, Strin
 }
 
 /// Simulate `cfg`, calibrate, audit with at most `max_effects` added.
-fn simulate_and_audit(cfg: &SimConfig, seed: u64, mode: NoiseMode, max_effects: usize) -> Result<Audit, String> {
+fn simulate_and_audit(cfg: &SimConfig, seed: u64, mode: NoiseMode, max_effects: usize) -> Result<Audit, AuditError> {
     let sim = simulate(Scenario::Tumble, cfg, seed).map_err(|e| e.to_string())?;
     let rec = sim.imu.to_recording();
     let cal = calibrate(&rec, &CalibOptions { gravity: cfg.gravity, ..Default::default() }).map_err(|e| e.message)?;
     let noise = (mode == NoiseMode::File).then(|| ImuNoise::from_model(&cfg.imu));
-    audit(&rec, &cal.calibration, &AuditOptions { noise, max_effects, ..Default::default() }).map_err(|e| e.0)
+    audit(&rec, &cal.calibration, &AuditOptions { noise, max_effects, ..Default::default() })
 }
 
 /// The simulator configuration of `case` for `seed`: sizes drawn, a warm-up of
 /// 5–15 °C for temperature effects, a hand turning at 1–2 rad/s on average,
 /// each turn at half to twice that (a hand's turns differ; at one rate the
 /// nonlinearity's forms integrate alike over every turn).
-pub fn config(case: &Case, seed: u64) -> Result<(SimConfig, Vec<f64>, f64), String> {
+pub fn config(case: &Case, seed: u64) -> Result<(SimConfig, Vec<f64>, f64), AuditError> {
     let mut cfg = SimConfig::default();
     cfg.imu.gyro.range = TRIAL_GYRO_RANGE;
     cfg.imu.gyro.lsb = TRIAL_GYRO_RANGE / 32768.0;

@@ -88,7 +88,7 @@ pub struct Applied {
     pub recording: ImuRecording,
     /// The effects applied beyond eq. 16 (their ids).
     pub effects: Vec<String>,
-    /// Problems applying them (see [`Corrector::warnings_for`]).
+    /// Problems applying them (see [`Corrector::warnings_for`](crate::model::calibration::Corrector::warnings_for)).
     pub warnings: Vec<String>,
     /// What else was done (the accelerometer resampled for an accel–gyro offset).
     pub notes: Vec<String>,

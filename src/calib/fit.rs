@@ -217,7 +217,7 @@ pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
     // The prior's residuals count as observations of the misalignments.
     let n_params = n_params.saturating_sub(prior.indices.len());
     let dof = (dim * factors.len()).saturating_sub(n_params).max(1) as f64;
-    let lm = Optimizer::new(LmOptions { function_tolerance: 1e-10, max_iterations, ..LmOptions::default() });
+    let lm = Optimizer::new(LmOptions { max_iterations, ..LmOptions::default() });
     let widen = |c: &DMatrix<f64>, s2: f64| c + DMatrix::identity(dim, dim) * s2;
     let build = |s2: f64| -> Result<Graph, String> {
         let mut g = Graph::new();
@@ -530,6 +530,13 @@ fn gyro_covariance(fit: &FloorFit, inputs: &GyroInputs, opts: &CalibOptions) -> 
     Ok(cov)
 }
 
+/// The relative decrease still to come at which the ±1σ re-solves of
+/// [`accel_uncertainty_in_gyro`] stop: their solutions are differenced over
+/// 2σ of an accelerometer parameter, so each must be converged far below the
+/// gyro parameters' own σ (a relative cost of 10⁻¹² leaves them within
+/// ~10⁻⁶ σ); the solver's default (10⁻¹⁰) would leave the differences noisy.
+const SENSITIVITY_FUNCTION_TOLERANCE: f64 = 1e-12;
+
 /// The gravity directions come from the accelerometer fit: its uncertainty
 /// carried into the gyro parameters, `J Σ_a Jᵀ` with `J = ∂x_g/∂x_a` by
 /// re-solving with each accelerometer parameter moved by ±1σ (central
@@ -551,9 +558,10 @@ fn accel_uncertainty_in_gyro(
             g.add(f.with_directions(d[i], d[j]), NoiseModel::from_covariance(&c).ok()?);
         }
         add_prior(&mut g, prior).ok()?;
-        let (s, _) = Optimizer::new(LmOptions { function_tolerance: 1e-12, ..LmOptions::default() })
-            .optimize(&g, &fit.values)
-            .ok()?;
+        let (s, _) =
+            Optimizer::new(LmOptions { function_tolerance: SENSITIVITY_FUNCTION_TOLERANCE, ..LmOptions::default() })
+                .optimize(&g, &fit.values)
+                .ok()?;
         let mut x = [0.0; 12];
         x[..9].copy_from_slice(s.get::<GyroMatrix>(KEY_GYRO).ok()?.as_slice());
         x[9..].copy_from_slice(s.get::<Vector3<f64>>(KEY_GYRO_BIAS).ok()?.as_slice());

@@ -5,17 +5,17 @@
 //!    intervals where the sliding accelerometer and gyro variances are below
 //!    `k · σ²(initial rest)`, for a sweep of `k`;
 //! 2. accelerometer: one [`GravityNormFactor`](tumble_factors::GravityNormFactor)
-//!    per interval (9 parameters; misalignments with a prior, see [`observability`]);
+//!    per interval (9 parameters; misalignments with a prior, see `observability`);
 //! 3. gyroscope: bias from the initial rest (or estimated), then one
 //!    [`IntegratedRotationFactor`](tumble_factors::IntegratedRotationFactor) per
 //!    pair of consecutive intervals (9 parameters, from several starts); for each
 //!    `k` both fits, the most certain calibration kept;
-//! 4. [`model`]: the paper's `T`, `K`, `b` with standard deviations from the
+//! 4. [`model`](crate::model): the paper's `T`, `K`, `b` with standard deviations from the
 //!    solver's covariance (inflated by χ²/dof when the residuals exceed the noise),
 //!    imu_tk's convention, correction of raw samples;
-//! 5. [`verdict`]: `ok`, `weak` (with reasons) or `failed` (an error carrying the
+//! 5. `verdict`: `ok`, `weak` (with reasons) or `failed` (an error carrying the
 //!    diagnosis; nothing loadable is written);
-//! 6. [`report`]: `calibration.json` / `.yaml`, imu_tk `.calib` files, a PNG of the detection.
+//! 6. `report`: `calibration.json` / `.yaml`, imu_tk `.calib` files, a PNG of the detection.
 //!
 //! ```
 //! use tumble::calib::{calibrate, CalibOptions};
@@ -27,20 +27,21 @@
 //! assert!((k_a.x - sim.config.imu.accel.scale[0]).abs() < 5.0 * result.calibration.accel.k_std.x);
 //! ```
 
-pub mod apply;
+pub(crate) mod apply;
+#[doc(hidden)]
 pub mod detect;
 mod fit;
-pub mod gravity;
-pub mod observability;
+pub(crate) mod gravity;
+pub(crate) mod observability;
 mod options;
-pub mod report;
+pub(crate) mod report;
 mod result;
-pub mod solve;
-pub mod verdict;
+pub(crate) mod solve;
+pub(crate) mod verdict;
 
 pub use crate::io::calibration::read_imu_tk_calib;
 pub use crate::model::calibration::{Corrector, EffectTerm, ImuCalibration, ModelEffects, TimeOffsets, Triad, Units};
-pub use apply::write_like_input;
+pub use apply::{apply_calibration, write_like_input, Applied, ApplyError};
 pub(crate) use fit::{accel_triad, gyro_triad};
 pub use gravity::{local_gravity, normal_gravity, LocalGravity};
 pub use options::{parse_multipliers, CalibOptions, MIN_STATIC_INTERVALS, RECORDING_ADVICE};

@@ -3,14 +3,14 @@
 
 use crate::OptionError;
 
-/// Settings of [`calibrate`].
+/// Settings of [`calibrate`](crate::calib::calibrate).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CalibOptions {
     /// Local gravity magnitude \[m/s²\] (see [`super::normal_gravity`]).
     pub gravity: f64,
     /// Length of the initial static period \[s\] (its variance sets the threshold; its mean the gyro bias);
-    /// `None`: found from the data ([`find_initial_rest`]: the longest early rest of at least
-    /// [`MIN_INITIAL_REST_S`]).
+    /// `None`: found from the data (`find_initial_rest`: the longest early rest of at least
+    /// `MIN_INITIAL_REST_S`).
     pub init_static_s: Option<f64>,
     /// Window of the sliding accelerometer variance \[s\] (imu_tk: 101 samples).
     pub window_s: f64,
@@ -46,7 +46,7 @@ impl Default for CalibOptions {
 }
 
 impl CalibOptions {
-    /// Check every option once, before any work (every [`calibrate`] calls it):
+    /// Check every option once, before any work (every [`calibrate`](crate::calib::calibrate) calls it):
     /// gravity, periods and windows positive, multipliers positive, at least
     /// one interval asked for.
     pub fn validate(&self) -> Result<(), OptionError> {

@@ -139,7 +139,7 @@ pub struct DetectionThresholds {
     pub window_rate: Option<[f64; 3]>,
 }
 
-/// Everything [`calibrate`] found.
+/// Everything [`calibrate`](crate::calib::calibrate) found.
 #[derive(Debug, Clone)]
 pub struct CalibrationResult {
     /// The calibration with 1-σ uncertainties.

@@ -24,7 +24,7 @@ impl ApplyArgs {
         let cal = ImuCalibration::read(&self.calibration)?;
         let source = self.input.source()?;
         let rec = source.open()?;
-        let applied = tumble::calib::apply::apply_calibration(rec, &cal, &self.calibration)?;
+        let applied = tumble::calib::apply_calibration(rec, &cal, &self.calibration)?;
         for w in &applied.warnings {
             eprintln!("warning: {w}");
         }

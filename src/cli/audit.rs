@@ -78,11 +78,11 @@ impl AuditArgs {
         }
         let t = std::time::Instant::now();
         let result = tumble::audit::audit_with_progress(&rec, &cal, &opts, &mut |m| eprintln!("{m}"))?;
-        print!("{}", tumble::audit::report::summary_table(&result));
+        print!("{}", tumble::audit::summary_table(&result));
         for n in &result.notes {
             eprintln!("note: {n}");
         }
-        let files = tumble::audit::report::write(&result, &self.out)?;
+        let files = tumble::audit::write_report(&result, &self.out)?;
         println!("{}", result.verdict());
         println!("audited in {:.2} s; wrote {} in {}", t.elapsed().as_secs_f64(), files.join(", "), self.out.display());
         Ok(())

@@ -52,7 +52,7 @@ impl InspectArgs {
             println!("  temperature {lo:.2} … {hi:.2} °C");
         }
         // A static log (gravity does not turn) also gets its knocks and steps.
-        let disturbances = tumble::allan::disturbance::static_disturbances(&r).unwrap_or_default();
+        let disturbances = tumble::allan::static_disturbances(&r).unwrap_or_default();
         if r.warnings.is_empty() && disturbances.is_empty() {
             println!("  no problems found");
         }

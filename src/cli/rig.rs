@@ -5,7 +5,7 @@ use super::CliResult;
 use clap::Args;
 use std::path::PathBuf;
 use tumble::factors::camera::DistortionKind;
-use tumble::rig::{calibrate_rig, output, RigInput, RigOptions};
+use tumble::rig::{calibrate_rig, summary_markdown, write_rig, RigInput, RigOptions};
 
 /// Flags of `tumble calibrate-rig`.
 #[derive(Args)]
@@ -86,8 +86,8 @@ impl RigArgs {
             &mut |msg| eprintln!("{msg}"),
         )?;
         let rig = calibrate_rig(&input, &options, &mut |msg| eprintln!("{msg}"))?;
-        println!("{}", output::summary_markdown(&rig));
-        let files = output::write_rig(&rig, &input, &self.out)?;
+        println!("{}", summary_markdown(&rig));
+        let files = write_rig(&rig, &input, &self.out)?;
         println!("wrote {}", paths(&files));
         Ok(())
     }

@@ -66,7 +66,7 @@ pub struct Declared {
 }
 
 /// Why a recording's paths and layout do not fit together.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SourceError {
     /// Both a recording and an imu_tk pair were named.
     #[error("give either a recording or --accel/--gyro, not both")]
@@ -77,6 +77,9 @@ pub enum SourceError {
     /// imu_tk's layout without its gyro file.
     #[error("--format imu_tk needs --accel FILE --gyro FILE (or --gyro-file)")]
     NoGyroFile,
+    /// A reading option cannot work (a recordings file's key, or its flag).
+    #[error(transparent)]
+    Options(#[from] crate::OptionError),
 }
 
 /// A recording named on a command line: one path (ASL folder, bag, MCAP,

@@ -20,11 +20,11 @@
 //! `strict_timestamps`, `unit_check` — the same meanings as the command
 //! line's flags. Unknown keys are refused.
 
-use super::recording::{Declared, RecordingSource};
+use super::recording::{Declared, RecordingSource, SourceError};
 use super::ros::ImuTopics;
 use super::validate::Duplicates;
 use super::{AccelUnit, GyroUnit, ImuColumns, RecordingOptions, TimeUnit};
-use crate::error::InputError;
+use crate::error::{InputError, OptionError};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -99,26 +99,30 @@ impl RunRecordings {
 
 impl RecordingSpec {
     /// The reading options this entry gives (the readers' defaults elsewhere).
-    pub fn options(&self) -> Result<RecordingOptions, String> {
+    pub fn options(&self) -> Result<RecordingOptions, OptionError> {
+        fn key(k: &'static str) -> impl Fn(OptionError) -> OptionError {
+            move |e| OptionError::new(format!("{k}:"), e.to_string())
+        }
         let mut o = RecordingOptions::default();
         if let Some(c) = &self.columns {
-            o.format.columns = ImuColumns::parse(c).map_err(|e| format!("columns: {e}"))?;
+            o.format.columns = ImuColumns::parse(c).map_err(key("columns"))?;
         }
         if let Some(t) = &self.time_unit {
-            o.format.time_unit = TimeUnit::parse(t).ok_or_else(|| format!("time_unit '{t}': use s, ms, us or ns"))?;
+            o.format.time_unit = TimeUnit::parse(t)
+                .ok_or_else(|| OptionError::new("time_unit:", format!("'{t}': use s, ms, us or ns")))?;
         }
         if let Some(u) = &self.gyro_unit {
-            o.format.gyro_unit = GyroUnit::parse(u).map_err(|e| format!("gyro_unit: {e}"))?;
+            o.format.gyro_unit = GyroUnit::parse(u).map_err(key("gyro_unit"))?;
         }
         if let Some(u) = &self.accel_unit {
-            o.format.accel_unit = AccelUnit::parse(u).map_err(|e| format!("accel_unit: {e}"))?;
+            o.format.accel_unit = AccelUnit::parse(u).map_err(key("accel_unit"))?;
         }
         o.format.validate.nominal_rate = self.rate;
         o.format.validate.check_units = self.unit_check.unwrap_or(true);
         if self.strict_timestamps {
             o.format.validate.duplicates = Duplicates::Error;
         }
-        o.format.validate.check().map_err(|e| e.to_string())?;
+        o.format.validate.check()?;
         o.gyro_file = self.gyro_file.clone();
         o.topics = ImuTopics {
             imu: self.topic.clone(),
@@ -126,18 +130,17 @@ impl RecordingSpec {
             gyro: self.gyro_topic.clone(),
             temperature: self.temperature_topic.clone(),
         };
-        o.topics.check().map_err(|e| e.to_string())?;
+        o.topics.check()?;
         Ok(o)
     }
 
     /// The recording source (imu_tk pairs resolved as on the command line).
-    pub fn source(&self) -> Result<RecordingSource, String> {
+    pub fn source(&self) -> Result<RecordingSource, SourceError> {
         let declared = Declared {
             time_unit: self.time_unit.is_some(),
             units: self.gyro_unit.is_some() || self.accel_unit.is_some(),
         };
         RecordingSource::new(Some(self.path.clone()), None, self.gyro_file.is_some(), self.options()?, declared)
-            .map_err(|e| e.to_string())
     }
 
     /// One line saying which options were used.

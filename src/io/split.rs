@@ -61,9 +61,26 @@ pub struct Merged {
 /// sample makes an interval of two periods; jitter stays well under 1.5).
 const GAP_FACTOR: f64 = 1.5;
 
+/// Why two split streams cannot be merged (the caller names the file).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct MergeError(pub String);
+
+impl From<&str> for MergeError {
+    fn from(s: &str) -> MergeError {
+        MergeError(s.to_string())
+    }
+}
+
+impl From<String> for MergeError {
+    fn from(s: String) -> MergeError {
+        MergeError(s)
+    }
+}
+
 /// Merge split streams onto the gyro's stamps (see the module doc).
 /// Errors say which stream is too short or when they do not overlap.
-pub fn merge_onto_gyro(gyro: Stream, accel: Stream) -> Result<Merged, String> {
+pub fn merge_onto_gyro(gyro: Stream, accel: Stream) -> Result<Merged, MergeError> {
     if gyro.t_ns.len() != gyro.v.len() || accel.t_ns.len() != accel.v.len() {
         return Err("a stream has a different number of stamps and samples".into());
     }
@@ -71,7 +88,7 @@ pub fn merge_onto_gyro(gyro: Stream, accel: Stream) -> Result<Merged, String> {
     let mut accel = accel.sorted();
     for (s, what) in [(&gyro, "gyro"), (&accel, "accelerometer")] {
         if s.t_ns.len() < 2 {
-            return Err(format!("the {what} stream has {} sample(s): too few to merge", s.t_ns.len()));
+            return Err(format!("the {what} stream has {} sample(s): too few to merge", s.t_ns.len()).into());
         }
     }
     let mut warnings = Vec::new();
@@ -127,7 +144,8 @@ pub fn merge_onto_gyro(gyro: Stream, accel: Stream) -> Result<Merged, String> {
             gyro.t_ns[gyro.t_ns.len() - 1] as f64 * 1e-9,
             a0 as f64 * 1e-9,
             a1 as f64 * 1e-9
-        ));
+        )
+        .into());
     }
     out.note = format!(
         "gyro at {:.1} Hz and accelerometer at {:.1} Hz merged onto the gyro's stamps (accelerometer interpolated \
@@ -208,7 +226,7 @@ mod tests {
         assert!(m.warnings.iter().any(|w| w.contains("repeat the previous stamp")), "{:?}", m.warnings);
         assert!(m.warnings.iter().any(|w| w.contains("1 gaps") && w.contains("0.022 s")), "{:?}", m.warnings);
         let late = Stream { t_ns: vec![1_000_000_000, 1_010_000_000], v: vec![[0.0; 3]; 2] };
-        assert!(merge_onto_gyro(gyro, late).unwrap_err().contains("do not overlap"));
+        assert!(merge_onto_gyro(gyro, late).unwrap_err().0.contains("do not overlap"));
     }
 
     #[test]

@@ -32,7 +32,7 @@ impl RigInput {
 
     /// [`RigInput::from_asl`], for a folder that may have images instead of
     /// `camN/corners.csv`: a camera whose folder has no `corners.csv` but
-    /// images (`camN/data.csv`) has its corners detected ([`detect`], feature
+    /// images (`camN/data.csv`) has its corners detected (`detect`, feature
     /// `opencv`; refused with a hint without it), with progress lines to `progress`.
     pub fn from_asl_with_progress(
         path: &Path,

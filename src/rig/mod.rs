@@ -24,12 +24,14 @@
 //! ```
 
 pub mod detect;
+#[doc(hidden)]
 pub mod init;
-pub mod input;
-pub mod output;
+pub(crate) mod input;
+pub(crate) mod output;
 mod solve;
 
 pub use crate::model::target::{CameraCorners, Corner, RigInput, Target, View};
+pub use output::{summary_markdown, write_rig};
 pub use solve::calibrate_rig;
 
 use crate::error::OptionError;

@@ -134,7 +134,7 @@ pub const EYE_HEIGHT: f64 = 1.3;
 
 /// A person walking laps of a [`Corridor`] with the rig in hand, looking
 /// ahead along the corridor: rest, speed up, whole laps at about
-/// [`WALKING_SPEED`] (faster on the straights, slower in the bends), slow
+/// `WALKING_SPEED` (faster on the straights, slower in the bends), slow
 /// down, rest, at the start pose again. The hand sways (±5 cm, periods of
 /// 1–8 s), bobs with the steps (±2 cm at ~1.8 Hz) and turns (±0.1 rad in
 /// roll and pitch, ±0.15 rad in yaw about the walking direction).

@@ -11,13 +11,13 @@
 //! assert_eq!(sim.imu.t.len(), 4001); // 20 s at 200 Hz, both ends
 //! ```
 
-pub mod camera;
-pub mod corridor;
-pub mod imu;
+pub(crate) mod camera;
+pub(crate) mod corridor;
+pub(crate) mod imu;
 pub use crate::model::imu_model as model;
-pub mod motion;
+pub(crate) mod motion;
 pub mod target;
-pub mod writer;
+pub(crate) mod writer;
 
 pub use camera::{CameraSettings, Scene, SimulatedTracks};
 pub use corridor::{Corridor, CorridorWalk};
@@ -129,7 +129,7 @@ pub struct SimConfig {
     /// Stops on the way of a walk, flight or corridor walk: `[start, length]` \[s\] each. The
     /// motion slows to a standstill over 1 s from `start`, stands still for
     /// `length` and speeds up again over 1 s; each pause makes the recording
-    /// `length + 1` s longer than `duration_s` (see [`motion::Paused`]).
+    /// `length + 1` s longer than `duration_s` (see `motion::Paused`).
     pub pauses_s: Vec<[f64; 2]>,
     /// Absolute time of the first sample \[ns\].
     pub t0_ns: i64,

@@ -11,7 +11,7 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
-use tumble_solvers::lie::{so3_exp, so3_log, so3_right_jacobian};
+use tumble_solvers::lie::{so3_exp, so3_right_jacobian};
 
 /// The true state at one instant.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -496,8 +496,9 @@ impl<M: Motion> Motion for Paused<M> {
 }
 
 /// Rotation vector from `a` to `b` in `a`'s frame (`Log(aᵀ b)`).
-pub fn relative_rotation(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Vector3<f64> {
-    so3_log(&(a.transpose() * b))
+#[cfg(test)]
+fn relative_rotation(a: &Matrix3<f64>, b: &Matrix3<f64>) -> Vector3<f64> {
+    tumble_solvers::lie::so3_log(&(a.transpose() * b))
 }
 
 #[cfg(test)]
@@ -642,11 +643,6 @@ impl Replay {
             return Err("the trajectory has fewer than two samples after the start time".into());
         }
         Ok(Replay { t, p, q })
-    }
-
-    /// Mean position \[m\].
-    pub fn p_mean(&self) -> Vector3<f64> {
-        self.p.iter().sum::<Vector3<f64>>() / self.p.len() as f64
     }
 
     /// The positions replayed \[m\], in time order.

@@ -39,20 +39,23 @@ mod auto_calib;
 mod open;
 pub use aids::{TargetTruth, TARGET_TRUTH_MAX_RMS_PX, TARGET_TRUTH_MIN_CORNERS};
 pub use open::{OpenError, OpenedVio, VioSource};
-pub mod estimator;
+pub(crate) mod estimator;
 pub mod frontend;
+#[doc(hidden)]
 pub mod init;
-pub mod input;
+pub(crate) mod input;
 mod keyframe;
 mod landmarks;
 mod marginalization;
 mod online_calib;
 pub use online_calib::{AutoOutcome, CameraEstimate};
-pub mod noise_meter;
-pub mod options;
-pub mod output;
+pub(crate) mod noise_meter;
+pub(crate) mod options;
+pub(crate) mod output;
 #[cfg(feature = "rerun")]
-pub mod record;
+pub(crate) mod record;
+#[cfg(feature = "rerun")]
+pub use record::{read_rrd, RrdContents};
 mod rest;
 mod startup;
 mod window;

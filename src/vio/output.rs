@@ -17,7 +17,7 @@ pub struct Summary {
     /// Data duration from initialization to the last frame \[s\].
     pub duration_s: f64,
     /// Length of the estimated path \[m\], through positions at least
-    /// [`PATH_STEP_M`] apart.
+    /// `PATH_STEP_M` apart.
     pub distance_m: f64,
     /// Length of the ground-truth path over the matched frames \[m\], when
     /// known.
@@ -55,7 +55,7 @@ pub struct Summary {
     /// Start of the bias RMSE window \[s\] (convergence time skipped).
     pub bias_rmse_from_s: f64,
     /// The gyro bias's steady-state std per axis that the noise coefficients
-    /// in use at the end predict, `√(N·K)` \[rad/s\] (see [`allan_steady_std`]).
+    /// in use at the end predict, `√(N·K)` \[rad/s\] (see `allan_steady_std`).
     pub bias_allan_std_gyro: f64,
     /// The same for the accelerometer bias \[m/s²\].
     pub bias_allan_std_accel: f64,
@@ -69,7 +69,7 @@ pub struct Summary {
     pub noise: Option<super::noise_meter::NoiseReport>,
     /// The camera's online calibration at the end (with [`super::CameraCalibrationOptions`]).
     pub camera: Option<super::CameraEstimate>,
-    /// Time with fewer than [`super::estimator::BLIND_FEATURES`] features per
+    /// Time with fewer than `super::estimator::BLIND_FEATURES` features per
     /// frame, the IMU alone carrying the estimate \[s\].
     pub blind_s: f64,
     /// The longest such span \[s\].

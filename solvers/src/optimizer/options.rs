@@ -23,6 +23,25 @@ pub enum Method {
 /// ([`LmOptions::trust_radius`]). A solve ends as converged only when the
 /// decrease still to come is below `function_tolerance` and an undamped
 /// solve agrees ([`LmOptions::check_stationarity`]); see `docs/solver.md`.
+///
+/// # Stopping rules
+///
+/// With cost `C = ½‖r‖²` (whitened), gradient `g = Jᵀr`, `H = JᵀJ`, the
+/// last two accepted decreases `d_k`, `d_{k−1}` and `q = d_k / d_{k−1}`, each
+/// tolerance means one thing:
+///
+/// - `function_tolerance` `f` bounds the **relative decrease still to come**,
+///   measured three ways, all of which must agree for `FunctionTolerance`:
+///   extrapolated `d_k q/(1−q) ≤ f C` (or `d_k ≤ f C` when `q ∉ (0, 1)`);
+///   along the best single column `max_j g_j² / (H_jj · 2C) ≤ f` (the squared
+///   scaled gradient, [`Summary::scaled_gradient`]); and by one undamped step
+///   `δ`: `(−gᵀδ − ½ δᵀHδ) / C ≤ f`.
+/// - `gradient_tolerance` `γ` is absolute: `max_j |g_j| ≤ γ` ends the solve as
+///   `GradientTolerance`.
+/// - `parameter_tolerance` `p` bounds the step: `‖δ‖ ≤ p (‖x‖ + p)` ends it
+///   as `ParameterTolerance` where the scaled gradient agrees, else
+///   `Stalled`.
+/// - `max_iterations` ends it as `MaxIterations` (not converged).
 #[derive(Clone, Debug)]
 pub struct LmOptions {
     /// Nonlinear method.

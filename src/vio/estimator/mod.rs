@@ -79,7 +79,7 @@ pub struct VioResult {
     pub wall_s: f64,
     /// The measurement residuals at their final estimates, for the audit.
     pub residuals: ResidualTally,
-    /// Spans `[from, to]` \[s\] of frames with fewer than [`BLIND_FEATURES`]
+    /// Spans `[from, to]` \[s\] of frames with fewer than `BLIND_FEATURES`
     /// features, where the estimate was the IMU's alone.
     pub blind_spans: Vec<[f64; 2]>,
     /// The IMU noise given, measured at rest and in motion, and in use at the end.
