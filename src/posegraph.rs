@@ -170,6 +170,29 @@ pub fn solve_two_stage(
     Ok((solution, first, second))
 }
 
+/// Every SE(2) or SE(3) pose in `values` by its key's index, in key order:
+/// `[x, y, θ]` \[m, m, rad\] in 2D, `[x, y, z, qx, qy, qz, qw]` \[m\] in 3D
+/// (g2o's order; other variable types are skipped).
+pub fn poses(values: &Values) -> Vec<(u64, Vec<f64>)> {
+    use tumble_solvers::sophus_lie::prelude::*;
+    use tumble_solvers::sophus_lie::Isometry2F64;
+    values
+        .keys()
+        .filter_map(|k| {
+            if let Ok(p) = values.get::<Isometry3F64>(k) {
+                let t = p.translation();
+                let q = nalgebra::UnitQuaternion::from_matrix(&p.rotation().matrix());
+                Some((k.index(), vec![t[0], t[1], t[2], q.i, q.j, q.k, q.w]))
+            } else {
+                values.get::<Isometry2F64>(k).ok().map(|p| {
+                    let (t, r) = (p.translation(), p.rotation().matrix());
+                    (k.index(), vec![t[0], t[1], r[(1, 0)].atan2(r[(0, 0)])])
+                })
+            }
+        })
+        .collect()
+}
+
 /// Positions seen from above, `(x, y)` \[m\], of every SE(2) or SE(3) pose in
 /// `values`, in key order (other variable types are skipped).
 pub fn top_view(values: &Values) -> Vec<(f64, f64)> {

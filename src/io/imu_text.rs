@@ -234,6 +234,54 @@ impl Default for ImuTextFormat {
     }
 }
 
+/// A recording from samples held in memory (a caller's arrays: the Python
+/// bindings), read as a file with these units would be: times `t` \[s\] and
+/// rows of gyro x y z and accelerometer x y z converted to SI (raw counts
+/// without a scale stay raw), a non-finite value refused by its row (0-based,
+/// named `row N` in `name`'s messages as a file's line would be), then the
+/// readers' checks (`checks`). `name` stands for the file in messages.
+pub fn recording_from_samples(
+    name: &str,
+    t: Vec<f64>,
+    gyro: &[[f64; 3]],
+    accel: &[[f64; 3]],
+    (gyro_unit, accel_unit): (GyroUnit, AccelUnit),
+    checks: &ValidateOptions,
+) -> Result<ImuRecording, InputError> {
+    let file = Path::new(name);
+    if gyro.len() != t.len() || accel.len() != t.len() {
+        return Err(InputError::file(
+            file,
+            format!(
+                "{} times, {} gyro rows and {} accelerometer rows: one of each per sample",
+                t.len(),
+                gyro.len(),
+                accel.len()
+            ),
+        ));
+    }
+    let bad = |row: usize, what: &str| InputError::file(file, format!("row {row}: {what} is not a finite number"));
+    if let Some(row) = t.iter().position(|v| !v.is_finite()) {
+        return Err(bad(row, "the time"));
+    }
+    for (rows, what) in [(gyro, "a gyro value"), (accel, "an accelerometer value")] {
+        if let Some(row) = rows.iter().position(|r| r.iter().any(|v| !v.is_finite())) {
+            return Err(bad(row, what));
+        }
+    }
+    let mut rec = ImuRecording {
+        sources: vec![file.to_path_buf()],
+        t,
+        gyro: gyro.iter().map(|r| r.map(|v| gyro_unit.convert(v))).collect(),
+        accel: accel.iter().map(|r| r.map(|v| accel_unit.convert(v))).collect(),
+        gyro_units: gyro_unit.stored(),
+        accel_units: accel_unit.stored(),
+        ..ImuRecording::default()
+    };
+    validate(&mut rec, checks)?;
+    Ok(rec)
+}
+
 /// Read one IMU text file (CSV or whitespace; `.gz` allowed) and validate it.
 ///
 /// A column whose header name starts with `temperature` is used as the

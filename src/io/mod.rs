@@ -29,7 +29,10 @@ pub mod validate;
 pub mod yaml;
 
 pub use imu::{AxisStats, ImuRecording, RecordingStats, Stored};
-pub use imu_text::{read_imu_text, read_imu_tk, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat, STANDARD_GRAVITY};
+pub use imu_text::{
+    read_imu_text, read_imu_tk, recording_from_samples, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat,
+    STANDARD_GRAVITY,
+};
 pub use noise::{ImuNoise, ImuNoiseAxes};
-pub use recording::{open_recording, RecordingOptions};
+pub use recording::{open_recording, recognise_imu_tk_units, RecordingOptions};
 pub use table::TimeUnit;

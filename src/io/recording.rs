@@ -139,13 +139,23 @@ impl RecordingSource {
     pub fn open(&self) -> Result<ImuRecording, InputError> {
         let mut rec = open_recording(&self.path, &self.options)?;
         if self.auto_units {
-            let n = rec.len().min(((rec.mean_rate() * 5.0) as usize).max(10));
-            let g = super::validate::norm(super::validate::mean3(&rec.accel[..n]));
-            if (7.0..13.0).contains(&g) {
-                rec.accel_units = super::Stored::Si;
-                rec.gyro_units = super::Stored::Si;
-            }
+            recognise_imu_tk_units(&mut rec);
         }
         Ok(rec)
+    }
+}
+
+/// imu_tk's units, recognised from the data: a recording read as raw counts
+/// whose accelerometer reads between 7 and 13 over its first 5 s (at rest,
+/// ≈ 1 g in m/s²) is in SI units (gyro in rad/s), else it stays in counts.
+pub fn recognise_imu_tk_units(rec: &mut ImuRecording) {
+    if rec.is_empty() {
+        return;
+    }
+    let n = rec.len().min(((rec.mean_rate() * 5.0) as usize).max(10));
+    let g = super::validate::norm(super::validate::mean3(&rec.accel[..n]));
+    if (7.0..13.0).contains(&g) {
+        rec.accel_units = super::Stored::Si;
+        rec.gyro_units = super::Stored::Si;
     }
 }

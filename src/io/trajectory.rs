@@ -32,6 +32,25 @@ impl Trajectory {
     pub fn is_empty(&self) -> bool {
         self.t_ns.is_empty()
     }
+
+    /// A trajectory from TUM rows held in memory (`t x y z qx qy qz qw`, `t`
+    /// in seconds), checked as a TUM file would be: finite values, strictly
+    /// increasing times and unit quaternions, each refused by its row (named
+    /// as `row N` of `name`).
+    pub fn from_tum_rows(name: &str, rows: &[[f64; 8]]) -> Result<Trajectory, InputError> {
+        let file = Path::new(name);
+        if let Some(row) = rows.iter().position(|r| r.iter().any(|v| !v.is_finite())) {
+            return Err(InputError::file(file, format!("row {row}: a value is not a finite number")));
+        }
+        let mut tr = Trajectory {
+            t_ns: rows.iter().map(|r| (r[0] * 1e9).round() as i64).collect(),
+            p: rows.iter().map(|r| [r[1], r[2], r[3]]).collect(),
+            q: rows.iter().map(|r| [r[7], r[4], r[5], r[6]]).collect(),
+            ..Trajectory::default()
+        };
+        check_times_and_quaternions(file, &mut tr, &LineMap::default())?;
+        Ok(tr)
+    }
 }
 
 fn triads(cols: &[Vec<f64>], first: usize) -> Vec<[f64; 3]> {
