@@ -118,6 +118,18 @@ fn bad_rosbag2_inputs_are_refused_by_name() {
 
 /// RealSense-style split topics: the gyro at 400 Hz, the accelerometer at 250 Hz, each in a
 /// `sensor_msgs/Imu` with the other sensor's fields zero.
+/// A malformed MCAP file on which the `mcap` crate panics ("capacity
+/// overflow" while decompressing a chunk; the input the `mcap` fuzz target
+/// found, kept in tests/fixtures/) is an error naming the file.
+#[test]
+fn a_malformed_mcap_chunk_is_an_error_not_a_crash() {
+    let d = dir("mcap_chunk");
+    let file = d.join("bad.mcap");
+    std::fs::write(&file, include_bytes!("fixtures/mcap_capacity_overflow.mcap")).unwrap();
+    let e = open_recording(&file, &RecordingOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("bad.mcap") && e.contains("MCAP reader failed"), "{e}");
+}
+
 #[test]
 fn realsense_split_topics_are_merged_onto_the_gyro() {
     let d = dir("split");

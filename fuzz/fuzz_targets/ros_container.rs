@@ -6,6 +6,12 @@ use tumble::io::ros::{read_ros_imu, ImuTopics, Storage};
 use tumble::io::validate::ValidateOptions;
 
 pub fn open_as(ext: &str, file: &[u8]) {
+    // tumble turns a panic of the MCAP reader into an error (catch_unwind);
+    // libFuzzer's panic hook would abort before that. Without a hook a panic
+    // tumble does not catch still unwinds into libfuzzer-sys, which aborts:
+    // it is found all the same.
+    static QUIET: std::sync::Once = std::sync::Once::new();
+    QUIET.call_once(|| std::panic::set_hook(Box::new(|_| {})));
     let dir = std::env::temp_dir().join(format!("tumble-fuzz-{ext}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join(format!("input.{ext}"));

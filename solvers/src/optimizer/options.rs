@@ -34,7 +34,7 @@ pub enum Method {
 ///   measured three ways, all of which must agree for `FunctionTolerance`:
 ///   extrapolated `d_k q/(1−q) ≤ f C` (or `d_k ≤ f C` when `q ∉ (0, 1)`);
 ///   along the best single column `max_j g_j² / (H_jj · 2C) ≤ f` (the squared
-///   scaled gradient, [`Summary::scaled_gradient`]); and by one undamped step
+///   scaled gradient, [`Summary::scaled_gradient`](super::Summary::scaled_gradient)); and by one undamped step
 ///   `δ`: `(−gᵀδ − ½ δᵀHδ) / C ≤ f`.
 /// - `gradient_tolerance` `γ` is absolute: `max_j |g_j| ≤ γ` ends the solve as
 ///   `GradientTolerance`.
@@ -57,7 +57,7 @@ pub struct LmOptions {
     pub gradient_tolerance: f64,
     /// Stop when ‖δ‖ < this · (‖x‖ + this): converged where the scaled
     /// gradient agrees ([`LmOptions::check_stationarity`]), else
-    /// [`Termination::Stalled`].
+    /// [`Termination::Stalled`](super::Termination::Stalled).
     pub parameter_tolerance: f64,
     /// Initial damping λ (1 / trust-region radius).
     pub initial_lambda: f64,
@@ -81,18 +81,18 @@ pub struct LmOptions {
     /// complement (landmarks in bundle adjustment). Each factor may touch at
     /// most one of them.
     pub eliminate: Vec<char>,
-    /// Record one [`IterationLog`] per iteration.
+    /// Record one [`IterationLog`](super::IterationLog) per iteration.
     pub log_iterations: bool,
     /// Before stopping on [`LmOptions::function_tolerance`] or
     /// [`LmOptions::parameter_tolerance`], check that the point is a minimum:
-    /// the squared scaled gradient ([`Summary::scaled_gradient`]) is within
+    /// the squared scaled gradient ([`Summary::scaled_gradient`](super::Summary::scaled_gradient)) is within
     /// the function tolerance, and one undamped (Gauss–Newton) solve predicts
     /// no larger relative decrease (or no longer step) either — the damped
     /// steps may have been small because the damping was large, not because
     /// the minimum is near. A small damped step needs only the scaled
     /// gradient (the undamped model can promise a decrease along columns that
     /// cancel, which no step delivers). A cost test that fails goes on; a
-    /// small step that fails ends [`Termination::Stalled`]. Without the check
+    /// small step that fails ends [`Termination::Stalled`](super::Termination::Stalled). Without the check
     /// a tolerance that fires ends the solve under its own name (as in
     /// Ceres). Off for anytime solves with a fixed budget (the VIO window,
     /// re-solved at the next frame).
@@ -140,7 +140,7 @@ impl LmOptions {
     /// Refuse options no solve can honour: tolerances and damping bounds
     /// that are negative or not finite, `min_diagonal > max_diagonal`, an
     /// initial damping outside `(0, max_lambda]`, or a `min_lambda_decrease`
-    /// outside `(0, 1)`. [`Optimizer::optimize`] calls it first.
+    /// outside `(0, 1)`. [`Optimizer::optimize`](super::Optimizer::optimize) calls it first.
     pub fn validate(&self) -> Result<(), SolveError> {
         let bad = |name: &str, v: f64, what: &str| Err(SolveError::Config(format!("{name} = {v}: {what}")));
         for (name, v) in [

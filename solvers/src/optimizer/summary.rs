@@ -17,9 +17,9 @@ pub enum Termination {
     MaxIterations,
     /// Damping grew past `max_lambda` without finding a decrease.
     NoProgress,
-    /// The damped steps became too small ([`LmOptions::parameter_tolerance`])
+    /// The damped steps became too small ([`LmOptions::parameter_tolerance`](super::LmOptions::parameter_tolerance))
     /// while the residual was still aligned with a Jacobian column (squared
-    /// [`Summary::scaled_gradient`] above [`LmOptions::function_tolerance`]):
+    /// [`Summary::scaled_gradient`] above [`LmOptions::function_tolerance`](super::LmOptions::function_tolerance)):
     /// not a minimum, the solver stalled — e.g. a parameter ran to where the
     /// data no longer see it.
     Stalled,
@@ -86,13 +86,13 @@ pub struct Summary {
     /// scale, and its square estimates the relative decrease still to come.
     pub scaled_gradient: f64,
     /// Largest gradient entry |(Jᵀr)_j| at the last assembled linearization
-    /// (the test of [`LmOptions::gradient_tolerance`]).
+    /// (the test of [`LmOptions::gradient_tolerance`](super::LmOptions::gradient_tolerance)).
     pub max_gradient: f64,
     /// Relative decrease still to come, as estimated after the last
-    /// accepted step (the test of [`LmOptions::function_tolerance`]).
+    /// accepted step (the test of [`LmOptions::function_tolerance`](super::LmOptions::function_tolerance)).
     pub remaining_decrease: f64,
     /// Relative decrease the undamped (Gauss–Newton) model predicted at the
-    /// last stationarity check ([`LmOptions::check_stationarity`]); NaN when
+    /// last stationarity check ([`LmOptions::check_stationarity`](super::LmOptions::check_stationarity)); NaN when
     /// none ran.
     pub gauss_newton_decrease: f64,
 }

@@ -131,7 +131,7 @@ impl Storage {
         };
         match self {
             Storage::Ros1(p) => ros1_topics(p)?.into_iter().for_each(&mut add),
-            Storage::Mcap(p) => mcap_topics(p)?.into_iter().for_each(&mut add),
+            Storage::Mcap(p) => mcap_guarded(p, || mcap_topics(p))?.into_iter().for_each(&mut add),
             Storage::Db3(p) => db3_topics(p, counts)?.into_iter().for_each(&mut add),
             Storage::Folder(files) => {
                 for f in files {
@@ -152,7 +152,7 @@ impl Storage {
     ) -> Result<(), InputError> {
         match self {
             Storage::Ros1(p) => ros1_each(p, topics, f),
-            Storage::Mcap(p) => mcap_each(p, topics, f),
+            Storage::Mcap(p) => mcap_guarded(p, || mcap_each(p, topics, f)),
             Storage::Db3(p) => db3_each(p, topics, f),
             Storage::Folder(files) => files.iter().try_for_each(|s| s.for_each(topics, f)),
         }
@@ -281,6 +281,22 @@ fn mcap_map(path: &Path) -> Result<memmap2::Mmap, InputError> {
     let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| InputError::file(path, format!("cannot map: {e}")))?;
     let _ = map.advise(memmap2::Advice::Sequential);
     Ok(map)
+}
+
+/// `read` on MCAP file `path`, a panic of the MCAP reader turned into an
+/// error naming the file: the `mcap` crate panics on some malformed files
+/// (a chunk declaring an uncompressed size beyond memory: "capacity
+/// overflow", found by the `mcap` fuzz target), and bad input must never
+/// crash tumble.
+fn mcap_guarded<T>(path: &Path, read: impl FnOnce() -> Result<T, InputError>) -> Result<T, InputError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(read)).unwrap_or_else(|panic| {
+        let why = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a malformed record".into());
+        Err(InputError::file(path, format!("not a readable MCAP file: the MCAP reader failed ({why})")))
+    })
 }
 
 fn mcap_bad(path: &Path) -> impl Fn(mcap::McapError) -> InputError + '_ {
