@@ -300,7 +300,7 @@ fn known_noise() -> tumble::sim::AxisNoise {
 /// Recovers N and K within 5 % and B within 20 % on 4-hour logs, and the 95 %
 /// intervals of the fit cover the truth in at least 90 % of 50 seeds.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn identifies_simulated_noise_with_honest_intervals() {
     use rayon::prelude::*;
     let spec = known_noise();

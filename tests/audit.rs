@@ -94,7 +94,7 @@ trial_tests! {
 /// every one, and its own gap — over the same recording's without it —
 /// shrunk ≥ 80 % on all but at most one), without a noise file.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn trials_quick() {
     for (name, seeds) in [("clean", 4), ("g_sensitivity", 3)] {
         let case = Case::all().into_iter().find(|c| c.name == name).unwrap();
@@ -168,7 +168,7 @@ fn reports_structure_no_candidate_explains() {
 /// own walks, 20–50× smaller, are not determined by four minutes: one
 /// axis's estimates scatter over 10× across seeds; docs/audit.md.)
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn estimates_the_bias_random_walk_from_the_recording() {
     let mut log_ratios: (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
     for seed in [600, 601, 602] {
@@ -281,7 +281,7 @@ fn the_walk_estimate_maximizes_the_restricted_likelihood() {
 /// whose walks are the simulator's), and the 95 % bounds hold the true size
 /// on all but a few.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn bounds_on_effects_not_added_hold_the_truth() {
     let (mut z2, mut n, mut held) = (0.0, 0, 0);
     for seed in 300..310 {
@@ -333,7 +333,7 @@ fn says_when_the_recording_does_not_determine_the_walks() {
 }
 
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn finds_two_hidden_effects_and_fits_their_size() {
     for seed in [300, 301, 302] {
         let (a, cfg) = run(&[("g_sensitivity", 2.0), ("accel_nonlinearity", 1.0)], seed);

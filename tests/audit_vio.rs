@@ -31,7 +31,7 @@ fn assert_gap_shrunk(a: &VioAudit) {
 }
 
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn finds_both_hidden_time_offsets() {
     // Camera–IMU 10 ms and accelerometer–gyro 10 ms, hidden together.
     let hidden = [("camera_imu_time_offset", 1.0), ("accel_gyro_time_offset", 2.0)];
@@ -57,7 +57,7 @@ fn finds_both_hidden_time_offsets() {
 }
 
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn finds_a_hidden_accel_gyro_time_offset() {
     // 10 ms: at 5 ms the offset is at the edge of what this walk shows (found on
     // one of two seeds), and its χ² stays below the gap's floor (χ²/dof < 1).
@@ -73,7 +73,7 @@ fn finds_a_hidden_accel_gyro_time_offset() {
 }
 
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn adds_nothing_to_a_clean_walk() {
     let (input, opts) = walk(&[], 702);
     let a = audit_vio(&input, &opts, None).unwrap();

@@ -135,7 +135,7 @@ fn real_pose_graphs_reach_peer_costs() {
 /// quaternion error first, then the log error, reach the minimum Ceres finds
 /// (its solution has 0.5·χ² = 22 583.7 in the log cost) or lower.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn torus_two_stage_reaches_the_ceres_minimum() {
     let Some(path) = shared("pose_graphs/torus3D.g2o") else {
         return;

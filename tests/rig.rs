@@ -48,7 +48,7 @@ fn angle_deg(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
 /// EuRoC; the intrinsics and T_BC differ from EuRoC's by one consistent
 /// principal-point shift (docs/rig.md), which the bounds here record.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn imu_april_intrinsics_estimated() {
     let Some((input, reference)) = input() else { return };
     let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
@@ -85,7 +85,7 @@ fn imu_april_intrinsics_estimated() {
 /// cameras are compared with EuRoC in `imu_april_intrinsics_estimated`; the
 /// equivariance is a property of the method, not of the camera count).
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn imu_april_extrinsics_follow_moved_stamps_and_rotated_axes() {
     let Some((mut input, mut reference)) = input() else { return };
     input.cameras.truncate(1);
@@ -131,7 +131,7 @@ fn imu_april_extrinsics_follow_moved_stamps_and_rotated_axes() {
 /// when the σ are honest) — and the stereo extrinsic `T_cam1_cam0` close to
 /// the simulated baseline.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn simulated_rigs_recover_their_truth_within_sigma() {
     use tumble::sim::target::{simulate_rig, RigSimSettings};
     let mut settings = RigSimSettings::default();
@@ -304,7 +304,7 @@ fn a_recording_turning_about_one_axis_is_refused() {
 /// they had walked the gyro bias 0.14 rad/s off with a σ of 1.3·10⁻³
 /// (100σ from where it settles) and the whole run's ATE was 0.026 m.
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn vio_with_its_own_rig_calibration_starts_in_motion_right() {
     let Some((input, _)) = input() else { return };
     let seq = common::shared("euroc/imu_april").unwrap();

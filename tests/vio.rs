@@ -204,7 +204,7 @@ fn imu_gaps_warn_and_recover() {
 }
 
 #[test]
-#[ignore = "long trial: CI runs it (cargo test --release -- --ignored)"]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn pure_rotation_triangulates_nothing_and_stays_finite() {
     let (mut input, opts) = walk(40.0, 7);
     // Every feature keeps its pixel: no parallax at all (a camera that only rotates
