@@ -196,22 +196,7 @@ pub fn poses(values: &Values) -> Vec<(u64, Vec<f64>)> {
 /// Positions seen from above, `(x, y)` \[m\], of every SE(2) or SE(3) pose in
 /// `values`, in key order (other variable types are skipped).
 pub fn top_view(values: &Values) -> Vec<(f64, f64)> {
-    use tumble_solvers::sophus_lie::prelude::*;
-    use tumble_solvers::sophus_lie::Isometry2F64;
-    values
-        .keys()
-        .filter_map(|k| {
-            if let Ok(p) = values.get::<Isometry3F64>(k) {
-                let t = p.translation();
-                Some((t[0], t[1]))
-            } else {
-                values.get::<Isometry2F64>(k).ok().map(|p| {
-                    let t = p.translation();
-                    (t[0], t[1])
-                })
-            }
-        })
-        .collect()
+    poses(values).into_iter().map(|(_, p)| (p[0], p[1])).collect()
 }
 
 /// Write a PNG (1000×800) of a pose graph seen from above: the initial guess
