@@ -449,3 +449,40 @@ fn a_failed_calibration_is_an_error_with_a_diagnosis_and_no_loadable_file() {
     assert!(e.contains("failed its verdict"), "{e}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// The recording checks itself: on clean simulated tumbles the halves agree
+/// as honest σ predict (RMS normalized difference near 1, nothing flagged);
+/// with a temperature warm-up hidden in the sensor (its scales move along the
+/// recording, which the model lacks) the halves disagree, the σ of what
+/// they disagree on widen, and the verdict says so. (Smaller warm-ups — the
+/// temperature bias ×3 or ×10, the scale ×5 — stay within the σ, which the
+/// fits' χ²/dof already widen, and are not flagged.)
+#[test]
+fn the_halves_of_a_recording_check_its_sigma() {
+    let cfg = sim_config();
+    let mut rms = Vec::new();
+    for seed in 0..4 {
+        let (res, _) = run_seed(&cfg, seed);
+        let split = res.split.as_ref().expect("a simulated tumble has enough poses for the check");
+        println!("clean seed {seed}: halves' RMS z {:.2}, {:?}", split.rms_z(), split.describe_disagreements());
+        assert!(split.disagreements().is_empty(), "seed {seed}: {:?}", split.describe_disagreements());
+        rms.push(split.rms_z());
+    }
+    let mean = rms.iter().sum::<f64>() / rms.len() as f64;
+    assert!((0.5..1.6).contains(&mean), "mean RMS z of clean halves {mean}");
+    let mut warm = sim_config();
+    // The temperature scale coefficients ×20: the warm-up moves the gyro's x
+    // scale by ≈ 1.2 % between the halves.
+    tumble::sim::hide_effect(&mut warm, "temperature_scale", 20.0).unwrap();
+    let (res, _) = run_seed(&warm, 1);
+    let split = res.split.as_ref().unwrap();
+    let widest = split.parameters.iter().map(|p| p.sigma_after / p.sigma_before).fold(1.0, f64::max);
+    println!(
+        "warm-up: halves' RMS z {:.2}, σ widened up to {widest:.1}×, {:?}",
+        split.rms_z(),
+        split.describe_disagreements()
+    );
+    assert!(widest > 2.0, "{split:?}");
+    assert!(split.disagreements().iter().any(|p| p.parameter.starts_with("gyroscope scale")), "{split:?}");
+    assert!(res.assessment.reasons.iter().any(|r| r.contains("the halves disagree")), "{:?}", res.assessment);
+}

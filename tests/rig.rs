@@ -79,6 +79,128 @@ fn imu_april_intrinsics_estimated() {
     }
 }
 
+/// `input` between `from` and `to` \[s from the IMU's first sample\]: IMU samples and views.
+fn between(input: &RigInput, from: f64, to: f64) -> RigInput {
+    let mut out = input.clone();
+    let t0 = input.imu.t[0];
+    let keep: Vec<usize> = (0..input.imu.t.len()).filter(|&i| (from..to).contains(&(input.imu.t[i] - t0))).collect();
+    out.imu.t = keep.iter().map(|&i| input.imu.t[i]).collect();
+    out.imu.gyro = keep.iter().map(|&i| input.imu.gyro[i]).collect();
+    out.imu.acc = keep.iter().map(|&i| input.imu.acc[i]).collect();
+    for cam in &mut out.cameras {
+        cam.views.retain(|v| {
+            let t = (v.t_ns - input.imu_t0_ns) as f64 * 1e-9 - t0;
+            (from + 0.1..to - 0.1).contains(&t)
+        });
+    }
+    out
+}
+
+/// Every σ-carrying parameter of one camera and the time offset: (name, value, σ).
+fn parameters(rig: &RigResult) -> Vec<(String, f64, f64)> {
+    let mut out = Vec::new();
+    for c in &rig.cameras {
+        let r = tumble::solvers::lie::so3_log(&rotation(&c.t_bc));
+        for i in 0..3 {
+            out.push((format!("{} rotation {i}", c.name), r[i], c.rotation_sigma[i]));
+            out.push((format!("{} translation {i}", c.name), c.t_bc.translation.vector[i], c.translation_sigma[i]));
+        }
+        if !c.intrinsics_fixed {
+            let m = [c.model.fx, c.model.fy, c.model.cx, c.model.cy];
+            for (i, name) in ["fx", "fy", "cx", "cy"].iter().enumerate() {
+                out.push((format!("{} {name}", c.name), m[i], c.model_sigma[i]));
+            }
+        }
+    }
+    out.push(("time offset".into(), rig.time_offset_s, rig.time_offset_sigma_s));
+    out
+}
+
+/// The recording checks itself: imu_april's two halves, each calibrated
+/// alone, against each other with the σ each reports (its own split check
+/// included), over the parameters neither half flags. The aim is RMS
+/// normalized difference ≤ 1.5 and none above 4; measured, with EuRoC's
+/// intrinsics held RMS 1.74 (worst 2.65), with the intrinsics estimated RMS
+/// 2.94 (worst 4.4, cy: the halves hold different views, a difference each
+/// half's quarters cannot show — docs/rig.md). The bounds here guard those
+/// figures; with EuRoC's intrinsics held `T_BC` stays within 0.35° / 10 mm of
+/// EuRoC's, in the whole and in each half.
+#[test]
+#[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
+fn imu_april_halves_agree_within_their_sigma() {
+    let Some((input, reference)) = input() else { return };
+    let span = input.imu.t.last().unwrap() - input.imu.t[0];
+    let mut failures = Vec::new();
+    for fixed in [true, false] {
+        let opts = if fixed {
+            options(&reference)
+        } else {
+            RigOptions { resolution: Some([752, 480]), ..RigOptions::default() }
+        };
+        let halves: Vec<RigResult> = [(0.0, span / 2.0), (span / 2.0, span)]
+            .iter()
+            .map(|&(a, b)| calibrate_rig(&between(&input, a, b), &opts, &mut |_| {}).unwrap())
+            .collect();
+        let (mut sum, mut n, mut worst) = (0.0, 0usize, (0.0f64, String::new()));
+        for ((name, a, sa), (_, b, sb)) in parameters(&halves[0]).into_iter().zip(parameters(&halves[1])) {
+            let z = (a - b) / sa.hypot(sb);
+            let flag =
+                halves.iter().any(|h| h.verdicts().iter().any(|v| v.reason.is_some() && covers(&v.parameter, &name)));
+            println!(
+                "intrinsics {}: {name}: {a:.6} ± {sa:.2e} vs {b:.6} ± {sb:.2e}: z {z:+.2}{}",
+                if fixed { "held" } else { "estimated" },
+                if flag { " (flagged)" } else { "" }
+            );
+            if flag {
+                continue;
+            }
+            sum += z * z;
+            n += 1;
+            if z.abs() > worst.0 {
+                worst = (z.abs(), name);
+            }
+        }
+        let rms = (sum / n.max(1) as f64).sqrt();
+        println!(
+            "intrinsics {}: RMS z {rms:.2} over {n} unflagged parameters, worst {:.2} ({})",
+            if fixed { "held" } else { "estimated" },
+            worst.0,
+            worst.1
+        );
+        let (rms_bound, worst_bound) = if fixed { (2.0, 3.5) } else { (3.5, 5.0) };
+        if !(rms <= rms_bound && worst.0 <= worst_bound) {
+            failures.push(format!(
+                "intrinsics {}: RMS {rms:.2}, worst {worst:?}",
+                if fixed { "held" } else { "estimated" }
+            ));
+        }
+        if fixed {
+            let whole = calibrate_rig(&input, &opts, &mut |_| {}).unwrap();
+            for rig in std::iter::once(&whole).chain(&halves) {
+                for d in rig.compare(&reference) {
+                    let dt = nalgebra::Vector3::from(d.translation_m).norm();
+                    println!("{}: T_BC {:.3}° and {:.1} mm from EuRoC's", d.name, d.rotation_deg, dt * 1e3);
+                    assert!(d.rotation_deg < 0.35 && dt < 0.01, "{d:?}");
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{failures:?}");
+}
+
+/// Whether the verdict on `verdict` (`cam0 principal point`) covers the parameter `name` (`cam0 cx`).
+fn covers(verdict: &str, name: &str) -> bool {
+    let (camera, what) = name.split_once(' ').unwrap_or((name, ""));
+    let group = match what {
+        "fx" | "fy" => "focal length",
+        "cx" | "cy" => "principal point",
+        w if w.starts_with("rotation") => "T_BC rotation",
+        w if w.starts_with("translation") => "T_BC translation",
+        _ => return verdict == name,
+    };
+    verdict == format!("{camera} {group}")
+}
+
 /// Kalibr's workflow (intrinsics fixed at EuRoC's): T_BC within 0.25° and
 /// 1 cm of EuRoC's; then camera stamps moved by 4 ms and the IMU's axes
 /// rotated move the time offset and T_BC exactly so. On cam0 alone (both
@@ -125,17 +247,20 @@ fn imu_april_extrinsics_follow_moved_stamps_and_rotated_axes() {
     }
 }
 
-/// Simulated stereo rigs with known truth, 10 seeds: every estimate of both
-/// cameras within its σ — the mean squared normalized error of each
-/// parameter over the seeds below 3 (its 99.9 % bound for 10 seeds is 2.96
-/// when the σ are honest) — and the stereo extrinsic `T_cam1_cam0` close to
-/// the simulated baseline.
+/// No minimum called a stall, no start lost to a flipped view: the rig's
+/// calibration converges on 20 simulated stereo recordings with different
+/// noise draws and motions (among them views of a dozen corners at the
+/// image's edge, whose homography poses come out flipped), every estimate
+/// of both cameras within its σ — each parameter's mean squared normalized
+/// error over the seeds below 2.5 (its 99.9 % bound for 20 seeds is 2.27
+/// when the σ are honest; the σ here include the halves' widening), none
+/// beyond 5 —, the stereo extrinsic `T_cam1_cam0` close to the simulated
+/// baseline, and the halves of each recording agreeing as honest σ predict
+/// (RMS z below 2 on average). `SEED=k` runs one seed.
 #[test]
 #[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
-fn simulated_rigs_recover_their_truth_within_sigma() {
+fn calibrate_rig_converges_on_every_seed() {
     use tumble::sim::target::{simulate_rig, RigSimSettings};
-    let mut settings = RigSimSettings::default();
-    settings.camera.stereo_baseline_m = 0.11;
     let names = [
         "rotation x",
         "rotation y",
@@ -149,36 +274,51 @@ fn simulated_rigs_recover_their_truth_within_sigma() {
         "cy",
         "time offset",
     ];
-    let seeds = 10;
-    let mut sum = [[0.0; 11]; 2];
-    for seed in 0..seeds {
-        let sim = simulate_rig(&settings, seed);
-        assert_eq!(sim.input.cameras.len(), 2);
+    let mut settings = RigSimSettings { duration_s: 20.0, ..RigSimSettings::default() };
+    settings.camera.stereo_baseline_m = 0.11;
+    let seeds = 20u64;
+    let only: Option<u64> = std::env::var("SEED").ok().and_then(|s| s.parse().ok());
+    let runs = if only.is_some() { 1.0 } else { seeds as f64 };
+    let (mut rms_sum, mut sum) = (0.0, [[0.0; 11]; 2]);
+    for seed in (0..seeds).filter(|s| only.is_none_or(|o| o == *s)) {
+        let sim = simulate_rig(&settings, 100 + seed);
         let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
         let rig = calibrate_rig(&sim.input, &opts, &mut |_| {}).unwrap();
-        assert!(rig.refusal().is_none(), "seed {seed}: {:?}", rig.refusal());
+        assert!(rig.converged && rig.refusal().is_none(), "seed {seed}: {:?}", rig.refusal());
         let truths = [sim.truth.t_bc, sim.truth.second_t_bc.unwrap()];
-        for (c, t_bc) in truths.iter().enumerate() {
-            let (_, _, e) = common::camera_errors(&rig, c, &sim.truth, t_bc);
-            println!("seed {seed} cam{c}: {}", e.iter().map(|x| format!("{x:+.2}")).collect::<Vec<_>>().join(" "));
+        let errors: Vec<[f64; 11]> =
+            truths.iter().enumerate().map(|(c, t)| common::camera_errors(&rig, c, &sim.truth, t).2).collect();
+        let worst = errors.iter().flatten().fold(0.0f64, |m, z| m.max(z.abs()));
+        let rms = rig.split.as_ref().map_or(f64::NAN, |s| s.rms_z());
+        println!(
+            "seed {seed}: {} iterations, worst |z| against the truth {worst:.2}, halves' RMS z {rms:.2}",
+            rig.iterations
+        );
+        for (c, e) in errors.iter().enumerate() {
+            if worst > 4.0 {
+                println!("  cam{c} (rotation, translation, fx fy cx cy, time offset): {e:+.1?}");
+            }
             for (s, x) in sum[c].iter_mut().zip(e) {
                 *s += x * x;
             }
         }
+        assert!(worst < 5.0, "seed {seed}: {worst}");
+        rms_sum += rms;
         // Camera 1 ← camera 0, from the two estimates.
-        let chain = truths[1].inverse() * truths[0];
-        let d = rig.chain[0].inverse() * chain;
+        let d = rig.chain[0].inverse() * (truths[1].inverse() * truths[0]);
         let (dr, dt) = (d.rotation.angle().to_degrees(), d.translation.vector.norm());
-        println!("seed {seed}: T_cam1_cam0 {dr:.4}°, {:.2} mm from the truth", dt * 1e3);
-        assert!(dr < 0.05 && dt < 2e-3, "seed {seed}: {dr}° {dt} m");
+        assert!(dr < 0.05 && dt < 2e-3, "seed {seed}: T_cam1_cam0 {dr}° {dt} m");
     }
     for (c, sums) in sum.iter().enumerate() {
         for (name, s) in names.iter().zip(sums) {
-            let nees = s / seeds as f64;
+            let nees = s / runs;
             println!("cam{c} {name}: mean squared normalized error {nees:.2}");
-            assert!(nees < 3.0, "cam{c} {name}: {nees}");
+            assert!(only.is_some() || nees < 2.5, "cam{c} {name}: {nees}");
         }
     }
+    let mean_rms = rms_sum / runs;
+    println!("mean RMS z of the halves: {mean_rms:.2}");
+    assert!(mean_rms < 2.0, "{mean_rms}");
 }
 
 /// Bad inputs are refused with the file, the line and what was wrong.

@@ -37,6 +37,7 @@ mod options;
 pub(crate) mod report;
 mod result;
 pub(crate) mod solve;
+mod split;
 pub(crate) mod verdict;
 
 pub use crate::io::calibration::read_imu_tk_calib;

@@ -59,6 +59,9 @@ struct Output<'a> {
     imu_tk: ImuTkOut,
     /// The verdict (`ok` / `weak` / `failed`) with its reasons.
     assessment: &'a Assessment,
+    /// The halves of the recording compared (the σ above are widened to cover them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    split: Option<&'a crate::model::split::SplitCheck>,
     warnings: &'a [String],
 }
 
@@ -87,6 +90,7 @@ impl CalibrationResult {
             },
             imu_tk: ImuTkOut { acc: imu_tk_triad(&self.calibration.accel), gyro: imu_tk_triad(&self.calibration.gyro) },
             assessment: &self.assessment,
+            split: self.split.as_ref(),
             warnings: &self.warnings,
         }
     }
@@ -154,6 +158,15 @@ impl CalibrationResult {
             "imu_tk-style costs: accel {:.6}, gyro {:.6}\n",
             self.accel_fit.imu_tk_cost, self.gyro_fit.imu_tk_cost
         ));
+        if let Some(split) = &self.split {
+            s.push_str(&format!(
+                "halves ({} / {}): RMS normalized difference {:.2} over {} parameters (≈ 1 when the σ are honest; σ widened where larger)\n",
+                split.halves[0],
+                split.halves[1],
+                split.rms_z(),
+                split.parameters.len()
+            ));
+        }
         s.push_str(&format!("verdict: {}\n", self.assessment.verdict));
         for r in &self.assessment.reasons {
             s.push_str(&format!("  - {r}\n"));

@@ -174,6 +174,8 @@ pub struct CalibrationResult {
     pub warnings: Vec<String>,
     /// The verdict: `ok`, `weak` (with reasons) or `failed` (only in [`CalibError::diagnosis`]).
     pub assessment: Assessment,
+    /// The halves of the recording compared (None when too few poses).
+    pub split: Option<crate::model::split::SplitCheck>,
 }
 
 /// The verdict.

@@ -81,7 +81,9 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         score: scores.accel,
         warnings,
         assessment: Assessment { verdict: Verdict::Ok, reasons: Vec::new(), not_determined: Vec::new() },
+        split: None,
     };
+    super::split::check_halves(rec, &result.intervals.clone(), &gyro_inputs, opts, &mut result);
     result.assessment = Assessment::of(&result, not_determined, gyro.ambiguity);
     if result.assessment.verdict == Verdict::Failed {
         return Err(CalibError {

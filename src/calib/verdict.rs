@@ -75,6 +75,14 @@ impl Assessment {
                 weak.push(format!("the {name} fit stopped at the iteration cap after {} iterations", fit.iterations));
             }
         }
+        if let Some(split) = &r.split {
+            weak.extend(
+                split
+                    .describe_disagreements()
+                    .into_iter()
+                    .map(|d| format!("{d}: the recording does not settle it (its σ is widened to cover the halves)")),
+            );
+        }
         for (name, t) in [("accelerometer", &r.calibration.accel), ("gyroscope", &r.calibration.gyro)] {
             for (axis, k, sd) in [("x", t.k.x, t.k_std.x), ("y", t.k.y, t.k_std.y), ("z", t.k.z, t.k_std.z)] {
                 if sd.is_nan() || sd > MAX_SCALE_REL_SIGMA * k.abs() {

@@ -13,6 +13,7 @@ pub mod imu_model;
 mod imu_samples;
 pub mod noise;
 pub mod numeric;
+pub mod split;
 pub mod target;
 
 pub use imu_samples::ImuData;

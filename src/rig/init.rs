@@ -459,6 +459,25 @@ pub fn correlate_time_offset(rates: &[(f64, f64, f64)], gyro: &RateIntegral, max
     Some((refined, best, scores))
 }
 
+/// A hand–eye pair: its two views' indices, and (the gyro's rotation over
+/// the pair's interval `R_BaBb`, the camera's `R_CaCb`).
+pub type HandEyePair = ([usize; 2], (Matrix3<f64>, Matrix3<f64>));
+
+/// The views every pair of which (at least one) disagrees with the gyro by
+/// more than `threshold` \[rad\] under the camera–IMU rotation `r_bc`.
+pub fn views_inconsistent_with_gyro(pairs: &[HandEyePair], r_bc: &Matrix3<f64>, threshold: f64) -> Vec<usize> {
+    let mut verdicts: std::collections::BTreeMap<usize, (usize, usize)> = std::collections::BTreeMap::new();
+    for (views, (rb, rc)) in pairs {
+        let angle = tumble_solvers::lie::so3_log(&((rb * r_bc).transpose() * (r_bc * rc))).norm();
+        for v in views {
+            let e = verdicts.entry(*v).or_default();
+            e.0 += 1;
+            e.1 += usize::from(angle > threshold);
+        }
+    }
+    verdicts.into_iter().filter(|(_, (n, bad))| n == bad).map(|(v, _)| v).collect()
+}
+
 /// Reweighting rounds of [`hand_eye_rotation`].
 pub const HAND_EYE_ITERATIONS: usize = 8;
 

@@ -23,16 +23,18 @@
 //! println!("time offset {:.3} ms ± {:.3}", rig.time_offset_s * 1e3, rig.time_offset_sigma_s * 1e3);
 //! ```
 
+mod calibrate;
 pub mod detect;
 #[doc(hidden)]
 pub mod init;
 pub(crate) mod input;
 pub(crate) mod output;
 mod solve;
+mod split;
 
 pub use crate::model::target::{CameraCorners, Corner, RigInput, Target, View};
+pub use calibrate::calibrate_rig;
 pub use output::{summary_markdown, write_rig};
-pub use solve::calibrate_rig;
 
 use crate::error::OptionError;
 use nalgebra::{Isometry3, Matrix3, Vector3};
@@ -276,6 +278,8 @@ pub struct RigResult {
     pub noise_source: String,
     /// What the calibration noticed.
     pub notes: Vec<String>,
+    /// The halves of the recording compared (None when too short or not run).
+    pub split: Option<crate::model::split::SplitCheck>,
 }
 
 /// How the rig's σ were found: each is the larger of the noise model's
@@ -308,6 +312,8 @@ pub struct Verdict {
     pub units: &'static str,
     /// The verdict.
     pub determination: Determination,
+    /// Why it is no better than weak although its σ would allow more (the halves disagree).
+    pub reason: Option<String>,
 }
 
 impl RigResult {
@@ -315,7 +321,12 @@ impl RigResult {
     pub fn verdicts(&self) -> Vec<Verdict> {
         let mut out = Vec::new();
         let mut add = |parameter: String, sigma: f64, accuracy: f64, units: &'static str| {
-            out.push(Verdict { parameter, sigma, accuracy, units, determination: Determination::of(sigma, accuracy) })
+            let mut determination = Determination::of(sigma, accuracy);
+            let reason = self.split_disagreement(&parameter);
+            if reason.is_some() && determination == Determination::Determined {
+                determination = Determination::Weak;
+            }
+            out.push(Verdict { parameter, sigma, accuracy, units, determination, reason })
         };
         for c in &self.cameras {
             add(
@@ -346,6 +357,25 @@ impl RigResult {
             add("time offset".into(), self.time_offset_sigma_s, accuracy::TIME_OFFSET_S, "s");
         }
         out
+    }
+
+    /// The halves' worst disagreement on a parameter of the verdict named
+    /// `parameter` (`cam0 principal point` covers `cam0 cx` and `cam0 cy`).
+    fn split_disagreement(&self, parameter: &str) -> Option<String> {
+        let split = self.split.as_ref()?;
+        let members = |p: &str| -> bool {
+            let Some((camera, rest)) = p.split_once(' ') else { return p == parameter };
+            let group = match rest {
+                "fx" | "fy" => "focal length",
+                "cx" | "cy" => "principal point",
+                r if r.starts_with("T_BC rotation") => "T_BC rotation",
+                r if r.starts_with("T_BC translation") => "T_BC translation",
+                _ => return p == parameter,
+            };
+            parameter == format!("{camera} {group}")
+        };
+        let worst = split.disagreements().into_iter().find(|d| members(&d.parameter))?;
+        Some(format!("the halves disagree at {:.1}σ on {}", worst.z.abs(), worst.parameter))
     }
 
     /// Why the result must not be used, if it must not: a solve that did not

@@ -53,6 +53,9 @@ struct RigJson<'a> {
     seconds: f64,
     verdicts: Vec<super::Verdict>,
     notes: &'a [String],
+    /// The halves of the recording compared (the σ above are widened to cover them).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    split: Option<&'a crate::model::split::SplitCheck>,
 }
 
 fn m4(t: &Isometry3<f64>) -> [[f64; 4]; 4] {
@@ -159,6 +162,7 @@ pub fn rig_json(rig: &RigResult) -> Result<String, OutputError> {
         seconds: rig.seconds,
         verdicts: rig.verdicts(),
         notes: &rig.notes,
+        split: rig.split.as_ref(),
     };
     serde_json::to_string_pretty(&j).map_err(|e| OutputError::Failed(format!("rig.json: {e}")))
 }
@@ -216,6 +220,15 @@ pub fn summary_markdown(rig: &RigResult) -> String {
         q.largest_ratio,
         if q.largest_ratio > 2.0 { " (the corners' errors are alike in neighbouring views)" } else { "" }
     );
+    if let Some(split) = &rig.split {
+        let _ = writeln!(
+            s,
+            "Halves of the recording: RMS normalized difference {:.2} over {} parameters (≈ 1 when the σ are honest); \
+             the σ above are widened to cover them.",
+            split.rms_z(),
+            split.parameters.len()
+        );
+    }
     let _ = writeln!(s, "\n| parameter | 3σ | accuracy sought | verdict |\n|---|---|---|---|");
     for v in rig.verdicts() {
         let _ = writeln!(
@@ -226,7 +239,10 @@ pub fn summary_markdown(rig: &RigResult) -> String {
             v.units,
             v.accuracy,
             v.units,
-            v.determination.word()
+            match &v.reason {
+                Some(why) => format!("{} ({why})", v.determination.word()),
+                None => v.determination.word().to_string(),
+            }
         );
     }
     for n in &rig.notes {
@@ -376,6 +392,9 @@ pub fn write_rig(rig: &RigResult, input: &RigInput, out: &Path) -> Result<Vec<Pa
             md.push('\n');
         }
         md.push_str(&summary_markdown(rig));
+        if let Some(split) = &rig.split {
+            let _ = write!(md, "\n## The recording checked against itself\n\n{}", split.markdown());
+        }
         for (c, cam) in rig.cameras.iter().enumerate() {
             let name = format!("reprojection_{}.png", cam.name);
             camera_figure(rig, c, &dir.join(&name))?;

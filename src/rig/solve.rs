@@ -10,7 +10,6 @@ use crate::model::geometry::{gravity_aligned, parts, pose, preintegrate};
 use nalgebra::{Matrix3, SVector, Vector1, Vector3, Vector6};
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use std::time::Instant;
 use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::PreintegrationParams;
 use tumble_factors::rig::{TargetCorner, TargetGauge};
@@ -21,15 +20,15 @@ use tumble_solvers::{
 };
 
 /// The target's pose `T_WT`.
-const TARGET: Key = Key::new('t', 0);
+pub(super) const TARGET: Key = Key::new('t', 0);
 /// The time offset.
-const OFFSET: Key = Key::new('d', 0);
+pub(super) const OFFSET: Key = Key::new('d', 0);
 /// Camera `c`'s `T_BC`.
-fn extrinsic(c: usize) -> Key {
+pub(super) fn extrinsic(c: usize) -> Key {
     Key::new('e', c as u64)
 }
 /// Camera `c`'s intrinsics.
-fn intrinsics(c: usize) -> Key {
+pub(super) fn intrinsics(c: usize) -> Key {
     Key::new('k', c as u64)
 }
 
@@ -45,13 +44,19 @@ const RATE_MAX_GAP_S: f64 = 0.15;
 const RATE_BIAS_TOLERANCE_RAD: f64 = 2e-5;
 /// Below this rank correlation of camera and gyro rates the coarse time offset is reported as doubtful.
 const WEAK_RATE_CORRELATION: f64 = 0.8;
+/// A view whose every hand–eye pair disagrees with the gyro by more than
+/// this \[deg\] is set aside: far above the pairs' residual for good views
+/// (0.2–0.7° here, and 1.7° from a 10 ms time offset at 3 rad/s), far below
+/// a flipped pose (tens of degrees).
+const INCONSISTENT_VIEW_DEG: f64 = 10.0;
 /// Hand–eye pairs span this many frames of a camera (≈ 0.25 s at 20 Hz: rotations well above the views' noise).
 const HAND_EYE_SPAN: usize = 5;
 
 /// One camera frame of the estimate: its time on the IMU axis and, per camera, the view seen then.
-struct FrameSlot {
-    t: f64,
-    views: Vec<Option<usize>>,
+#[derive(Clone)]
+pub(super) struct FrameSlot {
+    pub t: f64,
+    pub views: Vec<Option<usize>>,
 }
 
 /// Projection of the mean of rotation matrices onto SO(3) (chordal mean).
@@ -67,78 +72,86 @@ fn mean_rotation(rs: &[Matrix3<f64>]) -> Matrix3<f64> {
     }
 }
 
-/// Calibrate the rig; `progress` receives one line per stage.
-///
-/// The stages, each a function below: every camera alone (intrinsics, view
-/// poses) → the coarse time offset (rotation rates) → the frames → the
-/// camera–IMU rotations (hand–eye) → the starting state (gravity, world,
-/// body poses, velocities) → the joint solve → the results and their verdicts.
-pub fn calibrate_rig(input: &RigInput, o: &RigOptions, progress: &mut dyn FnMut(&str)) -> Result<RigResult, RigError> {
-    o.validate()?;
-    let t0 = Instant::now();
-    let n_cams = input.cameras.len();
-    if input.imu.t.len() < 2 || n_cams == 0 {
-        return Err(RigError::Recording(format!(
-            "{} IMU sample(s) and {n_cams} camera(s): nothing to calibrate",
-            input.imu.t.len()
-        )));
-    }
-    let mut notes = Vec::new();
-    // Samples are point samples at their stamps: the midpoint rule, not a
-    // zero-order hold, which would lag the IMU by half a sample period
-    // (2.5 ms at 200 Hz) and bias the time offset by as much.
-    let mut params = input.noise;
-    params.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
-    let (starts, view_poses) = calibrate_cameras(input, o, progress)?;
-    let gyro_integral = RateIntegral::new(&input.imu);
-    let coarse = coarse_time_offset(input, o, &view_poses[0], &gyro_integral, &mut notes, progress);
-    let td0 = coarse.as_ref().map_or(0.0, |c| c.0);
-    let frames = frame_slots(input, &view_poses, td0)?;
-    let (r_bc, hand_eye_rms) = hand_eye_rotations(input, &frames, &view_poses, params, progress)?;
-    let state = starting_state(input, &frames, &view_poses, &r_bc)?;
-    let start = Start { cameras: starts, frames, hand_eye_rms, state, params };
-    let joint = joint_solve(input, o, &start, &gyro_integral, progress)?;
-    let mut rig = results(input, o, &start, &joint, coarse, notes)?;
-    rig.seconds = t0.elapsed().as_secs_f64();
-    note_weak_parameters(&mut rig);
-    Ok(rig)
+/// What the stages before the joint solve found.
+pub(super) struct Start {
+    /// Each camera's intrinsics and pixel σ from its views alone.
+    pub cameras: Vec<init::CameraStart>,
+    /// The frames of the estimate.
+    pub frames: Vec<FrameSlot>,
+    /// Each camera's hand–eye residual \[rad\].
+    pub hand_eye_rms: Vec<f64>,
+    /// The state the joint solve starts from.
+    pub state: StartingState,
+    /// The IMU's preintegration parameters (midpoint rule).
+    pub params: PreintegrationParams,
+    /// The time offset the frames are placed with on the IMU's axis \[s\]
+    /// (the coarse one, then the joint solve's): the solve's own offset
+    /// variable is what it finds beyond this.
+    pub frame_offset: f64,
 }
 
-/// What the stages before the joint solve found.
-struct Start {
-    /// Each camera's intrinsics and pixel σ from its views alone.
-    cameras: Vec<init::CameraStart>,
-    /// The frames of the estimate.
-    frames: Vec<FrameSlot>,
-    /// Each camera's hand–eye residual \[rad\].
-    hand_eye_rms: Vec<f64>,
-    /// The state the joint solve starts from.
-    state: StartingState,
-    /// The IMU's preintegration parameters (midpoint rule).
-    params: PreintegrationParams,
+/// A start from `joint`'s solution at the frames of `range` (the frames'
+/// placement kept), with the offset variable starting at `offset` \[s\].
+pub(super) fn start_from_solution(
+    start: &Start,
+    joint: &Joint,
+    range: std::ops::Range<usize>,
+    offset: f64,
+) -> Result<Start, RigError> {
+    let s = &joint.solution;
+    let pose = |k: usize| -> Result<Isometry3F64, RigError> { Ok(*s.get::<Isometry3F64>(X(k as u64))?) };
+    let vel = |k: usize| -> Result<Vector3<f64>, RigError> { Ok(*s.get::<Vector3<f64>>(V(k as u64))?) };
+    let bias = |k: usize| -> Result<Vector6<f64>, RigError> { Ok(*s.get::<Vector6<f64>>(B(k as u64))?) };
+    let state = StartingState {
+        t_bc: (0..start.cameras.len())
+            .map(|c| Ok(*s.get::<Isometry3F64>(extrinsic(c))?))
+            .collect::<Result<_, RigError>>()?,
+        t_wt: *s.get::<Isometry3F64>(TARGET)?,
+        body: range.clone().map(pose).collect::<Result<_, _>>()?,
+        vel: range.clone().map(vel).collect::<Result<_, _>>()?,
+        offset,
+        bias: range.clone().map(bias).collect::<Result<_, _>>()?,
+    };
+    let mut cameras = start.cameras.clone();
+    for (c, cam) in cameras.iter_mut().enumerate() {
+        let k = s.get::<SVector<f64, 8>>(intrinsics(c))?;
+        cam.model = CameraModel::from_vector(cam.model.distortion.kind(), k.as_slice());
+    }
+    Ok(Start {
+        cameras,
+        frames: start.frames[range].to_vec(),
+        hand_eye_rms: start.hand_eye_rms.clone(),
+        state,
+        params: start.params,
+        frame_offset: start.frame_offset,
+    })
 }
 
 /// The joint solve's starting values.
-struct StartingState {
+pub(super) struct StartingState {
     /// Each camera's `T_BC`.
-    t_bc: Vec<Isometry3F64>,
+    pub t_bc: Vec<Isometry3F64>,
     /// The target's pose in the gravity-aligned world.
-    t_wt: Isometry3F64,
+    pub t_wt: Isometry3F64,
     /// Body poses at the frames.
-    body: Vec<Isometry3F64>,
+    pub body: Vec<Isometry3F64>,
     /// Velocities at the frames \[m/s\].
-    vel: Vec<Vector3<f64>>,
+    pub vel: Vec<Vector3<f64>>,
+    /// The time offset beyond the frames' (coarse) one \[s\].
+    pub offset: f64,
+    /// Biases `[b_a, b_g]` at the frames (zeros at the first start).
+    pub bias: Vec<Vector6<f64>>,
 }
 
 /// Seconds on the IMU's axis of a stamp \[ns\].
-fn stamp(input: &RigInput, t_ns: i64) -> f64 {
+pub(super) fn stamp(input: &RigInput, t_ns: i64) -> f64 {
     (t_ns - input.imu_t0_ns) as f64 * 1e-9
 }
 
 /// Stage 1: each camera alone — its intrinsics (or the ones held), every
 /// view's target pose, and the view poses the gyro cannot reach set aside.
-type CameraStarts = (Vec<init::CameraStart>, Vec<Vec<Option<Isometry3F64>>>);
-fn calibrate_cameras(
+pub(super) type CameraStarts = (Vec<init::CameraStart>, Vec<Vec<Option<Isometry3F64>>>);
+pub(super) fn calibrate_cameras(
     input: &RigInput,
     o: &RigOptions,
     progress: &mut dyn FnMut(&str),
@@ -170,7 +183,7 @@ fn calibrate_cameras(
 
 /// Stage 2: the coarse time offset from the first camera's rotation rates
 /// against the gyro's (None when not estimated or nothing to correlate, with a note).
-fn coarse_time_offset(
+pub(super) fn coarse_time_offset(
     input: &RigInput,
     o: &RigOptions,
     view_poses: &[Option<Isometry3F64>],
@@ -204,7 +217,7 @@ fn coarse_time_offset(
 
 /// Stage 3: the frames — every stamp at which some camera has a pose, on the
 /// IMU's axis shifted by the coarse offset `td0`, within the IMU's span.
-fn frame_slots(
+pub(super) fn frame_slots(
     input: &RigInput,
     view_poses: &[Vec<Option<Isometry3F64>>],
     td0: f64,
@@ -232,53 +245,92 @@ fn frame_slots(
     Ok(frames)
 }
 
+/// Each camera's `R_BC` and hand–eye residual \[rad\], and how many views were set aside.
+pub(super) type HandEye = (Vec<Matrix3<f64>>, Vec<f64>, usize);
+
 /// Stage 4: each camera's rotation in the IMU frame by hand–eye over pairs
-/// [`HAND_EYE_SPAN`] frames apart, with its residual \[rad\].
-fn hand_eye_rotations(
+/// [`HAND_EYE_SPAN`] frames apart, with its residual \[rad\]. A view whose
+/// every pair disagrees with the gyro by more than
+/// [`INCONSISTENT_VIEW_DEG`] under that rotation is set aside (a pose from
+/// a few corners at the image's edge can come out flipped) and the rotation
+/// found again without it; returns how many views were set aside.
+pub(super) fn hand_eye_rotations(
     input: &RigInput,
     frames: &[FrameSlot],
-    view_poses: &[Vec<Option<Isometry3F64>>],
+    view_poses: &mut [Vec<Option<Isometry3F64>>],
     params: PreintegrationParams,
     progress: &mut dyn FnMut(&str),
-) -> Result<(Vec<Matrix3<f64>>, Vec<f64>), RigError> {
-    let zero_bias = (Vector3::zeros(), Vector3::zeros());
+) -> Result<HandEye, RigError> {
     let mut r_bc = Vec::new();
     let mut hand_eye_rms = Vec::new();
+    let mut set_aside = 0;
     for (c, cam) in input.cameras.iter().enumerate() {
-        let seen: Vec<usize> = (0..frames.len()).filter(|&k| frames[k].views[c].is_some()).collect();
-        let mut pairs = Vec::new();
-        for w in seen.windows(HAND_EYE_SPAN + 1) {
-            let (a, b) = (w[0], w[HAND_EYE_SPAN]);
-            if frames[b].t - frames[a].t > 1.0 {
-                continue;
-            }
-            let (pim, _) = preintegrate(&input.imu, frames[a].t, frames[b].t, zero_bias, params);
-            let pa = view_poses[c][frames[a].views[c].unwrap_or(0)].as_ref();
-            let pb = view_poses[c][frames[b].views[c].unwrap_or(0)].as_ref();
-            if let (Some(pa), Some(pb)) = (pa, pb) {
-                let rc = pa.rotation().matrix() * pb.rotation().matrix().transpose();
-                pairs.push((pim.delta_rotation(), rc));
-            }
-        }
-        let (r, rms) = init::hand_eye_rotation(&pairs).ok_or_else(|| {
+        let too_few = || {
             RigError::Recording(format!("{}: too few views to relate the camera's rotation to the gyro's", cam.name))
-        })?;
+        };
+        let pairs = hand_eye_pairs(input, frames, &view_poses[c], c, params);
+        let rotations: Vec<_> = pairs.iter().map(|p| p.1).collect();
+        let (mut r, mut rms) = init::hand_eye_rotation(&rotations).ok_or_else(too_few)?;
+        let mut used = rotations.len();
+        let inconsistent = init::views_inconsistent_with_gyro(&pairs, &r, INCONSISTENT_VIEW_DEG.to_radians());
+        if !inconsistent.is_empty() {
+            for &v in &inconsistent {
+                view_poses[c][v] = None;
+            }
+            let kept = pairs.iter().filter(|p| !p.0.iter().any(|v| inconsistent.contains(v)));
+            let rotations: Vec<_> = kept.map(|p| p.1).collect();
+            (r, rms) = init::hand_eye_rotation(&rotations).ok_or_else(too_few)?;
+            used = rotations.len();
+            progress(&format!(
+                "{}: {} view pose(s) that disagree with the gyro by over {INCONSISTENT_VIEW_DEG}° set aside",
+                cam.name,
+                inconsistent.len()
+            ));
+            set_aside += inconsistent.len();
+        }
         progress(&format!(
             "{}: camera–IMU rotation from {} hand–eye pairs, residual {:.2}°",
             cam.name,
-            pairs.len(),
+            used,
             rms.to_degrees()
         ));
         r_bc.push(r);
         hand_eye_rms.push(rms);
     }
-    Ok((r_bc, hand_eye_rms))
+    Ok((r_bc, hand_eye_rms, set_aside))
+}
+
+/// Camera `c`'s hand–eye pairs: the two views' indices and (gyro rotation
+/// over the pair's interval, camera rotation `R_CaT R_CbTᵀ`).
+fn hand_eye_pairs(
+    input: &RigInput,
+    frames: &[FrameSlot],
+    view_poses: &[Option<Isometry3F64>],
+    c: usize,
+    params: PreintegrationParams,
+) -> Vec<init::HandEyePair> {
+    let zero_bias = (Vector3::zeros(), Vector3::zeros());
+    let seen: Vec<usize> = (0..frames.len()).filter(|&k| frames[k].views[c].is_some()).collect();
+    let mut pairs = Vec::new();
+    for w in seen.windows(HAND_EYE_SPAN + 1) {
+        let (a, b) = (w[0], w[HAND_EYE_SPAN]);
+        let (Some(va), Some(vb)) = (frames[a].views[c], frames[b].views[c]) else { continue };
+        if frames[b].t - frames[a].t > 1.0 {
+            continue;
+        }
+        if let (Some(pa), Some(pb)) = (view_poses[va].as_ref(), view_poses[vb].as_ref()) {
+            let (pim, _) = preintegrate(&input.imu, frames[a].t, frames[b].t, zero_bias, params);
+            let rc = pa.rotation().matrix() * pb.rotation().matrix().transpose();
+            pairs.push(([va, vb], (pim.delta_rotation(), rc)));
+        }
+    }
+    pairs
 }
 
 /// Stage 5: gravity in the target frame (the first camera's views and the
 /// accelerometer), the world it sets, the other cameras' `T_BC` from the
 /// frames both see, and the body poses and velocities at the frames.
-fn starting_state(
+pub(super) fn starting_state(
     input: &RigInput,
     frames: &[FrameSlot],
     view_poses: &[Vec<Option<Isometry3F64>>],
@@ -333,23 +385,24 @@ fn starting_state(
             }
         })
         .collect();
-    Ok(StartingState { t_bc, t_wt, body, vel })
+    let bias = vec![Vector6::zeros(); frames.len()];
+    Ok(StartingState { t_bc, t_wt, body, vel, offset: 0.0, bias })
 }
 
 /// What the joint solve found.
-struct Joint {
+pub(super) struct Joint {
     /// The solution.
-    solution: Values,
+    pub solution: Values,
     /// The last pass's graph, and its corner factors.
     graph: Graph,
     corners: Vec<CornerEntry>,
     /// The covariances of `cov_keys`: the noise model's and the cluster-robust.
-    cov: RobustCovariances,
+    pub cov: RobustCovariances,
     cov_keys: Vec<Key>,
     /// Frames per cluster of the robust covariance.
     block: usize,
     /// Every pass converged; iterations over all passes.
-    converged: bool,
+    pub converged: bool,
     iterations: usize,
     /// Whitened χ²/dof of the IMU factors.
     imu_chi2_per_dof: f64,
@@ -413,10 +466,10 @@ fn starting_values(o: &RigOptions, start: &Start) -> Values {
     for k in 0..start.frames.len() {
         values.insert(X(k as u64), s.body[k]);
         values.insert(V(k as u64), s.vel[k]);
-        values.insert(B(k as u64), Vector6::<f64>::zeros());
+        values.insert(B(k as u64), s.bias[k]);
     }
     values.insert(TARGET, s.t_wt);
-    values.insert(OFFSET, Vector1::new(0.0));
+    values.insert(OFFSET, Vector1::new(s.offset));
     if !o.estimate_time_offset {
         values.set_constant(OFFSET, true);
     }
@@ -465,7 +518,7 @@ fn imu_chi2_per_dof(graph: &Graph, values: &Values, imu_factors: &[usize]) -> f6
 /// depend on the view's geometry (the detector's bias, the target's
 /// flatness, the lens model's misfit) are alike in neighbouring views, and
 /// the corners' scatter alone does not show them.
-fn joint_solve(
+pub(super) fn joint_solve(
     input: &RigInput,
     o: &RigOptions,
     start: &Start,
@@ -475,7 +528,8 @@ fn joint_solve(
     let frames = &start.frames;
     let n_cams = input.cameras.len();
     let gravity = Vector3::new(0.0, 0.0, -o.gravity);
-    let mut gyro_bias: Vec<Vector3<f64>> = vec![Vector3::zeros(); frames.len()];
+    let gyro_of = |b: &Vector6<f64>| -> Vector3<f64> { b.fixed_rows::<3>(3).into_owned() };
+    let mut gyro_bias: Vec<Vector3<f64>> = start.state.bias.iter().map(gyro_of).collect();
     let block = ((frames.len() as f64).sqrt().floor() as usize).max(1);
     let mut keys: Vec<Key> = Vec::new();
     let mut solution = starting_values(o, start);
@@ -499,17 +553,19 @@ fn joint_solve(
         converged &= summary.converged();
         iterations += summary.iterations;
         solution = sol;
+        let mut largest_change: f64 = 0.0;
         for (k, b) in gyro_bias.iter_mut().enumerate() {
-            *b = solution.get::<Vector6<f64>>(B(k as u64))?.fixed_rows::<3>(3).into_owned();
+            let found = gyro_of(solution.get::<Vector6<f64>>(B(k as u64))?);
+            largest_change = largest_change.max((found - *b).norm());
+            *b = found;
         }
         let chi2 = imu_chi2_per_dof(&graph, &solution, &imu_factors);
         last = Some((graph, corners, c, chi2));
-        // The corners' rates were taken without the gyro bias: solve again
-        // only if the bias moves the exposure-time rotation `b_g · td` by
-        // more than a small fraction of a pixel's angle.
+        // The corners' rates were taken with the gyro bias of the start:
+        // solve again only if the bias found moves the exposure-time rotation
+        // `Δb_g · td` by more than a small fraction of a pixel's angle.
         let td = solution.get::<Vector1<f64>>(OFFSET)?[0];
-        let largest_bias = gyro_bias.iter().map(|b| b.norm()).fold(0.0, f64::max);
-        if largest_bias * td.abs() < RATE_BIAS_TOLERANCE_RAD {
+        if largest_change * td.abs() < RATE_BIAS_TOLERANCE_RAD {
             break;
         }
     }
@@ -520,7 +576,7 @@ fn joint_solve(
 
 /// Stage 7, one camera: its calibration with σ (the larger of the two
 /// covariances'), reprojection statistics and residuals.
-fn camera_result(
+pub(super) fn camera_result(
     input: &RigInput,
     o: &RigOptions,
     start: &Start,
@@ -571,7 +627,7 @@ fn camera_result(
 }
 
 /// Stage 7: the rig's calibration from the joint solve (its `seconds` left at 0).
-fn results(
+pub(super) fn results(
     input: &RigInput,
     o: &RigOptions,
     start: &Start,
@@ -580,7 +636,6 @@ fn results(
     mut notes: Vec<String>,
 ) -> Result<RigResult, RigError> {
     let solution = &joint.solution;
-    let td0 = coarse.as_ref().map_or(0.0, |c| c.0);
     let td = solution.get::<Vector1<f64>>(OFFSET)?[0];
     let cov = &joint.cov;
     let mut largest_ratio: f64 = 0.0;
@@ -620,7 +675,7 @@ fn results(
     }
     Ok(RigResult {
         cameras,
-        time_offset_s: td0 + td,
+        time_offset_s: start.frame_offset + td,
         time_offset_sigma_s: td_sigma,
         coarse_time_offset: coarse.as_ref().map(|c| (c.0, c.1)),
         time_offset_profile: coarse.map(|c| c.2).unwrap_or_default(),
@@ -635,11 +690,12 @@ fn results(
         seconds: 0.0,
         noise_source: input.noise_source.clone(),
         notes,
+        split: None,
     })
 }
 
 /// Weak parameters are written (a VIO refines them, or tolerates them), but said.
-fn note_weak_parameters(rig: &mut RigResult) {
+pub(super) fn note_weak_parameters(rig: &mut RigResult) {
     let weak: Vec<String> = rig
         .verdicts()
         .into_iter()
