@@ -363,18 +363,7 @@ impl RigResult {
     /// `parameter` (`cam0 principal point` covers `cam0 cx` and `cam0 cy`).
     fn split_disagreement(&self, parameter: &str) -> Option<String> {
         let split = self.split.as_ref()?;
-        let members = |p: &str| -> bool {
-            let Some((camera, rest)) = p.split_once(' ') else { return p == parameter };
-            let group = match rest {
-                "fx" | "fy" => "focal length",
-                "cx" | "cy" => "principal point",
-                r if r.starts_with("T_BC rotation") => "T_BC rotation",
-                r if r.starts_with("T_BC translation") => "T_BC translation",
-                _ => return p == parameter,
-            };
-            parameter == format!("{camera} {group}")
-        };
-        let worst = split.disagreements().into_iter().find(|d| members(&d.parameter))?;
+        let worst = split.disagreements().into_iter().find(|d| verdict_of(&d.parameter) == parameter)?;
         Some(format!("the halves disagree at {:.1}σ on {}", worst.z.abs(), worst.parameter))
     }
 
@@ -396,6 +385,21 @@ impl RigResult {
         }
         (!why.is_empty()).then(|| why.join("; "))
     }
+}
+
+/// The verdict ([`RigResult::verdicts`]) that covers a parameter of the
+/// halves' check: `cam0 cx` → `cam0 principal point`, `cam0 T_BC rotation x`
+/// → `cam0 T_BC rotation`, `fx`/`fy` → `focal length`; others are their own.
+pub fn verdict_of(parameter: &str) -> String {
+    let Some((camera, rest)) = parameter.split_once(' ') else { return parameter.to_string() };
+    let group = match rest {
+        "fx" | "fy" => "focal length",
+        "cx" | "cy" => "principal point",
+        r if r.starts_with("T_BC rotation") => "T_BC rotation",
+        r if r.starts_with("T_BC translation") => "T_BC translation",
+        _ => return parameter.to_string(),
+    };
+    format!("{camera} {group}")
 }
 
 /// Rotation matrix of an isometry (nalgebra), for reports.
