@@ -5,10 +5,9 @@
 use super::init::RateIntegral;
 use super::solve::{
     calibrate_cameras, coarse_time_offset, frame_slots, hand_eye_rotations, joint_solve, note_weak_parameters, results,
-    start_from_solution, starting_state, FrameSlot, Joint, Start, OFFSET,
+    start_from_solution, starting_state, FrameSlot, Joint, Start,
 };
 use super::{RigError, RigInput, RigOptions, RigResult};
-use nalgebra::Vector1;
 use std::time::Instant;
 
 /// A joint solve whose time offset moved the frames by more than this
@@ -74,7 +73,7 @@ fn joint_solve_in_place(
 ) -> Result<(Start, Joint), RigError> {
     let mut joint = joint_solve(input, o, &start, gyro_integral, progress)?;
     for _ in 0..MAX_RESLOTS {
-        let offset = joint.solution.get::<Vector1<f64>>(OFFSET)?[0];
+        let offset = joint.offset()?;
         if offset.abs() <= RESLOT_OFFSET_S {
             break;
         }

@@ -20,15 +20,15 @@ use tumble_solvers::{
 };
 
 /// The target's pose `T_WT`.
-pub(super) const TARGET: Key = Key::new('t', 0);
+const TARGET: Key = Key::new('t', 0);
 /// The time offset.
-pub(super) const OFFSET: Key = Key::new('d', 0);
+const OFFSET: Key = Key::new('d', 0);
 /// Camera `c`'s `T_BC`.
-pub(super) fn extrinsic(c: usize) -> Key {
+fn extrinsic(c: usize) -> Key {
     Key::new('e', c as u64)
 }
 /// Camera `c`'s intrinsics.
-pub(super) fn intrinsics(c: usize) -> Key {
+fn intrinsics(c: usize) -> Key {
     Key::new('k', c as u64)
 }
 
@@ -144,7 +144,7 @@ pub(super) struct StartingState {
 }
 
 /// Seconds on the IMU's axis of a stamp \[ns\].
-pub(super) fn stamp(input: &RigInput, t_ns: i64) -> f64 {
+fn stamp(input: &RigInput, t_ns: i64) -> f64 {
     (t_ns - input.imu_t0_ns) as f64 * 1e-9
 }
 
@@ -392,12 +392,12 @@ pub(super) fn starting_state(
 /// What the joint solve found.
 pub(super) struct Joint {
     /// The solution.
-    pub solution: Values,
+    solution: Values,
     /// The last pass's graph, and its corner factors.
     graph: Graph,
     corners: Vec<CornerEntry>,
     /// The covariances of `cov_keys`: the noise model's and the cluster-robust.
-    pub cov: RobustCovariances,
+    cov: RobustCovariances,
     cov_keys: Vec<Key>,
     /// Frames per cluster of the robust covariance.
     block: usize,
@@ -406,6 +406,29 @@ pub(super) struct Joint {
     iterations: usize,
     /// Whitened χ²/dof of the IMU factors.
     imu_chi2_per_dof: f64,
+}
+
+impl Joint {
+    /// The solve's offset variable: the time offset beyond the frames' placement \[s\].
+    pub(super) fn offset(&self) -> Result<f64, RigError> {
+        Ok(self.solution.get::<Vector1<f64>>(OFFSET)?[0])
+    }
+
+    /// Kalibr's `timeshift_cam_imu` \[s\] (the frames' placement of `start`
+    /// plus the solve's offset) and its σ, the larger of the two
+    /// covariances' (NaN when the offset is not estimated).
+    pub(super) fn time_offset(&self, start: &Start, o: &RigOptions) -> Result<(f64, f64), RigError> {
+        let td = start.frame_offset + self.offset()?;
+        let sigma = if o.estimate_time_offset {
+            [&self.cov.model, &self.cov.robust]
+                .iter()
+                .map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()))
+                .fold(0.0, f64::max)
+        } else {
+            f64::NAN
+        };
+        Ok((td, sigma))
+    }
 }
 
 /// Stage 6 (one pass): the joint graph — IMU preintegration and bias walks
@@ -636,7 +659,6 @@ pub(super) fn results(
     mut notes: Vec<String>,
 ) -> Result<RigResult, RigError> {
     let solution = &joint.solution;
-    let td = solution.get::<Vector1<f64>>(OFFSET)?[0];
     let cov = &joint.cov;
     let mut largest_ratio: f64 = 0.0;
     for k in &joint.cov_keys {
@@ -647,14 +669,7 @@ pub(super) fn results(
         }
     }
     let sigma_source = super::SigmaSource { block_frames: joint.block, blocks: cov.clusters, largest_ratio };
-    let td_sigma = if o.estimate_time_offset {
-        [&cov.model, &cov.robust]
-            .iter()
-            .map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()))
-            .fold(0.0, f64::max)
-    } else {
-        f64::NAN
-    };
+    let (time_offset_s, time_offset_sigma_s) = joint.time_offset(start, o)?;
     let cameras =
         (0..input.cameras.len()).map(|c| camera_result(input, o, start, joint, c)).collect::<Result<Vec<_>, _>>()?;
     let chain = (1..cameras.len()).map(|c| cameras[c].t_bc.inverse() * cameras[c - 1].t_bc).collect();
@@ -675,8 +690,8 @@ pub(super) fn results(
     }
     Ok(RigResult {
         cameras,
-        time_offset_s: start.frame_offset + td,
-        time_offset_sigma_s: td_sigma,
+        time_offset_s,
+        time_offset_sigma_s,
         coarse_time_offset: coarse.as_ref().map(|c| (c.0, c.1)),
         time_offset_profile: coarse.map(|c| c.2).unwrap_or_default(),
         gravity_in_target,

@@ -4,10 +4,9 @@
 //! σ widened to cover what the halves show ([`crate::model::split`]).
 
 use super::init::RateIntegral;
-use super::solve::{camera_result, joint_solve, start_from_solution, Joint, Start, OFFSET};
+use super::solve::{camera_result, joint_solve, start_from_solution, Joint, Start};
 use super::{CameraResult, RigError, RigInput, RigOptions, RigResult};
 use crate::model::split::{HalfComparison, SplitCheck};
-use nalgebra::Vector1;
 use tumble_solvers::lie::so3_log;
 
 /// Fewest frames in a half for the check to run: each half must hold a
@@ -43,7 +42,8 @@ pub(super) fn check_halves(
     let mut halves = Vec::new();
     for (h, range) in [0..n / 2, n / 2..n].into_iter().enumerate() {
         progress(&format!("split check: joint solve on half {} ({} frames)", h + 1, range.len()));
-        let half = start_from_solution(start, joint, range.clone(), rig.time_offset_s - start.frame_offset)?;
+        let offset = joint.offset()?;
+        let half = start_from_solution(start, joint, range.clone(), offset)?;
         let j = joint_solve(input, o, &half, gyro_integral, &mut |m: &str| progress(&format!("  {m}")))?;
         if !j.converged {
             rig.notes.push(format!("the joint solve on half {} did not converge: σ not checked", h + 1));
@@ -51,15 +51,11 @@ pub(super) fn check_halves(
         }
         let cameras =
             (0..input.cameras.len()).map(|c| camera_result(input, o, &half, &j, c)).collect::<Result<_, _>>()?;
-        let td = start.frame_offset + j.solution.get::<Vector1<f64>>(OFFSET)?[0];
-        let td_sigma = [&j.cov.model, &j.cov.robust]
-            .iter()
-            .map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()))
-            .fold(0.0, f64::max);
+        let time_offset = j.time_offset(&half, o)?;
         let span = |k: usize| start.frames[k].t - start.frames[0].t;
         let label =
             format!("frames {}–{} ({:.1}–{:.1} s)", range.start, range.end - 1, span(range.start), span(range.end - 1));
-        halves.push((label, HalfEstimate { cameras, time_offset: (td, td_sigma) }));
+        halves.push((label, HalfEstimate { cameras, time_offset }));
     }
     let [(l1, a), (l2, b)]: [(String, HalfEstimate); 2] =
         halves.try_into().map_err(|_| RigError::Internal("two halves expected".into()))?;
