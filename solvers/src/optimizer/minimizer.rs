@@ -41,8 +41,15 @@ pub(super) struct Minimizer<'a> {
 struct Point {
     /// `Jᵀr`, kept then eliminated unknowns.
     g: Vec<f64>,
+    /// Its largest entry's magnitude.
+    g_max: f64,
     /// The damping scale D.
     diag: Vec<f64>,
+    /// The current curvature diag H: the stationarity check's undamped step
+    /// is damped relative to it, not to D, which keeps the largest curvature
+    /// each unknown had (and a floor) and would hold back a column that has
+    /// since all but vanished (a saturated exponential).
+    curvature: Vec<f64>,
     /// ‖x‖ over the free variables.
     x_norm: f64,
 }
@@ -98,19 +105,20 @@ impl<'a> Minimizer<'a> {
                 self.summary.termination = Termination::MaxIterations;
                 break;
             }
-            let Some(point) = self.assemble(&mut strategy) else {
+            let point = self.assemble(&mut strategy);
+            // A small gradient proposes a stop as a small decrease does: where
+            // the cost is small too (a zero-residual fit still converging, an
+            // ill-conditioned fit whose columns nearly cancel) the undamped
+            // model still promises a decrease, and the solve goes on.
+            let small_gradient = point.g_max <= self.o.gradient_tolerance;
+            if small_gradient && !self.o.check_stationarity {
                 self.summary.termination = Termination::GradientTolerance;
                 break;
-            };
-            if let Some(test) = proposed.take() {
-                let at = (self.cost, point.x_norm);
-                let (o, sys) = (self.o, &self.sys);
-                if let Some(t) =
-                    check_stop(test, &mut self.structure, sys, &point.diag, &point.g, at, o, &mut self.summary)
-                {
-                    self.summary.termination = t;
-                    break;
-                }
+            }
+            let mut tests = small_gradient.then_some(Termination::GradientTolerance).into_iter().chain(proposed.take());
+            if let Some(t) = tests.find_map(|test| self.check(test, &point)) {
+                self.summary.termination = t;
+                break;
             }
             self.summary.iterations += 1;
             match self.iterate(&point, &mut strategy)? {
@@ -126,10 +134,17 @@ impl<'a> Minimizer<'a> {
         Ok(())
     }
 
+    /// The stationarity check of the stop `test` proposes at `point`
+    /// ([`check_stop`]): the termination, or None to go on.
+    fn check(&mut self, test: Termination, point: &Point) -> Option<Termination> {
+        let at = (self.cost, point.x_norm);
+        let (o, sys) = (self.o, &self.sys);
+        check_stop(test, &mut self.structure, sys, &point.curvature, &point.g, at, o, &mut self.summary)
+    }
+
     /// Assemble the normal equations at the current point: its gradient,
-    /// scaled gradient and damping scale; None when the largest gradient
-    /// entry is within [`LmOptions::gradient_tolerance`].
-    fn assemble(&mut self, strategy: &mut TrustRegion) -> Option<Point> {
+    /// scaled gradient and damping scale.
+    fn assemble(&mut self, strategy: &mut TrustRegion) -> Point {
         let t = Instant::now();
         self.structure.assemble_into(&self.lins, &mut self.sys);
         self.summary.time_build += t.elapsed().as_secs_f64();
@@ -138,13 +153,10 @@ impl<'a> Minimizer<'a> {
         let raw_diag = self.structure.diagonal(&self.sys);
         self.summary.scaled_gradient = scaled_gradient(&g, &raw_diag, self.cost);
         self.summary.max_gradient = gmax;
-        if gmax <= self.o.gradient_tolerance {
-            return None;
-        }
         let diag = strategy.scale(&raw_diag, self.o);
         let x_norm =
             self.free.iter().map(|&v| self.vars[v].params_dyn().iter().map(|p| p * p).sum::<f64>()).sum::<f64>().sqrt();
-        Some(Point { g, diag, x_norm })
+        Point { g, g_max: gmax, diag, curvature: raw_diag, x_norm }
     }
 
     /// One iteration: damped steps until one is accepted, or the strategy gives up.

@@ -37,7 +37,9 @@ pub enum Method {
 ///   scaled gradient, [`Summary::scaled_gradient`](super::Summary::scaled_gradient)); and by one undamped step
 ///   `δ`: `(−gᵀδ − ½ δᵀHδ) / C ≤ f`.
 /// - `gradient_tolerance` `γ` is absolute: `max_j |g_j| ≤ γ` ends the solve as
-///   `GradientTolerance`.
+///   `GradientTolerance` where the undamped step agrees, as for a cost test
+///   (a gradient can be that small far from a minimum: a zero-residual fit
+///   whose cost is still falling, columns that nearly cancel).
 /// - `parameter_tolerance` `p` bounds the step: `‖δ‖ ≤ p (‖x‖ + p)` ends it
 ///   as `ParameterTolerance` where the scaled gradient agrees, else
 ///   `Stalled`.
@@ -53,7 +55,9 @@ pub struct LmOptions {
     /// (a fast, superlinear convergence stops without one more iteration; a
     /// slow, linear one is not taken for a minimum).
     pub function_tolerance: f64,
-    /// Stop when the largest gradient entry is below this.
+    /// Stop when the largest gradient entry is below this (and, with
+    /// [`LmOptions::check_stationarity`], one undamped step predicts no
+    /// larger relative decrease than `function_tolerance`).
     pub gradient_tolerance: f64,
     /// Stop when ‖δ‖ < this · (‖x‖ + this): converged where the scaled
     /// gradient agrees ([`LmOptions::check_stationarity`]), else

@@ -16,7 +16,14 @@ pub(super) struct TrustRegion {
     radius: f64,
     /// Undamped Gauss–Newton: every step is taken.
     gauss_newton: bool,
+    /// The smallest λ after good steps ([`TrustRegion::scale`]).
+    floor: f64,
 }
+
+/// The smallest damping relative to the current curvature: λ·D ≥ this · diag H
+/// for every unknown after a run of good steps (then λ can still grow by
+/// doubling from it within a few rejected steps).
+const MIN_RELATIVE_DAMPING: f64 = 1e-16;
 
 /// Why λ cannot grow any more: [`LmOptions::max_lambda`] passed.
 pub(super) struct DampingExhausted;
@@ -29,6 +36,7 @@ impl TrustRegion {
             largest: Vec::new(),
             radius: f64::INFINITY,
             gauss_newton: o.method == Method::GaussNewton,
+            floor: MIN_RELATIVE_DAMPING,
         }
     }
 
@@ -48,8 +56,18 @@ impl TrustRegion {
                 *m = m.max(*d);
             }
         }
-        let scale = if o.keep_largest_scale { &self.largest[..] } else { raw_diag };
-        scale.iter().map(|d| d.clamp(o.min_diagonal, o.max_diagonal)).collect()
+        let scale: Vec<f64> = if o.keep_largest_scale { &self.largest[..] } else { raw_diag }
+            .iter()
+            .map(|d| d.clamp(o.min_diagonal, o.max_diagonal))
+            .collect();
+        // λ's floor is relative to the current curvature, not to the largest
+        // one kept: where a column has shrunk by orders of magnitude since the
+        // start (a polynomial's far start), a floor relative to D would damp
+        // it by far more than its own curvature and creep (Chebyquad from
+        // ×100 its standard start: 1000 iterations of 1e-4 steps).
+        let shrink = raw_diag.iter().zip(&scale).filter(|(r, _)| **r > 0.0).map(|(r, d)| r / d).fold(1.0, f64::min);
+        self.floor = (MIN_RELATIVE_DAMPING * shrink).max(f64::MIN_POSITIVE);
+        scale
     }
 
     /// The damping added to the diagonal (None for Gauss–Newton).
@@ -98,7 +116,7 @@ impl TrustRegion {
     pub fn accept(&mut self, rho: f64, o: &LmOptions) {
         if !self.gauss_newton {
             self.lambda *= o.min_lambda_decrease.max(1.0 - (2.0 * rho - 1.0).powi(3));
-            self.lambda = self.lambda.max(1e-16);
+            self.lambda = self.lambda.max(self.floor);
             self.nu = 2.0;
         }
     }

@@ -39,22 +39,27 @@ pub(super) fn predicted_decrease(delta: &[f64], g: &[f64], hd: &[f64]) -> f64 {
 
 /// The stationarity check ([`LmOptions::check_stationarity`]) of a stop that
 /// `test` proposes at the assembled system `sys` (cost `cost`, parameter
-/// norm `x_norm`, damping scale `diag`): the termination to end the solve
+/// norm `x_norm`, current curvature `diag`, diag H): the termination to end the solve
 /// with, or `None` to go on with damped steps.
 ///
-/// - The squared scaled gradient must be within `function_tolerance`: it
-///   bounds the relative decrease to come from below whatever a solve's
-///   accuracy, and a column that has all but vanished (a saturated
-///   parameter, below the damping floor) still shows. Else a small step has
-///   stalled and a cost test goes on.
-/// - A small damped step needs no more: at a first-order stationary point the
-///   undamped model can still promise a decrease along directions where the
-///   columns cancel (identical columns at a symmetric minimum), which no step
-///   delivers.
-/// - A cost test also needs one undamped solve whose predicted decrease (or
-///   step) is within the tolerances.
-/// - A cost at the rounding level of the start is a zero-residual fit, where
-///   the residual stays aligned with the columns: converged.
+/// - A cost at the rounding level of the start's residuals (`ε²` times the
+///   start's cost: each residual `ε` times the start's) is a zero-residual
+///   fit: converged. (A singular one, whose solution is `x = 0`, would
+///   otherwise creep on with steps that never get small against `x`.)
+/// - The squared scaled gradient within `function_tolerance` bounds the
+///   relative decrease to come from below whatever a solve's accuracy, and a
+///   column that has all but vanished (a saturated parameter, below the
+///   damping floor) still shows. A small damped step needs no more: at a
+///   first-order stationary point the undamped model can still promise a
+///   decrease along directions where the columns cancel (identical columns
+///   at a symmetric minimum), which no step delivers. Where it fails, a cost
+///   test or a small gradient goes on.
+/// - Otherwise one undamped solve decides: a cost test or a small gradient
+///   stops where its predicted decrease (or its step) is within the
+///   tolerances; a small damped step stops where the undamped step is small
+///   too (a zero-residual fit converging, whose residual stays aligned with
+///   the columns) and is a [`Termination::Stalled`] where it is not (the
+///   damping, not the minimum, made the step small).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn check_stop(
     test: Termination,
@@ -66,15 +71,15 @@ pub(super) fn check_stop(
     o: &LmOptions,
     summary: &mut Summary,
 ) -> Option<Termination> {
-    if cost <= f64::EPSILON * summary.initial_cost {
+    if cost <= f64::EPSILON * f64::EPSILON * summary.initial_cost {
         return Some(test);
     }
+    let small_step = test == Termination::ParameterTolerance;
     let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
-    if test != Termination::FunctionTolerance {
-        return Some(if aligned { test } else { Termination::Stalled });
-    }
-    if !aligned {
-        return None;
+    match (small_step, aligned) {
+        (true, true) => return Some(test),
+        (false, false) => return None,
+        _ => {}
     }
     let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
     summary.linear_solves += 1;
@@ -86,13 +91,14 @@ pub(super) fn check_stop(
         // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
         (d.is_finite() && d >= 0.0).then(|| (d, delta.iter().map(|v| v * v).sum::<f64>().sqrt()))
     });
-    let small = match solved {
-        Some((d, step)) => {
-            summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
-            d <= o.function_tolerance * cost || step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance)
-        }
+    let Some((d, step)) = solved else {
         // No undamped step (H singular there): the scaled gradient decided.
-        None => true,
+        return Some(if small_step { Termination::Stalled } else { test });
     };
-    small.then_some(test)
+    summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
+    let step_small = step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
+    if small_step {
+        return Some(if step_small { test } else { Termination::Stalled });
+    }
+    (d <= o.function_tolerance * cost || step_small).then_some(test)
 }
