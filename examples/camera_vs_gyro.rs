@@ -2,9 +2,10 @@
 //! reference calibration, on EuRoC's `imu_april` (or another ASL folder with
 //! `camN/corners.csv` and a target).
 //!
-//! `cargo run --release --example camera_vs_gyro -- [DATA_DIR]` (default
+//! `cargo run --release --example camera_vs_gyro -- [DATA_DIR] [--rig DIR]` (default
 //! `$TUMBLE_DATA/euroc`, docs/datasets.md: `imu_april/` and EuRoC's published calibration in
-//! `V1_01_easy_micro/`).
+//! `V1_01_easy_micro/`). `--rig DIR`: tumble's calibration read from what
+//! `tumble calibrate-rig` wrote there (`camN/sensor.yaml`) instead of calibrated again.
 //!
 //! Each frame's pose comes from its corners alone (PnP with the calibration's
 //! intrinsics), turned into the body frame by its `T_BC`. Over two frames
@@ -26,8 +27,9 @@
 //! The calibrations compared: EuRoC's published one (Kalibr's), and
 //! tumble's own of this recording (`calibrate-rig`, intrinsics estimated).
 
-use nalgebra::{Matrix3, UnitQuaternion, Vector3};
-use std::path::PathBuf;
+use nalgebra::{Isometry3, Matrix3, UnitQuaternion, Vector3};
+use std::error::Error;
+use std::path::{Path, PathBuf};
 use tumble::rig::init::refine_view_pose;
 use tumble::rig::View;
 use tumble::rig::{calibrate_rig, RigInput, RigOptions};
@@ -44,8 +46,16 @@ const MAX_RMS_PX: f64 = 2.0 * TARGET_TRUTH_MAX_RMS_PX;
 const SPAN_S: f64 = 0.25;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let root = match std::env::args().nth(1) {
-        Some(dir) => PathBuf::from(dir),
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let rig_dir = args.iter().position(|a| a == "--rig").map(|i| args.get(i + 1).map(PathBuf::from));
+    let rig_dir = match rig_dir {
+        Some(None) => return Err("--rig needs the folder `tumble calibrate-rig` wrote".into()),
+        Some(dir) => dir,
+        None => None,
+    };
+    let positional = args.iter().enumerate().find(|(i, a)| !a.starts_with("--") && (*i == 0 || args[i - 1] != "--rig"));
+    let root = match positional {
+        Some((_, dir)) => PathBuf::from(dir),
         None => match tumble::io::datasets::dataset("euroc") {
             Some(dir) => dir,
             None => return Ok(()),
@@ -59,14 +69,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
     let input = RigInput::from_asl(&seq, &seq.join("target.yaml"), Some(&micro.join("imu0/sensor.yaml")), None, &opts)?;
-    eprintln!("calibrating the rig on the recording (intrinsics estimated) …");
-    let rig = calibrate_rig(&input, &opts, &mut |_| {})?;
+    let ours = match &rig_dir {
+        Some(dir) => read_calibration(dir, &input)?,
+        None => {
+            eprintln!("calibrating the rig on the recording (intrinsics estimated) …");
+            let rig = calibrate_rig(&input, &opts, &mut |_| {})?;
+            rig.cameras.iter().map(|c| (c.name.clone(), c.model, c.t_bc)).collect()
+        }
+    };
     println!("Gyro against each frame pair's camera rotation (disjoint pairs; M in %, ± 1σ):\n");
     for cam in &input.cameras {
         let (euroc, t_bs, _, _) = tumble::io::asl::read_camera_sensor(&micro.join(&cam.name).join("sensor.yaml"))?;
         let euroc_t_bc = t_bs.ok_or("EuRoC's sensor.yaml without T_BS")?;
-        let ours = rig.cameras.iter().find(|c| c.name == cam.name).ok_or("camera missing from the result")?;
-        for (label, model, t_bc) in [("EuRoC's", euroc, euroc_t_bc), ("tumble's", ours.model, ours.t_bc)] {
+        let (_, model, t_bc) = ours.iter().find(|c| c.0 == cam.name).ok_or("camera missing from the result")?;
+        for (label, model, t_bc) in [("EuRoC's", euroc, euroc_t_bc), ("tumble's", *model, *t_bc)] {
             let fit = fit(&cam.views, &model, &t_bc.rotation, &input)?;
             println!("{} with {label} calibration ({} pairs, residual RMS {:.3}°):", cam.name, fit.pairs, fit.rms_deg);
             for r in 0..3 {
@@ -88,6 +104,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         }
     }
     Ok(())
+}
+
+/// A camera's name, model and `T_BC`.
+type Calibrated = (String, CameraModel, Isometry3<f64>);
+
+/// Each camera's name, model and `T_BC` as `tumble calibrate-rig` wrote them in `dir`.
+fn read_calibration(dir: &Path, input: &RigInput) -> Result<Vec<Calibrated>, Box<dyn Error>> {
+    input
+        .cameras
+        .iter()
+        .map(|cam| {
+            let file = dir.join(&cam.name).join("sensor.yaml");
+            let (model, t_bs, _, _) = tumble::io::asl::read_camera_sensor(&file)?;
+            let t_bc = t_bs.ok_or_else(|| format!("{}: no T_BS", file.display()))?;
+            Ok((cam.name.clone(), model, t_bc))
+        })
+        .collect()
 }
 
 /// `M` with its σ, the pairs used and the residual RMS.
