@@ -28,6 +28,18 @@ fn input() -> Option<(RigInput, Reference)> {
     Some((input, reference))
 }
 
+/// The whole recording calibrated with its intrinsics estimated, once per
+/// test binary (two trials start from it; it is a minute's work).
+fn estimated_whole() -> Option<&'static RigResult> {
+    static RIG: std::sync::OnceLock<Option<RigResult>> = std::sync::OnceLock::new();
+    RIG.get_or_init(|| {
+        let (input, _) = input()?;
+        let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
+        Some(calibrate_rig(&input, &opts, &mut |m| println!("{m}")).unwrap())
+    })
+    .as_ref()
+}
+
 fn options(reference: &Reference) -> RigOptions {
     RigOptions {
         resolution: Some([752, 480]),
@@ -50,10 +62,9 @@ fn angle_deg(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
 #[test]
 #[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn imu_april_intrinsics_estimated() {
-    let Some((input, reference)) = input() else { return };
-    let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
-    let rig = calibrate_rig(&input, &opts, &mut |m| println!("{m}")).unwrap();
-    println!("{}", tumble::rig::summary_markdown(&rig));
+    let Some((_, reference)) = input() else { return };
+    let rig = estimated_whole().unwrap();
+    println!("{}", tumble::rig::summary_markdown(rig));
     assert!(rig.refusal().is_none(), "{:?}", rig.refusal());
     // With the cluster-robust σ the rotation and the focal lengths are weak
     // (3σ ≈ 0.17–0.19° and 0.65 % against 0.15° and 0.5 %); nothing is undetermined.
@@ -438,11 +449,10 @@ fn vio_with_its_own_rig_calibration_starts_in_motion_right() {
     let Some((input, _)) = input() else { return };
     let seq = common::shared("euroc/imu_april").unwrap();
     let micro = common::shared("euroc/V1_01_easy_micro/mav0").unwrap();
-    let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
-    let rig = calibrate_rig(&input, &opts, &mut |_| {}).unwrap();
+    let rig = estimated_whole().unwrap();
     let dir = std::env::temp_dir().join(format!("tumble_rig_start_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    tumble::rig::write_rig(&rig, &input, &dir.join("rig")).unwrap();
+    tumble::rig::write_rig(rig, &input, &dir.join("rig")).unwrap();
     // The cameras as `from_target_recording` reads them: the rig's cam0, EuRoC's IMU noise.
     let cams = dir.join("cams/mav0");
     std::fs::create_dir_all(cams.join("cam0")).unwrap();
