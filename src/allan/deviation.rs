@@ -412,9 +412,38 @@ impl<'a> RateCorrelation<'a> {
     }
 }
 
-/// Σ (ca·a(i) + cb·b(i) + offset)² over two equally long slices, in eight
-/// lanes the compiler turns into SIMD.
+/// Σ (ca·a(i) + cb·b(i) + offset)² over two equally long slices: the edge
+/// terms' inner loop (a quarter of an Allan sweep's time). With fused
+/// multiply-adds on 256-bit vectors where the CPU has them (checked at run
+/// time: the binary stays portable), else in eight lanes the compiler turns
+/// into SSE2.
 fn pair_sq(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+        // SAFETY: the CPU supports AVX2 and FMA, checked just above.
+        return unsafe { pair_sq_fma(a, b, ca, cb, offset) };
+    }
+    pair_sq_portable(a, b, ca, cb, offset)
+}
+
+/// [`pair_sq`] compiled for AVX2 with fused multiply-adds.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn pair_sq_fma(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
+    let mut acc = [0.0f64; 16];
+    let mut ca16 = a.chunks_exact(16);
+    let mut cb16 = b.chunks_exact(16);
+    for (u, v) in (&mut ca16).zip(&mut cb16) {
+        for k in 0..16 {
+            let w = u[k].mul_add(ca, v[k].mul_add(cb, offset));
+            acc[k] = w.mul_add(w, acc[k]);
+        }
+    }
+    acc.iter().sum::<f64>() + pair_sq_portable(ca16.remainder(), cb16.remainder(), ca, cb, offset)
+}
+
+/// [`pair_sq`] in eight independent lanes.
+fn pair_sq_portable(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
     let mut acc = [0.0f64; 8];
     let mut ca8 = a.chunks_exact(8);
     let mut cb8 = b.chunks_exact(8);
