@@ -22,7 +22,11 @@ fn g2o_errors_name_file_and_line() {
         ("VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0\n", "bad.g2o:2:", "missing theta"),
         ("VERTEX_SE2 0 0 0 0\nVERTEX_XY 1 1 0\n", "bad.g2o:2:", "unknown tag 'VERTEX_XY'"),
         ("VERTEX_SE2 0 0 NaN 0\n", "bad.g2o:1:", "not finite"),
-        ("VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 7 1 0 0 1 0 0 1 0 1\n", "bad.g2o:2:", "vertex 7, which is not defined"),
+        (
+            "VERTEX_SE2 0 0 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 1 0 1\nEDGE_SE2 5 7 1 0 0 1 0 0 1 0 1\n",
+            "bad.g2o:3:",
+            "vertex 5 has no VERTEX line, and no chain of edges links it",
+        ),
         (
             "VERTEX_SE2 0 0 0 0\nVERTEX_SE2 1 1 0 0\nEDGE_SE2 0 1 1 0 0 1 0 0 -1 0 1\n",
             "bad.g2o:3:",
@@ -40,6 +44,28 @@ fn g2o_errors_name_file_and_line() {
         let e = g2o_err(text);
         assert!(e.starts_with(loc) && e.contains(what), "for {text:?} got: {e}");
     }
+}
+
+/// Files of edges alone (Carlone's CSAIL, manhattan, KITTI graphs): the
+/// poses are chained along the edges from the first vertex at the origin, an
+/// edge read backwards inverted; the gauge is that vertex.
+#[test]
+fn g2o_edges_alone_chain_the_initial_poses() {
+    use tumble::solvers::sophus_lie::{IsAffineGroup, Isometry2F64, Isometry3F64};
+    use tumble::solvers::X;
+    let text = "EDGE_SE2 0 1 1 0 1.5707963267948966 1 0 0 1 0 1\nEDGE_SE2 2 1 1 0 0 1 0 0 1 0 1\n";
+    let pg = parse_g2o(Path::new("edges.g2o"), text, &G2oOptions::default()).unwrap();
+    assert_eq!((pg.vertices, pg.edges), (3, 2));
+    assert!(pg.warnings.iter().any(|w| w.contains("2 vertices without a VERTEX line")), "{:?}", pg.warnings);
+    // Vertex 1 at (1, 0) facing +y; vertex 2 one metre behind it along its heading: (1, −1).
+    let p2 = pg.values.get::<Isometry2F64>(X(2)).unwrap().translation();
+    assert!((p2[0] - 1.0).abs() < 1e-12 && (p2[1] + 1.0).abs() < 1e-12, "{p2:?}");
+    assert!(pg.values.is_constant(X(0)));
+    let info: String = (0..6).flat_map(|r| (r..6).map(move |c| if r == c { "1 " } else { "0 " })).collect();
+    let text = format!("VERTEX_SE3:QUAT 4 0 0 2 0 0 0 1\nEDGE_SE3:QUAT 4 9 0 3 0 0 0 0 1 {info}\n");
+    let pg = parse_g2o(Path::new("edges3.g2o"), &text, &G2oOptions::default()).unwrap();
+    let p9 = pg.values.get::<Isometry3F64>(X(9)).unwrap().translation();
+    assert!((p9 - nalgebra::Vector3::new(0.0, 3.0, 2.0)).norm() < 1e-12, "{p9:?}");
 }
 
 #[test]

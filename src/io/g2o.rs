@@ -10,11 +10,11 @@
 use crate::error::InputError;
 use crate::io::tokens::{read_text, LineTokens};
 use nalgebra::{DMatrix, Vector3};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::Path;
 use tumble_factors::pose_graph_3d::QuaternionPoseError;
 use tumble_factors::BetweenFactor;
-use tumble_solvers::{se2, se3_from_quaternion, Graph, NoiseModel, Values, X};
+use tumble_solvers::{se2, se3_from_quaternion, DynVariable, Graph, Key, NoiseModel, Values, X};
 
 /// What to do with an information matrix that is not positive definite.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -272,14 +272,10 @@ impl G2oReader<'_> {
                 "Ceres' quaternion edge error applies to 3-D pose graphs; this one is planar",
             ));
         }
+        let posed = self.chain_missing_vertices()?;
         let mut graph = Graph::new();
         let n_edges = self.edges.len();
         for (ln, a, b, meas, noise) in self.edges {
-            for id in [a, b] {
-                if !self.vertex_lines.contains_key(&id) {
-                    return Err(InputError::at(path, ln, format!("edge refers to vertex {id}, which is not defined")));
-                }
-            }
             if a == b {
                 return Err(InputError::at(path, ln, format!("edge connects vertex {a} to itself")));
             }
@@ -292,12 +288,12 @@ impl G2oReader<'_> {
             };
         }
         if self.fixed.is_empty() {
-            if let Some((&id, _)) = self.vertex_lines.iter().next() {
+            if let Some(&id) = posed.iter().next() {
                 self.values.set_constant(X(id), true);
             }
         }
         for (ln, id) in self.fixed {
-            if !self.vertex_lines.contains_key(&id) {
+            if !posed.contains(&id) {
                 return Err(InputError::at(path, ln, format!("FIX names vertex {id}, which is not defined")));
             }
             self.values.set_constant(X(id), true);
@@ -305,12 +301,92 @@ impl G2oReader<'_> {
         if n_edges == 0 {
             return Err(InputError::file(path, "has no edges: a pose graph without measurements has nothing to solve"));
         }
-        let vertices = self.vertex_lines.len();
+        let vertices = posed.len();
         Ok(PoseGraph { graph, values: self.values, kind, vertices, edges: n_edges, warnings: self.warnings })
+    }
+}
+
+impl G2oReader<'_> {
+    /// Initial poses of the vertices no `VERTEX` line gave (files of edges
+    /// alone are common): chained along the edges, breadth-first from the
+    /// vertices that have one — from the lowest id, at the origin, when none
+    /// has — as g2o's odometry guess does. Returns every posed vertex; a
+    /// warning says how many were chained.
+    fn chain_missing_vertices(&mut self) -> Result<BTreeSet<u64>, InputError> {
+        let mut posed: BTreeSet<u64> = self.vertex_lines.keys().copied().collect();
+        let missing = self.edges.iter().flat_map(|e| [e.1, e.2]).filter(|id| !posed.contains(id)).count();
+        if missing == 0 {
+            return Ok(posed);
+        }
+        let mut touching: BTreeMap<u64, Vec<usize>> = BTreeMap::new();
+        for (k, e) in self.edges.iter().enumerate() {
+            touching.entry(e.1).or_default().push(k);
+            touching.entry(e.2).or_default().push(k);
+        }
+        let root = *touching.keys().next().expect("an edge was read");
+        let mut queue: VecDeque<u64> = posed.iter().copied().collect();
+        if queue.is_empty() {
+            match self.edges[0].3 {
+                EdgeMeas::Se2(_) => self.values.insert(X(root), se2(0.0, 0.0, 0.0)),
+                EdgeMeas::Se3(_) => {
+                    self.values.insert(X(root), se3_from_quaternion([1.0, 0.0, 0.0, 0.0], Vector3::zeros()))
+                }
+            }
+            posed.insert(root);
+            queue.push_back(root);
+        }
+        let mut chained = 0;
+        while let Some(v) = queue.pop_front() {
+            for &k in touching.get(&v).map(Vec::as_slice).unwrap_or_default() {
+                let (_, a, b, meas, _) = &self.edges[k];
+                let (other, forward) = if *a == v { (*b, true) } else { (*a, false) };
+                if posed.contains(&other) {
+                    continue;
+                }
+                let pose = meas.chain(&self.values, X(v), forward).map_err(|e| InputError::file(self.path, e))?;
+                self.values.insert_dyn(X(other), pose);
+                posed.insert(other);
+                queue.push_back(other);
+                chained += 1;
+            }
+        }
+        if let Some((ln, id)) =
+            self.edges.iter().flat_map(|e| [(e.0, e.1), (e.0, e.2)]).find(|(_, id)| !posed.contains(id))
+        {
+            return Err(InputError::at(
+                self.path,
+                ln,
+                format!("vertex {id} has no VERTEX line, and no chain of edges links it to a vertex that has one"),
+            ));
+        }
+        self.warnings.push(format!(
+            "{}: {chained} vertices without a VERTEX line: their initial poses chained along the edges (breadth-first from {})",
+            self.path.display(),
+            if self.vertex_lines.is_empty() { format!("vertex {root} at the origin") } else { "the vertices given".into() }
+        ));
+        Ok(posed)
     }
 }
 
 enum EdgeMeas {
     Se2(tumble_solvers::sophus_lie::Isometry2F64),
     Se3(tumble_solvers::sophus_lie::Isometry3F64),
+}
+
+impl EdgeMeas {
+    /// The pose of an edge's other vertex from the pose of `from` (the edge's
+    /// first vertex when `forward`, else its second): `T_from · Z` or `T_from · Z⁻¹`.
+    fn chain(&self, values: &Values, from: Key, forward: bool) -> Result<Box<dyn DynVariable>, String> {
+        let err = |e: tumble_solvers::ValueError| e.to_string();
+        Ok(match self {
+            EdgeMeas::Se2(z) => {
+                let t = values.get::<tumble_solvers::sophus_lie::Isometry2F64>(from).map_err(err)?;
+                Box::new(t.group_mul(if forward { *z } else { z.inverse() }))
+            }
+            EdgeMeas::Se3(z) => {
+                let t = values.get::<tumble_solvers::sophus_lie::Isometry3F64>(from).map_err(err)?;
+                Box::new(t.group_mul(if forward { *z } else { z.inverse() }))
+            }
+        })
+    }
 }
