@@ -47,10 +47,8 @@ const SPAN_S: f64 = 0.25;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let rig_dir = args.iter().position(|a| a == "--rig").map(|i| args.get(i + 1).map(PathBuf::from));
-    let rig_dir = match rig_dir {
-        Some(None) => return Err("--rig needs the folder `tumble calibrate-rig` wrote".into()),
-        Some(dir) => dir,
+    let rig_dir = match args.iter().position(|a| a == "--rig") {
+        Some(i) => Some(PathBuf::from(args.get(i + 1).ok_or("--rig needs the folder `tumble calibrate-rig` wrote")?)),
         None => None,
     };
     let positional = args.iter().enumerate().find(|(i, a)| !a.starts_with("--") && (*i == 0 || args[i - 1] != "--rig"));

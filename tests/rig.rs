@@ -28,16 +28,19 @@ fn input() -> Option<(RigInput, Reference)> {
     Some((input, reference))
 }
 
-/// The whole recording calibrated with its intrinsics estimated, once per
-/// test binary (two trials start from it; it is a minute's work).
-fn estimated_whole() -> Option<&'static RigResult> {
-    static RIG: std::sync::OnceLock<Option<RigResult>> = std::sync::OnceLock::new();
-    RIG.get_or_init(|| {
-        let (input, _) = input()?;
-        let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
-        Some(calibrate_rig(&input, &opts, &mut |m| println!("{m}")).unwrap())
-    })
-    .as_ref()
+/// The recording, EuRoC's reference and the whole recording calibrated
+/// with its intrinsics estimated, once per test binary (two trials start
+/// from it; it is a minute's work).
+fn estimated_whole() -> Option<&'static (RigInput, Reference, RigResult)> {
+    static WHOLE: std::sync::OnceLock<Option<(RigInput, Reference, RigResult)>> = std::sync::OnceLock::new();
+    WHOLE
+        .get_or_init(|| {
+            let (input, reference) = input()?;
+            let opts = RigOptions { resolution: Some([752, 480]), ..RigOptions::default() };
+            let rig = calibrate_rig(&input, &opts, &mut |m| println!("{m}")).unwrap();
+            Some((input, reference, rig))
+        })
+        .as_ref()
 }
 
 fn options(reference: &Reference) -> RigOptions {
@@ -62,8 +65,7 @@ fn angle_deg(a: &Matrix3<f64>, b: &Matrix3<f64>) -> f64 {
 #[test]
 #[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn imu_april_intrinsics_estimated() {
-    let Some((_, reference)) = input() else { return };
-    let rig = estimated_whole().unwrap();
+    let Some((_, reference, rig)) = estimated_whole() else { return };
     println!("{}", tumble::rig::summary_markdown(rig));
     assert!(rig.refusal().is_none(), "{:?}", rig.refusal());
     // With the cluster-robust σ the rotation and the focal lengths are weak
@@ -74,7 +76,7 @@ fn imu_april_intrinsics_estimated() {
     let baseline = rig.chain[0].translation.vector.norm();
     let ref_baseline = (reference[1].1.inverse() * reference[0].1).translation.vector.norm();
     assert!((baseline - ref_baseline).abs() < 2e-3, "baseline {baseline} against {ref_baseline}");
-    for d in rig.compare(&reference) {
+    for d in rig.compare(reference) {
         println!("{d:?}");
         assert!(d.focal_relative.iter().all(|f| f.abs() < 0.01), "{d:?}");
         assert!(d.principal_point_px.iter().all(|p| p.abs() < 8.0), "{d:?}");
@@ -446,13 +448,12 @@ fn a_recording_turning_about_one_axis_is_refused() {
 #[test]
 #[ignore = "long trial: CI runs it (cargo test -- --ignored)"]
 fn vio_with_its_own_rig_calibration_starts_in_motion_right() {
-    let Some((input, _)) = input() else { return };
+    let Some((input, _, rig)) = estimated_whole() else { return };
     let seq = common::shared("euroc/imu_april").unwrap();
     let micro = common::shared("euroc/V1_01_easy_micro/mav0").unwrap();
-    let rig = estimated_whole().unwrap();
     let dir = std::env::temp_dir().join(format!("tumble_rig_start_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    tumble::rig::write_rig(rig, &input, &dir.join("rig")).unwrap();
+    tumble::rig::write_rig(rig, input, &dir.join("rig")).unwrap();
     // The cameras as `from_target_recording` reads them: the rig's cam0, EuRoC's IMU noise.
     let cams = dir.join("cams/mav0");
     std::fs::create_dir_all(cams.join("cam0")).unwrap();

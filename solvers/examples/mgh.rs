@@ -465,6 +465,15 @@ fn run_case(
     println!("{line}");
 }
 
+/// A table's title and column header (`first`: the first column's name).
+fn print_header(title: &str, first: &str) {
+    println!("{title}");
+    println!(
+        "{first:<40} {:>3} {:>3} {:>13} {:>5}  termination (default options); previous defaults: Σr²",
+        "n", "m", "Σr²", "iter"
+    );
+}
+
 fn print_totals(suite: &str, cases: usize, runs: &[(&str, LmOptions)], totals: &Totals) {
     for ((name, _), (solved, wrong, secs)) in runs.iter().zip(totals) {
         println!(
@@ -488,11 +497,7 @@ fn main() {
     let show = args.iter().position(|a| a == "--show").and_then(|i| args.get(i + 1)).cloned();
     let runs = [("default options", LmOptions::default()), ("previous defaults", previous)];
 
-    println!("The paper's problems from their standard starts");
-    println!(
-        "{:<40} {:>3} {:>3} {:>13} {:>5}  termination (default options); previous defaults: Σr²",
-        "problem", "n", "m", "Σr²", "iter"
-    );
+    print_header("The paper's problems from their standard starts", "problem");
     let problems = problems();
     let mut totals = vec![(0, 0, 0.0); runs.len()];
     for p in &problems {
@@ -501,11 +506,7 @@ fn main() {
     }
     let paper = totals;
 
-    println!("\nMINPACK-1's lmder test driver (standard starts ×1, ×10, ×100)");
-    println!(
-        "{:<40} {:>3} {:>3} {:>13} {:>5}  termination (default options); previous defaults: Σr²",
-        "case (MINPACK's final ‖r‖)", "n", "m", "Σr²", "iter"
-    );
+    print_header("\nMINPACK-1's lmder test driver (standard starts ×1, ×10, ×100)", "case (MINPACK's final ‖r‖)");
     let cases = driver_cases();
     let mut totals = vec![(0, 0, 0.0); runs.len()];
     for case in &cases {

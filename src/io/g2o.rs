@@ -314,8 +314,7 @@ impl G2oReader<'_> {
     /// warning says how many were chained.
     fn chain_missing_vertices(&mut self) -> Result<BTreeSet<u64>, InputError> {
         let mut posed: BTreeSet<u64> = self.vertex_lines.keys().copied().collect();
-        let missing = self.edges.iter().flat_map(|e| [e.1, e.2]).filter(|id| !posed.contains(id)).count();
-        if missing == 0 {
+        if self.edges.iter().flat_map(|e| [e.1, e.2]).all(|id| posed.contains(&id)) {
             return Ok(posed);
         }
         let mut touching: BTreeMap<u64, Vec<usize>> = BTreeMap::new();

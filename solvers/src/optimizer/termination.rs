@@ -74,9 +74,9 @@ pub(super) fn check_stop(
     if cost <= f64::EPSILON * f64::EPSILON * summary.initial_cost {
         return Some(test);
     }
-    let small_step = test == Termination::ParameterTolerance;
+    let from_small_step = test == Termination::ParameterTolerance;
     let aligned = summary.scaled_gradient.powi(2) <= o.function_tolerance;
-    match (small_step, aligned) {
+    match (from_small_step, aligned) {
         (true, true) => return Some(test),
         (false, false) => return None,
         _ => {}
@@ -93,12 +93,12 @@ pub(super) fn check_stop(
     });
     let Some((d, step)) = solved else {
         // No undamped step (H singular there): the scaled gradient decided.
-        return Some(if small_step { Termination::Stalled } else { test });
+        return Some(if from_small_step { Termination::Stalled } else { test });
     };
     summary.gauss_newton_decrease = d / cost.max(f64::MIN_POSITIVE);
-    let step_small = step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
-    if small_step {
-        return Some(if step_small { test } else { Termination::Stalled });
+    let undamped_step_small = step <= o.parameter_tolerance * (x_norm + o.parameter_tolerance);
+    if from_small_step {
+        return Some(if undamped_step_small { test } else { Termination::Stalled });
     }
-    (d <= o.function_tolerance * cost || step_small).then_some(test)
+    (d <= o.function_tolerance * cost || undamped_step_small).then_some(test)
 }
