@@ -16,6 +16,7 @@ pub(crate) mod corridor;
 pub(crate) mod imu;
 pub use crate::model::imu_model as model;
 pub(crate) mod motion;
+pub(crate) mod replay_bands;
 pub mod target;
 pub(crate) mod writer;
 

@@ -650,6 +650,22 @@ impl Replay {
         &self.p
     }
 
+    /// Time of the first sample \[s\].
+    pub fn start(&self) -> f64 {
+        self.t[0]
+    }
+
+    /// Sample times \[s\] and rotations (world ← body), in time order.
+    pub fn samples(&self) -> (&[f64], &[UnitQuaternion<f64>]) {
+        (&self.t, &self.q)
+    }
+
+    /// The same path with other positions \[m\] (one per sample).
+    pub fn with_positions(&self, p: Vec<Vector3<f64>>) -> Replay {
+        debug_assert_eq!(p.len(), self.p.len());
+        Replay { p, ..self.clone() }
+    }
+
     fn pose(&self, t: f64) -> (Vector3<f64>, UnitQuaternion<f64>) {
         let t = t.clamp(self.t[0], self.t[self.t.len() - 1]);
         let k = self.t.partition_point(|&s| s <= t).clamp(1, self.t.len() - 1);

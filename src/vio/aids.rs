@@ -109,18 +109,31 @@ impl VioInput {
     /// simulated camera (`cam`) that flies the ground-truth path through a room
     /// of random landmarks around it: real IMU, simulated vision — for
     /// evaluating the estimator on real inertial data without images.
+    ///
+    /// The camera flies the path the IMU felt: where the ground truth's
+    /// positions hold motion the IMU does not (a tracker's jitter), the IMU's
+    /// own motion replaces them in those bands (see `sim::replay_bands`);
+    /// the returned notes say where and why.
     pub fn from_dataset_with_simulated_camera(
         ds: asl::AslDataset,
         calibration: Option<&ImuCalibration>,
         cam: &CameraSettings,
         seed: u64,
-    ) -> Result<VioInput, InputError> {
+    ) -> Result<(VioInput, Vec<String>), InputError> {
         let gt = ds.groundtruth.as_ref().ok_or_else(|| {
             InputError::file(&ds.root, "no ground truth (state_groundtruth_estimate0/, gt0/ or mocap0/)")
                 .with_hint("a simulated camera needs the true path to look from")
         })?;
         let t0 = ds.imu.t0_ns;
-        let motion = crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e.to_string()))?;
+        let recorded =
+            crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e.to_string()))?;
+        let imu = ds.imu.calibrated(calibration);
+        let smoothing = crate::sim::replay_bands::position_smoothing(&recorded, &imu);
+        let notes: Vec<String> = smoothing.as_ref().and_then(|s| s.note()).into_iter().collect();
+        let motion = match &smoothing {
+            Some(s) if s.sigma_s > 0.0 => crate::sim::replay_bands::body_path(&recorded, &imu, s.sigma_s),
+            _ => recorded,
+        };
         let (scene, cam) = crate::sim::camera::room_around(motion.positions(), cam);
         let tracks = crate::sim::camera::simulate_tracks(&motion, &cam, &scene, seed);
         // Frames where both the ground truth and the IMU are.
@@ -138,9 +151,8 @@ impl VioInput {
         }
         let body_from_camera = from_nalgebra(&cam.body_from_camera());
         let stereo = simulated_stereo(&cam, &frames, &tracks.stereo);
-        let imu = ds.imu.calibrated(calibration);
         let noise = ds.imu_noise();
-        Ok(with_calibrated_offsets(
+        let input = with_calibrated_offsets(
             VioInput {
                 name: format!("{} (simulated camera)", ds.root.display()),
                 t0_ns: t0,
@@ -154,7 +166,8 @@ impl VioInput {
                 images: Vec::new(),
             },
             calibration,
-        ))
+        );
+        Ok((input, notes))
     }
 }
 

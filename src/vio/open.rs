@@ -90,7 +90,9 @@ impl VioInput {
             if let Some(seed) = source.simulate_camera {
                 let cam = crate::sim::CameraSettings::default();
                 notes.push(format!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}"));
-                VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?
+                let (input, smoothing) = VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?;
+                notes.extend(smoothing.into_iter().map(|n| format!("camera: {n}")));
+                input
             } else {
                 let needs_frontend = ds
                     .cameras
