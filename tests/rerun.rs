@@ -87,6 +87,13 @@ mod recording {
         assert!(strips as f64 >= seconds.floor() && strips as f64 <= seconds.ceil() + 1.0, "{strips} strips");
         assert_eq!(c.rows_of("world/groundtruth"), 1);
         assert_eq!(c.rows_of("status/events"), 0, "nothing withdrawn");
+        // The scale's σ bound at each keyframe that reached far enough.
+        let windows = result
+            .estimates
+            .iter()
+            .filter(|e| e.window_length.is_some_and(|w| w.length_m >= tumble::vio::WINDOW_MIN_LENGTH_M))
+            .count() as u64;
+        assert!(windows > 10 && c.rows_of("status/window_length_sigma_pct") == windows, "{windows}: {:?}", c.rows);
         assert!(c.rows_of("world/body/camera") >= 1);
         // The landmarks logged are the window's: some, in metres, near the walk.
         assert!(result.estimates.iter().any(|e| e.landmarks > 20));

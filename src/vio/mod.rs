@@ -59,9 +59,10 @@ pub use record::{read_rrd, RrdContents};
 mod rest;
 mod startup;
 mod window;
+pub(crate) mod window_scale;
 
 pub use crate::io::ImuNoise;
-pub use estimator::{run, run_observed, Estimator, FrameEstimate, VioResult, WindowState};
+pub use estimator::{run, run_observed, Estimator, FrameEstimate, VioResult, WindowLength, WindowState};
 pub use input::{read_eqvio, Frame, NoiseSource, StereoCamera, VioInput};
 pub use marginalization::ResidualTally;
 pub use options::{
@@ -69,6 +70,7 @@ pub use options::{
     VioOptions, WindowOptions, REST_NOISE_SIGMAS,
 };
 pub use output::{bias_track, piece_starts_s, summarize, trajectory, write_outputs, Summary};
+pub use window_scale::{WindowScale, MIN_LENGTH_M as WINDOW_MIN_LENGTH_M};
 
 /// Why the estimator cannot run or could not produce an estimate.
 #[derive(Debug, thiserror::Error)]

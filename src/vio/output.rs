@@ -69,6 +69,9 @@ pub struct Summary {
     pub noise: Option<super::noise_meter::NoiseReport>,
     /// The camera's online calibration at the end (with [`super::CameraCalibrationOptions`]).
     pub camera: Option<super::CameraEstimate>,
+    /// How well the keyframe windows knew their own length (the scale they
+    /// carry), and against a ground truth whether they were right to.
+    pub window_length: Option<super::window_scale::WindowScale>,
     /// Time with fewer than `super::estimator::BLIND_FEATURES` features per
     /// frame, the IMU alone carrying the estimate \[s\].
     pub blind_s: f64,
@@ -223,6 +226,7 @@ pub fn summarize(input: &VioInput, opts: &VioOptions, result: &VioResult, bias_f
         bias_allan_std_accel: allan_steady_std(in_use[1], opts.noise.imu.accel_random_walk),
         noise: result.noise,
         camera: result.camera.clone(),
+        window_length: super::window_scale::window_scale(input, result),
         blind_s: result.blind_spans.iter().map(|[a, b]| b - a).sum(),
         blind_longest_s: result.blind_spans.iter().map(|[a, b]| b - a).fold(0.0, f64::max),
         warnings,
@@ -267,7 +271,7 @@ impl Summary {
              closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
              bias RMSE after {:.1} s: gyro {}, accel {}{}\n\
-             {}{}{}{}speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
+             {}{}{}{}{}speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
             self.duration_s,
             self.distance_m,
             self.groundtruth_distance_m.map_or(String::new(), |d| format!(" (ground truth {d:.2} m)")),
@@ -294,6 +298,7 @@ impl Summary {
                 .map_or(String::new(), |(g, a)| format!("{}\n", crate::eval::nees_line(g, a))),
             self.noise.map_or(String::new(), |n| format!("{}\n", n.line())),
             self.camera.as_ref().map_or(String::new(), |c| format!("{}\n", c.line())),
+            self.window_length.as_ref().map_or(String::new(), |w| format!("{}\n", w.line())),
             if self.blind_s > 0.0 {
                 format!(
                     "blind (fewer than {} features, IMU only): {:.1} s in all, longest {:.1} s\n",

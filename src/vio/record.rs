@@ -21,6 +21,7 @@
 //! | `biases/{accel,gyro}/{x,y,z}` | estimated biases \[m/s², rad/s\] |
 //! | `biases/{accel,gyro}_truth/{x,y,z}` | ground-truth biases, when known |
 //! | `status/{landmarks,solve_ms}` | landmarks in the window, solve time |
+//! | `status/window_length_sigma_pct` | at keyframes: the window's length σ in % of it, the bound on its scale's σ (`vio::WindowLength`) |
 //! | `status/events` | estimates withdrawn (text) |
 //!
 //! When the estimator withdraws estimates and starts again at the origin
@@ -216,6 +217,9 @@ impl<'a> Recorder<'a> {
             }
         }
         rec.log("status/landmarks", &rerun::Scalars::single(e.landmarks as f64))?;
+        if let Some(w) = e.window_length.filter(|w| w.length_m >= crate::vio::WINDOW_MIN_LENGTH_M) {
+            rec.log("status/window_length_sigma_pct", &rerun::Scalars::single(100.0 * w.sigma_m / w.length_m))?;
+        }
         rec.log("status/solve_ms", &rerun::Scalars::single(e.solve_s * 1e3))
     }
 

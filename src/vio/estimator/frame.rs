@@ -224,6 +224,10 @@ impl Estimator<'_> {
             cov_keys.extend([X(a), V(a), B(a), X(b), V(b)].into_iter().filter(|k| ![X(sid), V(sid)].contains(k)));
         }
         if keyframe {
+            // The window's length and its σ (FrameEstimate::window_length).
+            if let Some(first) = self.window.states.first().map(|s| X(s.sid)).filter(|k| !cov_keys.contains(k)) {
+                cov_keys.push(first);
+            }
             cov_keys.extend(self.window.camera.iter().flat_map(|c| c.keys(&self.window.values)));
         }
         let (mut solved, mut covariances) = self.solve(&graph, &self.window.values, &cov_keys, vec!['l']);

@@ -56,6 +56,28 @@ pub struct FrameEstimate {
     pub landmarks: usize,
     /// Time spent on this frame's solve \[s\].
     pub solve_s: f64,
+    /// At a keyframe solved with covariances: how far the window reaches
+    /// and how well it knows that distance.
+    pub window_length: Option<WindowLength>,
+}
+
+/// The distance from the window's oldest state to its newest (a keyframe)
+/// and that distance's σ from the solve's joint covariance of the two
+/// poses (marginalization prior included).
+///
+/// `sigma_m / length_m` bounds the relative σ of the scale the window
+/// holds: a window that knows its own length to 1 % cannot be 5 % off in
+/// scale without the estimator saying so. Against a ground truth the
+/// normalized errors `(length − true length) / σ` check that claim
+/// (`Summary::window_length`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowLength {
+    /// Time of the window's oldest state \[s\] (input time axis).
+    pub from_t: f64,
+    /// Straight-line distance from the oldest state to this one \[m\].
+    pub length_m: f64,
+    /// Its standard deviation \[m\].
+    pub sigma_m: f64,
 }
 
 /// Everything a run produced.
@@ -480,6 +502,7 @@ impl<'a> Estimator<'a> {
             }
         }
         let state = self.window.states.iter().find(|s| s.sid == sid).expect("state");
+        let window_length = covariances.filter(|_| keyframe).and_then(|c| self.window_length(sid, c));
         FrameEstimate {
             t: state.t,
             keyframe,
@@ -491,7 +514,30 @@ impl<'a> Estimator<'a> {
             std,
             landmarks: self.landmarks.count(),
             solve_s: t0.elapsed().as_secs_f64(),
+            window_length,
         }
+    }
+
+    /// The window's length from its oldest state to state `sid` and its σ
+    /// (None without the two poses' joint covariance or when they coincide).
+    /// Pose tangents are `[ω, ν]` with `T ⊞ δ = T·Exp(δ)`, so a position
+    /// moves by `R ν` in the world.
+    fn window_length(&self, sid: u64, c: &Covariances) -> Option<WindowLength> {
+        let first = self.window.states.first().filter(|f| f.sid != sid)?;
+        let joint = c.joint(&[X(first.sid), X(sid)])?;
+        let (ra, pa) = parts(&self.window.state_values(first.sid).0);
+        let (rb, pb) = parts(&self.window.state_values(sid).0);
+        let d = pb - pa;
+        let length_m = d.norm();
+        if length_m <= 0.0 || !length_m.is_finite() || joint.shape() != (12, 12) {
+            return None;
+        }
+        let u = d / length_m;
+        let mut g = nalgebra::DVector::zeros(12);
+        g.rows_mut(3, 3).copy_from(&-(ra.transpose() * u));
+        g.rows_mut(9, 3).copy_from(&(rb.transpose() * u));
+        let var = (g.transpose() * joint * &g)[(0, 0)];
+        Some(WindowLength { from_t: first.t, length_m, sigma_m: var.max(0.0).sqrt() })
     }
 }
 
