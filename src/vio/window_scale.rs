@@ -29,7 +29,7 @@ pub const SERIES_STEP_S: f64 = 1.0;
 /// The windows' lengths and their σ over a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct WindowScale {
-    /// Keyframe windows at least [`MIN_LENGTH_M`] long.
+    /// Keyframe windows at least `MIN_LENGTH_M` (0.1 m) long.
     pub windows: usize,
     /// Median over those windows of σ/length (the scale's relative σ bound).
     pub relative_sigma_median: f64,
@@ -41,7 +41,7 @@ pub struct WindowScale {
     /// With a ground truth: RMS of (length − true length)/σ over the windows
     /// (1 when the σ are honest).
     pub normalized_error_rms: Option<f64>,
-    /// `[t s, length m, σ m]` of the first window in each [`SERIES_STEP_S`].
+    /// `[t s, length m, σ m]` of the first window in each second (`SERIES_STEP_S`).
     pub series: Vec<[f64; 3]>,
 }
 
