@@ -13,8 +13,10 @@
 //!
 //! [`position_smoothing`] measures, band by band, how the ground truth's
 //! accelerations correlate with the IMU's (both in the world frame, through
-//! the ground truth's rotation) and returns the Gaussian smoothing that keeps
-//! only the bands where they agree. The rotation is left as it is: a ground
+//! the ground truth's rotation) and returns the scale of the Gaussian that
+//! cuts between the bands where they agree and those where they do not;
+//! [`body_path`] then follows the ground truth below the cut and the IMU's
+//! own motion above it. The rotation is left as it is: a ground
 //! truth's orientation is usually the IMU's own gyro fused in (EuRoC's
 //! follows the gyro with correlation 1.000 in every band).
 
@@ -44,17 +46,18 @@ pub struct BandCorrelation {
     pub correlation: f64,
 }
 
-/// The outcome: the bands and the smoothing that keeps the agreeing ones.
+/// The outcome: the bands and where the agreeing ones end.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Smoothing {
     /// The bands, finest first.
     pub bands: Vec<BandCorrelation>,
-    /// Gaussian σ \[s\] to smooth the ground truth's positions with (0: none).
+    /// σ \[s\] of the Gaussian that cuts below the first band that does not
+    /// agree ([`body_path`]'s argument; 0: every band agrees, no cut).
     pub sigma_s: f64,
 }
 
 impl Smoothing {
-    /// One line for a user: what was smoothed and why (None when nothing was).
+    /// One line for a user: where the cut fell and why (None without one).
     pub fn note(&self) -> Option<String> {
         if self.sigma_s == 0.0 {
             return None;
@@ -79,15 +82,15 @@ fn cutoff_hz(sigma: f64) -> f64 {
     1.0 / (2.0 * std::f64::consts::PI * sigma)
 }
 
-/// The smoothing that keeps the bands of `replay`'s accelerations that
-/// follow `imu`'s (times on the replay's axis, \[s\]); None when the two
-/// overlap too briefly to compare (under ten times the coarsest band's scale).
+/// Where the bands of `replay`'s accelerations that follow `imu`'s end
+/// (times on the replay's axis, \[s\]); None when the two overlap too
+/// briefly to compare (under ten times the coarsest band's scale).
 pub fn position_smoothing(replay: &Replay, imu: &ImuData) -> Option<Smoothing> {
     let (a_gt, a_imu) = accelerations(replay, imu)?;
     let sigmas: Vec<f64> = (0..=BANDS).map(|k| STEP_S * f64::from(1u32 << k)).collect();
     let smooth_all = |a: &[[f64; 3]]| sigmas.iter().map(|s| gaussian(a, s / STEP_S)).collect::<Vec<_>>();
     let (s_gt, s_imu) = (smooth_all(&a_gt), smooth_all(&a_imu));
-    // Edges, where the widest kernel met the clamp, stay out.
+    // Edges, where the widest kernel reached past the ends, stay out.
     let edge = (4.0 * sigmas[BANDS] / STEP_S).ceil() as usize;
     let bands: Vec<BandCorrelation> = (0..BANDS)
         .map(|k| {
@@ -171,9 +174,7 @@ pub fn body_path(replay: &Replay, imu: &ImuData, sigma_s: f64) -> Replay {
         v += a_mid * h;
     }
     let e: Vec<[f64; 3]> = (0..n).map(|i| (p_gt[i] - p_imu[i]).into()).collect();
-    let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let step = *steps.select_nth_unstable_by((n - 1) / 2, f64::total_cmp).1;
-    let sigma = sigma_s / step;
+    let sigma = sigma_s / crate::io::validate::median_period(t);
     let g = gaussian(&e, sigma);
     let gg = gaussian(&g, sigma);
     let p = (0..n).map(|i| p_imu[i] + Vector3::from(std::array::from_fn(|c| 2.0 * g[i][c] - gg[i][c]))).collect();

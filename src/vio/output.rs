@@ -119,7 +119,8 @@ pub fn allan_steady_std(n: f64, k: f64) -> f64 {
     (n * k).sqrt()
 }
 
-fn percentile(v: &mut [f64], p: f64) -> f64 {
+/// The `p`-quantile of `v` (sorted in place; the nearest rank), NaN when empty.
+pub(crate) fn percentile(v: &mut [f64], p: f64) -> f64 {
     if v.is_empty() {
         return f64::NAN;
     }

@@ -12,6 +12,7 @@
 //! near 1 means the σ can be believed, far above 1 that the windows are more
 //! sure of their scale than they should be.
 
+use super::output::percentile;
 use super::{VioInput, VioResult};
 use crate::eval::pose_at;
 use serde::Serialize;
@@ -73,15 +74,13 @@ pub fn window_scale(input: &VioInput, result: &VioResult) -> Option<WindowScale>
         return None;
     }
     let mut relative: Vec<f64> = windows.iter().map(|(_, w)| w.sigma_m / w.length_m).collect();
-    relative.sort_by(f64::total_cmp);
-    let at = |p: f64| relative[((relative.len() - 1) as f64 * p).round() as usize];
     let mut series: Vec<[f64; 3]> = Vec::new();
     for (t, w) in &windows {
         if series.last().is_none_or(|s| *t >= s[0] + SERIES_STEP_S) {
             series.push([*t, w.length_m, w.sigma_m]);
         }
     }
-    let truth = input.groundtruth.as_ref().map(|gt| {
+    let truth = input.groundtruth.as_ref().and_then(|gt| {
         let position = |t: f64| {
             let t_ns = input.t0_ns + (t * 1e9).round() as i64;
             pose_at(gt, t_ns, MAX_GT_GAP_S * 1e9).map(|p| p.translation.vector)
@@ -98,11 +97,10 @@ pub fn window_scale(input: &VioInput, result: &VioResult) -> Option<WindowScale>
         }
         (n > 0).then(|| (error / true_total, (z2 / n as f64).sqrt()))
     });
-    let truth = truth.flatten();
     Some(WindowScale {
         windows: windows.len(),
-        relative_sigma_median: at(0.5),
-        relative_sigma_p95: at(0.95),
+        relative_sigma_median: percentile(&mut relative, 0.5),
+        relative_sigma_p95: percentile(&mut relative, 0.95),
         length_error: truth.map(|t| t.0),
         normalized_error_rms: truth.map(|t| t.1),
         series,
