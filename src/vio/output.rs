@@ -7,6 +7,7 @@ use crate::eval::{evaluate, write_report, Alignment, EvalOptions, Evaluation};
 use crate::io::biases::{write_biases, BiasTrack};
 use crate::io::trajectory::{write_tum, Trajectory};
 use crate::model::geometry::preintegrate;
+use crate::model::numeric::percentile;
 use nalgebra::{UnitQuaternion, Vector3};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -117,15 +118,6 @@ fn path_length(positions: impl IntoIterator<Item = Vector3<f64>>, min_step_m: f6
 /// for the bias RMSE after convergence (≤ 2× this).
 pub fn allan_steady_std(n: f64, k: f64) -> f64 {
     (n * k).sqrt()
-}
-
-/// The `p`-quantile of `v` (sorted in place; the nearest rank), NaN when empty.
-pub(crate) fn percentile(v: &mut [f64], p: f64) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(|a, b| a.total_cmp(b));
-    v[((v.len() - 1) as f64 * p).round() as usize]
 }
 
 /// The warning a run whose noise meter raised the white noise gets: on a

@@ -12,9 +12,9 @@
 //! near 1 means the σ can be believed, far above 1 that the windows are more
 //! sure of their scale than they should be.
 
-use super::output::percentile;
 use super::{VioInput, VioResult};
 use crate::eval::pose_at;
+use crate::model::numeric::percentile;
 use serde::Serialize;
 
 /// Windows shorter than this \[m\] are left out of the relative figures: a
