@@ -36,6 +36,8 @@ pub(crate) mod observability;
 mod options;
 pub(crate) mod report;
 mod result;
+mod several;
+mod several_report;
 pub(crate) mod solve;
 mod split;
 pub(crate) mod verdict;
@@ -50,4 +52,5 @@ pub use result::{
     Assessment, CalibError, CalibrationResult, DetectionThresholds, FitStats, InitialRestReport, RotationResidual,
     StaticInterval, SweepEntry, Verdict,
 };
+pub use several::{calibrate_recordings, RecordingsResult};
 pub use solve::calibrate;

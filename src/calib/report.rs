@@ -9,7 +9,7 @@ use super::result::{
 };
 use crate::error::OutputError;
 use crate::io::ImuRecording;
-use crate::model::calibration::{imu_tk_calib_text, CalibrationFile, Triad};
+use crate::model::calibration::{imu_tk_calib_text, CalibrationFile, ImuCalibration, Triad};
 use crate::plot::{ensure_font, AXIS_COLORS};
 use plotters::prelude::*;
 use serde::Serialize;
@@ -109,7 +109,6 @@ impl CalibrationResult {
     pub fn summary_table(&self) -> String {
         let c = &self.calibration;
         let mut s = String::new();
-        let u = &c.units;
         let r = &self.initial_rest;
         s.push_str(&format!(
             "initial rest: {:.2}–{:.2} s ({} samples, {})\n",
@@ -124,32 +123,7 @@ impl CalibrationResult {
             self.multiplier,
             c.gravity
         ));
-        for (name, t, unit_b, unit_k) in [
-            ("accelerometer", &c.accel, &u.accel_input, format!("{} per m/s²", u.accel_input)),
-            ("gyroscope", &c.gyro, &u.gyro_input, format!("{} per rad/s", u.gyro_input)),
-        ] {
-            s.push_str(&format!("{name}:\n"));
-            s.push_str(&format!("  {:<4} {:>16} {:>16} {:>16}\n", "", "x", "y", "z"));
-            let row = |s: &mut String, label: &str, v: [f64; 3], sd: [f64; 3]| {
-                s.push_str(&format!("  {label:<4}"));
-                for k in 0..3 {
-                    s.push_str(&format!(" {:>16}", format!("{:.6} ±{:.1e}", v[k], sd[k])));
-                }
-                s.push('\n');
-            };
-            row(&mut s, "K", [t.k.x, t.k.y, t.k.z], [t.k_std.x, t.k_std.y, t.k_std.z]);
-            row(&mut s, "b", [t.b.x, t.b.y, t.b.z], [t.b_std.x, t.b_std.y, t.b_std.z]);
-            for r in 0..3 {
-                let label = format!("T{r}");
-                row(
-                    &mut s,
-                    &label,
-                    [t.t[(r, 0)], t.t[(r, 1)], t.t[(r, 2)]],
-                    [t.t_std[(r, 0)], t.t_std[(r, 1)], t.t_std[(r, 2)]],
-                );
-            }
-            s.push_str(&format!("  (K in {unit_k}, b in {unit_b})\n"));
-        }
+        s.push_str(&calibration_table(c));
         s.push_str(&format!(
             "fit: accel rms |a|−g {:.2e} m/s² (χ²/dof {:.2}), gyro rms direction error {:.2e} rad (χ²/dof {:.2})\n",
             self.accel_fit.rms, self.accel_fit.chi2_per_dof, self.gyro_fit.rms, self.gyro_fit.chi2_per_dof
@@ -202,7 +176,12 @@ impl CalibrationResult {
         })
     }
 
-    fn write_unstaged(&self, rec: &ImuRecording, opts: &CalibOptions, dir: &Path) -> Result<Vec<PathBuf>, OutputError> {
+    pub(super) fn write_unstaged(
+        &self,
+        rec: &ImuRecording,
+        opts: &CalibOptions,
+        dir: &Path,
+    ) -> Result<Vec<PathBuf>, OutputError> {
         let mut files = Vec::new();
         let mut write = |name: &str, text: String| -> Result<(), String> {
             let p = dir.join(name);
@@ -293,4 +272,37 @@ impl CalibrationResult {
         root.present().map_err(|x| e(&x))?;
         Ok(())
     }
+}
+
+/// The calibration's parameters ± 1σ, one block per triad (K, b, T rows).
+pub(super) fn calibration_table(c: &ImuCalibration) -> String {
+    let mut s = String::new();
+    let u = &c.units;
+    for (name, t, unit_b, unit_k) in [
+        ("accelerometer", &c.accel, &u.accel_input, format!("{} per m/s²", u.accel_input)),
+        ("gyroscope", &c.gyro, &u.gyro_input, format!("{} per rad/s", u.gyro_input)),
+    ] {
+        s.push_str(&format!("{name}:\n"));
+        s.push_str(&format!("  {:<4} {:>16} {:>16} {:>16}\n", "", "x", "y", "z"));
+        let row = |s: &mut String, label: &str, v: [f64; 3], sd: [f64; 3]| {
+            s.push_str(&format!("  {label:<4}"));
+            for k in 0..3 {
+                s.push_str(&format!(" {:>16}", format!("{:.6} ±{:.1e}", v[k], sd[k])));
+            }
+            s.push('\n');
+        };
+        row(&mut s, "K", [t.k.x, t.k.y, t.k.z], [t.k_std.x, t.k_std.y, t.k_std.z]);
+        row(&mut s, "b", [t.b.x, t.b.y, t.b.z], [t.b_std.x, t.b_std.y, t.b_std.z]);
+        for r in 0..3 {
+            let label = format!("T{r}");
+            row(
+                &mut s,
+                &label,
+                [t.t[(r, 0)], t.t[(r, 1)], t.t[(r, 2)]],
+                [t.t_std[(r, 0)], t.t_std[(r, 1)], t.t_std[(r, 2)]],
+            );
+        }
+        s.push_str(&format!("  (K in {unit_k}, b in {unit_b})\n"));
+    }
+    s
 }

@@ -78,7 +78,7 @@ pub(super) fn check_halves(
 /// The estimated entries of a triad: `(name, value, σ)` — scales, the
 /// misalignments with a σ (those the model estimates) and, with
 /// `with_bias`, the biases.
-fn entries(name: &str, t: &Triad, with_bias: bool) -> Vec<(String, f64, f64)> {
+pub(super) fn entries(name: &str, t: &Triad, with_bias: bool) -> Vec<(String, f64, f64)> {
     let axes = ["x", "y", "z"];
     let mut out: Vec<(String, f64, f64)> =
         (0..3).map(|i| (format!("{name} scale {}", axes[i]), t.k[i], t.k_std[i])).collect();

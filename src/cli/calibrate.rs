@@ -11,6 +11,12 @@ use tumble::calib::{local_gravity, parse_multipliers, CalibOptions};
 pub struct CalibrateArgs {
     #[command(flatten)]
     input: CalibInput,
+    /// Several hand tumbles of one sensor, described in a YAML file (a
+    /// `tumbles:` list, each entry with the keys of `tumble run --inputs`):
+    /// each calibrated alone, the sensor's scales and misalignments pooled
+    /// and checked for agreement (docs/calibration.md).
+    #[arg(long, conflicts_with_all = ["recording", "accel", "gyro"])]
+    inputs: Option<PathBuf>,
     /// Output folder.
     #[arg(long)]
     out: PathBuf,
@@ -65,6 +71,9 @@ impl CalibrateArgs {
             detect_with_gyro: !self.accel_only_detection,
         };
         opts.validate()?;
+        if let Some(inputs) = &self.inputs {
+            return calibrate_several(inputs, &opts, &self.out);
+        }
         let start = std::time::Instant::now();
         let source = self.input.source()?;
         let rec = source.open()?;
@@ -100,4 +109,42 @@ impl CalibrateArgs {
         println!("calibrated in {elapsed:.3} s; wrote {}", paths(&files));
         Ok(())
     }
+}
+
+/// `--inputs`: read every tumble the file describes, pool them, write.
+fn calibrate_several(inputs: &std::path::Path, opts: &CalibOptions, out: &std::path::Path) -> CliResult {
+    let described = tumble::io::recordings::RunRecordings::read(inputs)?;
+    if described.still.is_some() {
+        eprintln!(
+            "note: {}: `static:` is not used by `tumble calibrate` (give it to `tumble allan`)",
+            inputs.display()
+        );
+    }
+    let mut recs = Vec::new();
+    let mut names: Vec<String> = Vec::new();
+    for (i, spec) in described.all_tumbles().into_iter().enumerate() {
+        println!("tumble {}: {}", i + 1, spec.describe());
+        let rec = spec.source()?.open()?;
+        for w in &rec.warnings {
+            eprintln!("warning: {}: {w}", spec.path.display());
+        }
+        let name = spec.name();
+        names.push(if names.contains(&name) { format!("{name} ({})", i + 1) } else { name });
+        recs.push(rec);
+    }
+    let t = std::time::Instant::now();
+    let result = tumble::calib::calibrate_recordings(&recs, &names, opts)?;
+    let elapsed = t.elapsed().as_secs_f64();
+    print!("{}", result.summary_table());
+    for w in &result.warnings {
+        eprintln!("warning: {w}");
+    }
+    let files = result.write_all(&recs, &names, opts, out)?;
+    println!(
+        "calibrated {} recordings in {elapsed:.3} s; wrote {} files into {}",
+        recs.len(),
+        files.len(),
+        out.display()
+    );
+    Ok(())
 }

@@ -93,7 +93,8 @@ impl RunArgs {
             return Err("nothing to do: give --tumble, --static and/or --vio (see `tumble run --help`)".into());
         }
         let mut calib = CalibOptions { init_static_s: self.init_static, ..Default::default() };
-        let has_tumble = self.tumble.is_some() || described.as_ref().is_some_and(|d| d.tumble.is_some());
+        let described_tumble = described.as_ref().map(|d| d.single_tumble()).transpose()?.flatten();
+        let has_tumble = self.tumble.is_some() || described_tumble.is_some();
         if has_tumble && !opts.skip.contains(&Stage::Calibrate) {
             let gravity = local_gravity(self.gravity, self.latitude, 0.0)?;
             if let Some(note) = gravity.note {
@@ -129,7 +130,7 @@ impl RunArgs {
         }
         if let Some(d) = &described {
             for (spec, slot, what) in
-                [(&d.tumble, &mut inputs.tumble, "tumble"), (&d.still, &mut inputs.still, "static")]
+                [(&described_tumble, &mut inputs.tumble, "tumble"), (&d.still.as_ref(), &mut inputs.still, "static")]
             {
                 if let Some(spec) = spec {
                     println!("{what}: {}", spec.describe());

@@ -14,6 +14,18 @@
 //!   topic: /imu/data
 //! ```
 //!
+//! `tumble calibrate --inputs` pools several tumbles of one sensor: give
+//! them as a list under `tumbles:` (with or without `tumble:`, which then
+//! comes first):
+//!
+//! ```yaml
+//! tumbles:
+//!   - path: monday.csv
+//!     columns: t,ax,ay,az,gx,gy,gz
+//!   - path: tuesday.csv
+//!     columns: t,ax,ay,az,gx,gy,gz
+//! ```
+//!
 //! Keys per recording: `path` (required), `columns`, `time_unit`,
 //! `gyro_unit`, `accel_unit`, `rate` \[Hz\], `gyro_file` (imu_tk's second
 //! file), `topic`, `accel_topic`, `gyro_topic`, `temperature_topic`,
@@ -70,17 +82,22 @@ pub struct RunRecordings {
     /// The static recording for the Allan stage.
     #[serde(rename = "static")]
     pub still: Option<RecordingSpec>,
+    /// More hand-tumbled recordings of the same sensor (`tumble calibrate --inputs` pools them).
+    #[serde(default)]
+    pub tumbles: Vec<RecordingSpec>,
 }
 
 impl RunRecordings {
     /// Read and check a description file; paths become relative to its folder.
     pub fn read(path: &Path) -> Result<RunRecordings, InputError> {
         let mut r: RunRecordings = super::yaml::read_yaml(path)?;
-        if r.tumble.is_none() && r.still.is_none() {
-            return Err(InputError::file(path, "describes no recording (give `tumble:` and/or `static:`)"));
+        if r.tumble.is_none() && r.still.is_none() && r.tumbles.is_empty() {
+            return Err(InputError::file(path, "describes no recording (give `tumble:`, `tumbles:` and/or `static:`)"));
         }
         let base = path.parent().unwrap_or(Path::new("."));
-        for (spec, key) in [(&mut r.tumble, "tumble"), (&mut r.still, "static")] {
+        let listed = r.tumbles.iter_mut().enumerate().map(|(i, s)| (Some(s), format!("tumbles[{i}]")));
+        let single = [(r.tumble.as_mut(), "tumble".to_string()), (r.still.as_mut(), "static".to_string())];
+        for (spec, key) in single.into_iter().chain(listed) {
             if let Some(s) = spec {
                 if s.path.is_relative() {
                     s.path = base.join(&s.path);
@@ -95,9 +112,35 @@ impl RunRecordings {
         }
         Ok(r)
     }
+
+    /// Every tumble described, `tumble:` first, then `tumbles:` in order.
+    pub fn all_tumbles(&self) -> Vec<&RecordingSpec> {
+        self.tumble.iter().chain(&self.tumbles).collect()
+    }
+
+    /// The one tumble of a run (`tumble run` calibrates from one recording):
+    /// an error when `tumbles:` lists more.
+    pub fn single_tumble(&self) -> Result<Option<&RecordingSpec>, OptionError> {
+        match self.all_tumbles()[..] {
+            [] => Ok(None),
+            [one] => Ok(Some(one)),
+            ref several => Err(OptionError::new(
+                "tumbles:",
+                format!(
+                    "{} tumbles described: `tumble run` calibrates from one; pool several with                      `tumble calibrate --inputs`, then give its calibration.json to `tumble run --calibration`",
+                    several.len()
+                ),
+            )),
+        }
+    }
 }
 
 impl RecordingSpec {
+    /// A short name: the recording's file or folder name.
+    pub fn name(&self) -> String {
+        self.path.file_name().map_or_else(|| self.path.display().to_string(), |n| n.to_string_lossy().into_owned())
+    }
+
     /// The reading options this entry gives (the readers' defaults elsewhere).
     pub fn options(&self) -> Result<RecordingOptions, OptionError> {
         fn key(k: &'static str) -> impl Fn(OptionError) -> OptionError {
@@ -194,6 +237,13 @@ mod tests {
         std::fs::write(&p, "tumble:\n  path: t.csv\n  gyro_unit: furlongs\n").unwrap();
         let e = RunRecordings::read(&p).unwrap_err().to_string();
         assert!(e.contains("recordings.yaml") && e.contains("tumble: gyro_unit"), "{e}");
+        std::fs::write(&p, "tumbles:\n  - path: a.csv\n  - path: b.csv\n    gyro_unit: deg/s\n").unwrap();
+        let r = RunRecordings::read(&p).unwrap();
+        assert_eq!(r.all_tumbles().iter().map(|s| s.name()).collect::<Vec<_>>(), ["a.csv", "b.csv"]);
+        assert!(r.single_tumble().unwrap_err().to_string().contains("calibrate --inputs"));
+        std::fs::write(&p, "tumbles:\n  - path: a.csv\n  - path: b.csv\n    gyro_unit: parsecs\n").unwrap();
+        let e = RunRecordings::read(&p).unwrap_err().to_string();
+        assert!(e.contains("tumbles[1]: gyro_unit"), "{e}");
         std::fs::write(&p, "tumble:\n  path: t.csv\n  colums: t,gx\n").unwrap();
         let e = RunRecordings::read(&p).unwrap_err().to_string();
         assert!(e.contains("recordings.yaml:3") && e.contains("colums"), "{e}");

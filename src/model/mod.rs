@@ -7,6 +7,7 @@
 use crate::error::OptionError;
 
 pub mod calibration;
+pub mod consensus;
 pub mod datasheet;
 pub mod geometry;
 pub mod imu_model;
