@@ -1,6 +1,8 @@
 //! One sensor, several recordings (`tumble calibrate --inputs`): simulated
 //! tumbles of one IMU with a different power-on bias each, pooled against
-//! the truth; a recording whose sensor differs is flagged; bad inputs.
+//! the truth; a recording whose sensor differs is flagged; bad inputs; the
+//! joint audit (`tumble audit --inputs`) telling an effect of the sensor from
+//! one recording's.
 
 use tumble::calib::{calibrate_recordings, CalibOptions, RecordingsResult, Verdict};
 use tumble::io::ImuRecording;
@@ -87,4 +89,57 @@ fn what_cannot_be_pooled_is_refused() {
     let two = [recording(0, 1.0), counts];
     let e = calibrate_recordings(&two, &["a".into(), "b".into()], &CalibOptions::default()).unwrap_err();
     assert!(e.message.contains("one raw unit"), "{}", e.message);
+}
+
+/// Recording `seed` of the default IMU, with its g-sensitivity on (`hidden`)
+/// or off, and the simulator's configuration.
+fn tumble_with_g_sensitivity(seed: u64, hidden: bool) -> (ImuRecording, SimConfig) {
+    let mut cfg = SimConfig::default();
+    if hidden {
+        tumble::sim::hide_effect(&mut cfg, "g_sensitivity", 2.0).unwrap();
+    }
+    (simulate(Scenario::Tumble, &cfg, seed).unwrap().imu.to_recording(), cfg)
+}
+
+/// `tumble audit --inputs`: each recording audited with its own calibration.
+fn joint_audit(recs: &[ImuRecording]) -> tumble::audit::RecordingsAudit {
+    let r = pool(recs);
+    let names: Vec<String> = (1..=recs.len()).map(|i| format!("day {i}")).collect();
+    let cals: Vec<_> = r.each.iter().map(|e| e.calibration.clone()).collect();
+    let opts = tumble::audit::AuditOptions::default();
+    tumble::audit::audit_recordings(recs, &cals, &names, &r.calibration, &opts, &mut |_| {}).unwrap()
+}
+
+#[test]
+fn an_effect_of_the_sensor_repeats_and_an_accident_of_one_recording_does_not() {
+    let (a, cfg) = tumble_with_g_sensitivity(5, true);
+    let (b, _) = tumble_with_g_sensitivity(6, true);
+    let (c, _) = tumble_with_g_sensitivity(7, false);
+    // In both recordings: repeats, added with pooled coefficients near the truth.
+    let both = joint_audit(&[a.clone(), b]);
+    eprintln!("{:#?}", both.verdict_lines());
+    let g = both.effects.iter().find(|e| e.effect == "gyro_g_sensitivity").expect("found");
+    assert!(g.repeats && g.added_in == [true, true], "{:?}", both.verdict_lines());
+    let term = &both.calibration.effects.as_ref().unwrap().effects[0];
+    assert_eq!(term.id, "gyro_g_sensitivity");
+    let z: Vec<f64> = ["x", "y", "z"]
+        .iter()
+        .enumerate()
+        .flat_map(|(r, rn)| {
+            let term = &term;
+            let truth = cfg.imu.g_sensitivity[r];
+            ["x", "y", "z"].iter().enumerate().map(move |(c, cn)| {
+                let k = format!("G_{rn}{cn}");
+                (term.params[&k] - truth[c]) / term.std[&k]
+            })
+        })
+        .collect();
+    eprintln!("pooled G against the truth, z: {z:.2?}");
+    assert!(z.iter().all(|z| z.abs() < 4.0), "{z:?}");
+    // In one recording of two: the other's coefficient says it is not there; not added.
+    let one = joint_audit(&[a, c]);
+    eprintln!("{:#?}", one.verdict_lines());
+    let g = one.effects.iter().find(|e| e.effect == "gyro_g_sensitivity").expect("found");
+    assert!(!g.repeats && !g.agree && g.added_in == [true, false], "{:?}", one.verdict_lines());
+    assert!(one.calibration.effects.is_none());
 }

@@ -46,6 +46,7 @@
 pub(crate) mod data;
 #[doc(hidden)]
 pub mod fit;
+mod recordings;
 pub(crate) mod report;
 mod run;
 pub(crate) mod structure;
@@ -53,6 +54,7 @@ pub mod trials;
 pub mod vio;
 
 pub use data::AuditData;
+pub use recordings::{audit_recordings, EffectAcross, RecordingsAudit};
 pub use report::{summary_table, write as write_report};
 pub use run::{audit, audit_with_progress, MAX_STATIC_RATE};
 pub use tumble_factors::imu_effects::Effect;

@@ -185,7 +185,7 @@ pub fn write(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
     Ok(paths.iter().filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned())).collect())
 }
 
-fn write_unstaged(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
+pub(super) fn write_unstaged(a: &Audit, dir: &Path) -> Result<Vec<String>, AuditError> {
     let put = |name: &str, text: String| put_file(dir, name, text);
     let mut written = vec![put("audit.json", serde_json::to_string_pretty(&json(a)).map_err(|e| e.to_string())?)?];
     let file = crate::model::calibration::CalibrationFile::from(&a.calibration);

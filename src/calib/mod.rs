@@ -53,4 +53,5 @@ pub use result::{
     StaticInterval, SweepEntry, Verdict,
 };
 pub use several::{calibrate_recordings, RecordingsResult};
+pub use several_report::recording_folder;
 pub use solve::calibrate;

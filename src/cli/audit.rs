@@ -14,6 +14,13 @@ use tumble::vio::ImuNoise;
 pub struct AuditArgs {
     #[command(flatten)]
     input: CalibInput,
+    /// Several tumbles of one sensor (the file `tumble calibrate --inputs`
+    /// read; give its calibration.json as --calibration): each audited with
+    /// its own calibration (the folder per recording beside it), then every
+    /// effect found compared across them; those that repeat are added to the
+    /// sensor's calibration (docs/audit.md).
+    #[arg(long, conflicts_with_all = ["recording", "accel", "gyro", "vio"], requires = "calibration")]
+    inputs: Option<PathBuf>,
     /// calibration.json or .yaml from `tumble calibrate` (or imu_tk's, converted by it);
     /// optional with --vio (then calibration.json with the offsets is written only when given).
     #[arg(long)]
@@ -72,6 +79,9 @@ impl AuditArgs {
             opts.candidates = self.candidates;
         }
         opts.validate()?;
+        if let Some(inputs) = &self.inputs {
+            return audit_several(inputs, calibration, &cal, &opts, &self.out);
+        }
         let rec = self.input.source()?.open()?;
         for w in &rec.warnings {
             eprintln!("warning: {w}");
@@ -135,4 +145,44 @@ impl AuditArgs {
         println!("audited in {:.1} s; wrote {} in {}", t.elapsed().as_secs_f64(), files.join(", "), self.out.display());
         Ok(())
     }
+}
+
+/// `--inputs`: each recording audited with the calibration in its folder
+/// beside the pooled `calibration`, then the effects compared across them.
+fn audit_several(
+    inputs: &std::path::Path,
+    calibration: &std::path::Path,
+    pooled: &ImuCalibration,
+    opts: &AuditOptions,
+    out: &std::path::Path,
+) -> CliResult {
+    let (recs, names) = super::common::read_tumbles(inputs)?;
+    let dir = calibration.parent().unwrap_or(std::path::Path::new("."));
+    let folders: Vec<String> = names.iter().enumerate().map(|(i, n)| tumble::calib::recording_folder(i, n)).collect();
+    let cals = folders
+        .iter()
+        .map(|f| ImuCalibration::read(&dir.join(f).join("calibration.json")))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| {
+            format!(
+                "{e} (give --calibration the calibration.json `tumble calibrate --inputs` wrote from the same file)"
+            )
+        })?;
+    let t = std::time::Instant::now();
+    let result = tumble::audit::audit_recordings(&recs, &cals, &names, pooled, opts, &mut |m| eprintln!("{m}"))?;
+    for (name, a) in names.iter().zip(&result.each) {
+        println!("{name}: {}", a.verdict());
+    }
+    for line in result.verdict_lines() {
+        println!("{line}");
+    }
+    let files = result.write(&folders, out)?;
+    println!(
+        "audited {} recordings in {:.1} s; wrote {} files into {}",
+        recs.len(),
+        t.elapsed().as_secs_f64(),
+        files.len(),
+        out.display()
+    );
+    Ok(())
 }

@@ -113,25 +113,7 @@ impl CalibrateArgs {
 
 /// `--inputs`: read every tumble the file describes, pool them, write.
 fn calibrate_several(inputs: &std::path::Path, opts: &CalibOptions, out: &std::path::Path) -> CliResult {
-    let described = tumble::io::recordings::RunRecordings::read(inputs)?;
-    if described.still.is_some() {
-        eprintln!(
-            "note: {}: `static:` is not used by `tumble calibrate` (give it to `tumble allan`)",
-            inputs.display()
-        );
-    }
-    let mut recs = Vec::new();
-    let mut names: Vec<String> = Vec::new();
-    for (i, spec) in described.all_tumbles().into_iter().enumerate() {
-        println!("tumble {}: {}", i + 1, spec.describe());
-        let rec = spec.source()?.open()?;
-        for w in &rec.warnings {
-            eprintln!("warning: {}: {w}", spec.path.display());
-        }
-        let name = spec.name();
-        names.push(if names.contains(&name) { format!("{name} ({})", i + 1) } else { name });
-        recs.push(rec);
-    }
+    let (recs, names) = super::common::read_tumbles(inputs)?;
     let t = std::time::Instant::now();
     let result = tumble::calib::calibrate_recordings(&recs, &names, opts)?;
     let elapsed = t.elapsed().as_secs_f64();

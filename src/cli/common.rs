@@ -224,3 +224,27 @@ pub fn open_input(
     }
     Ok(opened.input)
 }
+
+/// `--inputs`: every tumble the file describes (`tumble:` then `tumbles:`),
+/// opened, with its name (its file name, numbered when two are alike).
+pub fn read_tumbles(
+    inputs: &std::path::Path,
+) -> Result<(Vec<tumble::io::ImuRecording>, Vec<String>), Box<dyn std::error::Error>> {
+    let described = tumble::io::recordings::RunRecordings::read(inputs)?;
+    if described.still.is_some() {
+        eprintln!("note: {}: `static:` is not used here (give it to `tumble allan`)", inputs.display());
+    }
+    let mut recs = Vec::new();
+    let mut names: Vec<String> = Vec::new();
+    for (i, spec) in described.all_tumbles().into_iter().enumerate() {
+        println!("tumble {}: {}", i + 1, spec.describe());
+        let rec = spec.source()?.open()?;
+        for w in &rec.warnings {
+            eprintln!("warning: {}: {w}", spec.path.display());
+        }
+        let name = spec.name();
+        names.push(if names.contains(&name) { format!("{name} ({})", i + 1) } else { name });
+        recs.push(rec);
+    }
+    Ok((recs, names))
+}
