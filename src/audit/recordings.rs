@@ -20,10 +20,11 @@
 //! (`tumble calibrate --inputs`): they were estimated without the effects,
 //! which the single-recording audit re-solves them with.
 
+use super::report::{put_file, write_unstaged};
 use super::{audit_with_progress, Audit, AuditError, AuditOptions};
 use crate::io::ImuRecording;
 use crate::model::calibration::{EffectTerm, ImuCalibration, ModelEffects};
-use crate::model::consensus::{Consensus, FALSE_ALARM};
+use crate::model::consensus::{Consensus, RecordingsCheck};
 use serde::Serialize;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 use tumble_factors::imu_effects::Effect;
@@ -39,7 +40,7 @@ pub struct EffectAcross {
     pub parameters: Vec<Consensus>,
     /// The chance of pooled coefficients this far from zero if the effect were absent (Wald χ²).
     pub pooled_p: f64,
-    /// No coefficient's `Q` beyond the family-wise false alarm.
+    /// No coefficient's `Q` beyond the family-wise false alarm ([`RecordingsCheck::disagreements`]).
     pub agree: bool,
     /// It repeats: added to the sensor's calibration.
     pub repeats: bool,
@@ -172,8 +173,9 @@ fn across(effect: Effect, each: &[Audit], alpha: f64) -> EffectAcross {
             Consensus::new(format!("{} {p}", effect.id()), "", &estimates)
         })
         .collect();
-    let threshold = FALSE_ALARM / parameters.len().max(1) as f64;
-    let agree = parameters.iter().all(|c| c.p_value >= threshold);
+    let check = RecordingsCheck { recordings: Vec::new(), parameters };
+    let agree = check.disagreements().is_empty();
+    let parameters = check.parameters;
     let wald: f64 = parameters.iter().map(|c| (c.value / c.sigma).powi(2)).filter(|x| x.is_finite()).sum();
     let pooled_p = ChiSquared::new(parameters.len().max(1) as f64).map_or(1.0, |c| 1.0 - c.cdf(wald));
     EffectAcross {
@@ -233,24 +235,19 @@ impl RecordingsAudit {
     /// `dir`; returns the files written.
     pub fn write(&self, folders: &[String], dir: &std::path::Path) -> Result<Vec<String>, AuditError> {
         let written = crate::io::staging::write_staged(dir, |stage| -> Result<Vec<std::path::PathBuf>, AuditError> {
-            let mut files = Vec::new();
-            let mut put = |name: &str, text: String| -> Result<(), AuditError> {
-                let p = stage.join(name);
-                std::fs::write(&p, text).map_err(|e| AuditError(format!("{}: {e}", p.display())))?;
-                files.push(p);
-                Ok(())
-            };
             let file = crate::model::calibration::CalibrationFile::from(&self.calibration);
-            put("calibration.json", serde_json::to_string_pretty(&file).unwrap_or_default())?;
             let out = JointOutput { recordings: &self.names, effects: &self.effects, verdict: self.verdict_lines() };
-            put("audit.json", serde_json::to_string_pretty(&out).unwrap_or_default())?;
-            put("audit_recordings.md", self.markdown())?;
+            let mut names = vec![
+                put_file(stage, "calibration.json", serde_json::to_string_pretty(&file).unwrap_or_default())?,
+                put_file(stage, "audit.json", serde_json::to_string_pretty(&out).unwrap_or_default())?,
+                put_file(stage, "audit_recordings.md", self.markdown())?,
+            ];
             for (a, folder) in self.each.iter().zip(folders) {
                 let sub = stage.join(folder);
                 std::fs::create_dir_all(&sub).map_err(|e| AuditError(format!("{}: {e}", sub.display())))?;
-                files.extend(super::report::write_unstaged(a, &sub)?.iter().map(|n| sub.join(n)));
+                names.extend(write_unstaged(a, &sub)?.iter().map(|n| format!("{folder}/{n}")));
             }
-            Ok(files)
+            Ok(names.iter().map(|n| stage.join(n)).collect())
         })?;
         Ok(written.iter().map(|p| p.strip_prefix(dir).unwrap_or(p).display().to_string()).collect())
     }

@@ -182,22 +182,7 @@ impl CalibrationResult {
         opts: &CalibOptions,
         dir: &Path,
     ) -> Result<Vec<PathBuf>, OutputError> {
-        let mut files = Vec::new();
-        let mut write = |name: &str, text: String| -> Result<(), String> {
-            let p = dir.join(name);
-            std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
-            files.push(p);
-            Ok(())
-        };
-        write("calibration.json", self.to_json(opts))?;
-        write("calibration.yaml", self.to_yaml(opts)?)?;
-        for (name, triad) in
-            [("imu_tk_acc.calib", &self.calibration.accel), ("imu_tk_gyro.calib", &self.calibration.gyro)]
-        {
-            if let Some((t, k, b)) = triad.to_imu_tk() {
-                write(name, imu_tk_calib_text(&t, &k, &b))?;
-            }
-        }
+        let mut files = write_loadable(dir, self.to_json(opts), self.to_yaml(opts)?, &self.calibration)?;
         let png = dir.join("static_detection.png");
         self.plot_detection(rec, &png)?;
         files.push(png);
@@ -305,4 +290,29 @@ pub(super) fn calibration_table(c: &ImuCalibration) -> String {
         s.push_str(&format!("  (K in {unit_k}, b in {unit_b})\n"));
     }
     s
+}
+
+/// Write what a user loads into `dir`: `calibration.json` and `.yaml` (the
+/// texts given) and imu_tk's `.calib` files of `c`; returns the files written.
+pub(super) fn write_loadable(
+    dir: &Path,
+    json: String,
+    yaml: String,
+    c: &ImuCalibration,
+) -> Result<Vec<PathBuf>, String> {
+    let mut files = Vec::new();
+    let mut write = |name: &str, text: String| -> Result<(), String> {
+        let p = dir.join(name);
+        std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
+        files.push(p);
+        Ok(())
+    };
+    write("calibration.json", json)?;
+    write("calibration.yaml", yaml)?;
+    for (name, triad) in [("imu_tk_acc.calib", &c.accel), ("imu_tk_gyro.calib", &c.gyro)] {
+        if let Some((t, k, b)) = triad.to_imu_tk() {
+            write(name, imu_tk_calib_text(&t, &k, &b))?;
+        }
+    }
+    Ok(files)
 }

@@ -5,12 +5,12 @@
 //! a folder of its own.
 
 use super::options::CalibOptions;
-use super::report::calibration_table;
+use super::report::{calibration_table, write_loadable};
 use super::result::{Assessment, Verdict};
 use super::several::RecordingsResult;
 use crate::error::OutputError;
 use crate::io::ImuRecording;
-use crate::model::calibration::{imu_tk_calib_text, CalibrationFile};
+use crate::model::calibration::CalibrationFile;
 use crate::model::consensus::RecordingsCheck;
 use plotters::prelude::*;
 use serde::Serialize;
@@ -156,24 +156,13 @@ impl RecordingsResult {
         dir: &Path,
     ) -> Result<Vec<PathBuf>, OutputError> {
         crate::io::staging::write_staged(dir, |stage| {
-            let mut files = Vec::new();
-            let mut write = |name: &str, text: String| -> Result<(), String> {
-                let p = stage.join(name);
-                std::fs::write(&p, text).map_err(|e| format!("{}: {e}", p.display()))?;
-                files.push(p);
-                Ok(())
-            };
             let out = self.output(names);
-            write("calibration.json", serde_json::to_string_pretty(&out).unwrap_or_default())?;
-            write("calibration.yaml", serde_saphyr::to_string(&out).map_err(|e| e.to_string())?)?;
-            for (name, triad) in
-                [("imu_tk_acc.calib", &self.calibration.accel), ("imu_tk_gyro.calib", &self.calibration.gyro)]
-            {
-                if let Some((t, k, b)) = triad.to_imu_tk() {
-                    write(name, imu_tk_calib_text(&t, &k, &b))?;
-                }
-            }
-            write("recordings.md", self.recordings_markdown())?;
+            let json = serde_json::to_string_pretty(&out).unwrap_or_default();
+            let yaml = serde_saphyr::to_string(&out).map_err(|e| e.to_string())?;
+            let mut files = write_loadable(stage, json, yaml, &self.calibration)?;
+            let md = stage.join("recordings.md");
+            std::fs::write(&md, self.recordings_markdown()).map_err(|e| format!("{}: {e}", md.display()))?;
+            files.push(md);
             let png = stage.join("recordings.png");
             plot_pooled(&self.check, &png)?;
             files.push(png);
