@@ -19,7 +19,7 @@
 //! | estimate pose and biases with a camera (VIO) | [`vio::run`] | [`vio::VioInput`], [`vio::VioOptions`] → [`vio::VioResult`], [`vio::VioError`] |
 //! | track features in images (feature `opencv`) | `vio::frontend` | |
 //! | evaluate a trajectory | [`eval::evaluate`] | [`eval::EvalInputs`], [`eval::EvalOptions`] → [`eval::Evaluation`], [`eval::EvalError`] |
-//! | simulate recordings with known truth | [`sim::simulate`], [`sim::simulate_and_write`] | [`sim::Scenario`], [`sim::SimConfig`] → [`sim::Simulation`], [`sim::SimError`] |
+//! | simulate recordings with known truth | [`sim::simulate`], [`sim::simulate_and_write`] (images: [`sim::render`]) | [`sim::Scenario`], [`sim::SimConfig`] → [`sim::Simulation`], [`sim::SimError`] |
 //! | the whole chain | [`pipeline::run_chain`] | [`pipeline::ChainInputs`], [`pipeline::ChainOptions`] |
 //! | solve a g2o / BAL file | [`posegraph::solve_file`] | [`posegraph::SolveFileOptions`] → [`posegraph::SolvedFile`] |
 //! | export to another estimator's config | [`export::export`] | [`export::Target`], [`export::ExportInputs`] |

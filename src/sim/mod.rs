@@ -13,9 +13,11 @@
 
 pub(crate) mod camera;
 pub(crate) mod corridor;
+pub mod images;
 pub(crate) mod imu;
 pub use crate::model::imu_model as model;
 pub(crate) mod motion;
+pub mod render;
 pub(crate) mod replay_bands;
 pub mod target;
 pub(crate) mod writer;
@@ -25,7 +27,7 @@ pub use corridor::{Corridor, CorridorWalk};
 pub use imu::{noise_series, simulate_imu, AxisNoise, SimulatedImu};
 pub use model::{Effects, ImuModel, TemperatureTrace, TriadModel};
 pub use motion::{Kinematics, Loop, Motion, Static, Tumble, TumbleSettings};
-pub use writer::{groundtruth, simulate_and_write, write_asl};
+pub use writer::{groundtruth, simulate_and_write, simulate_and_write_with, write_asl};
 
 use crate::error::InputError;
 use nalgebra::Vector3;
@@ -134,6 +136,9 @@ pub struct SimConfig {
     pub pauses_s: Vec<[f64; 2]>,
     /// Absolute time of the first sample \[ns\].
     pub t0_ns: i64,
+    /// Render the camera's frames as images (`tumble sim --images`): how they
+    /// are exposed. Absent: feature tracks only.
+    pub images: Option<render::ImageSettings>,
 }
 
 impl Default for SimConfig {
@@ -149,6 +154,7 @@ impl Default for SimConfig {
             groundtruth_rate_hz: None,
             pauses_s: Vec::new(),
             t0_ns: 1_700_000_000_000_000_000,
+            images: None,
         }
     }
 }
@@ -197,6 +203,9 @@ impl SimConfig {
         }
         self.imu.check()?;
         self.corridor.check()?;
+        if let Some(images) = &self.images {
+            images.check()?;
+        }
         self.camera.check()
     }
 }
@@ -359,6 +368,8 @@ pub struct Simulation {
     pub motion: Box<dyn Motion>,
     /// World-frame centre of the motion (room centre for the camera) \[m\].
     pub centre: Vector3<f64>,
+    /// What the camera sees.
+    pub scene: Scene,
     /// IMU samples and true biases.
     pub imu: SimulatedImu,
     /// Camera tracks, when a camera was simulated.
@@ -392,7 +403,17 @@ pub fn simulate_motion(
         Scene::Room(c) => c,
         Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
     };
-    Ok(Simulation { scenario, seed, config: config.clone(), motion, centre, imu, tracks, static_intervals: Vec::new() })
+    Ok(Simulation {
+        scenario,
+        seed,
+        config: config.clone(),
+        motion,
+        centre,
+        scene,
+        imu,
+        tracks,
+        static_intervals: Vec::new(),
+    })
 }
 
 /// Largest acceleration a walk or flight may reach \[m/s²\] (4 g): the loops
@@ -487,5 +508,15 @@ pub fn simulate_with(
         Scene::Room(c) => c,
         Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
     };
-    Ok(Simulation { scenario, seed, config: config.clone(), motion, centre, imu, tracks, static_intervals: intervals })
+    Ok(Simulation {
+        scenario,
+        seed,
+        config: config.clone(),
+        motion,
+        centre,
+        scene,
+        imu,
+        tracks,
+        static_intervals: intervals,
+    })
 }

@@ -75,9 +75,21 @@ pub fn simulate_and_write(
     seed: u64,
     out: &Path,
 ) -> Result<Simulation, SimError> {
+    simulate_and_write_with(scenario, config, seed, out, &mut |_, _| {})
+}
+
+/// [`simulate_and_write`], calling `progress(done, total)` after each
+/// rendered frame when the config asks for images (`SimConfig::images`).
+pub fn simulate_and_write_with(
+    scenario: super::Scenario,
+    config: &super::SimConfig,
+    seed: u64,
+    out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<Simulation, SimError> {
     let mut done = None;
     crate::io::staging::write_staged(out, |stage| -> Result<Vec<PathBuf>, SimError> {
-        done = Some(simulate_and_write_into(scenario, config, seed, stage)?);
+        done = Some(simulate_and_write_into(scenario, config, seed, stage, progress)?);
         crate::io::staging::files_under(stage).map_err(|e| SimError::from(format!("{}: {e}", stage.display())))
     })?;
     done.ok_or_else(|| SimError::from("the simulation wrote nothing"))
@@ -89,6 +101,7 @@ fn simulate_and_write_into(
     config: &super::SimConfig,
     seed: u64,
     out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
 ) -> Result<Simulation, SimError> {
     let refused = |m: SimError| format!("simulation: {m}");
     config.check().map_err(refused)?;
@@ -123,6 +136,9 @@ fn simulate_and_write_into(
         sim.map_err(refused)
     })?;
     write_rest(&sim, out).map_err(|e| e.to_string())?;
+    if let Some(images) = &config.images {
+        super::images::write_images(&sim, images, out, progress)?;
+    }
     Ok(sim)
 }
 
@@ -171,12 +187,17 @@ fn camera_yaml(sim: &Simulation, second: bool) -> String {
     let c = &sim.config.camera;
     let t = if second { c.body_from_second_camera() } else { c.body_from_camera() }.to_homogeneous();
     let data: Vec<String> = t.transpose().iter().map(|x| format!("{x}")).collect();
+    let comment = if sim.config.images.is_some() {
+        "simulated camera (rendered images in data/)"
+    } else {
+        "simulated camera (no images; features in tracks.csv)"
+    };
     let model = match c.distortion_model {
         super::camera::DistortionKind::RadialTangential => "radial-tangential",
         super::camera::DistortionKind::Equidistant => "equidistant",
     };
     format!(
-        "%YAML:1.0\nsensor_type: camera\ncomment: simulated camera (no images; features in tracks.csv)\nT_BS:\n  cols: 4\n  rows: 4\n  data: [{}]\nrate_hz: {}\nresolution: [{}, {}]\ncamera_model: pinhole\nintrinsics: [{}, {}, {}, {}]\ndistortion_model: {model}\ndistortion_coefficients: [{}, {}, {}, {}]\n",
+        "%YAML:1.0\nsensor_type: camera\ncomment: {comment}\nT_BS:\n  cols: 4\n  rows: 4\n  data: [{}]\nrate_hz: {}\nresolution: [{}, {}]\ncamera_model: pinhole\nintrinsics: [{}, {}, {}, {}]\ndistortion_model: {model}\ndistortion_coefficients: [{}, {}, {}, {}]\n",
         data.join(", "),
         c.rate_hz,
         c.resolution[0],
@@ -253,11 +274,14 @@ fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
         for o in &tr.observations {
             truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
         }
-        write_text(&cam.join("tracks.csv"), &tracks(&tr.observations))?;
+        // With images the estimators track them: the simulated tracks (exact
+        // projections plus the configured noise) go to truth/ beside the rest.
+        let track_dir = if sim.config.images.is_some() { out.join("truth") } else { cam.clone() };
+        write_text(&track_dir.join("tracks.csv"), &tracks(&tr.observations))?;
         if sim.config.camera.stereo_baseline_m > 0.0 {
             // The second camera's matches beside cam0's tracks, as `tumble
             // track --stereo` writes them, and its sensor.yaml in cam1/.
-            write_text(&cam.join("tracks_cam1.csv"), &tracks(&tr.stereo))?;
+            write_text(&track_dir.join("tracks_cam1.csv"), &tracks(&tr.stereo))?;
             let cam1 = mav0.join("cam1");
             write_text(&cam1.join("sensor.yaml"), &camera_yaml(sim, true))?;
             write_text(&cam1.join("data.csv"), &frames)?;

@@ -1,0 +1,104 @@
+//! A simulation's camera frames rendered into its ASL folder
+//! (`camN/data/<stamp>.png`, listed in `camN/data.csv`), for `tumble sim
+//! <scenario> --images`.
+
+use super::render::{lens::RayTable, render_frame, scene::RenderScene, ImageSettings};
+use super::{Scene, SimError, Simulation};
+use nalgebra::Isometry3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use std::path::Path;
+
+/// The scene a simulation's camera sees, as textured planes.
+pub fn render_scene(sim: &Simulation) -> Result<RenderScene, SimError> {
+    match sim.scene {
+        Scene::Room(centre) => Ok(RenderScene::room(centre, sim.config.camera.room_half_extent, sim.seed)),
+        Scene::Corridor(_) => {
+            Err("images: the corridor's curved walls are not rendered (rooms are: the walk and the flight); \
+             simulate the corridor without --images for its feature tracks"
+                .into())
+        }
+    }
+}
+
+/// 8-bit grey pixels as PNG bytes.
+pub fn png_gray(pixels: &[u8], width: usize, height: usize) -> Result<Vec<u8>, String> {
+    let mut out = Vec::new();
+    {
+        let mut e = png::Encoder::new(&mut out, width as u32, height as u32);
+        e.set_color(png::ColorType::Grayscale);
+        e.set_depth(png::BitDepth::Eight);
+        e.set_compression(png::Compression::Fast);
+        let mut w = e.write_header().map_err(|e| e.to_string())?;
+        w.write_image_data(pixels).map_err(|e| e.to_string())?;
+    }
+    Ok(out)
+}
+
+/// Render every frame of every simulated camera of `sim` with `settings`
+/// into `out/mav0/camN/data/<stamp>.png` (the stamps of `camN/data.csv`),
+/// calling `progress(done, total)` after each frame. Errors: a simulation
+/// without a camera, a scene that is not rendered, a file not written.
+pub fn write_images(
+    sim: &Simulation,
+    settings: &ImageSettings,
+    out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(), SimError> {
+    settings.check()?;
+    let tracks = sim.tracks.as_ref().ok_or("images: the scenario has no camera (walk and flight have one)")?;
+    let scene = render_scene(sim)?;
+    let c = &sim.config.camera;
+    let mut cameras: Vec<(&str, Isometry3<f64>)> = vec![("cam0", c.body_from_camera())];
+    if c.stereo_baseline_m > 0.0 {
+        cameras.push(("cam1", c.body_from_second_camera()));
+    }
+    let [w, h] = c.resolution.map(|x| x as usize);
+    let lens = RayTable::new(&c.model(), w, h);
+    let focal = c.intrinsics[0].max(c.intrinsics[1]);
+    let total = tracks.frames.len() * cameras.len();
+    let mut done = 0;
+    for (index, (name, body_from_camera)) in cameras.iter().enumerate() {
+        let dir = out.join("mav0").join(name).join("data");
+        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        // Each camera flickers on its own (its own auto-exposure).
+        let mut gains = ChaCha8Rng::seed_from_u64(sim.seed);
+        gains.set_stream(300 + index as u64);
+        let gains: Vec<f64> = (0..tracks.frames.len())
+            .map(|_| {
+                let jitter: f64 = StandardNormal.sample(&mut gains);
+                (1.0 + settings.gain_jitter * jitter).max(0.0)
+            })
+            .collect();
+        let frame = |k: usize| -> Result<(), String> {
+            let t = tracks.frames[k];
+            let seed = sim.seed.wrapping_mul(1_000_003).wrapping_add((index * tracks.frames.len() + k) as u64);
+            let pixels = render_frame(
+                &scene,
+                &lens,
+                focal,
+                sim.motion.as_ref(),
+                body_from_camera,
+                t + c.time_offset_s,
+                gains[k],
+                settings,
+                seed,
+            );
+            let stamp = sim.config.t0_ns + (t * 1e9).round() as i64;
+            let path = dir.join(format!("{stamp}.png"));
+            let bytes = png_gray(&pixels, w, h).map_err(|e| format!("{}: {e}", path.display()))?;
+            std::fs::write(&path, bytes).map_err(|e| format!("{}: {e}", path.display()))
+        };
+        // Frames in parallel, a few per thread at a time, with progress between.
+        let chunk = 4 * rayon::current_num_threads();
+        for start in (0..tracks.frames.len()).step_by(chunk) {
+            let end = (start + chunk).min(tracks.frames.len());
+            (start..end).into_par_iter().map(frame).collect::<Result<Vec<()>, String>>()?;
+            done += end - start;
+            progress(done, total);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,252 @@
+//! Textures with a mip pyramid that keeps the texel-centre convention, and
+//! the procedural "dead leaves" texture of the rendered scenes.
+//!
+//! Coordinates are continuous in level-0 texels: texel `i` covers `[i, i + 1)`
+//! and its value is the mean of the surface over that square (its centre is
+//! `i + ½`). Level `k` texel `i` is the mean of the four level-`k − 1` texels
+//! it covers, so it covers `[i·2ᵏ, (i + 1)·2ᵏ)` of level 0 and its centre is
+//! `(i + ½)·2ᵏ`: the same convention on every level. A sample at `u` on level
+//! `k` interpolates bilinearly about `u/2ᵏ − ½`. Box filters and a symmetric
+//! interpolation move no edge: a rendered edge or corner stays where it projects.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// One level of a pyramid: `width × height` texels, row-major, values in \[0, 1\].
+#[derive(Debug, Clone)]
+struct Level {
+    width: usize,
+    height: usize,
+    data: Vec<f32>,
+}
+
+/// `⌊x⌋` as an integer (without a call into libm).
+fn floor_i(x: f64) -> isize {
+    let t = x as isize;
+    t - isize::from((t as f64) > x)
+}
+
+impl Level {
+    fn at(&self, i: isize, j: isize) -> f32 {
+        let i = i.clamp(0, self.width as isize - 1) as usize;
+        let j = j.clamp(0, self.height as isize - 1) as usize;
+        self.data[j * self.width + i]
+    }
+
+    /// Bilinear interpolation between texel centres; `(x, y)` in this level's texels.
+    fn bilinear(&self, x: f64, y: f64) -> f64 {
+        let (x, y) = (x - 0.5, y - 0.5);
+        let (i, j) = (floor_i(x), floor_i(y));
+        let (fx, fy) = ((x - i as f64) as f32, (y - j as f64) as f32);
+        let (w, h) = (self.width as isize, self.height as isize);
+        let [a, b, c, d] = if i >= 0 && j >= 0 && i + 1 < w && j + 1 < h {
+            let k = (j * w + i) as usize;
+            let (top, bottom) = (&self.data[k..k + 2], &self.data[k + w as usize..k + w as usize + 2]);
+            [top[0], top[1], bottom[0], bottom[1]]
+        } else {
+            [self.at(i, j), self.at(i + 1, j), self.at(i, j + 1), self.at(i + 1, j + 1)]
+        };
+        let top = a + (b - a) * fx;
+        let bottom = c + (d - c) * fx;
+        f64::from(top + (bottom - top) * fy)
+    }
+
+    /// The next level: each texel the mean of the 2 × 2 it covers.
+    fn halved(&self) -> Level {
+        let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
+        let mut data = Vec::with_capacity(w * h);
+        for j in 0..h {
+            for i in 0..w {
+                let (i0, j0) = (2 * i as isize, 2 * j as isize);
+                let s = self.at(i0, j0) + self.at(i0 + 1, j0) + self.at(i0, j0 + 1) + self.at(i0 + 1, j0 + 1);
+                data.push(0.25 * s);
+            }
+        }
+        Level { width: w, height: h, data }
+    }
+}
+
+/// A texture with its mip pyramid. Sides are powers of two, so that every
+/// level halves exactly.
+#[derive(Debug, Clone)]
+pub struct Texture {
+    levels: Vec<Level>,
+}
+
+impl Texture {
+    /// A texture from level-0 texels (row-major, values in \[0, 1\]); `width`
+    /// and `height` must be powers of two.
+    ///
+    /// # Panics
+    /// When the sides are not powers of two or `data` has another length (a
+    /// programming error: the scene builds its textures).
+    pub fn new(width: usize, height: usize, data: Vec<f32>) -> Texture {
+        assert!(width.is_power_of_two() && height.is_power_of_two() && data.len() == width * height);
+        let mut levels = vec![Level { width, height, data }];
+        while levels.last().is_some_and(|l| l.width > 1 || l.height > 1) {
+            let next = levels.last().map(Level::halved).expect("one level at least");
+            levels.push(next);
+        }
+        Texture { levels }
+    }
+
+    /// Width and height of level 0 \[texels\].
+    pub fn size(&self) -> [usize; 2] {
+        [self.levels[0].width, self.levels[0].height]
+    }
+
+    /// The surface's mean over a footprint `footprint` level-0 texels wide
+    /// about `(u, v)` (level-0 texels): trilinear interpolation between the
+    /// two levels whose texels bracket the footprint. A footprint under one
+    /// texel reads level 0 bilinearly.
+    ///
+    /// Edges stay unbiased: every level's texels are centred as level 0's
+    /// and the interpolation is symmetric, so an edge's rendered position
+    /// errs only by where it falls within a texel and a pixel (its phase),
+    /// which averages out over positions (`tests/render.rs` measures both).
+    pub fn sample(&self, u: f64, v: f64, footprint: f64) -> f64 {
+        let lod = lod_of(footprint).min((self.levels.len() - 1) as f64);
+        let k = lod as usize;
+        let f = lod - k as f64;
+        let at = |k: usize| {
+            let s = (1u64 << k) as f64;
+            self.levels[k].bilinear(u / s, v / s)
+        };
+        if f < 1e-6 || k + 1 >= self.levels.len() {
+            return at(k);
+        }
+        at(k) * (1.0 - f) + at(k + 1) * f
+    }
+}
+
+/// The mip level for a footprint of `texels` (≥ 1): log₂ linearly
+/// interpolated between powers of two (exact at them, continuous and
+/// increasing between, within 0.09 of log₂), read from the float's bits.
+fn lod_of(texels: f64) -> f64 {
+    let x = texels.max(1.0);
+    let bits = x.to_bits();
+    let exponent = ((bits >> 52) & 0x7ff) as i64 - 1023;
+    let mantissa = f64::from_bits((bits & ((1u64 << 52) - 1)) | (1023u64 << 52));
+    exponent as f64 + mantissa - 1.0
+}
+
+/// Paint the axis-aligned rectangle `[x0, x1) × [y0, y1)` (level-0 texels)
+/// with `value`, each texel blended by the fraction of it the rectangle
+/// covers: the texture holds the surface's exact mean per texel.
+pub fn paint_rect(width: usize, height: usize, data: &mut [f32], [x0, y0, x1, y1]: [f64; 4], value: f32) {
+    let cover = |lo: f64, hi: f64, i: usize| (hi.min(i as f64 + 1.0) - lo.max(i as f64)).max(0.0);
+    let (i0, i1) = (x0.floor().max(0.0) as usize, (x1.ceil().max(0.0) as usize).min(width));
+    let (j0, j1) = (y0.floor().max(0.0) as usize, (y1.ceil().max(0.0) as usize).min(height));
+    for j in j0..j1 {
+        let cy = cover(y0, y1, j);
+        for i in i0..i1 {
+            let c = (cover(x0, x1, i) * cy) as f32;
+            let t = &mut data[j * width + i];
+            *t = *t * (1.0 - c) + value * c;
+        }
+    }
+}
+
+/// Fraction of [`dead_leaves`]' rectangles of any grey; the others are
+/// within [`WEAK_CONTRAST`] of the surface's base grey.
+const STRONG_LEAVES: f64 = 0.1;
+
+/// Largest grey difference of a weak rectangle from its surface's base (of 1).
+const WEAK_CONTRAST: f32 = 0.08;
+
+/// A "dead leaves" texture: rectangles of random grey, sides drawn from a
+/// `1/s³` law between `sides` \[level-0 texels\], painted over one another until the
+/// surface is covered several times over. The model reproduces the
+/// statistics of natural images that matter to a feature tracker: a
+/// scale-invariant (1/f²) power spectrum, sharp occluding edges and corners at
+/// every scale, and a heavy-tailed gradient distribution (Lee, Mumford and
+/// Huang, "Occlusion models for natural images", IJCV 2001).
+pub fn dead_leaves(width: usize, height: usize, sides: [f64; 2], seed: u64) -> Texture {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let base: f32 = rng.random_range(0.35..0.75);
+    let mut data = vec![base; width * height];
+    let [lo, hi] = sides;
+    let hi = hi.min(width.max(height) as f64);
+    // Mean area of a leaf, its two sides drawn independently from p(s) ∝ s⁻³ on
+    // [lo, hi]: E[s]², E[s] = 2 / (1/lo + 1/hi).
+    let mean_side = 2.0 / (1.0 / lo + 1.0 / hi);
+    let mean_area = mean_side * mean_side;
+    let leaves = (6.0 * (width * height) as f64 / mean_area).ceil() as usize;
+    for _ in 0..leaves {
+        // Inverse CDF of p(s) ∝ s⁻³: 1/s² uniform between 1/hi² and 1/lo².
+        let side = |rng: &mut ChaCha8Rng| {
+            let q: f64 = rng.random_range(0.0..1.0);
+            (1.0 / (1.0 / (lo * lo) - q * (1.0 / (lo * lo) - 1.0 / (hi * hi)))).sqrt()
+        };
+        let (w, h) = (side(&mut rng), side(&mut rng));
+        let x = rng.random_range(-w..width as f64);
+        let y = rng.random_range(-h..height as f64);
+        // Most surfaces differ little from their neighbours (walls, floors,
+        // furniture of one material); a few stand out (posters, frames, shadows).
+        let value = if rng.random_bool(STRONG_LEAVES) {
+            rng.random_range(0.08f32..0.92)
+        } else {
+            (base + WEAK_CONTRAST * rng.random_range(-1.0f32..1.0)).clamp(0.0, 1.0)
+        };
+        paint_rect(width, height, &mut data, [x, y, x + w, y + h], value);
+    }
+    Texture::new(width, height, data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_level_keeps_the_texel_centre_convention() {
+        // A dark square [24, 40) × [8, 16) in a 64 × 32 texture: its centroid
+        // (32, 12) is where every level and every footprint puts it.
+        let mut data = vec![1.0f32; 64 * 32];
+        paint_rect(64, 32, &mut data, [24.0, 8.0, 40.0, 16.0], 0.0);
+        let t = Texture::new(64, 32, data);
+        for footprint in [1.0, 1.7, 2.0, 3.3, 4.0, 8.0] {
+            let (mut m, mut mx, mut my) = (0.0, 0.0, 0.0);
+            // Sample on a fine grid of points (0.25 texel), as pixels would.
+            for j in 0..128 {
+                for i in 0..256 {
+                    let (u, v) = (i as f64 * 0.25 + 0.125, j as f64 * 0.25 + 0.125);
+                    let d = 1.0 - t.sample(u, v, footprint);
+                    m += d;
+                    mx += d * u;
+                    my += d * v;
+                }
+            }
+            let (cx, cy) = (mx / m, my / m);
+            assert!((cx - 32.0).abs() < 1e-3 && (cy - 12.0).abs() < 1e-3, "footprint {footprint}: ({cx}, {cy})");
+        }
+    }
+
+    #[test]
+    fn the_level_of_detail_follows_log2() {
+        for x in [1.0, 1.5, 2.0, 3.0, 4.0, 7.9, 1024.0, 3000.0] {
+            assert!((lod_of(x) - f64::log2(x)).abs() < 0.09, "{x}");
+        }
+        assert_eq!((lod_of(0.2), lod_of(8.0)), (0.0, 3.0));
+        assert_eq!(floor_i(-0.5), -1);
+        assert_eq!(floor_i(2.0), 2);
+    }
+
+    #[test]
+    fn dead_leaves_cover_the_texture_with_edges_at_every_scale() {
+        let t = dead_leaves(256, 256, [3.0, 400.0], 3);
+        let l = &t.levels[0];
+        let base = l.data[0];
+        let untouched = l.data.iter().filter(|&&x| x == base).count();
+        assert!(untouched < 256, "{untouched} texels never painted");
+        // Gradients on level 0 and level 3 alike: edges at both scales.
+        for k in [0, 3] {
+            let l = &t.levels[k];
+            let strong = (1..l.width)
+                .flat_map(|i| (0..l.height).map(move |j| (i, j)))
+                .filter(|&(i, j)| (l.data[j * l.width + i] - l.data[j * l.width + i - 1]).abs() > 0.1)
+                .count();
+            let fraction = strong as f64 / (l.width * l.height) as f64;
+            assert!(fraction > 0.02 && fraction < 0.6, "level {k}: {fraction}");
+        }
+    }
+}
