@@ -4,7 +4,7 @@
 //!
 //! - **Scene** ([`scene`]): textured rectangles — a room's or hall's six faces
 //!   with "dead leaves" textures (sharp edges and corners at every scale, the
-//!   power spectrum of natural images), a checkerboard target.
+//!   power spectrum of natural images).
 //! - **Anti-aliasing that moves no edge** ([`texture`]): each pixel shows its
 //!   surface's mean over the pixel's footprint, read from a mip pyramid of box
 //!   filters that keeps the texel-centre convention on every level, so

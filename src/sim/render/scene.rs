@@ -1,8 +1,7 @@
-//! What the rendered camera sees: textured rectangles in the world frame —
-//! the six faces of a room or hall, and a calibration target on a wall.
+//! What the rendered camera sees: textured rectangles in the world frame
+//! (the six faces of a room or hall).
 
-use super::texture::{dead_leaves, paint_rect, Texture};
-use crate::model::target::Target;
+use super::texture::{dead_leaves, Texture};
 use nalgebra::{Isometry3, Vector3};
 use std::sync::Arc;
 
@@ -168,43 +167,4 @@ impl SeenPlanes {
         }
         best
     }
-}
-
-/// Level-0 texels per target square side (or per AprilGrid tag bit).
-const TARGET_TEXELS_PER_CELL: usize = 32;
-
-/// A checkerboard target as printed, as a plane in the target's own frame
-/// (x right, y up, z out of the printed side; corner `k` at
-/// [`Target::corner`]): black squares alternating with white ones, one white
-/// square's width of white margin around. `None` for an AprilGrid: its tags'
-/// codes are not rendered yet.
-pub fn target_plane(target: &Target) -> Option<Plane> {
-    let Target::Checkerboard { cols, rows, col_spacing, row_spacing } = *target else { return None };
-    // Squares: cols + 1 by rows + 1, the inner corners at multiples of the spacing
-    // from (0, 0); a square's margin all round.
-    let (nx, ny) = (cols as usize + 3, rows as usize + 3);
-    let side = |n: usize| (n * TARGET_TEXELS_PER_CELL).next_power_of_two();
-    let (w, h) = (side(nx), side(ny));
-    // Texels per square along x and y (the texture spans the whole printed sheet).
-    let (sx, sy) = (w as f64 / nx as f64, h as f64 / ny as f64);
-    let mut data = vec![1.0f32; w * h];
-    for i in 0..=cols {
-        for j in 0..=rows {
-            if (i + j) % 2 == 0 {
-                // Square (i, j) spans target x ∈ [(i − 1)·dx, i·dx), y likewise; the sheet starts at −2·dx.
-                let (x0, y0) = ((i + 1) as f64 * sx, (j + 1) as f64 * sy);
-                // Texture rows run down the sheet (v along −y): flip.
-                let (v0, v1) = (h as f64 - (y0 + sy), h as f64 - y0);
-                paint_rect(w, h, &mut data, [x0, v0, x0 + sx, v1], 0.0);
-            }
-        }
-    }
-    let size = [nx as f64 * col_spacing, ny as f64 * row_spacing];
-    Some(Plane {
-        origin: Vector3::new(-2.0 * col_spacing, f64::from(rows + 1) * row_spacing, 0.0),
-        u_axis: Vector3::x(),
-        v_axis: -Vector3::y(),
-        size,
-        texture: Arc::new(Texture::new(w, h, data)),
-    })
 }
