@@ -183,3 +183,23 @@ fn gradient_percentiles<'a>(paths: impl Iterator<Item = &'a std::path::Path>) ->
     g.sort_by(f64::total_cmp);
     [0.5, 0.9, 0.99].map(|q| g[((g.len() - 1) as f64 * q) as usize])
 }
+
+/// What cannot be rendered is refused before anything is simulated, naming
+/// why, and writes nothing.
+#[test]
+fn scenarios_without_rendered_frames_are_refused_up_front() {
+    use tumble::sim::{render::ImageSettings, simulate_and_write, Scenario, SimConfig};
+    let cfg = SimConfig { images: Some(ImageSettings::default()), ..SimConfig::default() };
+    for (scenario, why) in [(Scenario::Static, "no camera"), (Scenario::Corridor, "curved walls")] {
+        let dir = std::env::temp_dir().join(format!("tumble_render_refused_{}_{scenario:?}", std::process::id()));
+        let e = match simulate_and_write(scenario, &cfg, 1, &dir) {
+            Err(e) => e.to_string(),
+            Ok(_) => panic!("{scenario:?} rendered"),
+        };
+        assert!(e.contains(why), "{e}");
+        assert!(!dir.exists(), "{scenario:?}: nothing is written");
+    }
+    let bad = ImageSettings { vignetting: 1.5, ..ImageSettings::default() };
+    let cfg = SimConfig { images: Some(bad), ..SimConfig::default() };
+    assert!(cfg.check().unwrap_err().to_string().contains("images.vignetting"));
+}

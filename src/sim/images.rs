@@ -15,13 +15,28 @@ use std::path::Path;
 pub fn render_scene(sim: &Simulation) -> Result<RenderScene, SimError> {
     match sim.scene {
         Scene::Room(centre) => Ok(RenderScene::room(centre, sim.config.camera.room_half_extent, sim.seed)),
-        Scene::Corridor(_) => {
-            Err("images: the corridor's curved walls are not rendered (rooms are: the walk and the flight); \
-             simulate the corridor without --images for its feature tracks"
-                .into())
-        }
+        Scene::Corridor(_) => Err(CORRIDOR_NOT_RENDERED.into()),
     }
 }
+
+/// Whether `scenario` under `config` has frames that can be rendered:
+/// refused before anything is simulated when it has no camera or a scene
+/// that is not rendered (the corridor).
+pub fn check_renderable(scenario: super::Scenario, config: &super::SimConfig) -> Result<(), SimError> {
+    use super::Scenario::{Corridor, Flight, Walk};
+    let moving = matches!(scenario, Walk | Flight | Corridor);
+    if !config.camera_enabled.unwrap_or(moving) {
+        return Err(format!("images: the {scenario:?} scenario has no camera (walk and flight have one)").into());
+    }
+    if scenario == Corridor {
+        return Err(CORRIDOR_NOT_RENDERED.into());
+    }
+    Ok(())
+}
+
+/// Why a corridor is not rendered.
+const CORRIDOR_NOT_RENDERED: &str = "images: the corridor's curved walls are not rendered (rooms are: the walk and \
+     the flight); simulate the corridor without --images for its feature tracks";
 
 /// 8-bit grey pixels as PNG bytes.
 pub fn png_gray(pixels: &[u8], width: usize, height: usize) -> Result<Vec<u8>, String> {

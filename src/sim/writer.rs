@@ -105,6 +105,9 @@ fn simulate_and_write_into(
 ) -> Result<Simulation, SimError> {
     let refused = |m: SimError| format!("simulation: {m}");
     config.check().map_err(refused)?;
+    if config.images.is_some() {
+        super::images::check_renderable(scenario, config)?;
+    }
     let csv = out.join("mav0").join("imu0").join("data.csv");
     let mut w = create(&csv).map_err(|e| e.to_string())?;
     let (tx, rx) = std::sync::mpsc::sync_channel::<Vec<Vec<u8>>>(2);
