@@ -150,14 +150,26 @@ fn png_of(img: &msgs::Image) -> Result<Vec<u8>, String> {
             px.extend_from_slice(s);
         }
     }
+    encode_png(&px, img.width as usize, img.height as usize, color, depth)
+}
+
+/// Packed pixels (rows of `width` samples, 16-bit ones big-endian) as PNG
+/// bytes, compressed fast (recordings hold thousands of frames).
+pub(crate) fn encode_png(
+    px: &[u8],
+    width: usize,
+    height: usize,
+    color: png::ColorType,
+    depth: png::BitDepth,
+) -> Result<Vec<u8>, String> {
     let mut out = Vec::new();
     {
-        let mut e = png::Encoder::new(&mut out, img.width, img.height);
+        let mut e = png::Encoder::new(&mut out, width as u32, height as u32);
         e.set_color(color);
         e.set_depth(depth);
         e.set_compression(png::Compression::Fast);
         let mut w = e.write_header().map_err(|e| e.to_string())?;
-        w.write_image_data(&px).map_err(|e| e.to_string())?;
+        w.write_image_data(px).map_err(|e| e.to_string())?;
     }
     Ok(out)
 }

@@ -4,6 +4,7 @@
 
 use super::render::{lens::RayTable, render_frame, scene::RenderScene, ImageSettings};
 use super::{Scene, SimError, Simulation};
+use crate::io::convert::encode_png;
 use nalgebra::Isometry3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -23,12 +24,10 @@ pub fn render_scene(sim: &Simulation) -> Result<RenderScene, SimError> {
 /// refused before anything is simulated when it has no camera or a scene
 /// that is not rendered (the corridor).
 pub fn check_renderable(scenario: super::Scenario, config: &super::SimConfig) -> Result<(), SimError> {
-    use super::Scenario::{Corridor, Flight, Walk};
-    let moving = matches!(scenario, Walk | Flight | Corridor);
-    if !config.camera_enabled.unwrap_or(moving) {
+    if !config.has_camera(scenario) {
         return Err(format!("images: the {scenario:?} scenario has no camera (walk and flight have one)").into());
     }
-    if scenario == Corridor {
+    if scenario == super::Scenario::Corridor {
         return Err(CORRIDOR_NOT_RENDERED.into());
     }
     Ok(())
@@ -37,20 +36,6 @@ pub fn check_renderable(scenario: super::Scenario, config: &super::SimConfig) ->
 /// Why a corridor is not rendered.
 const CORRIDOR_NOT_RENDERED: &str = "images: the corridor's curved walls are not rendered (rooms are: the walk and \
      the flight); simulate the corridor without --images for its feature tracks";
-
-/// 8-bit grey pixels as PNG bytes.
-pub fn png_gray(pixels: &[u8], width: usize, height: usize) -> Result<Vec<u8>, String> {
-    let mut out = Vec::new();
-    {
-        let mut e = png::Encoder::new(&mut out, width as u32, height as u32);
-        e.set_color(png::ColorType::Grayscale);
-        e.set_depth(png::BitDepth::Eight);
-        e.set_compression(png::Compression::Fast);
-        let mut w = e.write_header().map_err(|e| e.to_string())?;
-        w.write_image_data(pixels).map_err(|e| e.to_string())?;
-    }
-    Ok(out)
-}
 
 /// Render every frame of every simulated camera of `sim` with `settings`
 /// into `out/mav0/camN/data/<stamp>.png` (the stamps of `camN/data.csv`),
@@ -101,9 +86,10 @@ pub fn write_images(
                 settings,
                 seed,
             );
-            let stamp = sim.config.t0_ns + (t * 1e9).round() as i64;
+            let stamp = sim.stamp_ns(t);
             let path = dir.join(format!("{stamp}.png"));
-            let bytes = png_gray(&pixels, w, h).map_err(|e| format!("{}: {e}", path.display()))?;
+            let bytes = encode_png(&pixels, w, h, png::ColorType::Grayscale, png::BitDepth::Eight)
+                .map_err(|e| format!("{}: {e}", path.display()))?;
             std::fs::write(&path, bytes).map_err(|e| format!("{}: {e}", path.display()))
         };
         // Frames in parallel, a few per thread at a time, with progress between.

@@ -55,6 +55,11 @@ pub enum Scenario {
 }
 
 impl Scenario {
+    /// Whether the scenario moves through a scene (walk, flight, corridor):
+    /// it has a camera by default and may pause.
+    pub fn moves(self) -> bool {
+        matches!(self, Scenario::Walk | Scenario::Flight | Scenario::Corridor)
+    }
     /// The names [`Scenario`]'s `FromStr` takes, in order.
     pub const NAMES: [&'static str; 5] = ["tumble", "static", "walk", "flight", "corridor"];
     const ALL: [Scenario; 5] =
@@ -165,6 +170,11 @@ impl SimConfig {
         let cfg: SimConfig = crate::io::yaml::read_yaml(path)?;
         cfg.check().map_err(|m| InputError::file(path, m))?;
         Ok(cfg)
+    }
+    /// Whether `scenario` is simulated with a camera: `camera_enabled`, or
+    /// by default when it [moves](Scenario::moves).
+    pub fn has_camera(&self, scenario: Scenario) -> bool {
+        self.camera_enabled.unwrap_or(scenario.moves())
     }
     /// Check for values that cannot be simulated.
     pub fn check(&self) -> Result<(), SimError> {
@@ -366,8 +376,6 @@ pub struct Simulation {
     pub config: SimConfig,
     /// The true motion.
     pub motion: Box<dyn Motion>,
-    /// World-frame centre of the motion (room centre for the camera) \[m\].
-    pub centre: Vector3<f64>,
     /// What the camera sees.
     pub scene: Scene,
     /// IMU samples and true biases.
@@ -377,6 +385,21 @@ pub struct Simulation {
     /// True still intervals `[start, end]` \[s\] (tumble: the holds; static:
     /// all; walk, flight and corridor: the standstills of their pauses).
     pub static_intervals: Vec<[f64; 2]>,
+}
+
+impl Simulation {
+    /// World-frame centre of the motion (the room's centre; the corridor's
+    /// at eye height) \[m\].
+    pub fn centre(&self) -> Vector3<f64> {
+        match self.scene {
+            Scene::Room(c) => c,
+            Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
+        }
+    }
+    /// The written stamp \[ns\] of simulation time `t` \[s\] (frames' names and `data.csv` rows).
+    pub fn stamp_ns(&self, t: f64) -> i64 {
+        self.config.t0_ns + (t * 1e9).round() as i64
+    }
 }
 
 /// Run a scenario. Deterministic: the same seed and config give the same samples.
@@ -399,21 +422,7 @@ pub fn simulate_motion(
     let bias_every = ((config.imu.rate_hz / groundtruth_rate(scenario, config)).round() as usize).max(1);
     let imu = simulate_imu(motion.as_ref(), &config.imu, config.gravity, seed, bias_every);
     let tracks = Some(camera::simulate_tracks(motion.as_ref(), &config.camera, &scene, seed));
-    let centre = match scene {
-        Scene::Room(c) => c,
-        Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
-    };
-    Ok(Simulation {
-        scenario,
-        seed,
-        config: config.clone(),
-        motion,
-        centre,
-        scene,
-        imu,
-        tracks,
-        static_intervals: Vec::new(),
-    })
+    Ok(Simulation { scenario, seed, config: config.clone(), motion, scene, imu, tracks, static_intervals: Vec::new() })
 }
 
 /// Largest acceleration a walk or flight may reach \[m/s²\] (4 g): the loops
@@ -493,7 +502,7 @@ pub fn simulate_with(
             with_pauses(m, Scene::Corridor(config.corridor), &config.pauses_s)?
         }
     };
-    let moving = matches!(scenario, Scenario::Walk | Scenario::Flight | Scenario::Corridor);
+    let moving = scenario.moves();
     if !config.pauses_s.is_empty() && !moving {
         return Err("pauses_s: only a walk, a flight or a corridor walk can pause".into());
     }
@@ -502,21 +511,7 @@ pub fn simulate_with(
     }
     let bias_every = ((config.imu.rate_hz / groundtruth_rate(scenario, config)).round() as usize).max(1);
     let imu = imu::simulate_imu_streaming(motion.as_ref(), &config.imu, config.gravity, seed, bias_every, on_chunk);
-    let camera = config.camera_enabled.unwrap_or(moving);
+    let camera = config.has_camera(scenario);
     let tracks = camera.then(|| camera::simulate_tracks(motion.as_ref(), &config.camera, &scene, seed));
-    let centre = match scene {
-        Scene::Room(c) => c,
-        Scene::Corridor(_) => Vector3::new(0.0, 0.0, corridor::EYE_HEIGHT),
-    };
-    Ok(Simulation {
-        scenario,
-        seed,
-        config: config.clone(),
-        motion,
-        centre,
-        scene,
-        imu,
-        tracks,
-        static_intervals: intervals,
-    })
+    Ok(Simulation { scenario, seed, config: config.clone(), motion, scene, imu, tracks, static_intervals: intervals })
 }

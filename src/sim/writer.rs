@@ -256,7 +256,7 @@ fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
     create(&gt)?;
     write_asl_groundtruth(&gt, &groundtruth(sim))?;
     let t0 = sim.config.t0_ns;
-    let ns = |t: f64| t0 + (t * 1e9).round() as i64;
+    let ns = |t: f64| sim.stamp_ns(t);
     if let Some(tr) = &sim.tracks {
         let cam = mav0.join("cam0");
         write_text(&cam.join("sensor.yaml"), &camera_yaml(sim, false))?;
