@@ -102,19 +102,20 @@ fn calibrate_online(
     rotation: Vector3<f64>,
 ) -> (tumble::vio::CameraEstimate, f64, f64, f64, tumble::vio::VioResult) {
     let (c, errors, out) = calibrate_online_as(input, opts, Estimate::On, rotation, Vector3::new(0.03, 0.0, 0.0));
-    (c, errors.0, errors.1.norm(), errors.2, out)
+    (c, errors.0.norm().to_degrees(), errors.1.norm(), errors.2, out)
 }
 
 /// [`calibrate_online`] with both parameters estimated `mode`, the
 /// translation moved by `translation` \[m, camera frame\]; the errors are the
-/// rotation's \[deg\], the translation's per camera axis \[m\] and the time offset's \[s\].
+/// rotation's (a rotation vector about the camera's axes \[rad\]), the
+/// translation's per camera axis \[m\] and the time offset's \[s\].
 fn calibrate_online_as(
     input: VioInput,
     mut opts: VioOptions,
     mode: Estimate,
     rotation: Vector3<f64>,
     translation: Vector3<f64>,
-) -> (tumble::vio::CameraEstimate, (f64, Vector3<f64>, f64), tumble::vio::VioResult) {
+) -> (tumble::vio::CameraEstimate, (Vector3<f64>, Vector3<f64>, f64), tumble::vio::VioResult) {
     let shift = 0.008;
     let (input, correct) = input.with_camera_error(rotation, translation, shift);
     opts.camera.extrinsics = mode;
@@ -122,7 +123,8 @@ fn calibrate_online_as(
     let out = run(&input, &opts, None).unwrap();
     assert_eq!(out.resets, 0, "{:?}", out.warnings);
     let c = out.camera.clone().expect("an online estimate");
-    let (rotation_deg, _) = c.difference(&correct);
+    let rotation = c.rotation_error(&correct);
+    let rotation_deg = rotation.norm().to_degrees();
     let translation = c.translation_error(&correct);
     let td_error = c.time_offset_s + shift;
     println!(
@@ -133,7 +135,7 @@ fn calibrate_online_as(
         translation.z * 1e3,
         td_error * 1e3
     );
-    (c, (rotation_deg, translation, td_error), out)
+    (c, (rotation, translation, td_error), out)
 }
 
 /// `auto` on a motion that turns about the vertical only (as a ground robot
@@ -155,7 +157,7 @@ fn auto_holds_what_a_turn_about_one_axis_cannot_determine() {
     let opts = VioOptions::for_simulation(&cfg);
     // 2 cm off along the unobservable axis too.
     let moved = Vector3::new(0.02, 0.02, 0.0);
-    let (c, (rotation_deg, t, td_error), _) =
+    let (c, (rotation, t, td_error), _) =
         calibrate_online_as(input, opts, Estimate::Auto, Vector3::new(0.02, -0.02, 0.02), moved);
     let auto = c.extrinsics_auto.as_ref().expect("auto");
     assert!(auto.freed_at_s.is_some() && auto.determined_at_s.is_none(), "{auto:?}");
@@ -166,6 +168,7 @@ fn auto_holds_what_a_turn_about_one_axis_cannot_determine() {
     assert!((t.y - 0.02).abs() < 1e-3, "{t}");
     assert!(c.translation_sigma_m[1] > 0.025, "{:?}", c.translation_sigma_m);
     // The determined directions converge.
+    let rotation_deg = rotation.norm().to_degrees();
     assert!(rotation_deg < 0.3 && t.x.abs() < 0.005 && t.z.abs() < 0.005, "{rotation_deg}° {t}");
     assert!(td_error.abs() < 5e-4, "{td_error}");
     assert!(c.time_offset_auto.as_ref().is_some_and(|a| a.determined_at_s.is_some() && a.held.is_empty()));
@@ -317,4 +320,40 @@ fn a_shock_the_features_contradict_is_withdrawn_and_the_pieces_named() {
     assert!(text.contains(&format!("pieces: {}", out.starts.len())), "{text}");
     let ate: f64 = text.split("RMSE ").nth(1).and_then(|r| r.split(' ').next()).unwrap().parse().unwrap();
     assert!((ate - s.ate_rmse_m.unwrap()).abs() < 1e-3, "{ate}");
+}
+
+/// The online calibration's σ against its errors on the wrong-start walks
+/// of seeds 1–8 (`SEEDS=1,2` runs some): per group (rotation, translation,
+/// time offset) the mean of the squared normalized errors per coordinate,
+/// which honest σ put near 1 (issue 64 asks for [0.5, 2]). Measured
+/// (2026-12-03): rotation 1.10, translation 4.21, time offset 1.30 — the
+/// translation's σ are about 2× too small; from a start 100× closer to the
+/// truth 2.10, 2.15 and 1.85 (docs/vio.md says what is known of why). The
+/// bounds guard those figures until the cause is fixed.
+#[test]
+#[ignore = "long trial: cargo test --test vio_online -- --ignored"]
+fn online_calibration_sigma_against_their_errors() {
+    let seeds: Vec<u64> = std::env::var("SEEDS")
+        .ok()
+        .map(|s| s.split(',').map(|x| x.parse().expect("SEEDS: comma-separated integers")).collect())
+        .unwrap_or_else(|| (1..=8).collect());
+    let (mut sums, mut counts) = ([0.0f64; 3], [0usize; 3]);
+    for &seed in &seeds {
+        let (input, opts) = walk(80.0, seed);
+        let wrong = (Vector3::new(0.02, -0.02, 0.02), Vector3::new(0.03, 0.0, 0.0));
+        let (c, (r_err, t_err, td_err), _) = calibrate_online_as(input, opts, Estimate::On, wrong.0, wrong.1);
+        let z = [
+            (0..3).map(|i| r_err[i].to_degrees() / c.rotation_sigma_deg[i]).collect::<Vec<f64>>(),
+            (0..3).map(|i| t_err[i] / c.translation_sigma_m[i]).collect(),
+            vec![td_err / c.time_offset_sigma_s],
+        ];
+        println!("seed {seed}: z rotation {:+.2?}, translation {:+.2?}, time offset {:+.2?}", z[0], z[1], z[2]);
+        for (g, z) in z.iter().enumerate() {
+            sums[g] += z.iter().map(|v| v * v).sum::<f64>();
+            counts[g] += z.len();
+        }
+    }
+    let mean = |g: usize| sums[g] / counts[g] as f64;
+    println!("mean z²: rotation {:.2}, translation {:.2}, time offset {:.2}", mean(0), mean(1), mean(2));
+    assert!(mean(0) < 2.5 && mean(1) < 6.0 && mean(2) < 2.5, "{sums:?} over {counts:?}");
 }

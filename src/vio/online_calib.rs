@@ -100,11 +100,22 @@ impl CameraEstimate {
     /// The rotation \[deg\] and the distance between the translations \[m\]
     /// from `body_from_camera` (a reference `T_BC`) to this estimate.
     pub fn difference(&self, body_from_camera: &Isometry3F64) -> (f64, f64) {
+        let (rot, t) = deviation(body_from_camera, &self.body_from_camera());
+        (rot.norm().to_degrees(), t.norm())
+    }
+
+    /// The rotation from `body_from_camera` (a reference `T_BC`) to this
+    /// estimate, a rotation vector about the reference camera's axes \[rad\]:
+    /// the error [`CameraEstimate::rotation_sigma_deg`] describes.
+    pub fn rotation_error(&self, body_from_camera: &Isometry3F64) -> Vector3<f64> {
+        deviation(body_from_camera, &self.body_from_camera()).0
+    }
+
+    /// This estimate's `T_BC`.
+    fn body_from_camera(&self) -> Isometry3F64 {
         let [w, x, y, z] = self.rotation;
         let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
-        let estimate = pose(q.to_rotation_matrix().matrix(), &Vector3::from(self.translation));
-        let (rot, t) = deviation(body_from_camera, &estimate);
-        (rot.norm().to_degrees(), t.norm())
+        pose(q.to_rotation_matrix().matrix(), &Vector3::from(self.translation))
     }
 
     /// This estimate's translation minus `body_from_camera`'s (a reference
