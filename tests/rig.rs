@@ -488,3 +488,34 @@ fn vio_with_its_own_rig_calibration_starts_in_motion_right() {
     assert!(worst < 6.0, "the start's gyro bias is {worst:.1}σ from where it settles");
     assert!(ate < 0.02, "ATE {ate} m");
 }
+
+/// `tumble sim rig` without images: the folder (IMU, each camera's
+/// corners.csv and sensor.yaml, target.yaml) reads back and calibrates to
+/// its truth within the σ reported, on both cameras of a stereo rig.
+#[test]
+fn a_simulated_rig_folder_calibrates_to_its_truth() {
+    use tumble::sim::rig_recording::{rig_settings, write_rig_recording};
+    let dir = std::env::temp_dir().join(format!("tumble_sim_rig_{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let settings = rig_settings(20.0, 0.11);
+    let sim = write_rig_recording(&settings, None, 3, &dir, &mut |_, _| {}).unwrap();
+    for f in ["target.yaml", "truth.json", "mav0/cam0/corners.csv", "mav0/cam1/sensor.yaml", "mav0/imu0/sensor.yaml"] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    let opts = RigOptions::default();
+    let input = RigInput::from_asl(&dir, &dir.join("target.yaml"), None, None, &opts).unwrap();
+    assert_eq!(input.cameras.len(), 2);
+    let rig = calibrate_rig(&input, &opts, &mut |_| {}).unwrap();
+    assert!(rig.converged && rig.refusal().is_none(), "{:?}", rig.refusal());
+    let truths = [sim.truth.t_bc, sim.truth.second_t_bc.unwrap()];
+    for (c, t) in truths.iter().enumerate() {
+        let z = common::camera_errors(&rig, c, &sim.truth, t).2;
+        println!("cam{c} z (rotation, translation, fx fy cx cy, time offset): {z:+.2?}");
+        assert!(z.iter().all(|z| z.abs() < 4.0), "cam{c}: {z:?}");
+    }
+    // The written truth is the one returned.
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["time_offset_s"].as_f64(), Some(sim.truth.time_offset_s));
+    let _ = std::fs::remove_dir_all(&dir);
+}

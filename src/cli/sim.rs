@@ -1,7 +1,6 @@
 //! `tumble sim`: simulate a recording with known truth.
 
 use super::CliResult;
-use clap::builder::TypedValueParser as _;
 use clap::Args;
 use std::path::PathBuf;
 use tumble::sim::{Scenario, SimConfig};
@@ -9,9 +8,12 @@ use tumble::sim::{Scenario, SimConfig};
 /// Flags of `tumble sim`.
 #[derive(Args)]
 pub struct SimArgs {
-    /// What to simulate.
-    #[arg(value_parser = clap::builder::PossibleValuesParser::new(Scenario::NAMES).map(|s| s.parse::<Scenario>().expect("listed")))]
-    scenario: Scenario,
+    /// What to simulate: an IMU scenario, or `rig` (a camera–IMU rig waved
+    /// before a checkerboard, for `tumble calibrate-rig X --target
+    /// X/target.yaml`; its camera is EuRoC's cam0 with a 3 ms time offset;
+    /// of --config it reads the `images` key).
+    #[arg(value_parser = clap::builder::PossibleValuesParser::new(SCENARIOS))]
+    scenario: String,
     /// Output folder (gets mav0/ and truth.json).
     #[arg(long)]
     out: PathBuf,
@@ -57,8 +59,16 @@ pub struct SimArgs {
     hide: Vec<String>,
 }
 
+/// The scenarios `tumble sim` takes: the IMU scenarios, then `rig`.
+const SCENARIOS: [&str; 6] =
+    [Scenario::NAMES[0], Scenario::NAMES[1], Scenario::NAMES[2], Scenario::NAMES[3], Scenario::NAMES[4], "rig"];
+
 impl SimArgs {
     pub fn run(self) -> CliResult {
+        if self.scenario == "rig" {
+            return self.run_rig();
+        }
+        let scenario: Scenario = self.scenario.parse()?;
         let mut cfg = match &self.config {
             Some(p) => SimConfig::read(p)?,
             None => SimConfig::default(),
@@ -92,13 +102,13 @@ impl SimArgs {
                 b.set_position(done as u64);
             }
         };
-        let sim = tumble::sim::simulate_and_write_with(self.scenario, &cfg, self.seed, &self.out, &mut progress)?;
+        let sim = tumble::sim::simulate_and_write_with(scenario, &cfg, self.seed, &self.out, &mut progress)?;
         if let Some(b) = bar {
             b.finish_and_clear();
         }
         println!(
             "simulated {:?}: {} IMU samples over {:.1} s{}, written to {} in {:.2} s",
-            self.scenario,
+            scenario,
             sim.imu.t.len(),
             sim.motion.duration(),
             sim.tracks
@@ -107,6 +117,64 @@ impl SimArgs {
                 .unwrap_or_default(),
             self.out.display(),
             start.elapsed().as_secs_f64()
+        );
+        Ok(())
+    }
+
+    /// `tumble sim rig`: the rig recording, its frames rendered with --images.
+    fn run_rig(self) -> CliResult {
+        let cfg = match &self.config {
+            Some(p) => SimConfig::read(p)?,
+            None => SimConfig::default(),
+        };
+        if self.print_config {
+            print!("{}", serde_saphyr::to_string(&cfg)?);
+            return Ok(());
+        }
+        if !self.hide.is_empty() || !self.pause.is_empty() {
+            return Err("sim rig: --hide and --pause are for the IMU scenarios".into());
+        }
+        let settings = tumble::sim::rig_recording::rig_settings(
+            self.duration.unwrap_or(40.0),
+            self.stereo_baseline.unwrap_or(0.0),
+        );
+        let images = match (self.images, cfg.images) {
+            (false, _) => None,
+            (true, Some(i)) => Some(i),
+            (true, None) => Some(tumble::sim::render::ImageSettings::default()),
+        };
+        let start = std::time::Instant::now();
+        let bar = images.is_some().then(|| {
+            super::common::progress_bar(0, "rendering [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})")
+        });
+        let mut progress = |done: usize, total: usize| {
+            if let Some(b) = &bar {
+                b.set_length(total as u64);
+                b.set_position(done as u64);
+            }
+        };
+        let sim = tumble::sim::rig_recording::write_rig_recording(
+            &settings,
+            images.as_ref(),
+            self.seed,
+            &self.out,
+            &mut progress,
+        )?;
+        if let Some(b) = bar {
+            b.finish_and_clear();
+        }
+        let views: usize = sim.input.cameras.iter().map(|c| c.views.len()).sum();
+        println!(
+            "simulated rig: {} IMU samples over {:.1} s, {} camera(s), {views} {}, written to {} in {:.2} s \
+             (calibrate: tumble calibrate-rig {} --target {})",
+            sim.input.imu.t.len(),
+            settings.duration_s,
+            sim.input.cameras.len(),
+            if images.is_some() { "rendered frames" } else { "views of the target's corners" },
+            self.out.display(),
+            start.elapsed().as_secs_f64(),
+            self.out.display(),
+            self.out.join("target.yaml").display()
         );
         Ok(())
     }

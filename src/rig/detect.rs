@@ -167,9 +167,21 @@ pub fn tag_corners(tags: &[TagDetection], target: &Target, order: usize) -> Vec<
 /// A checkerboard view's corners from OpenCV's list (row by row, `cols` per
 /// row). The list is taken with the rows reversed when it is mirrored: seen
 /// from its printed side, the target's x axis turns counter-clockwise on the
-/// screen into its y axis, and an order that does not is no pose of the board. Of the two orders left (a half turn apart), the one closer to
-/// the previous view's is taken.
-pub fn checkerboard_corners(target: &Target, pts: &[[f64; 2]], previous: Option<&[Corner]>) -> Vec<Corner> {
+/// screen into its y axis, and an order that does not is no pose of the
+/// board. Of the two orders left (a half turn apart):
+/// - on a board whose squares differ in parity along its two sides (inner
+///   corners `cols + rows` odd) the colours tell them apart: corner 0 is the
+///   one whose outer square is dark. `shades` are the grey levels of the
+///   image at the centres of the squares beyond the list's four corners
+///   ([`outer_square_centres`]'s order); a view whose two candidate squares
+///   differ by less than [`MIN_SHADE_CONTRAST`] is not decided so;
+/// - otherwise the order closer to the previous view's is taken.
+pub fn checkerboard_corners(
+    target: &Target,
+    pts: &[[f64; 2]],
+    shades: Option<[f64; 4]>,
+    previous: Option<&[Corner]>,
+) -> Vec<Corner> {
     let n = target.corner_count();
     let Target::Checkerboard { cols, .. } = *target else { return Vec::new() };
     let cols = cols as usize;
@@ -183,12 +195,89 @@ pub fn checkerboard_corners(target: &Target, pts: &[[f64; 2]], previous: Option<
     let pts: Vec<[f64; 2]> =
         if mirrored { (0..n).map(|k| pts[(rows - 1 - k / cols) * cols + k % cols]).collect() } else { pts.to_vec() };
     let index = |flip: bool, k: usize| if flip { n - 1 - k } else { k };
+    // The shades beyond the (unmirrored) list's first and last corners: of
+    // the raw list's lower-left/upper-right pair when mirrored.
+    let by_colour = shades.filter(|_| (cols + rows) % 2 == 1).and_then(|s| {
+        let (first, last) = if mirrored { (s[2], s[1]) } else { (s[0], s[3]) };
+        ((first - last).abs() >= MIN_SHADE_CONTRAST * (first + last)).then_some(first > last)
+    });
     let gap = |flip: bool| match previous {
         Some(prev) => prev.iter().map(|c| dist(c.uv, pts[index(flip, c.id)])).sum::<f64>(),
         None => 0.0,
     };
-    let flip = previous.is_some_and(|p| !p.is_empty()) && gap(true) < gap(false);
+    let flip = by_colour.unwrap_or_else(|| previous.is_some_and(|p| !p.is_empty()) && gap(true) < gap(false));
     (0..n).filter_map(|id| Some(Corner { id, target: target.corner(id)?, uv: pts[index(flip, id)] })).collect()
+}
+
+/// Whether every corner of a checkerboard view (`pts`, `cols` per row) is an
+/// X-junction in the image `grey` samples: of the four squares about it,
+/// sampled 0.3 of the local corner spacing along both grid directions, the
+/// two on one diagonal match and differ from the two on the other by at
+/// least [`MIN_JUNCTION_CONTRAST`] of the view's strongest junction. A board
+/// partly outside the image can be "found" with a row or column made up of
+/// its outer squares' corners against the margin (one dark square, three
+/// light) or of the wall behind it: such a view is refused, not mislabelled.
+pub fn board_corners_are_junctions(pts: &[[f64; 2]], cols: usize, grey: &dyn Fn([f64; 2]) -> Option<f64>) -> bool {
+    if cols < 2 || pts.len() < 2 * cols || pts.len() % cols != 0 {
+        return false;
+    }
+    let rows = pts.len() / cols;
+    let at = |r: usize, c: usize| nalgebra::Vector2::from(pts[r * cols + c]);
+    // The step to the next corner along a row and a column, inwards at the edges.
+    let step = |r: usize, c: usize| {
+        let a = if c + 1 < cols { at(r, c + 1) - at(r, c) } else { at(r, c) - at(r, c - 1) };
+        let b = if r + 1 < rows { at(r + 1, c) - at(r, c) } else { at(r, c) - at(r - 1, c) };
+        (a, b)
+    };
+    let mut junctions = Vec::with_capacity(pts.len());
+    for r in 0..rows {
+        for c in 0..cols {
+            let (a, b) = step(r, c);
+            let p = at(r, c);
+            let q = |sa: f64, sb: f64| grey((p + (a * sa + b * sb) * JUNCTION_REACH).into());
+            let (Some(pp), Some(mm), Some(pm), Some(mp)) = (q(1.0, 1.0), q(-1.0, -1.0), q(1.0, -1.0), q(-1.0, 1.0))
+            else {
+                return false;
+            };
+            let contrast = (0.5 * (pp + mm) - 0.5 * (pm + mp)).abs();
+            junctions.push((contrast, (pp - mm).abs().max((pm - mp).abs())));
+        }
+    }
+    let strongest = junctions.iter().map(|j| j.0).fold(0.0, f64::max);
+    strongest > 0.0
+        && junctions
+            .iter()
+            .all(|&(contrast, mismatch)| contrast >= MIN_JUNCTION_CONTRAST * strongest && mismatch <= 0.5 * contrast)
+}
+
+/// How far from a corner its four squares are sampled, in corner spacings
+/// along each grid direction (inside the squares, clear of their edges under blur).
+const JUNCTION_REACH: f64 = 0.3;
+
+/// Smallest contrast of a board's junction, as a share of the view's strongest.
+pub const MIN_JUNCTION_CONTRAST: f64 = 0.3;
+
+/// Smallest difference of the two candidate outer squares' grey levels, as
+/// a share of their sum, for the colours to decide a checkerboard's order
+/// (printed black and white differ by over 0.8; blur and glare by less).
+pub const MIN_SHADE_CONTRAST: f64 = 0.2;
+
+/// The image points at the centres of the squares beyond the four corners of
+/// a checkerboard's list (`cols` per row): beyond the first row's first and
+/// last corners, then the last row's first and last — half a corner spacing
+/// outwards along both of the grid's directions there.
+pub fn outer_square_centres(pts: &[[f64; 2]], cols: usize) -> Option<[[f64; 2]; 4]> {
+    if cols < 2 || pts.len() < 2 * cols || pts.len() % cols != 0 {
+        return None;
+    }
+    let rows = pts.len() / cols;
+    let at = |r: usize, c: usize| pts[r * cols + c];
+    let centre = |r: usize, c: usize| {
+        let (rn, cn) = (if r == 0 { 1 } else { r - 1 }, if c == 0 { 1 } else { c - 1 });
+        let (p, pr, pc) = (at(r, c), at(rn, c), at(r, cn));
+        [0, 1].map(|i| p[i] + 0.5 * (p[i] - pr[i]) + 0.5 * (p[i] - pc[i]))
+    };
+    Some([centre(0, 0), centre(0, cols - 1), centre(rows - 1, 0), centre(rows - 1, cols - 1)])
 }
 
 #[cfg(feature = "opencv")]
@@ -250,11 +339,72 @@ mod tests {
         let t = Target::Checkerboard { cols: 4, rows: 3, col_spacing: 0.05, row_spacing: 0.05 };
         let pts: Vec<[f64; 2]> =
             (0..12).map(|k| [100.0 + 30.0 * (k % 4) as f64, 50.0 + 30.0 * (k / 4) as f64]).collect();
-        let first = checkerboard_corners(&t, &pts, None);
+        let first = checkerboard_corners(&t, &pts, None, None);
         let mut reversed = pts.clone();
         reversed.reverse();
-        let second = checkerboard_corners(&t, &reversed, Some(&first));
+        let second = checkerboard_corners(&t, &reversed, None, Some(&first));
         assert_eq!(first, second);
-        assert!(checkerboard_corners(&t, &pts[..11], None).is_empty());
+        assert!(checkerboard_corners(&t, &pts[..11], None, None).is_empty());
+    }
+
+    /// A drawn board: corners 30 px apart from (100, 50), squares alternating
+    /// dark and light, a light margin of one square, a wall beyond that.
+    fn drawn_board(p: [f64; 2]) -> Option<f64> {
+        let (x, y) = ((p[0] - 100.0) / 30.0, (p[1] - 50.0) / 30.0);
+        if !(-2.0..7.0).contains(&x) || !(-2.0..6.0).contains(&y) {
+            return Some(120.0);
+        }
+        if !(-1.0..6.0).contains(&x) || !(-1.0..5.0).contains(&y) {
+            return Some(230.0);
+        }
+        Some(if (x.floor() as i64 + y.floor() as i64).rem_euclid(2) == 0 { 20.0 } else { 230.0 })
+    }
+
+    #[test]
+    fn a_board_whose_corners_are_not_all_junctions_is_refused() {
+        // 6 × 5 inner corners at x 0..5, y 0..4 of the drawn board.
+        let board = |x0: f64, y0: f64| -> Vec<[f64; 2]> {
+            (0..30).map(|k| [100.0 + 30.0 * (x0 + (k % 6) as f64), 50.0 + 30.0 * (y0 + (k / 6) as f64)]).collect()
+        };
+        assert!(board_corners_are_junctions(&board(0.0, 0.0), 6, &drawn_board));
+        // One row too high: its corners are the outer squares' against the margin.
+        assert!(!board_corners_are_junctions(&board(0.0, -1.0), 6, &drawn_board));
+        // One column too far right: into the margin and the wall.
+        assert!(!board_corners_are_junctions(&board(1.0, 0.0), 6, &drawn_board));
+        // Beyond the image.
+        assert!(!board_corners_are_junctions(&board(0.0, 0.0), 6, &|p| drawn_board(p).filter(|_| p[0] < 200.0)));
+    }
+
+    /// On a board of 5 × 4 squares the squares beyond corner 0 and the last
+    /// corner differ in colour: the order follows the colours, whatever the
+    /// previous view says, and a list given in reverse gives the same corners.
+    #[test]
+    fn a_checkerboard_order_follows_its_colours_where_they_differ() {
+        let t = Target::Checkerboard { cols: 4, rows: 3, col_spacing: 0.05, row_spacing: 0.05 };
+        let pts: Vec<[f64; 2]> =
+            (0..12).map(|k| [100.0 + 30.0 * (k % 4) as f64, 50.0 + 30.0 * (k / 4) as f64]).collect();
+        let centres = outer_square_centres(&pts, 4).unwrap();
+        assert_eq!(centres[0], [85.0, 35.0]);
+        assert_eq!(centres[3], [205.0, 125.0]);
+        // Beyond the first row dark, beyond the last light (the raw list's four corners).
+        let shades = [20.0, 20.0, 230.0, 230.0];
+        let a = checkerboard_corners(&t, &pts, Some(shades), None);
+        let mut reversed = pts.clone();
+        reversed.reverse();
+        let misleading: Vec<Corner> = a.iter().map(|c| Corner { uv: a[11 - c.id].uv, ..*c }).collect();
+        let b = checkerboard_corners(&t, &reversed, Some([230.0, 230.0, 20.0, 20.0]), Some(&misleading));
+        assert_eq!(a, b);
+        // Dark at the other end: the other order.
+        let c = checkerboard_corners(&t, &pts, Some([230.0, 230.0, 20.0, 20.0]), None);
+        assert_eq!(c[0].uv, a[11].uv);
+        // Too little contrast, or a board whose two ends match: continuity decides.
+        let d = checkerboard_corners(&t, &pts, Some([120.0, 120.0, 110.0, 110.0]), Some(&misleading));
+        assert_eq!(d[0].uv, a[11].uv);
+        let square = Target::Checkerboard { cols: 4, rows: 4, col_spacing: 0.05, row_spacing: 0.05 };
+        let pts16: Vec<[f64; 2]> =
+            (0..16).map(|k| [100.0 + 30.0 * (k % 4) as f64, 50.0 + 30.0 * (k / 4) as f64]).collect();
+        let e = checkerboard_corners(&square, &pts16, Some([20.0, 230.0, 230.0, 230.0]), None);
+        let f = checkerboard_corners(&square, &pts16, Some([230.0, 230.0, 230.0, 20.0]), None);
+        assert_eq!(e, f);
     }
 }

@@ -3,7 +3,7 @@
 //! <scenario> --images`.
 
 use super::render::{lens::RayTable, render_frame, scene::RenderScene, ImageSettings};
-use super::{Scene, SimError, Simulation};
+use super::{CameraSettings, Motion, Scene, SimError, Simulation};
 use crate::io::convert::encode_png;
 use nalgebra::Isometry3;
 use rand::SeedableRng;
@@ -51,55 +51,101 @@ pub fn write_images(
     let tracks = sim.tracks.as_ref().ok_or("images: the scenario has no camera (walk and flight have one)")?;
     let scene = render_scene(sim)?;
     let c = &sim.config.camera;
-    let mut cameras: Vec<(&str, Isometry3<f64>)> = vec![("cam0", c.body_from_camera())];
+    let mut cameras: Vec<Isometry3<f64>> = vec![c.body_from_camera()];
     if c.stereo_baseline_m > 0.0 {
-        cameras.push(("cam1", c.body_from_second_camera()));
+        cameras.push(c.body_from_second_camera());
     }
-    let [w, h] = c.resolution.map(|x| x as usize);
-    let lens = RayTable::new(&c.model(), w, h);
-    let focal = c.intrinsics[0].max(c.intrinsics[1]);
-    let total = tracks.frames.len() * cameras.len();
-    let mut done = 0;
-    for (index, (name, body_from_camera)) in cameras.iter().enumerate() {
-        let dir = out.join("mav0").join(name).join("data");
-        std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+    // Each frame exposed at its stamp plus the camera's time offset (IMU time).
+    let frames: Vec<(f64, i64)> = tracks.frames.iter().map(|&t| (t + c.time_offset_s, sim.stamp_ns(t))).collect();
+    let mut progress = Progress { done: 0, total: frames.len() * cameras.len(), report: progress };
+    for (index, body_from_camera) in cameras.iter().enumerate() {
+        let camera = CameraFrames {
+            scene: &scene,
+            camera: c,
+            motion: sim.motion.as_ref(),
+            body_from_camera,
+            settings,
+            seed: sim.seed,
+            index,
+        };
+        camera.render(&frames, &out.join("mav0").join(format!("cam{index}")).join("data"), &mut progress)?;
+    }
+    Ok(())
+}
+
+/// Frames rendered so far of how many, and whom to tell.
+pub(crate) struct Progress<'a> {
+    /// Frames written.
+    pub done: usize,
+    /// Frames to write.
+    pub total: usize,
+    /// Called with `(done, total)` after each batch.
+    pub report: &'a mut dyn FnMut(usize, usize),
+}
+
+/// What one camera's frames are rendered from.
+pub(crate) struct CameraFrames<'a> {
+    /// The scene.
+    pub scene: &'a RenderScene,
+    /// The camera's lens, resolution and focal length.
+    pub camera: &'a CameraSettings,
+    /// The body's motion (IMU time).
+    pub motion: &'a dyn Motion,
+    /// Camera to body.
+    pub body_from_camera: &'a Isometry3<f64>,
+    /// Exposure, noise and gain.
+    pub settings: &'a ImageSettings,
+    /// The recording's seed.
+    pub seed: u64,
+    /// The camera's index in the rig (cam0, cam1, …): its own noise and flicker.
+    pub index: usize,
+}
+
+impl CameraFrames<'_> {
+    /// Render `frames` (the IMU time at the middle of each exposure \[s\] and
+    /// the frame's stamp \[ns\]) into `dir/<stamp>.png`, rayon across
+    /// frames, a few per thread at a time with progress between.
+    pub fn render(&self, frames: &[(f64, i64)], dir: &Path, progress: &mut Progress) -> Result<(), SimError> {
+        std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
+        let c = self.camera;
+        let [w, h] = c.resolution.map(|x| x as usize);
+        let lens = RayTable::new(&c.model(), w, h);
+        let focal = c.intrinsics[0].max(c.intrinsics[1]);
         // Each camera flickers on its own (its own auto-exposure).
-        let mut gains = ChaCha8Rng::seed_from_u64(sim.seed);
-        gains.set_stream(300 + index as u64);
-        let gains: Vec<f64> = (0..tracks.frames.len())
+        let mut gains = ChaCha8Rng::seed_from_u64(self.seed);
+        gains.set_stream(300 + self.index as u64);
+        let gains: Vec<f64> = (0..frames.len())
             .map(|_| {
                 let jitter: f64 = StandardNormal.sample(&mut gains);
-                (1.0 + settings.gain_jitter * jitter).max(0.0)
+                (1.0 + self.settings.gain_jitter * jitter).max(0.0)
             })
             .collect();
         let frame = |k: usize| -> Result<(), String> {
-            let t = tracks.frames[k];
-            let seed = sim.seed.wrapping_mul(1_000_003).wrapping_add((index * tracks.frames.len() + k) as u64);
+            let (t, stamp) = frames[k];
+            let seed = self.seed.wrapping_mul(1_000_003).wrapping_add((self.index * frames.len() + k) as u64);
             let pixels = render_frame(
-                &scene,
+                self.scene,
                 &lens,
                 focal,
-                sim.motion.as_ref(),
-                body_from_camera,
-                t + c.time_offset_s,
+                self.motion,
+                self.body_from_camera,
+                t,
                 gains[k],
-                settings,
+                self.settings,
                 seed,
             );
-            let stamp = sim.stamp_ns(t);
             let path = dir.join(format!("{stamp}.png"));
             let bytes = encode_png(&pixels, w, h, png::ColorType::Grayscale, png::BitDepth::Eight)
                 .map_err(|e| format!("{}: {e}", path.display()))?;
             std::fs::write(&path, bytes).map_err(|e| format!("{}: {e}", path.display()))
         };
-        // Frames in parallel, a few per thread at a time, with progress between.
         let chunk = 4 * rayon::current_num_threads();
-        for start in (0..tracks.frames.len()).step_by(chunk) {
-            let end = (start + chunk).min(tracks.frames.len());
+        for start in (0..frames.len()).step_by(chunk) {
+            let end = (start + chunk).min(frames.len());
             (start..end).into_par_iter().map(frame).collect::<Result<Vec<()>, String>>()?;
-            done += end - start;
-            progress(done, total);
+            progress.done += end - start;
+            (progress.report)(progress.done, progress.total);
         }
+        Ok(())
     }
-    Ok(())
 }

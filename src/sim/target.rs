@@ -95,8 +95,7 @@ pub struct SimulatedRig {
 /// projected at each image's exposure time (`stamp + time offset`) with
 /// Gaussian pixel noise; corners outside the image are not seen.
 pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
-    let [pa, ra] = s.amplitudes.map(Vector3::from);
-    let motion = Loop::target_wave_with(s.duration_s, seed, pa, ra);
+    let motion = rig_motion(s, seed);
     let p = &s.noise;
     let triad = |noise: [f64; 3], walk: [f64; 3], bias: [f64; 3]| TriadModel {
         noise_density: noise,
@@ -115,13 +114,8 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
     let cam = &s.camera;
     let camera = cam.model();
     let t_bc = cam.body_from_camera();
-    // Target: x along world −y, y along world +z, z towards the camera (its
-    // printed side faces the camera), centred on the optical axis.
-    let r_wt = Matrix3::new(0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    let (r_wt, t_wt) = target_in_world(s);
     let n = s.target.corner_count();
-    let centre =
-        (0..n).filter_map(|i| s.target.corner(i)).fold(Vector3::zeros(), |a, c| a + Vector3::from(c)) / n as f64;
-    let t_wt = Vector3::new(s.distance_m, 0.0, 0.0) - r_wt * centre;
     let noise = Normal::new(0.0, cam.pixel_noise_px.max(1e-300)).expect("finite σ");
     let [w, h] = cam.resolution.map(f64::from);
     let frames = (s.duration_s * cam.rate_hz).floor() as i64;
@@ -174,4 +168,22 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
         sources: Vec::new(),
     };
     SimulatedRig { input, truth: RigTruth { model: camera, t_bc, time_offset_s: cam.time_offset_s, second_t_bc } }
+}
+
+/// The body's motion of the recording `seed` ([`Loop::target_wave_with`] with
+/// the settings' amplitudes): what [`simulate_rig`] samples, for rendering.
+pub fn rig_motion(s: &RigSimSettings, seed: u64) -> Loop {
+    let [pa, ra] = s.amplitudes.map(Vector3::from);
+    Loop::target_wave_with(s.duration_s, seed, pa, ra)
+}
+
+/// The target's pose in the world: `p_W = R p_T + t` (see the module docs:
+/// its x along world −y, its y along world +z, its z towards the camera,
+/// its corners centred on the optical axis `distance_m` ahead).
+pub fn target_in_world(s: &RigSimSettings) -> (Matrix3<f64>, Vector3<f64>) {
+    let r_wt = Matrix3::new(0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0);
+    let n = s.target.corner_count();
+    let centre =
+        (0..n).filter_map(|i| s.target.corner(i)).fold(Vector3::zeros(), |a, c| a + Vector3::from(c)) / n as f64;
+    (r_wt, Vector3::new(s.distance_m, 0.0, 0.0) - r_wt * centre)
 }

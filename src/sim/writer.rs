@@ -15,6 +15,7 @@ use super::SimError;
 use super::Simulation;
 use crate::error::InputError;
 use crate::io::trajectory::{write_asl_groundtruth, Trajectory};
+use nalgebra::Isometry3;
 use rayon::prelude::*;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -159,7 +160,7 @@ fn write_imu_csv(path: &Path, sim: &Simulation) -> Result<(), InputError> {
     w.flush().map_err(|e| werr(path, e))
 }
 
-fn write_text(path: &Path, text: &str) -> Result<(), InputError> {
+pub(crate) fn write_text(path: &Path, text: &str) -> Result<(), InputError> {
     let mut w = create(path)?;
     w.write_all(text.as_bytes()).map_err(|e| werr(path, e))?;
     w.flush().map_err(|e| werr(path, e))
@@ -188,13 +189,22 @@ fn imu_yaml(sim: &Simulation) -> String {
 /// `sensor.yaml` of camera 0 or (stereo) camera 1.
 fn camera_yaml(sim: &Simulation, second: bool) -> String {
     let c = &sim.config.camera;
-    let t = if second { c.body_from_second_camera() } else { c.body_from_camera() }.to_homogeneous();
-    let data: Vec<String> = t.transpose().iter().map(|x| format!("{x}")).collect();
+    let t = if second { c.body_from_second_camera() } else { c.body_from_camera() };
     let comment = if sim.config.images.is_some() {
         "simulated camera (rendered images in data/)"
     } else {
         "simulated camera (no images; features in tracks.csv)"
     };
+    camera_sensor_yaml(c, &t, comment)
+}
+
+/// An ASL `camN/sensor.yaml` of camera `c` mounted at `body_from_camera`.
+pub(crate) fn camera_sensor_yaml(
+    c: &super::CameraSettings,
+    body_from_camera: &Isometry3<f64>,
+    comment: &str,
+) -> String {
+    let data: Vec<String> = body_from_camera.to_homogeneous().transpose().iter().map(|x| format!("{x}")).collect();
     let model = match c.distortion_model {
         super::camera::DistortionKind::RadialTangential => "radial-tangential",
         super::camera::DistortionKind::Equidistant => "equidistant",

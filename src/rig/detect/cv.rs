@@ -1,6 +1,9 @@
 //! The detector itself, on OpenCV (feature `opencv`).
 
-use super::{checkerboard_corners, tag_corners, view_order, vote, TagDetection};
+use super::{
+    board_corners_are_junctions, checkerboard_corners, outer_square_centres, tag_corners, view_order, vote,
+    TagDetection,
+};
 use crate::error::InputError;
 use crate::model::target::DetectionStats;
 use crate::model::target::{Target, View};
@@ -30,11 +33,35 @@ struct Detector {
 
 enum Found {
     Tags(Vec<TagDetection>, usize),
-    Board(Option<Vec<[f64; 2]>>),
+    /// The board, when found.
+    Board(Option<Board>),
+}
+
+/// A checkerboard found in an image.
+struct Board {
+    /// Its corners, in OpenCV's order \[px\].
+    corners: Vec<[f64; 2]>,
+    /// The grey levels beyond its four corners ([`outer_square_centres`]).
+    shades: Option<[f64; 4]>,
 }
 
 /// What one image gave: its size \[px\] and what was found in it.
 type ImageResult = Result<([u32; 2], Found), InputError>;
+
+/// The mean grey level of the 3 × 3 pixels around `p` \[px\]; None beyond the image.
+fn grey_around(img: &Mat, p: [f64; 2]) -> Option<f64> {
+    let (c, r) = (p[0].round() as i32, p[1].round() as i32);
+    if c < 1 || r < 1 || c + 1 >= img.cols() || r + 1 >= img.rows() {
+        return None;
+    }
+    let mut sum = 0.0;
+    for dr in -1..=1 {
+        for dc in -1..=1 {
+            sum += f64::from(*img.at_2d::<u8>(r + dr, c + dc).ok()?);
+        }
+    }
+    Some(sum / 9.0)
+}
 
 fn cv_error(path: &std::path::Path, what: &str, e: impl std::fmt::Display) -> InputError {
     InputError::file(path, format!("{what}: {e}"))
@@ -67,7 +94,12 @@ impl Detector {
                 let flags = calib3d::CALIB_CB_EXHAUSTIVE | calib3d::CALIB_CB_ACCURACY;
                 let found = calib3d::find_chessboard_corners_sb(&img, size, &mut pts, flags)
                     .map_err(|e| cv_error(path, "checkerboard detection", e))?;
-                Ok(Found::Board(found.then(|| pts.iter().map(|p| [p.x as f64, p.y as f64]).collect())))
+                let pts: Vec<[f64; 2]> = pts.iter().map(|p| [p.x as f64, p.y as f64]).collect();
+                let found = found && board_corners_are_junctions(&pts, cols as usize, &|p| grey_around(&img, p));
+                let shades = outer_square_centres(&pts, cols as usize)
+                    .and_then(|c| c.iter().map(|&p| grey_around(&img, p)).collect::<Option<Vec<f64>>>())
+                    .map(|g| [g[0], g[1], g[2], g[3]]);
+                Ok(Found::Board(found.then_some(Board { corners: pts, shades })))
             }
         }?;
         Ok((size, found))
@@ -202,9 +234,9 @@ pub fn detect_camera(
         Target::Checkerboard { .. } => {
             let mut previous: Option<usize> = None;
             for (k, f) in found.iter().enumerate() {
-                if let Found::Board(Some(pts)) = f {
+                if let Found::Board(Some(board)) = f {
                     let prev = previous.map(|p| views[p].corners.clone());
-                    views[k].corners = checkerboard_corners(target, pts, prev.as_deref());
+                    views[k].corners = checkerboard_corners(target, &board.corners, board.shades, prev.as_deref());
                     previous = Some(k);
                 }
             }

@@ -1,0 +1,281 @@
+//! `tumble sim rig`: a camera–IMU rig waved before a checkerboard on a wall
+//! ([`super::target`]), written as the ASL folder `tumble calibrate-rig`
+//! reads, with the truth beside it. Without images each camera gets the
+//! target's corners (`camN/corners.csv`, projections plus the configured
+//! pixel noise: no detector needed); with images every frame is rendered
+//! (`camN/data/<stamp>.png`, the detector finds the corners) and the exact
+//! projections go to `truth/`.
+//!
+//! The folder: `mav0/imu0/{data.csv, sensor.yaml}`, `mav0/camN/{data.csv,
+//! sensor.yaml}` and the corners or the images, `target.yaml` (Kalibr's
+//! keys), `truth.json` (the camera model, each camera's `T_BC`, the time
+//! offset, the IMU's turn-on biases and noise).
+
+use super::images::{CameraFrames, Progress};
+use super::render::scene::{Plane, RenderScene};
+use super::render::texture::{paint_rect, Texture};
+use super::render::ImageSettings;
+use super::target::{rig_motion, simulate_rig, target_in_world, RigSimSettings, SimulatedRig};
+use super::writer::{camera_sensor_yaml, write_text};
+use super::SimError;
+use crate::model::target::{CameraCorners, Target};
+use nalgebra::Vector3;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The target of `tumble sim rig`: a checkerboard of 7 × 6 inner corners
+/// (8 × 7 squares of 8 cm, 0.64 × 0.56 m), OpenCV's and Kalibr's kind. An
+/// AprilGrid is not rendered (its tags' codes are not drawn here).
+pub const RIG_CHECKERBOARD: Target = Target::Checkerboard { cols: 7, rows: 6, col_spacing: 0.08, row_spacing: 0.08 };
+
+/// Absolute time of the recording's first IMU sample \[ns\] (as the other scenarios' default).
+const T0_NS: i64 = 1_700_000_000_000_000_000;
+
+/// The settings of `tumble sim rig`: [`RigSimSettings`]' defaults (EuRoC's
+/// cam0 lens, a 3 ms time offset, 0.3 px corner noise, the target 1 m
+/// ahead) with the checkerboard [`RIG_CHECKERBOARD`], `duration_s` long,
+/// a second camera `stereo_baseline_m` to the right when positive.
+pub fn rig_settings(duration_s: f64, stereo_baseline_m: f64) -> RigSimSettings {
+    let mut s = RigSimSettings { duration_s, target: RIG_CHECKERBOARD, ..RigSimSettings::default() };
+    s.camera.stereo_baseline_m = stereo_baseline_m;
+    s
+}
+
+/// Simulate the rig recording `seed` and write it into `out` (created;
+/// written only when everything succeeded), rendering its frames with
+/// `images` when given, calling `progress(done, total)` after each batch of
+/// rendered frames. Returns the simulation (its corners are the exact
+/// projections when rendering).
+///
+/// Errors: settings the simulator refuses (a recording under 12 s, a
+/// checkerboard absent), image settings out of range, a file not written.
+pub fn write_rig_recording(
+    settings: &RigSimSettings,
+    images: Option<&ImageSettings>,
+    seed: u64,
+    out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<SimulatedRig, SimError> {
+    check(settings, images)?;
+    let mut settings = settings.clone();
+    if images.is_some() {
+        // The image's own noise replaces the corners': the truth is exact.
+        settings.camera.pixel_noise_px = 0.0;
+    }
+    let sim = simulate_rig(&settings, seed);
+    let mut done = None;
+    crate::io::staging::write_staged(out, |stage| -> Result<Vec<PathBuf>, SimError> {
+        write_folder(&settings, &sim, seed, images.is_some(), stage)?;
+        if let Some(images) = images {
+            render_frames(&settings, &sim, images, seed, stage, progress)?;
+        }
+        done = Some(());
+        crate::io::staging::files_under(stage).map_err(|e| SimError::from(format!("{}: {e}", stage.display())))
+    })?;
+    done.map(|()| sim).ok_or_else(|| SimError::from("the rig simulation wrote nothing"))
+}
+
+/// Refuse what the recording cannot be made from, before anything is simulated.
+fn check(s: &RigSimSettings, images: Option<&ImageSettings>) -> Result<(), SimError> {
+    // The wave needs 10 s beyond its still ends ([`super::Loop::target_wave_with`]).
+    if !(s.duration_s.is_finite() && s.duration_s >= 12.0) {
+        return Err(format!("rig: the recording must last at least 12 s, found {} s", s.duration_s).into());
+    }
+    if let Some(images) = images {
+        images.check()?;
+        if !matches!(s.target, Target::Checkerboard { .. }) {
+            return Err("rig: only a checkerboard is rendered (an AprilGrid's tag codes are not drawn)".into());
+        }
+    }
+    Ok(())
+}
+
+/// The IMU, each camera's stamps and sensor.yaml, the corners (without
+/// images: in the camera's folder; with: in `truth/`), the target and the truth.
+fn write_folder(s: &RigSimSettings, sim: &SimulatedRig, seed: u64, images: bool, out: &Path) -> Result<(), SimError> {
+    let mav0 = out.join("mav0");
+    write_imu(&mav0.join("imu0"), sim)?;
+    let mounts = std::iter::once(sim.truth.t_bc).chain(sim.truth.second_t_bc);
+    for (cam, t_bc) in sim.input.cameras.iter().zip(mounts) {
+        let dir = mav0.join(&cam.name);
+        let comment = if images {
+            "simulated rig camera (rendered images in data/)"
+        } else {
+            "simulated rig camera (no images; the target's corners in corners.csv)"
+        };
+        write_text(&dir.join("sensor.yaml"), &camera_sensor_yaml(&s.camera, &t_bc, comment))?;
+        let mut frames = String::from("#timestamp [ns],filename\n");
+        for v in &cam.views {
+            frames.push_str(&format!("{0},{0}.png\n", T0_NS + v.t_ns));
+        }
+        write_text(&dir.join("data.csv"), &frames)?;
+        let (corners, _) = crate::io::target::corners_csv(&absolute(cam).views, &s.target);
+        let corners_path =
+            if images { out.join("truth").join(format!("corners_{}.csv", cam.name)) } else { dir.join("corners.csv") };
+        write_text(&corners_path, &corners)?;
+    }
+    write_text(&out.join("target.yaml"), &target_yaml(&s.target))?;
+    write_text(&out.join("truth.json"), &truth_json(s, sim, seed)?)?;
+    Ok(())
+}
+
+/// The camera's views with absolute stamps.
+fn absolute(cam: &CameraCorners) -> CameraCorners {
+    let mut cam = cam.clone();
+    for v in &mut cam.views {
+        v.t_ns += T0_NS;
+    }
+    cam
+}
+
+/// `imu0/data.csv` (ASL, ns, rad/s, m/s²) and `imu0/sensor.yaml` with the simulation's noise.
+fn write_imu(dir: &Path, sim: &SimulatedRig) -> Result<(), SimError> {
+    let imu = &sim.input.imu;
+    let mut csv = crate::io::imu_write::asl_imu_header(false);
+    for i in 0..imu.t.len() {
+        let (g, a) = (imu.gyro[i], imu.acc[i]);
+        let t_ns = T0_NS + (imu.t[i] * 1e9).round() as i64;
+        let values = [g.x, g.y, g.z, a.x, a.y, a.z].map(|x| ryu::Buffer::new().format(x).to_string());
+        csv.push_str(&format!("{t_ns},{}\n", values.join(",")));
+    }
+    write_text(&dir.join("data.csv"), &csv)?;
+    let n = &sim.input.noise;
+    let yaml = format!(
+        "%YAML:1.0\n# Simulated by tumble (scenario rig). Noise figures: continuous time, SI.\nsensor_type: imu\n\
+         comment: simulated rig IMU\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, \
+         0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\nrate_hz: 200\ngyroscope_noise_density: {:e}\ngyroscope_random_walk: {:e}\n\
+         accelerometer_noise_density: {:e}\naccelerometer_random_walk: {:e}\n",
+        n.gyro_noise_density, n.gyro_random_walk, n.accel_noise_density, n.accel_random_walk
+    );
+    Ok(write_text(&dir.join("sensor.yaml"), &yaml)?)
+}
+
+/// Kalibr's `target.yaml` of `target`.
+fn target_yaml(target: &Target) -> String {
+    match *target {
+        Target::Checkerboard { cols, rows, col_spacing, row_spacing } => format!(
+            "target_type: 'checkerboard'\ntargetCols: {cols}\ntargetRows: {rows}\nrowSpacingMeters: {row_spacing}\n\
+             colSpacingMeters: {col_spacing}\n"
+        ),
+        Target::AprilGrid { cols, rows, size, spacing } => format!(
+            "target_type: 'aprilgrid'\ntagCols: {cols}\ntagRows: {rows}\ntagSize: {size}\ntagSpacing: {spacing}\n"
+        ),
+    }
+}
+
+/// The truth: camera model, each camera's `T_BC` (4×4, row major), the time
+/// offset, the IMU's turn-on biases and noise, the seed.
+fn truth_json(s: &RigSimSettings, sim: &SimulatedRig, seed: u64) -> Result<String, SimError> {
+    let t = &sim.truth;
+    let matrix =
+        |m: &nalgebra::Isometry3<f64>| -> Vec<f64> { m.to_homogeneous().transpose().iter().copied().collect() };
+    let mut cameras = vec![serde_json::json!({ "name": "cam0", "T_BC": matrix(&t.t_bc) })];
+    if let Some(second) = &t.second_t_bc {
+        cameras.push(serde_json::json!({ "name": "cam1", "T_BC": matrix(second) }));
+    }
+    let n = &sim.input.noise;
+    let truth = serde_json::json!({
+        "generator": format!("tumble {}", env!("CARGO_PKG_VERSION")),
+        "scenario": "rig",
+        "seed": seed,
+        "t0_ns": T0_NS,
+        "duration_s": s.duration_s,
+        "gravity": s.gravity,
+        "intrinsics": [t.model.fx, t.model.fy, t.model.cx, t.model.cy],
+        "distortion_model": format!("{:?}", s.camera.distortion_model),
+        "distortion_coefficients": s.camera.distortion_coefficients,
+        "resolution": s.camera.resolution,
+        "cameras": cameras,
+        "time_offset_s": t.time_offset_s,
+        "accel_bias": s.bias[0],
+        "gyro_bias": s.bias[1],
+        "noise": {
+            "gyroscope_noise_density": n.gyro_noise_density,
+            "gyroscope_random_walk": n.gyro_random_walk,
+            "accelerometer_noise_density": n.accel_noise_density,
+            "accelerometer_random_walk": n.accel_random_walk,
+        },
+        "corner_noise_px": s.camera.pixel_noise_px,
+        "convention": "T_BC maps camera to body (IMU) coordinates, row major; an image stamped t was exposed at IMU time t + time_offset_s (Kalibr's timeshift_cam_imu)",
+    });
+    serde_json::to_string_pretty(&truth).map_err(|e| SimError::from(format!("truth.json: {e}")))
+}
+
+/// Render every camera's frames into `out/mav0/camN/data/`.
+fn render_frames(
+    s: &RigSimSettings,
+    sim: &SimulatedRig,
+    images: &ImageSettings,
+    seed: u64,
+    out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(), SimError> {
+    let scene = rig_scene(s, seed);
+    let motion = rig_motion(s, seed);
+    let mounts: Vec<_> = std::iter::once(sim.truth.t_bc).chain(sim.truth.second_t_bc).collect();
+    let total = sim.input.cameras.iter().map(|c| c.views.len()).sum();
+    let mut progress = Progress { done: 0, total, report: progress };
+    for (index, (cam, body_from_camera)) in sim.input.cameras.iter().zip(&mounts).enumerate() {
+        // Each view exposed at its stamp plus the time offset (IMU time).
+        let frames: Vec<(f64, i64)> =
+            cam.views.iter().map(|v| (v.t_ns as f64 * 1e-9 + s.camera.time_offset_s, T0_NS + v.t_ns)).collect();
+        let camera = CameraFrames {
+            scene: &scene,
+            camera: &s.camera,
+            motion: &motion,
+            body_from_camera,
+            settings: images,
+            seed,
+            index,
+        };
+        camera.render(&frames, &out.join("mav0").join(&cam.name).join("data"), &mut progress)?;
+    }
+    Ok(())
+}
+
+/// Side of the checkerboard's texture \[texels\]: its squares' edges fall
+/// anywhere within texels, painted with their exact coverage.
+const BOARD_TEXELS: usize = 1024;
+
+/// Grey of the board's dark and light squares (of 1): printed black and white paper.
+const BOARD_GREYS: [f32; 2] = [0.08, 0.9];
+
+/// The rig's scene: a room whose front wall stands 5 cm behind the target,
+/// and the checkerboard with a white margin of one square around its squares.
+fn rig_scene(s: &RigSimSettings, seed: u64) -> RenderScene {
+    let half = [2.0, 3.0, 2.0];
+    let centre = Vector3::new(s.distance_m + 0.05 - half[0], 0.0, 0.0);
+    let mut scene = RenderScene::room(centre, half, seed);
+    if let Target::Checkerboard { cols, rows, col_spacing, row_spacing } = s.target {
+        scene.planes.push(checkerboard_plane(s, [cols as usize, rows as usize], [col_spacing, row_spacing]));
+    }
+    scene
+}
+
+/// The checkerboard of `inner` corners spaced `spacing` \[m\] as a plane in the
+/// world ([`target_in_world`]): squares `(inner + 1)`, the corner `(0, 0)`
+/// the first inner corner, a light margin of one square.
+fn checkerboard_plane(s: &RigSimSettings, inner: [usize; 2], spacing: [f64; 2]) -> Plane {
+    let squares = inner.map(|n| n + 1);
+    // The plane spans [−2, n + 1] squares along each axis.
+    let extent = [0, 1].map(|a| (squares[a] + 2) as f64 * spacing[a]);
+    let texel = [0, 1].map(|a| BOARD_TEXELS as f64 / (squares[a] + 2) as f64);
+    let mut data = vec![BOARD_GREYS[1]; BOARD_TEXELS * BOARD_TEXELS];
+    for j in 0..squares[1] {
+        for i in 0..squares[0] {
+            if (i + j) % 2 == 0 {
+                let [x0, y0] = [(i + 1) as f64 * texel[0], (j + 1) as f64 * texel[1]];
+                let rect = [x0, y0, x0 + texel[0], y0 + texel[1]];
+                paint_rect(BOARD_TEXELS, BOARD_TEXELS, &mut data, rect, BOARD_GREYS[0]);
+            }
+        }
+    }
+    let (r_wt, t_wt) = target_in_world(s);
+    Plane {
+        origin: r_wt * Vector3::new(-2.0 * spacing[0], -2.0 * spacing[1], 0.0) + t_wt,
+        u_axis: r_wt * Vector3::x(),
+        v_axis: r_wt * Vector3::y(),
+        size: extent,
+        texture: Arc::new(Texture::new(BOARD_TEXELS, BOARD_TEXELS, data)),
+    }
+}
