@@ -513,6 +513,12 @@ fn a_simulated_rig_folder_calibrates_to_its_truth() {
         println!("cam{c} z (rotation, translation, fx fy cx cy, time offset): {z:+.2?}");
         assert!(z.iter().all(|z| z.abs() < 4.0), "cam{c}: {z:?}");
     }
+    // What cannot be made is refused before anything is written.
+    let refused = dir.with_extension("refused");
+    for (duration, baseline) in [(8.0, 0.0), (20.0, -0.11)] {
+        let e = write_rig_recording(&rig_settings(duration, baseline), None, 3, &refused, &mut |_, _| {}).unwrap_err();
+        assert!(e.to_string().contains("rig:") && !refused.exists(), "{e}");
+    }
     // The written truth is the one returned.
     let truth: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("truth.json")).unwrap()).unwrap();

@@ -47,8 +47,9 @@ pub fn rig_settings(duration_s: f64, stereo_baseline_m: f64) -> RigSimSettings {
 /// rendered frames. Returns the simulation (its corners are the exact
 /// projections when rendering).
 ///
-/// Errors: settings the simulator refuses (a recording under 12 s, a
-/// checkerboard absent), image settings out of range, a file not written.
+/// Errors: a recording under 12 s, a negative stereo baseline, images of a
+/// target other than a checkerboard, image settings out of range, a file
+/// not written.
 pub fn write_rig_recording(
     settings: &RigSimSettings,
     images: Option<&ImageSettings>,
@@ -80,6 +81,12 @@ fn check(s: &RigSimSettings, images: Option<&ImageSettings>) -> Result<(), SimEr
     // The wave needs 10 s beyond its still ends ([`super::Loop::target_wave_with`]).
     if !(s.duration_s.is_finite() && s.duration_s >= 12.0) {
         return Err(format!("rig: the recording must last at least 12 s, found {} s", s.duration_s).into());
+    }
+    let baseline = s.camera.stereo_baseline_m;
+    if !(baseline.is_finite() && baseline >= 0.0) {
+        return Err(
+            format!("rig: the stereo baseline must be 0 (one camera) or positive metres, found {baseline}").into()
+        );
     }
     if let Some(images) = images {
         images.check()?;
