@@ -328,7 +328,7 @@ fn a_shock_the_features_contradict_is_withdrawn_and_the_pieces_named() {
 /// which honest σ put near 1 (issue 64 asks for [0.5, 2]). Measured
 /// (2026-12-03): rotation 1.10, translation 4.21, time offset 1.30 — the
 /// translation's σ are about 2× too small; from a start 100× closer to the
-/// truth 2.10, 2.15 and 1.85 (docs/vio.md says what is known of why). The
+/// truth 2.10, 2.15 and 1.85 (docs/findings/vio.md says what is known of why). The
 /// bounds guard those figures until the cause is fixed.
 #[test]
 #[ignore = "long trial: cargo test --test vio_online -- --ignored"]

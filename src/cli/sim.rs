@@ -135,7 +135,7 @@ impl SimArgs {
             return Err("sim rig: --hide and --pause are for the IMU scenarios".into());
         }
         let settings = tumble::sim::rig_recording::rig_settings(
-            self.duration.unwrap_or(40.0),
+            self.duration.unwrap_or(tumble::sim::target::RigSimSettings::default().duration_s),
             self.stereo_baseline.unwrap_or(0.0),
         );
         let images = match (self.images, cfg.images) {

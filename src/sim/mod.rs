@@ -159,7 +159,7 @@ impl Default for SimConfig {
             camera_enabled: None,
             groundtruth_rate_hz: None,
             pauses_s: Vec::new(),
-            t0_ns: 1_700_000_000_000_000_000,
+            t0_ns: DEFAULT_T0_NS,
             images: None,
         }
     }
@@ -402,6 +402,9 @@ impl Simulation {
         self.config.t0_ns + (t * 1e9).round() as i64
     }
 }
+
+/// Absolute time of a simulated recording's first IMU sample unless configured \[ns\] (November 2023).
+pub(crate) const DEFAULT_T0_NS: i64 = 1_700_000_000_000_000_000;
 
 /// Run a scenario. Deterministic: the same seed and config give the same samples.
 pub fn simulate(scenario: Scenario, config: &SimConfig, seed: u64) -> Result<Simulation, SimError> {

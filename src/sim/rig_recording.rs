@@ -15,8 +15,8 @@ use super::images::{CameraFrames, Progress};
 use super::render::scene::{Plane, RenderScene};
 use super::render::texture::{paint_rect, Texture};
 use super::render::ImageSettings;
-use super::target::{rig_motion, simulate_rig, target_in_world, RigSimSettings, SimulatedRig};
-use super::writer::{camera_sensor_yaml, write_text};
+use super::target::{rig_motion, simulate_rig, target_in_world, RigSimSettings, SimulatedRig, RIG_IMU_RATE_HZ};
+use super::writer::{camera_sensor_yaml, imu_sensor_yaml, write_text};
 use super::SimError;
 use crate::model::target::{CameraCorners, Target};
 use nalgebra::Vector3;
@@ -28,8 +28,8 @@ use std::sync::Arc;
 /// AprilGrid is not rendered (its tags' codes are not drawn here).
 pub const RIG_CHECKERBOARD: Target = Target::Checkerboard { cols: 7, rows: 6, col_spacing: 0.08, row_spacing: 0.08 };
 
-/// Absolute time of the recording's first IMU sample \[ns\] (as the other scenarios' default).
-const T0_NS: i64 = 1_700_000_000_000_000_000;
+/// Absolute time of the recording's first IMU sample \[ns\]: the other scenarios' default.
+const T0_NS: i64 = super::DEFAULT_T0_NS;
 
 /// The settings of `tumble sim rig`: [`RigSimSettings`]' defaults (EuRoC's
 /// cam0 lens, a 3 ms time offset, 0.3 px corner noise, the target 1 m
@@ -64,16 +64,14 @@ pub fn write_rig_recording(
         settings.camera.pixel_noise_px = 0.0;
     }
     let sim = simulate_rig(&settings, seed);
-    let mut done = None;
     crate::io::staging::write_staged(out, |stage| -> Result<Vec<PathBuf>, SimError> {
         write_folder(&settings, &sim, seed, images.is_some(), stage)?;
         if let Some(images) = images {
             render_frames(&settings, &sim, images, seed, stage, progress)?;
         }
-        done = Some(());
         crate::io::staging::files_under(stage).map_err(|e| SimError::from(format!("{}: {e}", stage.display())))
     })?;
-    done.map(|()| sim).ok_or_else(|| SimError::from("the rig simulation wrote nothing"))
+    Ok(sim)
 }
 
 /// Refuse what the recording cannot be made from, before anything is simulated.
@@ -147,13 +145,9 @@ fn write_imu(dir: &Path, sim: &SimulatedRig) -> Result<(), SimError> {
     }
     write_text(&dir.join("data.csv"), &csv)?;
     let n = &sim.input.noise;
-    let yaml = format!(
-        "%YAML:1.0\n# Simulated by tumble (scenario rig). Noise figures: continuous time, SI.\nsensor_type: imu\n\
-         comment: simulated rig IMU\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, \
-         0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\nrate_hz: 200\ngyroscope_noise_density: {:e}\ngyroscope_random_walk: {:e}\n\
-         accelerometer_noise_density: {:e}\naccelerometer_random_walk: {:e}\n",
-        n.gyro_noise_density, n.gyro_random_walk, n.accel_noise_density, n.accel_random_walk
-    );
+    let noise = [n.gyro_noise_density, n.gyro_random_walk, n.accel_noise_density, n.accel_random_walk];
+    let header = "Simulated by tumble (scenario rig). Noise figures: continuous time, SI.";
+    let yaml = imu_sensor_yaml(header, "simulated rig IMU", RIG_IMU_RATE_HZ, noise);
     Ok(write_text(&dir.join("sensor.yaml"), &yaml)?)
 }
 

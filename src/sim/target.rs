@@ -26,6 +26,9 @@ use rand_distr::{Distribution, Normal};
 use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::PreintegrationParams;
 
+/// The simulated rig IMU's sample rate \[Hz\].
+pub(crate) const RIG_IMU_RATE_HZ: f64 = 200.0;
+
 /// Settings of a simulated rig calibration recording.
 #[derive(Debug, Clone)]
 pub struct RigSimSettings {
@@ -104,7 +107,7 @@ pub fn simulate_rig(s: &RigSimSettings, seed: u64) -> SimulatedRig {
         ..TriadModel::default()
     };
     let model = ImuModel {
-        rate_hz: 200.0,
+        rate_hz: RIG_IMU_RATE_HZ,
         gyro: triad(p.gyro_noise().into(), p.gyro_walk().into(), s.bias[1]),
         accel: triad(p.accel_noise().into(), p.accel_walk().into(), s.bias[0]),
         effects: Effects { bias: true, random_walk: true, white_noise: true, ..Effects::none() },

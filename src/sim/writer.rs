@@ -172,18 +172,28 @@ fn worst(v: &[f64; 3]) -> f64 {
 
 fn imu_yaml(sim: &Simulation) -> String {
     let m = &sim.config.imu;
+    let header = format!(
+        "Simulated by tumble (scenario {:?}, seed {}). Noise figures: worst axis of the model, continuous time, SI.",
+        sim.scenario, sim.seed
+    );
+    let noise = [&m.gyro.noise_density, &m.gyro.random_walk, &m.accel.noise_density, &m.accel.random_walk].map(worst);
+    imu_sensor_yaml(&header, "simulated BMI055-like IMU", m.rate_hz, noise)
+        + &crate::io::ImuNoise::from_model(m).axes.map_or(String::new(), |a| {
+            format!(
+                "# Per axis [x, y, z], the random walks with the bias instability folded in (tumble's key):\n{}",
+                a.yaml_block()
+            )
+        })
+}
+
+/// An ASL `imu0/sensor.yaml` (IMU frame = body frame) with `header` as its
+/// comment line, at `rate_hz`, with the noise figures `[gyro white noise,
+/// gyro random walk, accel white noise, accel random walk]` (Kalibr's units).
+pub(crate) fn imu_sensor_yaml(header: &str, comment: &str, rate_hz: f64, noise: [f64; 4]) -> String {
+    let [gn, gw, an, aw] = noise;
     format!(
-        "%YAML:1.0\n# Simulated by tumble (scenario {:?}, seed {}). Noise figures: worst axis of the model, continuous time, SI.\nsensor_type: imu\ncomment: simulated BMI055-like IMU\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\nrate_hz: {}\ngyroscope_noise_density: {:e}\ngyroscope_random_walk: {:e}\naccelerometer_noise_density: {:e}\naccelerometer_random_walk: {:e}\n",
-        sim.scenario,
-        sim.seed,
-        m.rate_hz,
-        worst(&m.gyro.noise_density),
-        worst(&m.gyro.random_walk),
-        worst(&m.accel.noise_density),
-        worst(&m.accel.random_walk)
-    ) + &crate::io::ImuNoise::from_model(m).axes.map_or(String::new(), |a| {
-        format!("# Per axis [x, y, z], the random walks with the bias instability folded in (tumble's key):\n{}", a.yaml_block())
-    })
+        "%YAML:1.0\n# {header}\nsensor_type: imu\ncomment: {comment}\nT_BS:\n  cols: 4\n  rows: 4\n  data: [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]\nrate_hz: {rate_hz}\ngyroscope_noise_density: {gn:e}\ngyroscope_random_walk: {gw:e}\naccelerometer_noise_density: {an:e}\naccelerometer_random_walk: {aw:e}\n"
+    )
 }
 
 /// `sensor.yaml` of camera 0 or (stereo) camera 1.
