@@ -529,3 +529,123 @@ fn calibrate_rig_command_on_images(dir: &std::path::Path) {
         assert!(cli_out.join(f).is_file(), "{f} not written: {text}");
     }
 }
+
+/// How the frontend's tracks on rendered frames compare with the scene's geometry.
+struct RenderedTracking {
+    /// Every tracked position's distance from where the scene puts it \[px\], sorted.
+    errors: Vec<f64>,
+    /// The same, one frame after each track began (a single KLT step), sorted.
+    first_steps: Vec<f64>,
+    /// Observations per finished or running track \[frames\].
+    lengths: Vec<usize>,
+    /// Tracks whose first position hit no plane (not checked).
+    unplaced: usize,
+    /// The tracker's own statistics.
+    stats: FrontendStats,
+}
+
+/// Track the first `seconds` of a 60 s simulated flight's cam0 frames (the
+/// pace of EuRoC's medium flights) rendered with
+/// `settings` (the room `tumble sim flight --images` renders) and compare
+/// every tracked position with the truth: a track's first position is cast
+/// onto the scene's planes from the true camera pose, and that point is
+/// projected into each later frame through the same lens.
+fn rendered_flight_tracking(settings: &tumble::sim::render::ImageSettings, seconds: f64) -> RenderedTracking {
+    use opencv::core::{Mat, MatTraitManual, Scalar, CV_8UC1};
+    use tumble::sim::render::{camera_pose, lens::RayTable, render_frame};
+    use tumble::sim::{images::render_scene, simulate, Scenario, SimConfig};
+    let cfg = SimConfig { duration_s: Some(60.0), ..SimConfig::default() };
+    let sim = simulate(Scenario::Flight, &cfg, 1).unwrap();
+    let scene = render_scene(&sim).unwrap();
+    let c = &sim.config.camera;
+    let model = c.model();
+    let [w, h] = c.resolution.map(|x| x as usize);
+    let lens = RayTable::new(&model, w, h);
+    let focal = model.fx.max(model.fy);
+    let body_from_camera = c.body_from_camera();
+    let mut tracker = KltTracker::new(model, FrontendOptions::default());
+    // Each track's point in the world (None: its first position hit nothing) and its length.
+    let mut points: HashMap<u64, (Option<nalgebra::Point3<f64>>, usize)> = HashMap::new();
+    let (mut errors, mut first_steps) = (Vec::new(), Vec::new());
+    let frames = sim.tracks.as_ref().unwrap().frames.iter().take_while(|&&t| t < seconds);
+    for (k, &stamp) in frames.enumerate() {
+        let t = stamp + c.time_offset_s;
+        let gain = 1.0 + settings.gain_jitter * (k as f64 * 2.4).sin();
+        let pixels =
+            render_frame(&scene, &lens, focal, sim.motion.as_ref(), &body_from_camera, t, gain, settings, k as u64);
+        let mut image = Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC1, Scalar::all(0.0)).unwrap();
+        image.data_bytes_mut().unwrap().copy_from_slice(&pixels);
+        let world_from_camera = camera_pose(sim.motion.as_ref(), &body_from_camera, t);
+        for (id, uv) in tracker.track(&image).unwrap() {
+            let (point, length) = points.entry(id).or_insert_with(|| {
+                let [x, y] = model.unproject(uv).unwrap();
+                let ray = nalgebra::Vector3::new(x, y, 1.0).normalize();
+                let hit = scene.seen_from(&world_from_camera).hit(&ray, 0.05);
+                (hit.map(|hit| world_from_camera * nalgebra::Point3::from(ray * hit.distance_m)), 0)
+            });
+            *length += 1;
+            if *length == 1 {
+                continue;
+            }
+            if let Some(p) = point {
+                let q = world_from_camera.inverse() * *p;
+                let expect = model.project(&[q.x, q.y, q.z]).unwrap();
+                let error = ((expect[0] - uv[0]).powi(2) + (expect[1] - uv[1]).powi(2)).sqrt();
+                errors.push(error);
+                if *length == 2 {
+                    first_steps.push(error);
+                }
+            }
+        }
+    }
+    errors.sort_by(|a, b| a.total_cmp(b));
+    first_steps.sort_by(|a, b| a.total_cmp(b));
+    let unplaced = points.values().filter(|p| p.0.is_none()).count();
+    let lengths = points.values().map(|p| p.1).collect();
+    RenderedTracking { errors, first_steps, lengths, unplaced, stats: tracker.stats() }
+}
+
+/// The frontend on rendered frames of a flight in the simulated room, against
+/// the scene's geometry: sharp frames (no blur, no noise, no flicker) and the
+/// renderer's default camera (3 ms exposure, read and shot noise, vignetting,
+/// 2 % flicker). Bounds: the issue's median of 0.2 px on sharp frames; one KLT
+/// step within 0.1 px (median); tracks of 15 frames or more and 120 of the 150
+/// features per frame, as the real V1_01 images give; and, as a regression
+/// floor, at most 20 % of the tracked positions beyond 1 px (measured 10–11 %:
+/// frame-to-frame KLT drifts, 0.06 px after one frame, 0.2 px after ten, and
+/// a sixth of the tracks older than 40 frames have slid past 1 px).
+#[test]
+fn tracks_on_rendered_frames_follow_the_scene() {
+    use tumble::sim::render::ImageSettings;
+    let sharp = ImageSettings {
+        exposure_s: 0.0,
+        read_noise_dn: 0.0,
+        full_well_electrons: 0.0,
+        gain_jitter: 0.0,
+        ..ImageSettings::default()
+    };
+    for (name, settings) in [("sharp", sharp), ("default camera", ImageSettings::default())] {
+        let r = rendered_flight_tracking(&settings, 10.0);
+        let e = &r.errors;
+        let (median, p95) = (e[e.len() / 2], e[e.len() * 95 / 100]);
+        let first_step = r.first_steps[r.first_steps.len() / 2];
+        let beyond_1px = e.iter().filter(|&&x| x > 1.0).count() as f64 / e.len() as f64;
+        let mean_length = r.lengths.iter().sum::<usize>() as f64 / r.lengths.len() as f64;
+        println!(
+            "rendered flight, {name}: {} tracked positions, error median {median:.3} px (after one frame \
+             {first_step:.3} px), 95th percentile {p95:.3} px, {:.1} % beyond 1 px; mean track \
+             {mean_length:.1} frames ({} tracks, {} not on a plane)\n  {}",
+            e.len(),
+            100.0 * beyond_1px,
+            r.lengths.len(),
+            r.unplaced,
+            r.stats.line()
+        );
+        if name == "sharp" {
+            assert!(median <= 0.2, "{name}: median {median} px");
+        }
+        assert!(first_step <= 0.1, "{name}: one step's median {first_step} px");
+        assert!(beyond_1px <= 0.2, "{name}: {beyond_1px} of the positions beyond 1 px");
+        assert!(mean_length >= 15.0 && r.stats.features_per_frame >= 120.0, "{name}: {}", r.stats.line());
+    }
+}
