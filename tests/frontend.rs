@@ -649,3 +649,36 @@ fn tracks_on_rendered_frames_follow_the_scene() {
         assert!(mean_length >= 15.0 && r.stats.features_per_frame >= 120.0, "{name}: {}", r.stats.line());
     }
 }
+
+/// tumble's Shi–Tomasi detector finds OpenCV's `goodFeaturesToTrack` corners
+/// (same definition, no Harris, 3×3 blocks) on a real V1_01 image, with the
+/// whole image free and with a mask of 100 random disks blocked, as the
+/// tracker's spread leaves it: the same corners, but for the rare pair whose
+/// float scores round apart.
+#[test]
+fn corners_are_opencvs_good_features() {
+    use opencv::core::{Mat, Point, Point2f, Scalar, Vector, CV_8UC1};
+    use opencv::prelude::*;
+    use tumble::vio::frontend::corners::{shi_tomasi, CornerSearch, GrayImage};
+    let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
+    let ds = read_asl(&micro, &Default::default()).unwrap();
+    let img = read_gray(&ds.cameras[0].frames[10].1).unwrap();
+    let (w, h) = (img.cols(), img.rows());
+    let mut mask = Mat::new_rows_cols_with_default(h, w, CV_8UC1, Scalar::all(255.0)).unwrap();
+    for blocked in [0, 100] {
+        for k in 0..blocked {
+            let centre = Point::new((k * 7919) % w, (k * 104_729) % h);
+            opencv::imgproc::circle(&mut mask, centre, 30, Scalar::all(0.0), -1, opencv::imgproc::LINE_8, 0).unwrap();
+        }
+        let mut theirs = Vector::<Point2f>::new();
+        opencv::imgproc::good_features_to_track(&img, &mut theirs, 150, 0.01, 30.0, &mask, 3, false, 0.04).unwrap();
+        let image = GrayImage { pixels: img.data_bytes().unwrap(), width: w as usize, height: h as usize };
+        let search =
+            CornerSearch { mask: mask.data_bytes().unwrap(), max_corners: 150, quality: 0.01, min_distance: 30.0 };
+        let ours = shi_tomasi(&image, &search);
+        let same = ours.iter().filter(|p| theirs.iter().any(|q| q.x == p[0] && q.y == p[1])).count();
+        println!("{blocked} disks blocked: OpenCV {} corners, tumble {}, {same} the same", theirs.len(), ours.len());
+        assert!(ours.len().abs_diff(theirs.len()) <= 2, "{} vs {}", ours.len(), theirs.len());
+        assert!(same as f64 >= 0.95 * theirs.len() as f64, "{same} of {}", theirs.len());
+    }
+}

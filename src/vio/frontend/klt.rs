@@ -1,5 +1,6 @@
 //! The KLT tracker on OpenCV (feature `opencv`).
 
+use super::corners::{CornerSearch, GrayImage, ShiTomasi};
 use super::FrontendError;
 use super::{FrontendOptions, FrontendStats, Observation, StereoStats};
 use opencv::core::{self, Mat, Point, Point2f, Scalar, Size, TermCriteria, Vector};
@@ -31,6 +32,7 @@ pub struct KltTracker {
     opts: FrontendOptions,
     camera: CameraModel,
     clahe: Option<core::Ptr<imgproc::CLAHE>>,
+    corners: ShiTomasi,
     prev: Option<Vector<Mat>>,
     pts: Vec<Point2f>,
     ids: Vec<u64>,
@@ -53,6 +55,7 @@ impl KltTracker {
     pub fn new(camera: CameraModel, opts: FrontendOptions) -> KltTracker {
         KltTracker {
             clahe: None,
+            corners: ShiTomasi::default(),
             opts,
             camera,
             prev: None,
@@ -212,6 +215,23 @@ impl KltTracker {
         Ok(mask)
     }
 
+    /// Up to `want` new Shi–Tomasi corners of `img` where `mask` is nonzero.
+    fn detect(&mut self, img: &Mat, mask: &Mat, want: usize) -> Result<Vec<[f32; 2]>, FrontendError> {
+        // `track`'s image is its own continuous copy (or CLAHE's output): rows without padding.
+        let image = GrayImage {
+            pixels: img.data_bytes().map_err(cv)?,
+            width: img.cols() as usize,
+            height: img.rows() as usize,
+        };
+        let search = CornerSearch {
+            mask: mask.data_bytes().map_err(cv)?,
+            max_corners: want,
+            quality: self.opts.quality,
+            min_distance: self.opts.min_distance,
+        };
+        Ok(self.corners.detect(&image, &search))
+    }
+
     /// Track into the next image (8-bit grayscale); returns the features seen, `(track id, [u, v])`.
     pub fn track(&mut self, image: &Mat) -> Result<Vec<(u64, [f64; 2])>, FrontendError> {
         if image.empty() {
@@ -245,21 +265,9 @@ impl KltTracker {
         let mask = self.spread(img.rows(), img.cols())?;
         let want = self.opts.max_features.saturating_sub(self.pts.len());
         if want > 0 {
-            let mut corners = Vector::<Point2f>::new();
-            imgproc::good_features_to_track(
-                &img,
-                &mut corners,
-                want as i32,
-                self.opts.quality,
-                self.opts.min_distance,
-                &mask,
-                3,
-                false,
-                0.04,
-            )
-            .map_err(cv)?;
-            for p in corners {
-                self.pts.push(p);
+            let corners = self.detect(&img, &mask, want)?;
+            for [x, y] in corners {
+                self.pts.push(Point2f::new(x, y));
                 self.ids.push(self.next_id);
                 self.ages.push(1);
                 self.next_id += 1;

@@ -7,9 +7,10 @@
 //! check, RANSAC on the fundamental matrix of undistorted points) uses OpenCV
 //! and is built with the cargo feature `opencv`
 //! (`apt-get install libopencv-dev clang libclang-dev`, then
-//! `cargo build --features opencv`). Options, statistics and the
-//! tracks file are here without it.
+//! `cargo build --features opencv`). Options, statistics, the tracks file and
+//! the corner detector ([`corners`]) are here without it.
 
+pub mod corners;
 #[cfg(feature = "opencv")]
 mod klt;
 #[cfg(feature = "opencv")]
