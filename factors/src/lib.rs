@@ -9,7 +9,8 @@
 //! - [`camera::CameraModel`]: pinhole with radial–tangential or equidistant distortion.
 //! - [`imu_calib`]: gravity-norm and integrated-rotation factors of turntable-free IMU calibration.
 //! - [`imu_preint`]: IMU preintegration (GTSAM's zero-order hold or VINS-Mono's midpoint), [`ImuFactor`], [`bias_random_walk`].
-//! - [`InverseDepthReprojection`]: VINS-Mono's inverse-depth reprojection through any [`camera::CameraModel`].
+//! - [`InverseDepthReprojection`]: the reprojection of an anchored inverse-depth landmark (VINS-Mono's
+//!   one parameter, or three with the bearing: [`reprojection::Landmark`]) through any [`camera::CameraModel`].
 //! - [`rig`]: a target corner seen by a camera with unknown intrinsics, pose in the IMU frame and time offset ([`rig::TargetCorner`]), the camera-only corner ([`rig::CameraCorner`]) and the target's gauge.
 //! - [`SnavelyReprojection`]: the Bundle-Adjustment-in-the-Large camera model (analytic Jacobians; its residual is generic too, for autodiff).
 //!

@@ -1,9 +1,20 @@
 //! Reprojection of a landmark parametrized by its inverse depth in the first
-//! keyframe that observed it (VINS-Mono's parametrization).
+//! keyframe that observed it.
 //!
-//! The landmark is `p_Ca = f_a / ρ` in the anchor camera, with `f_a = [x, y, 1]`
-//! the anchor observation's undistorted normalized coordinates and `ρ` \[1/m\]
-//! the inverse depth (a `Vector1` variable). Poses are body-in-world SE(3)
+//! The landmark is `p_Ca = f / ρ` in the anchor camera, with `ρ` \[1/m\] the
+//! inverse depth and `f` the bearing, in one of two forms ([`Landmark`]):
+//! - a `Vector1` variable `[ρ]`: `f = f_a = [x, y, 1]`, the anchor
+//!   observation's undistorted normalized coordinates, held fixed
+//!   (VINS-Mono's parametrization). The anchor's pixel noise then enters every
+//!   other observation's residual and is counted nowhere: the residuals of one
+//!   landmark are correlated and the poses' σ come out too small.
+//! - a `Vector3` variable `[δx, δy, ρ]`: `f = [x + δx, y + δy, 1]`, the
+//!   bearing estimated too, with the anchor observation a residual of its own
+//!   ([`AnchorObservation`]) — the anchored inverse depth of OpenVINS and
+//!   Basalt (three degrees of freedom per landmark), where every pixel is one
+//!   independent measurement.
+//!
+//! Poses are body-in-world SE(3)
 //! (`Isometry3F64`, right perturbation); `body_from_camera` is the fixed
 //! camera-to-IMU extrinsic `T_BC`. The residual is `π(p_Cj) − uv_j` in pixels
 //! of the given [`CameraModel`] (pinhole, radial–tangential or equidistant);
@@ -26,13 +37,119 @@
 //! ```
 
 use crate::camera::CameraModel;
-use nalgebra::{DVector, Matrix2x3, Matrix3, Vector1, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Vector1, Vector3};
 use tumble_solvers::lie::hat;
 use tumble_solvers::sophus_lie::prelude::*;
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{Factor, FactorError, Key, Linearization, Vars};
 
-/// Reprojection factor on `[X_anchor, X_j, ρ]`; see the module docs.
+/// A landmark variable read by the factors of this module: the bearing
+/// `f` (anchor camera, `z = 1`) and the inverse depth `ρ` \[1/m\], from a
+/// `Vector1` `[ρ]` (bearing fixed at the anchor observation) or a `Vector3`
+/// `[δx, δy, ρ]` (bearing `f_a + [δx, δy, 0]`); see the module docs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Landmark {
+    /// The bearing `f` in the anchor camera (`z = 1`).
+    pub bearing: Vector3<f64>,
+    /// The inverse depth ρ \[1/m\].
+    pub rho: f64,
+    /// The variable's dimension: 1 (`[ρ]`) or 3 (`[δx, δy, ρ]`).
+    pub dim: usize,
+}
+
+impl Landmark {
+    /// Variable `i` of `vars` as a landmark anchored at bearing `anchor` (`z = 1`).
+    pub fn read(vars: &Vars<'_>, i: usize, anchor: &Vector3<f64>) -> Result<Landmark, FactorError> {
+        if let Ok(v) = vars.get::<Vector3<f64>>(i) {
+            return Ok(Landmark { bearing: anchor + Vector3::new(v[0], v[1], 0.0), rho: v[2], dim: 3 });
+        }
+        let rho = vars.get::<Vector1<f64>>(i)?[0];
+        Ok(Landmark { bearing: *anchor, rho, dim: 1 })
+    }
+
+    /// The point `f / ρ` in the anchor camera \[m\].
+    pub fn point(&self) -> Vector3<f64> {
+        self.bearing / self.rho
+    }
+
+    /// `∂(f / ρ)/∂[δx, δy, ρ]` (3 × 3); a `[ρ]` landmark's is the last column.
+    pub fn point_jacobian(&self) -> Matrix3<f64> {
+        let inv = 1.0 / self.rho;
+        let d_rho = -self.bearing * (inv * inv);
+        Matrix3::new(inv, 0.0, d_rho.x, 0.0, inv, d_rho.y, 0.0, 0.0, d_rho.z)
+    }
+
+    /// `jl = m ∂(f / ρ)/∂(variable)`: the residual's Jacobian by the landmark
+    /// (2 × [`Landmark::dim`]) from `m`, its Jacobian by the point `f / ρ`
+    /// in the anchor camera (2 × 3).
+    pub fn chain_into(&self, m: &Matrix2x3<f64>, jl: &mut DMatrix<f64>) {
+        let j = m * self.point_jacobian();
+        let first = 3 - self.dim;
+        for c in 0..self.dim {
+            jl[(0, c)] = j[(0, first + c)];
+            jl[(1, c)] = j[(1, first + c)];
+        }
+    }
+}
+
+/// The anchor observation of a landmark whose bearing is estimated (a
+/// `Vector3` `[δx, δy, ρ]`, see [`Landmark`]): `r = π(f_a + [δx, δy, 0]) −
+/// uv_a` \[px\], a factor on the landmark alone. With it the anchor's pixel
+/// is one measurement like every other, not a constant. Pair it with a Huber loss.
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use tumble_factors::camera::{CameraModel, Distortion};
+/// use tumble_factors::reprojection::AnchorObservation;
+/// use tumble_solvers::{check_jacobians, L};
+/// let cam = CameraModel { fx: 460.0, fy: 460.0, cx: 376.0, cy: 240.0,
+///     distortion: Distortion::RadTan { k1: -0.28, k2: 0.07, p1: 2e-4, p2: 2e-5 } };
+/// let f = AnchorObservation::new(L(7), [0.1, -0.05], [420.0, 217.0], cam);
+/// assert!(check_jacobians(&f, &[&Vector3::new(0.002, -0.001, 0.4)]).unwrap().passes(1e-6));
+/// ```
+#[derive(Clone, Debug)]
+pub struct AnchorObservation {
+    keys: [Key; 1],
+    bearing: Vector3<f64>,
+    measured: [f64; 2],
+    camera: CameraModel,
+}
+
+impl AnchorObservation {
+    /// Factor on `landmark` (`[δx, δy, ρ]`): anchor observation `anchor_xy`
+    /// (undistorted normalized: the bearing the landmark's δ correct), its
+    /// pixel `measured_uv` \[px\] and the camera's model.
+    pub fn new(landmark: Key, anchor_xy: [f64; 2], measured_uv: [f64; 2], camera: CameraModel) -> Self {
+        AnchorObservation {
+            keys: [landmark],
+            bearing: Vector3::new(anchor_xy[0], anchor_xy[1], 1.0),
+            measured: measured_uv,
+            camera,
+        }
+    }
+
+    /// Residual \[px\] and, with `jac`, its derivative by `[δx, δy, ρ]` (none by ρ).
+    fn evaluate(&self, vars: Vars<'_>, jac: bool, out: &mut Linearization) -> Result<(), FactorError> {
+        let l = Landmark::read(&vars, 0, &self.bearing)?;
+        if l.dim != 3 {
+            return Err(FactorError::Other("an anchor observation needs a [δx, δy, ρ] landmark (Vector3)".into()));
+        }
+        let Some(jpi) = pixel_residual(&self.camera, &l.bearing, self.measured, (jac, &[3]), out)? else {
+            return Ok(());
+        };
+        let j = &mut out.jacobians[0];
+        for r in 0..2 {
+            j[(r, 0)] = jpi[(r, 0)];
+            j[(r, 1)] = jpi[(r, 1)];
+            j[(r, 2)] = 0.0;
+        }
+        Ok(())
+    }
+}
+
+crate::pixel::pixel_factor!(AnchorObservation);
+
+/// Reprojection factor on `[X_anchor, X_j, L]` (`L` a [`Landmark`]); see the module docs.
 #[derive(Clone, Debug)]
 pub struct InverseDepthReprojection {
     keys: [Key; 3],
@@ -88,16 +205,15 @@ impl InverseDepthReprojection {
     fn evaluate(&self, vars: Vars<'_>, jac: bool, out: &mut Linearization) -> Result<(), FactorError> {
         let xa: &Isometry3F64 = vars.get(0)?;
         let xj: &Isometry3F64 = vars.get(1)?;
-        let rho: &Vector1<f64> = vars.get(2)?;
+        let l = Landmark::read(&vars, 2, &self.bearing)?;
         let (ra, pa) = (xa.rotation().matrix(), xa.translation());
         let (rj, pj) = (xj.rotation().matrix(), xj.translation());
-        let inv = 1.0 / rho[0];
-        let p_ca = self.bearing * inv;
+        let p_ca = l.point();
         let p_ba = self.r_bc * p_ca + self.t_bc;
         let p_w = ra * p_ba + pa;
         let p_bj = rj.transpose() * (p_w - pj);
         let p_cj = self.r_bcj.transpose() * (p_bj - self.t_bcj);
-        let Some(jpi) = pixel_residual(&self.camera, &p_cj, self.measured, (jac, &[6, 6, 1]), out)? else {
+        let Some(jpi) = pixel_residual(&self.camera, &p_cj, self.measured, (jac, &[6, 6, l.dim]), out)? else {
             return Ok(());
         };
         let rcb_rjt = self.r_bcj.transpose() * rj.transpose();
@@ -107,8 +223,7 @@ impl InverseDepthReprojection {
         jxa.fixed_view_mut::<2, 3>(0, 3).copy_from(&j_pw);
         jxj.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * self.r_bcj.transpose() * hat(&p_bj)));
         jxj.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jpi * self.r_bcj.transpose()));
-        let d_rho = j_pw * self.r_bc * (-self.bearing * (inv * inv));
-        jl.copy_from_slice(d_rho.as_slice());
+        l.chain_into(&(j_pw * self.r_bc), jl);
         Ok(())
     }
 }
@@ -139,11 +254,12 @@ fn pixel_residual(
 crate::pixel::pixel_factor!(InverseDepthReprojection);
 
 /// A landmark's anchor observation matched in a second camera at the same
-/// time (stereo): a factor on its inverse depth alone, `[ρ]` (`Vector1`).
+/// time (stereo): a factor on the landmark alone (a [`Landmark`]: `[ρ]` or
+/// `[δx, δy, ρ]`).
 ///
-/// The landmark `p_B = R_BC f_a / ρ + t_BC` in the body frame at the anchor
-/// (first camera `T_BC`, `f_a = [x, y, 1]` the anchor observation's
-/// undistorted normalized coordinates) seen by the second camera
+/// The landmark `p_B = R_BC f / ρ + t_BC` in the body frame at the anchor
+/// (first camera `T_BC`, `f` the bearing: `f_a = [x, y, 1]`, the anchor
+/// observation's undistorted normalized coordinates, plus its correction) seen by the second camera
 /// (`T_BC1`): `r = π₁(R_BC1ᵀ (p_B − t_BC1)) − uv₁` in its pixels. The
 /// baseline makes the depth observable without motion. Pair it with a Huber loss.
 ///
@@ -161,8 +277,9 @@ crate::pixel::pixel_factor!(InverseDepthReprojection);
 #[derive(Clone, Debug)]
 pub struct StereoInverseDepth {
     keys: [Key; 1],
-    /// The landmark in the body frame per unit inverse depth, `R_BC f_a`, and `t_BC`.
-    ray_b: Vector3<f64>,
+    /// The anchor observation's bearing `f_a`, and the first camera's `T_BC`.
+    bearing: Vector3<f64>,
+    r_bc: Matrix3<f64>,
     t_bc: Vector3<f64>,
     measured: [f64; 2],
     camera: CameraModel,
@@ -183,7 +300,8 @@ impl StereoInverseDepth {
     ) -> Self {
         StereoInverseDepth {
             keys: [landmark],
-            ray_b: body_from_camera.rotation().matrix() * Vector3::new(anchor_xy[0], anchor_xy[1], 1.0),
+            bearing: Vector3::new(anchor_xy[0], anchor_xy[1], 1.0),
+            r_bc: body_from_camera.rotation().matrix(),
             t_bc: body_from_camera.translation(),
             measured: measured_uv,
             camera,
@@ -192,16 +310,14 @@ impl StereoInverseDepth {
         }
     }
 
-    /// Residual \[px\] and, with `jac`, its derivative by ρ.
+    /// Residual \[px\] and, with `jac`, its derivative by the landmark.
     fn evaluate(&self, vars: Vars<'_>, jac: bool, out: &mut Linearization) -> Result<(), FactorError> {
-        let rho: &Vector1<f64> = vars.get(0)?;
-        let inv = 1.0 / rho[0];
-        let p_c1 = self.r_bc1.transpose() * (self.ray_b * inv + self.t_bc - self.t_bc1);
-        let Some(jpi) = pixel_residual(&self.camera, &p_c1, self.measured, (jac, &[1]), out)? else {
+        let l = Landmark::read(&vars, 0, &self.bearing)?;
+        let p_c1 = self.r_bc1.transpose() * (self.r_bc * l.point() + self.t_bc - self.t_bc1);
+        let Some(jpi) = pixel_residual(&self.camera, &p_c1, self.measured, (jac, &[l.dim]), out)? else {
             return Ok(());
         };
-        let d_rho = jpi * self.r_bc1.transpose() * (-self.ray_b * (inv * inv));
-        out.jacobians[0].copy_from_slice(d_rho.as_slice());
+        l.chain_into(&(jpi * self.r_bc1.transpose() * self.r_bc), &mut out.jacobians[0]);
         Ok(())
     }
 }
@@ -232,9 +348,10 @@ impl ExposureMotion {
 /// [`InverseDepthReprojection`] with the camera's extrinsic `T_BC` and time
 /// offset `td` as unknowns, for their online calibration in a sliding window
 /// (VINS-Mono's `estimate_extrinsic` / `estimate_td`): a factor on
-/// `[X_a, V_a, X_j, V_j, ρ, T_BC, td]` (SE(3), R³, SE(3), R³, R¹, SE(3), R¹;
-/// 26 tangent dimensions), with hand-written Jacobians (wrapped in
-/// [`tumble_solvers::AutoDiff`], the same residual is differentiated automatically).
+/// `[X_a, V_a, X_j, V_j, L, T_BC, td]` (SE(3), R³, SE(3), R³, a [`Landmark`]
+/// `[ρ]` or `[δx, δy, ρ]`, SE(3), R¹; 26 or 28 tangent dimensions), with
+/// hand-written Jacobians (wrapped in [`tumble_solvers::AutoDiff`] with 26 or
+/// 28 dual directions, the same residual is differentiated automatically).
 ///
 /// An image stamped `t` by the camera was exposed at IMU time `t + td`
 /// (Kalibr's `timeshift_cam_imu`). Each body pose (state at the stamp,
@@ -243,7 +360,7 @@ impl ExposureMotion {
 /// `φ = ω₀ td + ω₁ td²/2 + ω₂ td³/3`, and `p + v td + (R f + g) td²/2`. A
 /// constant rate alone (VINS-Mono's feature velocity, the first order) leaves
 /// 1.6 px RMS at 8 ms on a hand-held motion of 4 rad/s and 80 rad/s². The
-/// landmark `p_Ba = R_BC f_a / ρ + t_BC` of the anchor goes through the world
+/// landmark `p_Ba = R_BC f / ρ + t_BC` of the anchor goes through the world
 /// into the observing camera: `r = π(R_BCᵀ (p_Bj − t_BC)) − uv_j` \[px\].
 /// Behind the camera the residual is finite and large, so a trial step there
 /// is rejected.
@@ -267,7 +384,12 @@ impl ExposureMotion {
 /// let vars: [&dyn tumble_solvers::DynVariable; 7] = [&xa, &va, &xj, &vj, &rho, &t_bc, &td];
 /// // The factor's own (analytic) Jacobians, and the autodiff form of the same residual.
 /// assert!(check_jacobians(&f, &vars).unwrap().passes(1e-6));
-/// assert!(check_jacobians(&AutoDiff::new(f.clone()), &vars).unwrap().passes(1e-6));
+/// assert!(check_jacobians(&AutoDiff::<_, 26>::new(f.clone()), &vars).unwrap().passes(1e-6));
+/// // The landmark with its bearing estimated: [δx, δy, ρ].
+/// let l = Vector3::new(0.003, -0.002, 0.4);
+/// let vars: [&dyn tumble_solvers::DynVariable; 7] = [&xa, &va, &xj, &vj, &l, &t_bc, &td];
+/// assert!(check_jacobians(&f, &vars).unwrap().passes(1e-6));
+/// assert!(check_jacobians(&AutoDiff::<_, 28>::new(f.clone()), &vars).unwrap().passes(1e-6));
 /// ```
 #[derive(Clone, Debug)]
 pub struct CalibratingReprojection {
@@ -281,7 +403,7 @@ pub struct CalibratingReprojection {
 }
 
 impl CalibratingReprojection {
-    /// Factor on `[X_a, V_a, X_j, V_j, ρ, T_BC, td]`: anchor observation
+    /// Factor on `[X_a, V_a, X_j, V_j, L, T_BC, td]`: anchor observation
     /// `anchor_xy` (undistorted normalized), observation `measured_uv` \[px\]
     /// in frame j, the body's motion around the two frames' stamps, the
     /// camera's model (intrinsics fixed) and gravity in the world \[m/s²\].
@@ -342,7 +464,7 @@ impl CalibratingReprojection {
     }
 
     /// Residual \[px\] and, with `jac`, its seven Jacobian blocks
-    /// `[X_a, V_a, X_j, V_j, ρ, T_BC, td]` (6, 3, 6, 3, 1, 6, 1 columns), by
+    /// `[X_a, V_a, X_j, V_j, L, T_BC, td]` (6, 3, 6, 3, 1 or 3, 6, 1 columns), by
     /// hand from [`tumble_solvers::AutoDiffResidual::residual`]'s expression
     /// (right perturbations, `[ω, ν]` for SE(3)); the autodiff form, 26 dual
     /// directions per observation, made the window's solve ≈ 3× slower.
@@ -351,25 +473,24 @@ impl CalibratingReprojection {
         let va: &Vector3<f64> = vars.get(1)?;
         let xj: &Isometry3F64 = vars.get(2)?;
         let vj: &Vector3<f64> = vars.get(3)?;
-        let rho = vars.get::<Vector1<f64>>(4)?[0];
+        let l = Landmark::read(&vars, 4, &Vector3::from(self.bearing))?;
         let tbc: &Isometry3F64 = vars.get(5)?;
         let td = vars.get::<Vector1<f64>>(6)?[0];
         let (ra, pa) = (xa.rotation().matrix(), xa.translation());
         let (rj, pj) = (xj.rotation().matrix(), xj.translation());
         let (r_bc, t_bc) = (tbc.rotation().matrix(), tbc.translation());
         let g = Vector3::from(self.gravity);
-        let f = Vector3::from(self.bearing);
-        let inv = 1.0 / rho;
+        let p_ca = l.point();
         let (phi_a, dphi_a, fa) = self.exposure(0, td);
         let (phi_j, dphi_j, fj) = self.exposure(1, td);
-        let pba = r_bc * f * inv + t_bc;
+        let pba = r_bc * p_ca + t_bc;
         let sa = series(&phi_a);
         let qa = sa * pba;
         let pw = ra * qa + pa + va * td + (ra * fa + g) * (0.5 * td * td);
         let e = rj.transpose() * (pw - pj - vj * td - (rj * fj + g) * (0.5 * td * td));
         let sj = series(&-phi_j);
         let pc = r_bc.transpose() * (sj * e - t_bc);
-        let cols = [6, 3, 6, 3, 1, 6, 1];
+        let cols = [6, 3, 6, 3, l.dim, 6, 1];
         let Some((jpi, _)) =
             crate::pixel::pixel_linearization(self.kind, &self.intrinsics, &pc, self.measured, (jac, &cols), out)?
         else {
@@ -381,7 +502,7 @@ impl CalibratingReprojection {
         let k = h * rj.transpose();
         let kq = k * ra * sa;
         let half_t2 = 0.5 * td * td;
-        let [jxa, jva, jxj, jvj, jrho, je, jtd] = &mut out.jacobians[..] else {
+        let [jxa, jva, jxj, jvj, jl, je, jtd] = &mut out.jacobians[..] else {
             unreachable!("reshaped to seven blocks")
         };
         jxa.fixed_view_mut::<2, 3>(0, 0).copy_from(&(-k * ra * (hat(&qa) + hat(&fa) * half_t2)));
@@ -390,8 +511,8 @@ impl CalibratingReprojection {
         jxj.fixed_view_mut::<2, 3>(0, 0).copy_from(&(h * (hat(&e) + hat(&fj) * half_t2)));
         jxj.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-h));
         jvj.copy_from(&(-k * td));
-        jrho.copy_from(&(kq * (r_bc * f * (-inv * inv))));
-        je.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * hat(&pc) - kq * r_bc * hat(&(f * inv))));
+        l.chain_into(&(kq * r_bc), jl);
+        je.fixed_view_mut::<2, 3>(0, 0).copy_from(&(jpi * hat(&pc) - kq * r_bc * hat(&p_ca)));
         je.fixed_view_mut::<2, 3>(0, 3).copy_from(&(-jpi + kq * r_bc));
         let dpw = ra * series_derivative(&phi_a, &pba) * dphi_a + va + (ra * fa + g) * td;
         let dd = dpw - vj - (rj * fj + g) * td;
@@ -403,19 +524,19 @@ impl CalibratingReprojection {
 
 crate::pixel::pixel_factor!(CalibratingReprojection);
 
-impl tumble_solvers::AutoDiffResidual<26> for CalibratingReprojection {
-    fn keys(&self) -> &[Key] {
-        &self.keys
-    }
-    fn residual_dim(&self) -> usize {
-        2
-    }
-    fn residual<T: tumble_solvers::Real>(&self, p: &[&[T]]) -> Vec<T> {
+impl CalibratingReprojection {
+    /// The residual of [`tumble_solvers::AutoDiffResidual`], for a landmark
+    /// `[ρ]` or `[δx, δy, ρ]` (`p[4]`).
+    fn generic_residual<T: tumble_solvers::Real>(&self, p: &[&[T]]) -> Vec<T> {
         use crate::pixel::{pixel_residual, rot, rot_t, small_rotation};
-        let (xa, va, xj, vj, rho, tbc, td) = (p[0], p[1], p[2], p[3], p[4][0], p[5], p[6][0]);
+        let (xa, va, xj, vj, tbc, td) = (p[0], p[1], p[2], p[3], p[5], p[6][0]);
+        let (bearing, rho) = match p[4] {
+            [dx, dy, rho] => ([*dx + self.bearing[0], *dy + self.bearing[1], T::one()], *rho),
+            _ => (self.bearing.map(T::from), p[4][0]),
+        };
         let inv = T::one() / rho;
         // The landmark in the anchor body frame at its exposure.
-        let r_pca = rot(&tbc[..9], self.bearing.map(|b| inv * b));
+        let r_pca = rot(&tbc[..9], bearing.map(|b| inv * b));
         let pba = [0, 1, 2].map(|i| r_pca[i] + tbc[9 + i]);
         // Anchor pose at exposure: R_a Exp(φ_a), p_a + Δp_a.
         let (phi_a, dp_a) = self.moved(0, xa, va, td);
@@ -428,5 +549,31 @@ impl tumble_solvers::AutoDiffResidual<26> for CalibratingReprojection {
         let pc = rot_t(&tbc[..9], [0, 1, 2].map(|i| pbj[i] - tbc[9 + i]));
         let k = self.intrinsics.map(T::from);
         pixel_residual(self.kind, &k, &pc, self.measured)
+    }
+}
+
+/// The autodiff form with the anchor bearing fixed (a `[ρ]` landmark).
+impl tumble_solvers::AutoDiffResidual<26> for CalibratingReprojection {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual<T: tumble_solvers::Real>(&self, p: &[&[T]]) -> Vec<T> {
+        self.generic_residual(p)
+    }
+}
+
+/// The autodiff form with the bearing estimated (a `[δx, δy, ρ]` landmark).
+impl tumble_solvers::AutoDiffResidual<28> for CalibratingReprojection {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        2
+    }
+    fn residual<T: tumble_solvers::Real>(&self, p: &[&[T]]) -> Vec<T> {
+        self.generic_residual(p)
     }
 }

@@ -149,7 +149,7 @@ fn imu_factor_and_bias_random_walk() {
 fn inverse_depth_reprojection_for_every_camera_model() {
     use nalgebra::Vector1;
     use tumble_factors::camera::{CameraModel, Distortion};
-    use tumble_factors::reprojection::StereoInverseDepth;
+    use tumble_factors::reprojection::{AnchorObservation, StereoInverseDepth};
     use tumble_factors::InverseDepthReprojection;
     let t_bc = Isometry3F64::exp(Vector6::new(0.05, -0.02, 0.01, 1.2, -1.2, 1.2));
     let xa = Isometry3F64::exp(Vector6::new(0.3, -0.2, 1.0, 1.0, 2.0, 0.5));
@@ -173,6 +173,16 @@ fn inverse_depth_reprojection_for_every_camera_model() {
         let s = StereoInverseDepth::new(L(3), [0.1, -0.08], [380.0, 240.0], (cam, &t_bc1), &t_bc);
         assert_ok(&s, &[&rho]);
         assert_linearize_into_matches(&s, &[&rho]);
+        // The landmark with its bearing estimated ([δx, δy, ρ]) in each, and its anchor observation.
+        let l = Vector3::new(0.004, -0.003, 0.35);
+        assert_ok(&f, &[&xa, &xj, &l]);
+        assert_ok(&f1, &[&xa, &xj, &l]);
+        assert_linearize_into_matches(&f1, &[&xa, &xj, &l]);
+        assert_ok(&s, &[&l]);
+        let a = AnchorObservation::new(L(3), [0.1, -0.08], [410.0, 212.0], cam);
+        assert_ok(&a, &[&l]);
+        assert_linearize_into_matches(&a, &[&l]);
+        assert!(a.residual(Vars::new(&[&rho])).is_err(), "an anchor observation needs the bearing estimated");
     }
 }
 

@@ -2,7 +2,11 @@
 //! window's states, triangulation behind two gates (rays that agree, an
 //! angle between them), the prediction gate for new observations, outlier
 //! removal after a solve, and the reprojection factors they add to a graph.
-//! A landmark is an inverse depth `L(lid)` along its anchor observation's ray.
+//! A landmark `L(lid)` is its inverse depth `[ρ]` \[1/m\] along its anchor
+//! observation's ray, or with [`super::WindowOptions::landmark_bearings`]
+//! `[δx, δy, ρ]`: its bearing in the anchor camera (the anchor observation's
+//! undistorted normalized point plus `δ`) too, the anchor observation then a
+//! residual like every other ([`tumble_factors::reprojection::Landmark`]).
 
 use super::online_calib::{body_at_exposure, body_from_camera, exposure_motion, EXTRINSIC, TIME_OFFSET};
 use super::{VioInput, VioOptions};
@@ -11,7 +15,7 @@ use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use tumble_factors::camera::CameraModel;
-use tumble_factors::reprojection::{CalibratingReprojection, ExposureMotion, StereoInverseDepth};
+use tumble_factors::reprojection::{AnchorObservation, CalibratingReprojection, ExposureMotion, StereoInverseDepth};
 use tumble_factors::InverseDepthReprojection;
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{Factor, FactorEntry, Graph, Huber, NoiseModel, Values, B, L, V, X};
@@ -43,6 +47,16 @@ pub(crate) struct Track {
 }
 
 impl Track {
+    /// The landmark id and its anchor observation, when the landmark is
+    /// constrained: seen by another observation than the anchor's (or matched
+    /// by the second camera there). Alone, the anchor observation fixes the
+    /// bearing but not the depth, and the landmark gets no factor.
+    pub fn anchored(&self) -> Option<(u64, &Obs)> {
+        let (lid, anchor) = self.landmark?;
+        let a = self.obs.iter().find(|o| o.sid == anchor)?;
+        (self.obs.len() > 1 || a.uv1.is_some()).then_some((lid, a))
+    }
+
     /// The landmark id, the anchor's observation and state `sid`'s, when this
     /// track's landmark can place state `sid` with the window held fixed:
     /// triangulated, anchored in another state, seen at `sid`, and seen at
@@ -130,7 +144,27 @@ fn rays(tr: &Track, poses: &CameraPoses, poses1: &CameraPoses, stereo_camera: Op
     out
 }
 
-/// A track's landmark in the world frame \[m\]: its anchor observation's ray
+/// A landmark's bearing in the anchor camera (`z = 1`) and inverse depth
+/// \[1/m\] in `values`, from its anchor observation's normalized point `xy`.
+pub(crate) fn bearing_and_inverse_depth(values: &Values, lid: u64, xy: [f64; 2]) -> Option<(Vector3<f64>, f64)> {
+    if let Ok(l) = values.get::<Vector3<f64>>(L(lid)) {
+        return Some((Vector3::new(xy[0] + l[0], xy[1] + l[1], 1.0), l[2]));
+    }
+    let rho = values.get::<Vector1<f64>>(L(lid)).ok()?[0];
+    Some((Vector3::new(xy[0], xy[1], 1.0), rho))
+}
+
+/// Insert landmark `lid` triangulated at depth `z` \[m\] along its anchor
+/// observation's ray: `[1/z]`, or `[0, 0, 1/z]` when `bearings` are estimated.
+pub(crate) fn insert_landmark(values: &mut Values, lid: u64, z: f64, bearings: bool) {
+    if bearings {
+        values.insert(L(lid), Vector3::new(0.0, 0.0, 1.0 / z));
+    } else {
+        values.insert(L(lid), Vector1::new(1.0 / z));
+    }
+}
+
+/// A track's landmark in the world frame \[m\]: its estimated bearing
 /// at the estimated inverse depth, seen from the anchor state's camera at
 /// its exposure (moved by the time offset in `values`, as the factors see it;
 /// `gravity` \[m/s²\]).
@@ -138,9 +172,9 @@ fn landmark_world(values: &Values, body_from_camera: &Isometry3F64, tr: &Track, 
     let (lid, anchor) = tr.landmark?;
     let a = tr.obs.iter().find(|o| o.sid == anchor)?;
     let (ra, pa) = body_at_exposure(values, anchor, &a.motion, gravity)?;
-    let rho = values.get::<Vector1<f64>>(L(lid)).ok()?[0];
+    let (bearing, rho) = bearing_and_inverse_depth(values, lid, a.xy)?;
     let (r_bc, t_bc) = parts(body_from_camera);
-    let pw = ra * (r_bc * (Vector3::new(a.xy[0], a.xy[1], 1.0) / rho) + t_bc) + pa;
+    let pw = ra * (r_bc * (bearing / rho) + t_bc) + pa;
     pw.iter().all(|x| x.is_finite()).then_some(pw)
 }
 
@@ -158,9 +192,11 @@ fn reprojection(
 }
 
 /// The factors of observation `o` of landmark `lid` anchored in observation
-/// `a`: the first camera's reprojection (none at the anchor itself) and the
-/// second camera's, when `o` has a stereo match — at the anchor a factor on
-/// the inverse depth alone. Each with whether it is the stereo one. When
+/// `a`: the first camera's reprojection (at the anchor itself the anchor
+/// observation, a factor on the landmark alone, when its bearing is
+/// estimated) and the second camera's, when
+/// `o` has a stereo match — at the anchor a factor on the landmark alone too.
+/// Each with whether it is the stereo one. When
 /// `opts` calibrate the camera online (its `T_BC` and time offset are
 /// variables of the window), the first camera's is a [`CalibratingReprojection`] on them too.
 pub(crate) fn observation_factors(
@@ -172,7 +208,11 @@ pub(crate) fn observation_factors(
 ) -> Vec<(Box<dyn Factor>, bool)> {
     let (anchor, anchor_xy) = (a.sid, a.xy);
     let mut out: Vec<(Box<dyn Factor>, bool)> = Vec::new();
-    if o.sid != anchor {
+    if o.sid == anchor {
+        if opts.window.landmark_bearings {
+            out.push((Box::new(AnchorObservation::new(L(lid), anchor_xy, o.uv, input.camera)), false));
+        }
+    } else {
         let f: Box<dyn Factor> = if opts.camera.online() {
             let keys = [X(anchor), V(anchor), X(o.sid), V(o.sid), L(lid), EXTRINSIC, TIME_OFFSET];
             let g = [0.0, 0.0, -opts.noise.gravity];
@@ -235,8 +275,7 @@ impl Landmarks {
     pub fn add_factors(&self, g: &mut Graph, input: &VioInput, opts: &VioOptions) {
         let (noise, huber) = pixel_noise(opts);
         for tr in self.tracks.values() {
-            let Some((lid, anchor)) = tr.landmark else { continue };
-            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
+            let Some((lid, a)) = tr.anchored() else { continue };
             for o in &tr.obs {
                 for (factor, _) in observation_factors(input, opts, a, lid, o) {
                     g.add_entry(FactorEntry { factor, noise: noise.clone(), loss: Some(huber.clone()) });
@@ -418,7 +457,7 @@ impl Landmarks {
             }
             let lid = self.next_lid;
             self.next_lid += 1;
-            values.insert(L(lid), Vector1::new(1.0 / z));
+            insert_landmark(values, lid, z, opts.window.landmark_bearings);
             tr.landmark = Some((lid, anchor));
         }
         tally
@@ -426,26 +465,35 @@ impl Landmarks {
 
     /// After a solve: drop observations whose error exceeds
     /// [`super::GateOptions::outlier_sigmas`] σ (a second camera's match alone
-    /// when it is the one), and landmarks with an implausible depth (their
-    /// track keeps its newest observation and may be triangulated again).
+    /// when it is the one), and landmarks with an implausible depth or whose
+    /// anchor observation is the one (their track keeps its newest observation
+    /// and may be triangulated again).
     pub fn reject_outliers(&mut self, input: &VioInput, values: &mut Values, opts: &VioOptions) {
         let limit = opts.gates.outlier_sigmas * opts.noise.pixel_sigma;
         let mut drop_landmarks = Vec::new();
         let mut drop_obs: Vec<(u64, u64, bool)> = Vec::new();
         for (&id, tr) in &self.tracks {
             let Some((lid, anchor)) = tr.landmark else { continue };
-            let rho = values.get::<Vector1<f64>>(L(lid)).map(|v| v[0]).unwrap_or(f64::NAN);
+            let Some((_, a)) = tr.anchored() else { continue };
+            let rho = bearing_and_inverse_depth(values, lid, a.xy).map_or(f64::NAN, |(_, rho)| rho);
             if !(rho > 1.0 / 200.0 && rho < 10.0) {
                 drop_landmarks.push(id);
                 continue;
             }
-            let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
+            let mut outliers = Vec::new();
             for o in &tr.obs {
                 for (f, stereo) in observation_factors(input, opts, a, lid, o) {
                     if values.residual_of(f.as_ref()).is_none_or(|r| r.norm() > limit) {
-                        drop_obs.push((id, o.sid, stereo));
+                        outliers.push((id, o.sid, stereo));
                     }
                 }
+            }
+            // The anchor observation carries the landmark: when it is the
+            // outlier the landmark goes.
+            if outliers.iter().any(|&(_, sid, stereo)| sid == anchor && !stereo) {
+                drop_landmarks.push(id);
+            } else {
+                drop_obs.extend(outliers);
             }
         }
         for (id, sid, stereo) in drop_obs {
@@ -588,7 +636,7 @@ mod tests {
         lm.reject_outliers(&inp, &mut values, &opts);
         assert_eq!(lm.tracks()[&7].obs.iter().map(|o| o.sid).collect::<Vec<_>>(), vec![0, 1, 2, 3]);
         // A landmark 1000 m away (inverse depth 1e-3) is forgotten; its newest observation stays.
-        values.insert(L(0), Vector1::new(1e-3));
+        insert_landmark(&mut values, 0, 1e3, false);
         lm.reject_outliers(&inp, &mut values, &opts);
         assert_eq!(lm.count(), 0);
         assert!(!values.contains(L(0)));

@@ -14,17 +14,21 @@ use tumble_solvers::{marginalize, Graph, SolveError, B, L, V, X};
 /// to the next state). Priors are not measurements and are left out. The
 /// model-discrepancy audit of a VIO run compares them with what the noise explains.
 ///
-/// A reprojection residual is whitened by `σ_px √2`: the landmark's ray is
-/// fixed by its anchor observation, whose pixel noise therefore enters every
-/// other residual of the landmark about as much as the observation's own (the
-/// solver's factor weighs by `σ_px` alone, as VINS-Mono's does).
+/// With the landmarks' bearings estimated
+/// ([`super::WindowOptions::landmark_bearings`]) a reprojection residual is
+/// whitened by `σ_px`: every observation, the anchor's included, is one
+/// residual, and each landmark has three parameters. With the inverse depth
+/// alone, by `σ_px √2`: the landmark's ray is fixed by its anchor
+/// observation, whose pixel noise therefore enters every other residual of
+/// the landmark about as much as the observation's own (the solver's factor
+/// weighs by `σ_px` alone, as VINS-Mono's does), and each landmark has one.
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize)]
 pub struct ResidualTally {
-    /// Σ ‖r/(σ_px √2)‖² of the reprojections (no robust loss).
+    /// Σ ‖r/σ‖² of the reprojections (no robust loss; σ as above).
     pub reprojection_chi2: f64,
     /// Number of reprojection residual rows (2 per observation).
     pub reprojection_rows: usize,
-    /// Landmarks whose observations were counted (one inverse depth each).
+    /// Landmarks whose observations were counted.
     pub landmarks: usize,
     /// Σ of squared whitened IMU-factor and bias random-walk residuals.
     pub imu_chi2: f64,
@@ -32,6 +36,8 @@ pub struct ResidualTally {
     pub imu_rows: usize,
     /// Marginalized states (15 parameters each: pose, velocity, biases).
     pub states: usize,
+    /// Parameters per landmark: 1 (inverse depth) or 3 (bearing too).
+    pub landmark_dof: usize,
 }
 
 impl ResidualTally {
@@ -42,7 +48,7 @@ impl ResidualTally {
 
     /// Degrees of freedom: residual rows minus the parameters estimated from them.
     pub fn dof(&self) -> usize {
-        (self.reprojection_rows + self.imu_rows).saturating_sub(self.landmarks + 15 * self.states)
+        (self.reprojection_rows + self.imu_rows).saturating_sub(self.landmark_dof * self.landmarks + 15 * self.states)
     }
 
     /// The gap χ²/dof − 1, floored at 0 (0 when the noise explains the residuals;
@@ -97,18 +103,19 @@ fn count_leaving(
     tally: &mut ResidualTally,
 ) {
     let mut t = *tally;
+    let bearings = opts.window.landmark_bearings;
+    t.landmark_dof = if bearings { 3 } else { 1 };
+    let variance = opts.noise.pixel_sigma.powi(2) * if bearings { 1.0 } else { 2.0 };
     for tr in landmarks.tracks().values() {
-        let Some((lid, anchor)) = tr.landmark else { continue };
-        if anchor != old {
+        let Some((lid, a)) = tr.anchored() else { continue };
+        if a.sid != old {
             continue;
         }
-        let Some(a) = tr.obs.iter().find(|o| o.sid == anchor) else { continue };
         let mut counted = false;
         for o in &tr.obs {
             for (f, _) in observation_factors(input, opts, a, lid, o) {
                 if let Some(r) = window.values.residual_of(f.as_ref()) {
-                    // The anchor's own pixel noise enters through the ray it fixes: ≈ 2σ² per row.
-                    t.reprojection_chi2 += r.norm_squared() / (2.0 * opts.noise.pixel_sigma.powi(2));
+                    t.reprojection_chi2 += r.norm_squared() / variance;
                     t.reprojection_rows += 2;
                     counted = true;
                 }
@@ -141,9 +148,11 @@ mod tests {
             imu_chi2: 30.0,
             imu_rows: 30,
             states: 2,
+            landmark_dof: 1,
         };
         assert_eq!(t.dof(), 130 - 10 - 30);
         assert!((t.gap() - (120.0 / 90.0 - 1.0)).abs() < 1e-12);
+        assert_eq!(ResidualTally { landmark_dof: 3, ..t }.dof(), 130 - 30 - 30);
         assert!(ResidualTally::default().gap().is_nan());
     }
 }

@@ -68,6 +68,14 @@ pub struct WindowOptions {
     /// factor on its depth alone; single-frame stereo tracks triangulated).
     /// Off, the second camera serves the initialization only.
     pub stereo: bool,
+    /// Estimate each landmark's bearing with its inverse depth (three
+    /// parameters, the anchor observation a residual like every other: the
+    /// anchored inverse depth of OpenVINS and Basalt) instead of fixing the
+    /// bearing at the anchor pixel (one parameter, VINS-Mono's). Fixed, the
+    /// anchor pixel's noise enters every other observation of the landmark
+    /// and is counted nowhere, so the window's σ come out too small
+    /// (docs/findings/vio.md).
+    pub landmark_bearings: bool,
 }
 
 /// Which feature observations enter the solve, and how they are weighed.
@@ -263,6 +271,7 @@ impl Default for WindowOptions {
             keyframe_max_interval_s: 1.0,
             solve_every_frame: false,
             stereo: false,
+            landmark_bearings: false,
         }
     }
 }
