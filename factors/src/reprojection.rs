@@ -41,7 +41,7 @@ use nalgebra::{DMatrix, DVector, Matrix2x3, Matrix3, Vector1, Vector3};
 use tumble_solvers::lie::hat;
 use tumble_solvers::sophus_lie::prelude::*;
 use tumble_solvers::sophus_lie::Isometry3F64;
-use tumble_solvers::{Factor, FactorError, Key, Linearization, Vars};
+use tumble_solvers::{DynVariable, Factor, FactorError, Key, Linearization, Vars};
 
 /// A landmark variable read by the factors of this module: the bearing
 /// `f` (anchor camera, `z = 1`) and the inverse depth `ρ` \[1/m\], from a
@@ -58,13 +58,23 @@ pub struct Landmark {
 }
 
 impl Landmark {
+    /// Variable `v` as a landmark anchored at bearing `anchor` (`z = 1`);
+    /// None when it is neither a `Vector1` nor a `Vector3`.
+    pub fn of(v: &dyn DynVariable, anchor: &Vector3<f64>) -> Option<Landmark> {
+        let any = v.as_any();
+        if let Some(l) = any.downcast_ref::<Vector3<f64>>() {
+            return Some(Landmark { bearing: anchor + Vector3::new(l[0], l[1], 0.0), rho: l[2], dim: 3 });
+        }
+        any.downcast_ref::<Vector1<f64>>().map(|rho| Landmark { bearing: *anchor, rho: rho[0], dim: 1 })
+    }
+
     /// Variable `i` of `vars` as a landmark anchored at bearing `anchor` (`z = 1`).
     pub fn read(vars: &Vars<'_>, i: usize, anchor: &Vector3<f64>) -> Result<Landmark, FactorError> {
-        if let Ok(v) = vars.get::<Vector3<f64>>(i) {
-            return Ok(Landmark { bearing: anchor + Vector3::new(v[0], v[1], 0.0), rho: v[2], dim: 3 });
+        if let Some(l) = (i < vars.len()).then(|| Landmark::of(vars.get_dyn(i), anchor)).flatten() {
+            return Ok(l);
         }
-        let rho = vars.get::<Vector1<f64>>(i)?[0];
-        Ok(Landmark { bearing: *anchor, rho, dim: 1 })
+        // No variable i, or another type: the error that names them.
+        Err(vars.get::<Vector1<f64>>(i).err().unwrap_or(FactorError::Other(format!("variable {i} is no landmark"))))
     }
 
     /// The point `f / ρ` in the anchor camera \[m\].

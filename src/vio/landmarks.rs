@@ -15,7 +15,9 @@ use nalgebra::{Matrix3, Vector1, Vector2, Vector3};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::sync::Arc;
 use tumble_factors::camera::CameraModel;
-use tumble_factors::reprojection::{AnchorObservation, CalibratingReprojection, ExposureMotion, StereoInverseDepth};
+use tumble_factors::reprojection::{
+    AnchorObservation, CalibratingReprojection, ExposureMotion, Landmark, StereoInverseDepth,
+};
 use tumble_factors::InverseDepthReprojection;
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{Factor, FactorEntry, Graph, Huber, NoiseModel, Values, B, L, V, X};
@@ -147,11 +149,8 @@ fn rays(tr: &Track, poses: &CameraPoses, poses1: &CameraPoses, stereo_camera: Op
 /// A landmark's bearing in the anchor camera (`z = 1`) and inverse depth
 /// \[1/m\] in `values`, from its anchor observation's normalized point `xy`.
 pub(crate) fn bearing_and_inverse_depth(values: &Values, lid: u64, xy: [f64; 2]) -> Option<(Vector3<f64>, f64)> {
-    if let Ok(l) = values.get::<Vector3<f64>>(L(lid)) {
-        return Some((Vector3::new(xy[0] + l[0], xy[1] + l[1], 1.0), l[2]));
-    }
-    let rho = values.get::<Vector1<f64>>(L(lid)).ok()?[0];
-    Some((Vector3::new(xy[0], xy[1], 1.0), rho))
+    let l = Landmark::of(values.get_dyn(L(lid)).ok()?, &Vector3::new(xy[0], xy[1], 1.0))?;
+    Some((l.bearing, l.rho))
 }
 
 /// Insert landmark `lid` triangulated at depth `z` \[m\] along its anchor
