@@ -7,7 +7,7 @@
 //! the corners with that calibration (no biases to compare; aligned in 6 DOF,
 //! as the target's tilt against gravity is known only to the accelerometer's bias).
 //!
-//! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--seed N]
+//! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--inverse-depth-only] [--seed N]
 //! [--noise-in-flight] [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--from SECONDS] [--only TEXT] [--out DIR]
 //! [--markdown]`
 //!
@@ -23,7 +23,8 @@
 //! estimator's choices off or on, to compare: `--noise-from-static` raises the
 //! noise to the static start's spread, `--zoh` integrates with the zero-order
 //! hold instead of the midpoint rule, `--fixed-noise` does not measure the
-//! noise in motion, `--walk-scale G,A` multiplies the bias random walks given
+//! noise in motion, `--inverse-depth-only` fixes each landmark's bearing at
+//! its anchor pixel (VINS-Mono's landmarks), `--walk-scale G,A` multiplies the bias random walks given
 //! (gyro, accelerometer; `docs/vio.md`, "The bias random walk in flight"),
 //! `--noise-in-flight` gives each case the noise its IMU shows in flight on
 //! the *other* sequences under `full_imu/` (`tumble allan --groundtruth` on
@@ -63,7 +64,14 @@ impl Args {
     fn parse() -> Result<Args, String> {
         let args: Vec<String> = std::env::args().skip(1).collect();
         let value = |f: &str| args.iter().position(|a| a == f).and_then(|i| args.get(i + 1)).cloned();
-        const FLAGS: [&str; 5] = ["--noise-from-static", "--noise-in-flight", "--zoh", "--fixed-noise", "--markdown"];
+        const FLAGS: [&str; 6] = [
+            "--noise-from-static",
+            "--noise-in-flight",
+            "--zoh",
+            "--fixed-noise",
+            "--inverse-depth-only",
+            "--markdown",
+        ];
         const VALUED: [&str; 7] = ["--seed", "--only", "--out", "--walk-scale", "--online", "--blackout", "--from"];
         let known = |i: usize, a: &str| {
             FLAGS.contains(&a) || VALUED.contains(&a) || (i > 0 && VALUED.contains(&args[i - 1].as_str()))
@@ -110,6 +118,7 @@ fn main() {
     let mut opts = VioOptions::default();
     opts.noise.from_static = args.has("--noise-from-static");
     opts.noise.measure_in_motion = !args.has("--fixed-noise");
+    opts.window.landmark_bearings = !args.has("--inverse-depth-only");
     if args.has("--zoh") {
         opts.noise.imu.scheme = tumble_factors::imu_preint::Scheme::ZeroOrderHold;
     }

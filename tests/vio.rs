@@ -579,9 +579,11 @@ fn imu_april_with_its_corners_as_features_tracks_the_pnp_poses() {
 
 /// A whole EuRoC sequence (real IMU, a simulated camera along the ground
 /// truth): the rotors shake the IMU far beyond its datasheet figures; the
-/// window's IMU residuals show it and the noise in use rises (measured: gyro
-/// 2.9×, accelerometer 7.5×), which brings the bias NEES from 28 to 5 on
-/// average over the six axes, with no reset.
+/// window's IMU residuals show it in the accelerometer and its noise in use
+/// rises (measured: ×9.6), with no reset. The gyro's residuals stay within
+/// its datasheet figure (measured 1.36e-4 against 1.70e-4 rad/s/√Hz): the
+/// ×2.9 read with the landmarks' bearings fixed at their anchor pixels was
+/// that pixel noise, which moved the keyframes' rotations (docs/findings/vio.md).
 #[test]
 fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
     let Some(seq) = common::shared("euroc/full_imu/V1_02_medium") else { return };
@@ -591,7 +593,7 @@ fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
     let (out, s) = run_without_resets(&input, &opts, 10.0);
     let noise = out.noise.expect("measured");
     println!("{}", noise.line());
-    assert!(noise.in_use[0] > 2.0 * noise.given[0] && noise.in_use[1] > 3.0 * noise.given[1], "{}", noise.line());
+    assert!(noise.in_use[1] > 3.0 * noise.given[1], "{}", noise.line());
     // The bias σ that rest on the datasheet's walk are flagged (docs/vio.md,
     // "The bias random walk in flight").
     assert!(s.warnings.iter().any(|w| w.contains("bias σ may then be several times too small")), "{:?}", s.warnings);
@@ -608,7 +610,8 @@ fn a_whole_euroc_sequence_measures_its_vibration_in_flight() {
 /// positions hold accelerations above 2 Hz that the IMU does not feel; a
 /// camera flying them made the estimate 17 % short (ATE 0.90 m) with these
 /// options. The camera now flies the body's path (the IMU's motion above the
-/// cut: `sim::replay_bands`). Measured: path −1.7 %, ATE 0.19 m, 0 resets.
+/// cut: `sim::replay_bands`). Measured: path −0.75 %, ATE 0.109 m, 0 resets
+/// (−1.7 % and 0.19 m with `--inverse-depth-only`).
 #[test]
 fn a_machine_hall_flight_keeps_its_scale() {
     let Some(seq) = common::shared("euroc/full_imu/MH_03_medium") else { return };

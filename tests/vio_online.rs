@@ -326,9 +326,9 @@ fn a_shock_the_features_contradict_is_withdrawn_and_the_pieces_named() {
 /// of seeds 1–8 (`SEEDS=1,2` runs some): per group (rotation, translation,
 /// time offset) the mean of the squared normalized errors per coordinate,
 /// which honest σ put near 1 (issue 64 asks for [0.5, 2]). With the
-/// landmarks' bearings estimated (`--landmark-bearings`, three parameters per
+/// landmarks' bearings estimated (the default, three parameters per
 /// landmark) measured 0.85, 1.36 and 1.35 (2026-12-03). With VINS-Mono's
-/// inverse depth alone (`LANDMARK_BEARINGS=0`, today's default) 1.07, 5.56 and
+/// inverse depth alone (`LANDMARK_BEARINGS=0`, `--inverse-depth-only`) 1.07, 5.56 and
 /// 1.18: the anchor pixel's noise, counted nowhere, makes the translation's σ
 /// about 2.4× too small; those bounds guard that figure.
 #[test]

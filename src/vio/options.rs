@@ -70,11 +70,12 @@ pub struct WindowOptions {
     pub stereo: bool,
     /// Estimate each landmark's bearing with its inverse depth (three
     /// parameters, the anchor observation a residual like every other: the
-    /// anchored inverse depth of OpenVINS and Basalt) instead of fixing the
-    /// bearing at the anchor pixel (one parameter, VINS-Mono's). Fixed, the
-    /// anchor pixel's noise enters every other observation of the landmark
-    /// and is counted nowhere, so the window's σ come out too small
-    /// (docs/findings/vio.md).
+    /// anchored inverse depth of OpenVINS and Basalt; the default) instead of
+    /// fixing the bearing at the anchor pixel (one parameter, VINS-Mono's,
+    /// about 1.4× faster). Fixed, the anchor pixel's noise enters every other
+    /// observation of the landmark and is counted nowhere: the window's σ come
+    /// out too small, the noise meter reads that noise as the gyro's, and the
+    /// path comes out short (docs/findings/vio.md).
     pub landmark_bearings: bool,
 }
 
@@ -271,7 +272,7 @@ impl Default for WindowOptions {
             keyframe_max_interval_s: 1.0,
             solve_every_frame: false,
             stereo: false,
-            landmark_bearings: false,
+            landmark_bearings: true,
         }
     }
 }
