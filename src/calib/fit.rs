@@ -5,7 +5,8 @@
 //! `b` with standard deviations.
 
 use super::detect::{mean3, Interval};
-use super::observability::{prior_sigma, undetermined, OffDiagonal, ACCEL_OFF_DIAGONAL, GYRO_OFF_DIAGONAL};
+use super::floor::{solve_with_floor, FloorFit, MisalignmentPrior};
+use super::observability::{undetermined, OffDiagonal, ACCEL_OFF_DIAGONAL, GYRO_OFF_DIAGONAL};
 use super::options::CalibOptions;
 use super::result::{FitStats, RotationResidual};
 use crate::io::{ImuRecording, Stored};
@@ -15,8 +16,7 @@ use rayon::prelude::*;
 use tumble_factors::imu_calib::{
     accel_matrix, gyro_matrix, AccelParams, GravityNormFactor, GyroMatrix, IntegratedRotationFactor, UPPER,
 };
-use tumble_factors::PartialPriorFactor;
-use tumble_solvers::{covariances, Factor, Graph, Key, LmOptions, NoiseModel, Optimizer, Termination, Values, Vars};
+use tumble_solvers::{covariances, Factor, Key, LmOptions, Values, Vars};
 
 const KEY_ACCEL: Key = Key::new('a', 0);
 const KEY_GYRO: Key = Key::new('g', 0);
@@ -156,135 +156,6 @@ pub(super) fn fit_accel(rec: &ImuRecording, intervals: &[Interval], g: f64, var_
     })
 }
 
-/// The Gaussian prior on the misalignments of a 9-vector model matrix (see
-/// [`super::observability`]): zero, σ = [`MISALIGNMENT_PRIOR_SIGMA`] × the
-/// row's scale at the start.
-#[derive(Clone, Debug)]
-pub(super) struct MisalignmentPrior {
-    pub key: Key,
-    /// The start with the misalignments at zero.
-    pub at: nalgebra::SVector<f64, 9>,
-    pub indices: Vec<usize>,
-    pub sigmas: Vec<f64>,
-}
-
-impl MisalignmentPrior {
-    pub(super) fn new(key: Key, start: &nalgebra::SVector<f64, 9>, offs: &[OffDiagonal]) -> MisalignmentPrior {
-        let mut at = *start;
-        for o in offs {
-            at[o.index] = 0.0;
-        }
-        MisalignmentPrior {
-            key,
-            at,
-            indices: offs.iter().map(|o| o.index).collect(),
-            sigmas: offs.iter().map(|o| prior_sigma(start, o)).collect(),
-        }
-    }
-}
-
-/// A solve whose noise model may have been widened by an unmodelled-error floor.
-pub(super) struct FloorFit {
-    pub values: Values,
-    pub graph: Graph,
-    /// χ²/dof with the base noise.
-    pub chi2_white: f64,
-    /// χ²/dof with the floor (≈ 1 when a floor was added).
-    pub chi2_final: f64,
-    /// The floor, in residual units.
-    pub floor: f64,
-    pub iterations: usize,
-    /// A solve stopped at the iteration cap ([`LmOptions::max_iterations`]).
-    pub capped: bool,
-}
-
-/// Solve factors with per-factor noise covariances `base`; when the residuals
-/// exceed that noise (χ²/dof > 1), add a common isotropic floor `s²` (C_k + s² I)
-/// that makes χ²/dof = 1 — a variance-component estimate of what the model does
-/// not explain, which evens out the weights of long and short intervals — and
-/// re-solve (when `refine`; otherwise the floor is only estimated, enough to rank
-/// detections).
-pub(super) fn solve_with_floor<F: Factor + Clone + 'static>(
-    factors: &[F],
-    base: &[DMatrix<f64>],
-    values: &Values,
-    n_params: usize,
-    prior: &MisalignmentPrior,
-    max_iterations: usize,
-    refine: bool,
-) -> Result<FloorFit, String> {
-    let dim = factors.first().map(|f| f.residual_dim()).unwrap_or(1);
-    // The prior's residuals count as observations of the misalignments.
-    let n_params = n_params.saturating_sub(prior.indices.len());
-    let dof = (dim * factors.len()).saturating_sub(n_params).max(1) as f64;
-    let lm = Optimizer::new(LmOptions { max_iterations, ..LmOptions::default() });
-    let widen = |c: &DMatrix<f64>, s2: f64| c + DMatrix::identity(dim, dim) * s2;
-    let build = |s2: f64| -> Result<Graph, String> {
-        let mut g = Graph::new();
-        for (f, c) in factors.iter().zip(base) {
-            g.add(f.clone(), NoiseModel::from_covariance(&widen(c, s2)).map_err(|e| e.to_string())?);
-        }
-        add_prior(&mut g, prior)?;
-        Ok(g)
-    };
-    let graph = build(0.0)?;
-    let (mut sol, summary) = lm.optimize(&graph, values).map_err(|e| e.to_string())?;
-    let chi2_white = 2.0 * summary.final_cost / dof;
-    let mut iterations = summary.iterations;
-    let mut capped = summary.termination == Termination::MaxIterations;
-    let (mut graph, mut s2, mut chi2_final) = (graph, 0.0, chi2_white);
-    for _ in 0..3 {
-        if chi2_final <= 1.0 + 1e-3 {
-            break;
-        }
-        let residual = |f: &F| -> Result<DVector<f64>, String> {
-            let vars: Vec<&dyn tumble_solvers::DynVariable> =
-                f.keys().iter().map(|k| sol.get_dyn(*k)).collect::<Result<_, _>>().map_err(|e| e.to_string())?;
-            f.residual(Vars::new(&vars)).map_err(|e| e.to_string())
-        };
-        let rs: Vec<DVector<f64>> = factors.iter().map(residual).collect::<Result<_, _>>()?;
-        let chi2 = |s2: f64| {
-            rs.iter()
-                .zip(base)
-                .map(|(r, c)| widen(c, s2).cholesky().map(|ch| r.dot(&ch.solve(r))).unwrap_or(f64::MAX))
-                .sum::<f64>()
-                / dof
-        };
-        let (mut lo, mut hi) = (s2, rs.iter().map(|r| r.norm_squared()).fold(0.0, f64::max).max(1e-300));
-        while chi2(hi) > 1.0 {
-            hi *= 4.0;
-        }
-        for _ in 0..60 {
-            let mid = 0.5 * (lo + hi);
-            if chi2(mid) > 1.0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        s2 = hi;
-        graph = build(s2)?;
-        if !refine {
-            // Ranking only: the floor from the first solution, not solved again.
-            chi2_final = 1.0;
-            break;
-        }
-        let (next, summary) = lm.optimize(&graph, &sol).map_err(|e| e.to_string())?;
-        sol = next;
-        iterations += summary.iterations;
-        capped |= summary.termination == Termination::MaxIterations;
-        chi2_final = 2.0 * summary.final_cost / dof;
-    }
-    Ok(FloorFit { values: sol, graph, chi2_white, chi2_final, floor: s2.sqrt(), iterations, capped })
-}
-
-/// Add the misalignment prior's [`PartialPriorFactor`] to a graph.
-pub(super) fn add_prior(g: &mut Graph, prior: &MisalignmentPrior) -> Result<(), String> {
-    let noise = NoiseModel::diagonal(&prior.sigmas).map_err(|e| e.to_string())?;
-    g.add(PartialPriorFactor::new(prior.key, prior.at, prior.indices.clone()), noise);
-    Ok(())
-}
-
 #[derive(Clone)]
 pub(super) struct GyroFit {
     /// `[M_g row major (9), b_g (3)]`.
@@ -298,6 +169,8 @@ pub(super) struct GyroFit {
     /// Another start explained the data nearly as well at another scale:
     /// `(kept scale, other scale, χ² ratio)`.
     pub ambiguity: Option<(f64, f64, f64)>,
+    /// The isotropic scales it started from, the kept one's first.
+    pub starts: Vec<f64>,
 }
 
 /// Iterations the other starts of the gyro fit get (the first gets the solver's
@@ -509,88 +382,126 @@ fn solve_starts(
     Ok((prior, fit, ambiguity))
 }
 
-/// The fit's covariance of `[M_g (9), b_g (3)]`, inflated by its χ²/dof; the
-/// bias's white-noise standard error when it is the initial rest's mean.
-fn gyro_covariance(fit: &FloorFit, inputs: &GyroInputs, opts: &CalibOptions) -> Result<DMatrix<f64>, String> {
-    let keys: Vec<Key> = if opts.estimate_gyro_bias { vec![KEY_GYRO, KEY_GYRO_BIAS] } else { vec![KEY_GYRO] };
-    let cv = covariances(&fit.graph, &fit.values, &keys).map_err(|e| format!("gyroscope covariance: {e}"))?;
-    let inflation = fit.chi2_final.max(1.0);
-    let mut cov = DMatrix::zeros(12, 12);
-    cov.view_mut((0, 0), (9, 9)).copy_from(&(cv.get(KEY_GYRO).ok_or("no covariance")? * inflation));
+/// The free gyro parameters at the fit: `[M_g (9), b_g (3)]`, or `M_g` alone
+/// when the bias is the initial rest's mean (held).
+fn free_gyro_keys(opts: &CalibOptions) -> Vec<Key> {
     if opts.estimate_gyro_bias {
-        cov.view_mut((9, 9), (3, 3)).copy_from(&(cv.get(KEY_GYRO_BIAS).ok_or("no covariance")? * inflation));
-        let cross = cv.block(KEY_GYRO, KEY_GYRO_BIAS).ok_or("no covariance")? * inflation;
-        cov.view_mut((0, 9), (9, 3)).copy_from(&cross);
-        cov.view_mut((9, 0), (3, 9)).copy_from(&cross.transpose());
+        vec![KEY_GYRO, KEY_GYRO_BIAS]
     } else {
+        vec![KEY_GYRO]
+    }
+}
+
+/// The inverse of the fit's information matrix over the free gyro parameters
+/// ([`free_gyro_keys`]): their covariance before any inflation.
+fn information_inverse(fit: &FloorFit, opts: &CalibOptions) -> Result<DMatrix<f64>, String> {
+    let keys = free_gyro_keys(opts);
+    let cv = covariances(&fit.graph, &fit.values, &keys).map_err(|e| format!("gyroscope covariance: {e}"))?;
+    cv.joint(&keys).ok_or_else(|| "gyroscope covariance: no joint block".to_string())
+}
+
+/// The fit's covariance of `[M_g (9), b_g (3)]` from the information's
+/// inverse `h_inv`, inflated by its χ²/dof; the bias's white-noise standard
+/// error when it is the initial rest's mean.
+fn gyro_covariance(h_inv: &DMatrix<f64>, fit: &FloorFit, inputs: &GyroInputs) -> DMatrix<f64> {
+    let n = h_inv.nrows();
+    let mut cov = DMatrix::zeros(12, 12);
+    cov.view_mut((0, 0), (n, n)).copy_from(&(h_inv * fit.chi2_final.max(1.0)));
+    if n == 9 {
         for k in 0..3 {
             cov[(9 + k, 9 + k)] = inputs.var_g[k] / inputs.n_init as f64;
         }
     }
-    Ok(cov)
+    cov
 }
 
-/// The relative decrease still to come at which the ±1σ re-solves of
-/// [`accel_uncertainty_in_gyro`] stop: their solutions are differenced over
-/// 2σ of an accelerometer parameter, so each must be converged far below the
-/// gyro parameters' own σ (a relative cost of 10⁻¹² leaves them within
-/// ~10⁻⁶ σ); the solver's default (10⁻¹⁰) would leave the differences noisy.
-const SENSITIVITY_FUNCTION_TOLERANCE: f64 = 1e-12;
-
 /// The gravity directions come from the accelerometer fit: its uncertainty
-/// carried into the gyro parameters, `J Σ_a Jᵀ` with `J = ∂x_g/∂x_a` by
-/// re-solving with each accelerometer parameter moved by ±1σ (central
-/// differences, 18 solves).
+/// carried into the gyro parameters, `J Σ_a Jᵀ` with `J = ∂x_g/∂x_a`, the
+/// solution's sensitivity by the implicit function theorem at the fit's
+/// Gauss–Newton normal equations: `J = −H⁻¹ Σ_t J_tᵀ W_t D_t`, with each turn
+/// `t`'s whitened Jacobian `J_t` in the gyro parameters and `D_t` its
+/// residual's derivative in the accelerometer parameters (the turn's rotation
+/// held: only the directions move; central differences over ±1σ of each).
+/// It replaced 18 re-solves (±1σ per parameter) that gave the same σ to
+/// their printed digits at 30× the cost; what it leaves out is the residuals'
+/// curvature, second order in residuals of a few milliradians.
 fn accel_uncertainty_in_gyro(
     turns: &Turns,
     base: &[DMatrix<f64>],
     means: &[Vector3<f64>],
     accel: &AccelFit,
-    prior: &MisalignmentPrior,
     fit: &FloorFit,
+    h_inv: &DMatrix<f64>,
 ) -> Result<DMatrix<f64>, String> {
     let acc_cov = &accel.cov * accel.stats.covariance_inflation;
-    let resolve = |pa: &AccelParams| -> Option<[f64; 12]> {
-        let d = directions(means, pa);
-        let mut g = Graph::new();
-        for ((f, &(i, j)), c) in turns.factors.iter().zip(&turns.pairs).zip(base) {
-            let c = c + DMatrix::identity(2, 2) * fit.floor.powi(2);
-            g.add(f.with_directions(d[i], d[j]), NoiseModel::from_covariance(&c).ok()?);
-        }
-        add_prior(&mut g, prior).ok()?;
-        let (s, _) =
-            Optimizer::new(LmOptions { function_tolerance: SENSITIVITY_FUNCTION_TOLERANCE, ..LmOptions::default() })
-                .optimize(&g, &fit.values)
-                .ok()?;
-        let mut x = [0.0; 12];
-        x[..9].copy_from_slice(s.get::<GyroMatrix>(KEY_GYRO).ok()?.as_slice());
-        x[9..].copy_from_slice(s.get::<Vector3<f64>>(KEY_GYRO_BIAS).ok()?.as_slice());
-        Some(x)
-    };
-    let columns: Option<Vec<Vec<f64>>> = (0..9)
-        .into_par_iter()
+    let p = *fit.values.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
+    let b = *fit.values.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
+    let m = gyro_matrix(&p);
+    let n = h_inv.nrows();
+    let steps: Vec<f64> = (0..9).map(|k| acc_cov[(k, k)].max(0.0).sqrt()).collect();
+    // Each accelerometer parameter moved by ±1σ: the directions of every pose.
+    let moved: Vec<[Vec<Vector3<f64>>; 2]> = (0..9)
         .map(|k| {
-            let h = acc_cov[(k, k)].max(0.0).sqrt();
-            if h == 0.0 {
-                return Some(vec![0.0; 12]);
-            }
             let (mut lo, mut hi) = (accel.params, accel.params);
-            lo[k] -= h;
-            hi[k] += h;
-            let (a, b) = (resolve(&lo)?, resolve(&hi)?);
-            Some((0..12).map(|i| (b[i] - a[i]) / (2.0 * h)).collect())
+            lo[k] -= steps[k];
+            hi[k] += steps[k];
+            [directions(means, &lo), directions(means, &hi)]
         })
         .collect();
-    let cols = columns.ok_or("gyroscope fit does not converge when the accelerometer parameters move by 1σ")?;
-    let j = DMatrix::from_fn(12, 9, |r, c| cols[c][r]);
+    let per_turn = |((f, &(i, j)), c): ((&IntegratedRotationFactor, &(usize, usize)), &DMatrix<f64>)| {
+        let vars: [&dyn tumble_solvers::DynVariable; 2] = [&p, &b];
+        let lin = f.linearize(Vars::new(&vars)).map_err(|e| e.to_string())?;
+        let jt =
+            DMatrix::from_fn(
+                2,
+                n,
+                |r, col| if col < 9 { lin.jacobians[0][(r, col)] } else { lin.jacobians[1][(r, col - 9)] },
+            );
+        let w = (c + DMatrix::identity(2, 2) * fit.floor.powi(2)).try_inverse().ok_or("singular turn noise")?;
+        let r = f.rotation(&m, &b);
+        let d = DMatrix::from_fn(2, 9, |row, k| {
+            if steps[k] == 0.0 {
+                return 0.0;
+            }
+            let [lo, hi] = &moved[k];
+            let e_lo = IntegratedRotationFactor::residual_between(&r, &lo[i], &lo[j]);
+            let e_hi = IntegratedRotationFactor::residual_between(&r, &hi[i], &hi[j]);
+            (e_hi[row] - e_lo[row]) / (2.0 * steps[k])
+        });
+        Ok::<DMatrix<f64>, String>(jt.transpose() * w * d)
+    };
+    let g = turns
+        .factors
+        .par_iter()
+        .zip(&turns.pairs)
+        .zip(base)
+        .map(per_turn)
+        .try_reduce(|| DMatrix::zeros(n, 9), |a, b| Ok(a + b))?;
+    let mut j = DMatrix::zeros(12, 9);
+    j.view_mut((0, 0), (n, 9)).copy_from(&-(h_inv * g));
     Ok(&j * acc_cov * j.transpose())
 }
 
+/// The isotropic scale a detection's gyro fit starts from when it only
+/// ranks the detection (see [`Turns::starts`]).
+pub(super) fn ranking_start(
+    rec: &ImuRecording,
+    intervals: &[Interval],
+    accel: &AccelFit,
+    inputs: &GyroInputs,
+) -> Result<f64, String> {
+    let means = interval_means(rec, intervals);
+    let turns = Turns::new(rec, intervals, directions(&means, &accel.params), inputs.edge)?;
+    Ok(turns.starts(rec, intervals, inputs.bias, inputs.edge, false)?[0])
+}
+
 /// Fit the gyroscope to the turns between the static intervals `intervals`
-/// (mean raw readings `means`, gravity directions from `accel`): from
-/// several isotropic starts (one when only ranking a detection, not
-/// `final_fit`), then its covariance, with the accelerometer's uncertainty
-/// carried in on the `final_fit`.
+/// (mean raw readings `means`, gravity directions from `accel`): from the
+/// isotropic scales `starts` when given, else from those its own turns' cost
+/// shows (several; one when only ranking a detection, not `final_fit`), then
+/// its covariance, with the accelerometer's uncertainty carried in on the
+/// `final_fit`.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn fit_gyro(
     rec: &ImuRecording,
     intervals: &[Interval],
@@ -599,16 +510,21 @@ pub(super) fn fit_gyro(
     inputs: &GyroInputs,
     opts: &CalibOptions,
     final_fit: bool,
+    starts: Option<&[f64]>,
 ) -> Result<GyroFit, String> {
     let turns = Turns::new(rec, intervals, directions(means, &accel.params), inputs.edge)?;
-    let starts = turns.starts(rec, intervals, inputs.bias, inputs.edge, final_fit)?;
+    let starts = match starts {
+        Some(s) if !s.is_empty() => s.to_vec(),
+        _ => turns.starts(rec, intervals, inputs.bias, inputs.edge, final_fit)?,
+    };
     let base = turns.noise(intervals, &accel_matrix(&accel.params), inputs, starts[0], opts.gravity);
-    let (prior, fit, ambiguity) = solve_starts(&turns, &base, &starts, inputs.bias, opts, final_fit)?;
+    let (_, fit, ambiguity) = solve_starts(&turns, &base, &starts, inputs.bias, opts, final_fit)?;
     let p = *fit.values.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
     let b = *fit.values.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
-    let mut cov = gyro_covariance(&fit, inputs, opts)?;
+    let h_inv = information_inverse(&fit, opts)?;
+    let mut cov = gyro_covariance(&h_inv, &fit, inputs);
     if final_fit {
-        cov += accel_uncertainty_in_gyro(&turns, &base, means, accel, &prior, &fit)?;
+        cov += accel_uncertainty_in_gyro(&turns, &base, means, accel, &fit, &h_inv)?;
     }
     let not_determined = undetermined(&p, &cov, &GYRO_OFF_DIAGONAL);
     let (rotations, rms, imu_tk_cost) = turns.residuals(&gyro_matrix(&p), &b);
@@ -618,6 +534,7 @@ pub(super) fn fit_gyro(
     Ok(GyroFit {
         x,
         cov,
+        starts,
         stats: FitStats {
             residuals: 2 * turns.factors.len(),
             parameters: 9 + 3 * opts.estimate_gyro_bias as usize,

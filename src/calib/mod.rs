@@ -31,6 +31,7 @@ pub(crate) mod apply;
 #[doc(hidden)]
 pub mod detect;
 mod fit;
+mod floor;
 pub(crate) mod gravity;
 pub(crate) mod observability;
 mod options;

@@ -46,7 +46,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     let Kept { multiplier, intervals, accel } = best;
     // The kept detection's gyro fit again, with the accelerometer's uncertainty carried into it.
     let means = interval_means(rec, &intervals);
-    let gyro = fit_gyro(rec, &intervals, &means, &accel, &gyro_inputs, opts, true).map_err(|m| err(m, None))?;
+    let gyro = fit_gyro(rec, &intervals, &means, &accel, &gyro_inputs, opts, true, None).map_err(|m| err(m, None))?;
     let ma = accel_matrix(&accel.params);
     let ba = Vector3::new(accel.params[6], accel.params[7], accel.params[8]);
     let dirs: Vec<Vector3<f64>> = means.iter().map(|m| ma * (m - ba)).collect();
@@ -83,7 +83,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         assessment: Assessment { verdict: Verdict::Ok, reasons: Vec::new(), not_determined: Vec::new() },
         split: None,
     };
-    super::split::check_halves(rec, &result.intervals.clone(), &gyro_inputs, opts, &mut result);
+    super::split::check_halves(rec, &result.intervals.clone(), &gyro_inputs, opts, gyro.starts[0], &mut result);
     result.assessment = Assessment::of(&result, not_determined, gyro.ambiguity);
     if result.assessment.verdict == Verdict::Failed {
         return Err(CalibError {
@@ -288,14 +288,27 @@ fn sweep_thresholds(
     let firsts: Vec<usize> =
         (0..detections.len()).map(|i| (0..=i).find(|&j| detections[j].1 == detections[i].1).unwrap_or(i)).collect();
     let unique: Vec<usize> = (0..detections.len()).filter(|&i| firsts[i] == i).collect();
-    let fitted: Vec<(usize, Fits)> = unique
+    let accel_fits: Vec<(usize, Option<AccelFit>)> = unique
         .par_iter()
         .map(|&i| {
             let iv = &detections[i].1;
-            let fit = (iv.len() >= opts.min_intervals).then(|| fit_accel(rec, iv, opts.gravity, &rest.var_a)).flatten();
+            (i, (iv.len() >= opts.min_intervals).then(|| fit_accel(rec, iv, opts.gravity, &rest.var_a)).flatten())
+        })
+        .collect();
+    // One isotropic start for every ranking fit, searched on the first
+    // detection fitted: the scale is the gyro's, not the detection's, and the
+    // search (some 30 integrations of every turn) cost 80 % of each ranking.
+    // The kept detection's final fit searches its own starts.
+    let shared_start = accel_fits
+        .iter()
+        .find_map(|(i, a)| a.as_ref().and_then(|a| ranking_start(rec, &detections[*i].1, a, gyro_inputs).ok()));
+    let fitted: Vec<(usize, Fits)> = accel_fits
+        .into_par_iter()
+        .map(|(i, fit)| {
+            let iv = &detections[i].1;
             let gyro = fit.as_ref().map(|a| {
                 let means = interval_means(rec, iv);
-                fit_gyro(rec, iv, &means, a, gyro_inputs, opts, false)
+                fit_gyro(rec, iv, &means, a, gyro_inputs, opts, false, shared_start.as_ref().map(std::slice::from_ref))
             });
             (i, (fit, gyro))
         })

@@ -19,22 +19,26 @@ fn fit_half(
     intervals: &[Interval],
     inputs: &GyroInputs,
     opts: &CalibOptions,
+    start: f64,
 ) -> Result<(Triad, Triad), String> {
     let accel = fit_accel(rec, intervals, opts.gravity, inputs.var_a).ok_or("the accelerometer fit failed")?;
     let means = interval_means(rec, intervals);
-    let gyro = fit_gyro(rec, intervals, &means, &accel, inputs, opts, true)?;
+    let gyro = fit_gyro(rec, intervals, &means, &accel, inputs, opts, true, Some(&[start]))?;
     Ok((accel_triad(&accel.params, &accel.cov, accel.stats.covariance_inflation), gyro_triad(&gyro.x, &gyro.cov)))
 }
 
 /// Compare the halves of the kept detection's `intervals` and widen the σ
 /// of `result.calibration`; `result.split` holds the comparison (None, with a
 /// warning, when a half has fewer than [`MIN_STATIC_INTERVALS`] poses or
-/// cannot be fitted).
+/// cannot be fitted). Each half's gyro fit starts from `gyro_start`, the
+/// isotropic scale the whole recording's fit kept: the halves turn the same
+/// gyro, and its scale does not need to be searched for again.
 pub(super) fn check_halves(
     rec: &ImuRecording,
     intervals: &[Interval],
     inputs: &GyroInputs,
     opts: &CalibOptions,
+    gyro_start: f64,
     result: &mut CalibrationResult,
 ) {
     let m = intervals.len();
@@ -46,7 +50,7 @@ pub(super) fn check_halves(
         return;
     }
     let halves = [&intervals[..m / 2], &intervals[m / 2..]];
-    let fits: Result<Vec<_>, String> = halves.par_iter().map(|h| fit_half(rec, h, inputs, opts)).collect();
+    let fits: Result<Vec<_>, String> = halves.par_iter().map(|h| fit_half(rec, h, inputs, opts, gyro_start)).collect();
     let fits = match fits {
         Ok(f) => f,
         Err(why) => {
