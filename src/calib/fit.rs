@@ -460,15 +460,13 @@ fn accel_uncertainty_in_gyro(
             );
         let w = (c + DMatrix::identity(2, 2) * fit.floor.powi(2)).try_inverse().ok_or("singular turn noise")?;
         let r = f.rotation(&m, &b);
-        let d = DMatrix::from_fn(2, 9, |row, k| {
-            if steps[k] == 0.0 {
-                return 0.0;
-            }
-            let [lo, hi] = &moved[k];
+        // Each column once: both residuals of a parameter's ±1σ move, differenced.
+        let mut d = DMatrix::zeros(2, 9);
+        for (k, [lo, hi]) in moved.iter().enumerate().filter(|(k, _)| steps[*k] > 0.0) {
             let e_lo = IntegratedRotationFactor::residual_between(&r, &lo[i], &lo[j]);
             let e_hi = IntegratedRotationFactor::residual_between(&r, &hi[i], &hi[j]);
-            (e_hi[row] - e_lo[row]) / (2.0 * steps[k])
-        });
+            d.set_column(k, &((e_hi - e_lo) / (2.0 * steps[k])));
+        }
         Ok::<DMatrix<f64>, String>(jt.transpose() * w * d)
     };
     let g = turns
