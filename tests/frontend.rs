@@ -682,3 +682,17 @@ fn corners_are_opencvs_good_features() {
         assert!(same as f64 >= 0.95 * theirs.len() as f64, "{same} of {}", theirs.len());
     }
 }
+
+/// An ASL folder with images but no tracks: the estimator says how to get
+/// tracks, and the frontend tracks them into a VIO input with one frame per
+/// tracked image.
+#[test]
+fn image_folders_go_through_the_frontend() {
+    let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
+    let err = tumble::vio::VioInput::from_asl(&micro, None).unwrap_err().to_string();
+    assert!(err.contains("tracks.csv") && err.contains("frontend"), "{err}");
+    let ds = read_asl(&micro, &Default::default()).unwrap();
+    let (obs, stats) = track_asl(&ds, 0, &FrontendOptions::default(), &mut |_, _| {}).unwrap();
+    let input = tumble::vio::VioInput::from_dataset(ds, None, Some(obs), false).unwrap();
+    assert_eq!(input.frames.len(), stats.frames);
+}
