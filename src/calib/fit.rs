@@ -261,15 +261,21 @@ impl Turns {
         let mut sorted = ratios.clone();
         sorted.sort_by(f64::total_cmp);
         let s_med = sorted[sorted.len() / 2];
+        // Summed in the turns' order after the parallel map: rayon's own sum
+        // groups the terms as its threads happen to split the work, so the
+        // last bit of the cost (and through the starts the whole calibration
+        // and what is computed from it) would change from run to run.
         let iso_cost = |s: f64| -> f64 {
             let m = Matrix3::identity() * s;
-            self.factors
+            let terms: Vec<f64> = self
+                .factors
                 .par_iter()
                 .map(|f| {
                     let vars: [&dyn tumble_solvers::DynVariable; 2] = [&gyro_vec(&m), b0];
                     f.residual(Vars::new(&vars)).map(|r| r.norm_squared()).unwrap_or(f64::MAX)
                 })
-                .sum()
+                .collect();
+            terms.iter().sum()
         };
         // A gyro that reports rad/s is within a factor of 2 of it; beyond that the units are
         // wrong (deg/s is 57×), which no calibration should paper over.
@@ -469,13 +475,11 @@ fn accel_uncertainty_in_gyro(
         }
         Ok::<DMatrix<f64>, String>(jt.transpose() * w * d)
     };
-    let g = turns
-        .factors
-        .par_iter()
-        .zip(&turns.pairs)
-        .zip(base)
-        .map(per_turn)
-        .try_reduce(|| DMatrix::zeros(n, 9), |a, b| Ok(a + b))?;
+    // Summed in the turns' order (as the cost in `Turns::starts`): a parallel
+    // reduce would group the terms differently from run to run.
+    let terms: Vec<DMatrix<f64>> =
+        turns.factors.par_iter().zip(&turns.pairs).zip(base).map(per_turn).collect::<Result<_, _>>()?;
+    let g = terms.iter().fold(DMatrix::zeros(n, 9), |a, t| a + t);
     let mut j = DMatrix::zeros(12, 9);
     j.view_mut((0, 0), (n, 9)).copy_from(&-(h_inv * g));
     Ok(&j * acc_cov * j.transpose())
