@@ -10,7 +10,7 @@ use crate::linearized::linearize_all;
 use crate::values::Values;
 use crate::variable::DynVariable;
 use nalgebra::{DMatrix, DVector};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// A linear prior on a set of variables left by marginalization:
 /// `r(x) = R · [x_k ⊟_{x0_k}]_k + e`, already whitened (use [`crate::NoiseModel::Unit`]).
@@ -401,7 +401,9 @@ pub(crate) fn robust_covariances_of_system(
     let full = structure.inverse_columns(sys, &cols)?;
     let p = cols.len();
     let labelled = clusters.iter().flatten().max().map_or(0, |m| m + 1);
-    let mut scores: HashMap<usize, DVector<f64>> = HashMap::new();
+    // By cluster label, in order: the sum below must not follow a hash map's
+    // per-instance order, or the σ would change in their last bits from run to run.
+    let mut scores: BTreeMap<usize, DVector<f64>> = BTreeMap::new();
     for (fi, fv) in layout.factor_vars.iter().enumerate() {
         let c = clusters[fi].unwrap_or(labelled + fi);
         let r = lins.residual(fi);
