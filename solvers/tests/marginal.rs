@@ -221,6 +221,14 @@ fn covariance_equals_dense_inverse() {
     assert!(cov.joint(&[X(n as u64)]).is_none());
 }
 
+/// A point `(x, y)` of the line `y = a + b·x` (`X(0)` = `[a, b]`), σ 0.1.
+fn add_line_point(g: &mut Graph, x: f64, y: f64) {
+    g.add(
+        LinearFactor::new(vec![X(0)], vec![DMatrix::from_row_slice(1, 2, &[1.0, x])], DVector::from_element(1, -y)),
+        NoiseModel::isotropic(1, 0.1).unwrap(),
+    );
+}
+
 /// Cluster-robust covariances against the spread of estimates over many
 /// replications: a line `y = a + b·x` fitted to 20 clusters of 10 points.
 /// With independent errors both covariances match the spread; with a
@@ -246,14 +254,7 @@ fn cluster_robust_covariance_matches_the_spread_of_estimates() {
                 for _ in 0..per {
                     let x = c as f64 / clusters as f64 + 0.05 * rng.random::<f64>();
                     let y = 1.0 + 2.0 * x + offset + 0.1 * normal(&mut rng);
-                    g.add(
-                        LinearFactor::new(
-                            vec![X(0)],
-                            vec![DMatrix::from_row_slice(1, 2, &[1.0, x])],
-                            DVector::from_element(1, -y),
-                        ),
-                        NoiseModel::isotropic(1, 0.1).unwrap(),
-                    );
+                    add_line_point(&mut g, x, y);
                     labels.push(Some(c));
                 }
             }
@@ -296,14 +297,7 @@ fn cluster_robust_covariances_are_identical_when_repeated() {
         for k in 0..4 {
             let x = (c * 4 + k) as f64 / 120.0;
             let y = 1.0 + 2.0 * x + 0.01 * ((c * 7 + k * 3) % 11) as f64;
-            g.add(
-                LinearFactor::new(
-                    vec![X(0)],
-                    vec![DMatrix::from_row_slice(1, 2, &[1.0, x])],
-                    DVector::from_element(1, -y),
-                ),
-                NoiseModel::isotropic(1, 0.1).unwrap(),
-            );
+            add_line_point(&mut g, x, y);
             labels.push(Some(c));
         }
     }
