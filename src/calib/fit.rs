@@ -173,6 +173,13 @@ pub(super) struct GyroFit {
     pub starts: Vec<f64>,
 }
 
+impl GyroFit {
+    /// `M_g` (as the solver holds it).
+    pub fn matrix(&self) -> GyroMatrix {
+        GyroMatrix::from_column_slice(&self.x[..9])
+    }
+}
+
 /// Iterations the other starts of the gyro fit get (the first gets the solver's
 /// default): a start that has not converged by then is wandering.
 const OTHER_START_ITERATIONS: usize = 20;
@@ -332,8 +339,9 @@ impl Turns {
     }
 }
 
-/// One solve per start; the one that explains the data best (lowest χ² with
-/// the predicted noise) is kept and finished. The other starts get few
+/// One solve per start (the first from `from` when given); the one that
+/// explains the data best (lowest χ² with the predicted noise) is kept and
+/// finished. The other starts get few
 /// iterations: a start that has not converged by then is wandering (an alias
 /// start can take 300). Returns the kept fit with its prior, and the
 /// ambiguity when another start explains the data nearly as well at a clearly
@@ -343,6 +351,7 @@ fn solve_starts(
     turns: &Turns,
     base: &[DMatrix<f64>],
     starts: &[f64],
+    from: Option<GyroMatrix>,
     b0: &Vector3<f64>,
     opts: &CalibOptions,
     final_fit: bool,
@@ -356,7 +365,7 @@ fn solve_starts(
             let start = gyro_vec(&(Matrix3::identity() * s));
             let prior = MisalignmentPrior::new(KEY_GYRO, &start, &GYRO_OFF_DIAGONAL);
             let mut values = Values::new();
-            values.insert(KEY_GYRO, start);
+            values.insert(KEY_GYRO, if i == 0 { from.unwrap_or(start) } else { start });
             values.insert(KEY_GYRO_BIAS, *b0);
             values.set_constant(KEY_GYRO_BIAS, !opts.estimate_gyro_bias);
             // The other starts are compared on their first solve; the kept one is refined below.
@@ -498,12 +507,23 @@ pub(super) fn ranking_start(
     Ok(turns.starts(rec, intervals, inputs.bias, inputs.edge, false)?[0])
 }
 
+/// Where a gyro fit starts.
+#[derive(Clone, Copy)]
+pub(super) enum GyroStart {
+    /// At the isotropic scales its own turns' cost shows (several; one when
+    /// only ranking a detection).
+    Search,
+    /// At the isotropic scale `scale`·I, which also sets the turns' noise and
+    /// the misalignment prior; solved from `from` when given — a nearby
+    /// detection's or the whole recording's solution: the same problem,
+    /// reached in fewer iterations.
+    Scale { scale: f64, from: Option<GyroMatrix> },
+}
+
 /// Fit the gyroscope to the turns between the static intervals `intervals`
-/// (mean raw readings `means`, gravity directions from `accel`): from the
-/// isotropic scales `starts` when given, else from those its own turns' cost
-/// shows (several; one when only ranking a detection, not `final_fit`), then
-/// its covariance, with the accelerometer's uncertainty carried in on the
-/// `final_fit`.
+/// (mean raw readings `means`, gravity directions from `accel`) from
+/// `start`, then its covariance, with the accelerometer's uncertainty
+/// carried in on the `final_fit`.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn fit_gyro(
     rec: &ImuRecording,
@@ -513,15 +533,15 @@ pub(super) fn fit_gyro(
     inputs: &GyroInputs,
     opts: &CalibOptions,
     final_fit: bool,
-    starts: Option<&[f64]>,
+    start: GyroStart,
 ) -> Result<GyroFit, String> {
     let turns = Turns::new(rec, intervals, directions(means, &accel.params), inputs.edge)?;
-    let starts = match starts {
-        Some(s) if !s.is_empty() => s.to_vec(),
-        _ => turns.starts(rec, intervals, inputs.bias, inputs.edge, final_fit)?,
+    let (starts, from) = match start {
+        GyroStart::Scale { scale, from } => (vec![scale], from),
+        GyroStart::Search => (turns.starts(rec, intervals, inputs.bias, inputs.edge, final_fit)?, None),
     };
     let base = turns.noise(intervals, &accel_matrix(&accel.params), inputs, starts[0], opts.gravity);
-    let (_, fit, ambiguity) = solve_starts(&turns, &base, &starts, inputs.bias, opts, final_fit)?;
+    let (_, fit, ambiguity) = solve_starts(&turns, &base, &starts, from, inputs.bias, opts, final_fit)?;
     let p = *fit.values.get::<GyroMatrix>(KEY_GYRO).map_err(|e| e.to_string())?;
     let b = *fit.values.get::<Vector3<f64>>(KEY_GYRO_BIAS).map_err(|e| e.to_string())?;
     let h_inv = information_inverse(&fit, opts)?;
@@ -573,8 +593,11 @@ pub(super) fn isotropic_starts(
     let (l0, l1) = (lo.ln(), hi.max(lo * 1.01).ln());
     let grid: Vec<f64> = (0..n_grid).map(|i| l0 + (l1 - l0) * i as f64 / (n_grid - 1) as f64).collect();
     let values: Vec<f64> = grid.par_iter().map(|x| cost(x.exp())).collect();
-    let mut minima: Vec<(f64, f64)> = (0..n_grid)
+    let local: Vec<usize> = (0..n_grid)
         .filter(|&i| (i == 0 || values[i] <= values[i - 1]) && (i == n_grid - 1 || values[i] <= values[i + 1]))
+        .collect();
+    let mut minima: Vec<(f64, f64)> = local
+        .into_par_iter()
         .map(|i| {
             let (mut a, mut b) = (grid[i.saturating_sub(1)], grid[(i + 1).min(n_grid - 1)]);
             let phi = 0.5 * (5f64.sqrt() - 1.0);

@@ -4,8 +4,8 @@
 //! the estimates and their covariances into the paper's convention.
 
 use super::detect::{
-    axis_noise, axis_ratio, find_initial_rest, intervals_below, mean3, norms, quietest, sliding_mean, sliding_variance,
-    var3, InitialRest, Interval,
+    axis_noise, axis_ratio, find_initial_rest, intervals_below, kth_smallest, mean3, norms, quietest, sliding_mean,
+    sliding_variance, var3, InitialRest, Interval,
 };
 use super::fit::*;
 use super::observability::names;
@@ -46,7 +46,9 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
     let Kept { multiplier, intervals, accel } = best;
     // The kept detection's gyro fit again, with the accelerometer's uncertainty carried into it.
     let means = interval_means(rec, &intervals);
-    let gyro = fit_gyro(rec, &intervals, &means, &accel, &gyro_inputs, opts, true, None).map_err(|m| err(m, None))?;
+    let gyro = fit_gyro(rec, &intervals, &means, &accel, &gyro_inputs, opts, true, GyroStart::Search)
+        .map_err(|m| err(m, None))?;
+    let halves_start = GyroStart::Scale { scale: gyro.starts[0], from: Some(gyro.matrix()) };
     let ma = accel_matrix(&accel.params);
     let ba = Vector3::new(accel.params[6], accel.params[7], accel.params[8]);
     let dirs: Vec<Vector3<f64>> = means.iter().map(|m| ma * (m - ba)).collect();
@@ -83,7 +85,7 @@ pub fn calibrate(rec: &ImuRecording, opts: &CalibOptions) -> Result<CalibrationR
         assessment: Assessment { verdict: Verdict::Ok, reasons: Vec::new(), not_determined: Vec::new() },
         split: None,
     };
-    super::split::check_halves(rec, &result.intervals.clone(), &gyro_inputs, opts, gyro.starts[0], &mut result);
+    super::split::check_halves(rec, &result.intervals.clone(), &gyro_inputs, opts, halves_start, &mut result);
     result.assessment = Assessment::of(&result, not_determined, gyro.ambiguity);
     if result.assessment.verdict == Verdict::Failed {
         return Err(CalibError {
@@ -140,8 +142,8 @@ struct Scores {
 impl Scores {
     fn of(rec: &ImuRecording, opts: &CalibOptions) -> Result<Scores, CalibError> {
         let mut dts: Vec<f64> = rec.t.windows(2).map(|w| w[1] - w[0]).collect();
-        dts.sort_by(f64::total_cmp);
-        let period = dts[dts.len() / 2];
+        let mid = dts.len() / 2;
+        let period = kth_smallest(&mut dts, mid);
         if period.is_nan() || period <= 0.0 {
             return Err(CalibError::new(rec, "timestamps do not increase".into(), None));
         }
@@ -298,21 +300,32 @@ fn sweep_thresholds(
     // One isotropic start for every ranking fit, searched on the first
     // detection fitted: the scale is the gyro's, not the detection's, and the
     // search (some 30 integrations of every turn) cost 80 % of each ranking.
-    // The kept detection's final fit searches its own starts.
-    let shared_start = accel_fits
-        .iter()
-        .find_map(|(i, a)| a.as_ref().and_then(|a| ranking_start(rec, &detections[*i].1, a, gyro_inputs).ok()));
-    let fitted: Vec<(usize, Fits)> = accel_fits
-        .into_par_iter()
-        .map(|(i, fit)| {
-            let iv = &detections[i].1;
-            let gyro = fit.as_ref().map(|a| {
-                let means = interval_means(rec, iv);
-                fit_gyro(rec, iv, &means, a, gyro_inputs, opts, false, shared_start.as_ref().map(std::slice::from_ref))
-            });
-            (i, (fit, gyro))
-        })
-        .collect();
+    // That detection is fitted first, and the others are solved from its
+    // solution (their own problems, nearby: fewer iterations). The kept
+    // detection's final fit searches its own starts.
+    let shared = accel_fits.iter().enumerate().find_map(|(k, (i, a))| {
+        ranking_start(rec, &detections[*i].1, a.as_ref()?, gyro_inputs).ok().map(|scale| (k, scale))
+    });
+    let rank = |(i, fit): (usize, Option<AccelFit>), start: GyroStart| {
+        let iv = &detections[i].1;
+        let gyro =
+            fit.as_ref().map(|a| fit_gyro(rec, iv, &interval_means(rec, iv), a, gyro_inputs, opts, false, start));
+        (i, (fit, gyro))
+    };
+    let mut fitted: Vec<(usize, Fits)> = Vec::with_capacity(accel_fits.len());
+    let mut start = GyroStart::Search;
+    if let Some((first, scale)) = shared {
+        let done = rank(accel_fits[first].clone(), GyroStart::Scale { scale, from: None });
+        let from = match &done.1 .1 {
+            Some(Ok(g)) => Some(g.matrix()),
+            _ => None,
+        };
+        start = GyroStart::Scale { scale, from };
+        fitted.push(done);
+    }
+    let rest: Vec<(usize, Option<AccelFit>)> =
+        accel_fits.into_iter().enumerate().filter(|(k, _)| Some(*k) != shared.map(|s| s.0)).map(|(_, f)| f).collect();
+    fitted.extend(rest.into_par_iter().map(|f| rank(f, start)).collect::<Vec<_>>());
     let fits_of = |i: usize| &fitted.iter().find(|f| f.0 == firsts[i]).expect("every first detection is fitted").1;
     let sweep: Vec<SweepEntry> = detections
         .iter()
@@ -471,9 +484,9 @@ fn check_initial_static(
     let (false, Some(quiet)) = (init.is_empty(), quietest(score)) else {
         return Ok(());
     };
-    init.sort_by(f64::total_cmp);
-    let med = init[init.len() / 2];
-    let worst = init[init.len() - 1];
+    let worst = init.iter().copied().fold(f64::MIN, f64::max);
+    let mid = init.len() / 2;
+    let med = kth_smallest(&mut init, mid);
     let advice = "start the recording with the IMU lying perfectly still for the whole initial period \
                   (--init-static sets its length)";
     // A rotation shows in the gyro (compared with its quietest windows anywhere in the

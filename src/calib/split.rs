@@ -4,7 +4,7 @@
 //! show ([`crate::model::split`]).
 
 use super::detect::Interval;
-use super::fit::{fit_accel, fit_gyro, interval_means, GyroInputs};
+use super::fit::{fit_accel, fit_gyro, interval_means, GyroInputs, GyroStart};
 use super::options::{CalibOptions, MIN_STATIC_INTERVALS};
 use super::result::CalibrationResult;
 use crate::calib::{accel_triad, gyro_triad};
@@ -19,26 +19,26 @@ fn fit_half(
     intervals: &[Interval],
     inputs: &GyroInputs,
     opts: &CalibOptions,
-    start: f64,
+    start: GyroStart,
 ) -> Result<(Triad, Triad), String> {
     let accel = fit_accel(rec, intervals, opts.gravity, inputs.var_a).ok_or("the accelerometer fit failed")?;
     let means = interval_means(rec, intervals);
-    let gyro = fit_gyro(rec, intervals, &means, &accel, inputs, opts, true, Some(&[start]))?;
+    let gyro = fit_gyro(rec, intervals, &means, &accel, inputs, opts, true, start)?;
     Ok((accel_triad(&accel.params, &accel.cov, accel.stats.covariance_inflation), gyro_triad(&gyro.x, &gyro.cov)))
 }
 
 /// Compare the halves of the kept detection's `intervals` and widen the σ
 /// of `result.calibration`; `result.split` holds the comparison (None, with a
 /// warning, when a half has fewer than [`MIN_STATIC_INTERVALS`] poses or
-/// cannot be fitted). Each half's gyro fit starts from `gyro_start`, the
-/// isotropic scale the whole recording's fit kept: the halves turn the same
-/// gyro, and its scale does not need to be searched for again.
+/// cannot be fitted). Each half's gyro fit starts from `gyro_start`: the
+/// isotropic scale the whole recording's fit kept, solved from its solution
+/// (the halves turn the same gyro: its scale need not be searched for again).
 pub(super) fn check_halves(
     rec: &ImuRecording,
     intervals: &[Interval],
     inputs: &GyroInputs,
     opts: &CalibOptions,
-    gyro_start: f64,
+    gyro_start: GyroStart,
     result: &mut CalibrationResult,
 ) {
     let m = intervals.len();
