@@ -37,30 +37,6 @@ fn rodrigues(t2: f64) -> (f64, f64, f64) {
     (a, b, c)
 }
 
-/// `I + x·[w]× + y·[w]×²`, with `[w]×² = w wᵀ − |w|² I`.
-fn rodrigues_matrix(w: &Vector3<f64>, x: f64, y: f64) -> Matrix3<f64> {
-    let d = 1.0 - y * w.norm_squared();
-    let (p, q, r) = (w.x, w.y, w.z);
-    Matrix3::new(
-        d + y * p * p,
-        y * p * q - x * r,
-        y * p * r + x * q,
-        y * p * q + x * r,
-        d + y * q * q,
-        y * q * r - x * p,
-        y * p * r - x * q,
-        y * q * r + x * p,
-        d + y * r * r,
-    )
-}
-
-/// `Exp(w)` for one integration step ([`rodrigues`]).
-#[cfg(test)]
-fn step_exp(w: &Vector3<f64>) -> Matrix3<f64> {
-    let (a, b, _) = rodrigues(w.norm_squared());
-    rodrigues_matrix(w, a, b)
-}
-
 /// The unit quaternion of `Exp(w)` for one integration step: `cos(θ/2)` and
 /// `sin(θ/2)/θ` by their series through (θ/2)⁶ below θ = 0.05 (as [`rodrigues`]).
 #[inline]
@@ -78,13 +54,6 @@ fn step_quaternion(w: &Vector3<f64>) -> Quaternion<f64> {
         )
     };
     Quaternion::new(c, s * w.x, s * w.y, s * w.z)
-}
-
-/// `Exp(w)` and the right Jacobian `J_r(w) = I − b·[w]× + c·[w]×²` of one step.
-#[cfg(test)]
-fn step_exp_and_jacobian(w: &Vector3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
-    let (a, b, c) = rodrigues(w.norm_squared());
-    (rodrigues_matrix(w, a, b), rodrigues_matrix(w, -b, c))
 }
 
 /// `a·[w]×`: each row of `a` crossed with `w`.
@@ -372,6 +341,37 @@ mod tests {
     use super::*;
     use tumble_solvers::lie::{so3_exp, so3_right_jacobian};
 
+    // The step's rotation and right Jacobian from the series' coefficients,
+    // as matrices: what the quaternion and the sweep's products compute.
+    /// `I + x·[w]× + y·[w]×²`, with `[w]×² = w wᵀ − |w|² I`.
+    fn rodrigues_matrix(w: &Vector3<f64>, x: f64, y: f64) -> Matrix3<f64> {
+        let d = 1.0 - y * w.norm_squared();
+        let (p, q, r) = (w.x, w.y, w.z);
+        Matrix3::new(
+            d + y * p * p,
+            y * p * q - x * r,
+            y * p * r + x * q,
+            y * p * q + x * r,
+            d + y * q * q,
+            y * q * r - x * p,
+            y * p * r - x * q,
+            y * q * r + x * p,
+            d + y * r * r,
+        )
+    }
+
+    /// `Exp(w)` for one integration step ([`rodrigues`]).
+    fn step_exp(w: &Vector3<f64>) -> Matrix3<f64> {
+        let (a, b, _) = rodrigues(w.norm_squared());
+        rodrigues_matrix(w, a, b)
+    }
+
+    /// `Exp(w)` and the right Jacobian `J_r(w) = I − b·[w]× + c·[w]×²` of one step.
+    fn step_exp_and_jacobian(w: &Vector3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
+        let (a, b, c) = rodrigues(w.norm_squared());
+        (rodrigues_matrix(w, a, b), rodrigues_matrix(w, -b, c))
+    }
+
     #[test]
     fn step_exp_and_quaternion_are_so3_exp_to_rounding() {
         for &t in &[0.0, 1e-9, 1e-4, 0.01, 0.049, 0.0501, 0.3] {
@@ -398,5 +398,31 @@ mod tests {
                 assert!((jr - so3_right_jacobian(&w)).amax() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn sweep_agrees_with_the_matrix_products() {
+        let raw: Vec<[f64; 3]> =
+            (0..400).map(|i| [3.0 + (i as f64 * 0.05).sin(), -2.0, 1.5 * (i as f64 * 0.02).cos()]).collect();
+        let f = IntegratedRotationFactor::new(
+            [Key::new('g', 0), Key::new('g', 1)],
+            raw,
+            vec![0.01; 399],
+            Vector3::z(),
+            Vector3::x(),
+        )
+        .unwrap();
+        let m = Matrix3::new(1.01, 0.02, -0.01, 0.0, 0.98, 0.03, 0.01, -0.02, 1.02);
+        let b = Vector3::new(0.1, -0.05, 0.02);
+        let (mut c, mut visited): (Matrix3<f64>, usize) = (Matrix3::identity(), 0);
+        let r = f.sweep(&m, &b, |i, d: &Matrix3<f64>| {
+            let (e, jr) = step_exp_and_jacobian(&(m * (f.mid[i] - b) * f.dt[i]));
+            c *= e;
+            assert!((d - c * jr * f.dt[i]).amax() < 1e-14, "step {i}");
+            visited += 1;
+        });
+        assert_eq!(visited, 399);
+        assert!((r - c).amax() < 1e-13);
+        assert!((f.rotation(&m, &b) - c).amax() < 1e-13);
     }
 }
