@@ -29,6 +29,7 @@ pub fn variance_norm(x: &[[f64; 3]]) -> f64 {
 }
 
 pub use crate::io::validate::{mean3, var3};
+use crate::model::numeric::{kth_smallest, median};
 
 /// The level of a recording's quietest windows: the 5th percentile of the
 /// finite values of a sliding-variance score (`None` when there are none).
@@ -36,12 +37,6 @@ pub fn quietest(score: &[f64]) -> Option<f64> {
     let mut v: Vec<f64> = score.iter().copied().filter(|x| x.is_finite()).collect();
     let k = v.len() / 20;
     (!v.is_empty()).then(|| kth_smallest(&mut v, k))
-}
-
-/// The `k`-th smallest value of `v` (0-based, `k < v.len()`), as sorting
-/// would give it, in linear time (the order of `v` changes).
-pub fn kth_smallest(v: &mut [f64], k: usize) -> f64 {
-    *v.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
 /// Norm of the per-axis variance over a window of `w` samples (odd) centred
@@ -234,8 +229,7 @@ pub fn find_initial_rest(
     }
     let bias: [f64; 3] = std::array::from_fn(|k| {
         let mut v: Vec<f64> = quiet_means.iter().map(|m| m[k]).collect();
-        let mid = v.len() / 2;
-        kth_smallest(&mut v, mid)
+        median(&mut v).unwrap_or(f64::NAN)
     });
     for (r, m) in ratio.iter_mut().zip(&mean) {
         let d2: f64 = (0..3).map(|k| (m[k] - bias[k]).powi(2)).sum();

@@ -4,8 +4,8 @@
 //! the estimates and their covariances into the paper's convention.
 
 use super::detect::{
-    axis_noise, axis_ratio, find_initial_rest, intervals_below, kth_smallest, mean3, norms, quietest, sliding_mean,
-    sliding_variance, var3, InitialRest, Interval,
+    axis_noise, axis_ratio, find_initial_rest, intervals_below, mean3, norms, quietest, sliding_mean, sliding_variance,
+    var3, InitialRest, Interval,
 };
 use super::fit::*;
 use super::observability::names;
@@ -14,6 +14,7 @@ use super::result::*;
 use super::result::{Assessment, Verdict};
 use crate::io::{ImuRecording, Stored};
 use crate::model::calibration::{ImuCalibration, Units};
+use crate::model::numeric::median;
 use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use tumble_factors::imu_calib::accel_matrix;
@@ -142,8 +143,7 @@ struct Scores {
 impl Scores {
     fn of(rec: &ImuRecording, opts: &CalibOptions) -> Result<Scores, CalibError> {
         let mut dts: Vec<f64> = rec.t.windows(2).map(|w| w[1] - w[0]).collect();
-        let mid = dts.len() / 2;
-        let period = kth_smallest(&mut dts, mid);
+        let period = median(&mut dts).unwrap_or(f64::NAN);
         if period.is_nan() || period <= 0.0 {
             return Err(CalibError::new(rec, "timestamps do not increase".into(), None));
         }
@@ -316,10 +316,7 @@ fn sweep_thresholds(
     let mut start = GyroStart::Search;
     if let Some((first, scale)) = shared {
         let done = rank(accel_fits[first].clone(), GyroStart::Scale { scale, from: None });
-        let from = match &done.1 .1 {
-            Some(Ok(g)) => Some(g.matrix()),
-            _ => None,
-        };
+        let from = done.1 .1.as_ref().and_then(|g| g.as_ref().ok()).map(GyroFit::matrix);
         start = GyroStart::Scale { scale, from };
         fitted.push(done);
     }
@@ -481,12 +478,10 @@ fn check_initial_static(
     // Windows wholly inside the initial period.
     let inside = n_init.saturating_sub(half).max(1);
     let mut init: Vec<f64> = score[..inside].iter().copied().filter(|x| x.is_finite()).collect();
-    let (false, Some(quiet)) = (init.is_empty(), quietest(score)) else {
+    let worst = init.iter().copied().fold(f64::MIN, f64::max);
+    let (Some(med), Some(quiet)) = (median(&mut init), quietest(score)) else {
         return Ok(());
     };
-    let worst = init.iter().copied().fold(f64::MIN, f64::max);
-    let mid = init.len() / 2;
-    let med = kth_smallest(&mut init, mid);
     let advice = "start the recording with the IMU lying perfectly still for the whole initial period \
                   (--init-static sets its length)";
     // A rotation shows in the gyro (compared with its quietest windows anywhere in the

@@ -1,13 +1,15 @@
 //! Small numeric helpers the estimators share.
 
-/// Median of a slice (reordered); None when empty.
+/// Median of a slice (reordered; the upper one of an even count); None when empty.
 pub fn median(x: &mut [f64]) -> Option<f64> {
-    if x.is_empty() {
-        return None;
-    }
     let m = x.len() / 2;
-    x.select_nth_unstable_by(m, f64::total_cmp);
-    Some(x[m])
+    (!x.is_empty()).then(|| kth_smallest(x, m))
+}
+
+/// The `k`-th smallest value of `v` (0-based, `k < v.len()`), as sorting
+/// would give it, in linear time (the order of `v` changes).
+pub fn kth_smallest(v: &mut [f64], k: usize) -> f64 {
+    *v.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
 /// The `p`-quantile of `v` (sorted in place; the nearest rank), NaN when empty.
