@@ -81,8 +81,8 @@ pub struct Marginalization {
 }
 
 /// Eigenvalues below this (relative to the largest) are dropped from the prior
-/// and from the pseudo-inverse of the marginalized block; both eigen-decompositions
-/// are of the information scaled to a unit diagonal (see `ScaledEigen`).
+/// and from the pseudo-inverses of the marginalized blocks; every eigen-decomposition
+/// is of the information scaled to a unit diagonal (see `ScaledEigen`).
 pub const PRIOR_RANK_TOLERANCE: f64 = 1e-10;
 
 /// Marginalize `keys` out of `graph` at `values`: the factors touching them are
@@ -108,8 +108,11 @@ pub const PRIOR_RANK_TOLERANCE: f64 = 1e-10;
 pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Marginalization, SolveError> {
     let removed: Vec<usize> =
         (0..graph.len()).filter(|&i| graph.entries()[i].factor.keys().iter().any(|k| keys.contains(k))).collect();
-    // Ordered variables: marginalized first, then the separator.
-    let mut order: Vec<Key> = keys.to_vec();
+    // Ordered variables: the independent marginalized blocks first, then the
+    // other marginalized variables, then the separator.
+    let independent = independent_keys(graph, &removed, keys);
+    let mut order: Vec<Key> = independent.clone();
+    order.extend(keys.iter().filter(|k| !independent.contains(k)));
     for &i in &removed {
         for k in graph.entries()[i].factor.keys() {
             if !order.contains(k) {
@@ -126,18 +129,17 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
         dims.push(d);
         n += d;
     }
+    let ni: usize = dims[..independent.len()].iter().sum();
     let nm: usize = dims[..keys.len()].iter().sum();
     let mut h = DMatrix::zeros(n, n);
     let mut g = DVector::zeros(n);
     add_normal_equations(graph, values, &removed, &offsets, &mut h, &mut g)?;
-    let hmm = h.view((0, 0), (nm, nm)).into_owned();
-    let hms = h.view((0, nm), (nm, n - nm)).into_owned();
-    let hss = h.view((nm, nm), (n - nm, n - nm)).into_owned();
-    let gm = g.rows(0, nm).into_owned();
-    let gs = g.rows(nm, n - nm).into_owned();
-    let hmm_inv = ScaledEigen::new(&hmm, "information of the marginalized variables")?.pseudo_inverse(nm);
-    let hstar = &hss - hms.transpose() * &hmm_inv * &hms;
-    let gstar = &gs - hms.transpose() * &hmm_inv * &gm;
+    let mut start = 0;
+    for &d in &dims[..independent.len()] {
+        eliminate_block(&mut h, &mut g, start..start + d, ni)?;
+        start += d;
+    }
+    let (hstar, gstar) = schur_complement(&h, &g, ni..nm)?;
     let (r, e) = ScaledEigen::new(&hstar, "marginal information")?.sqrt_with_offset(n - nm, &gstar);
     let sep_keys: Vec<Key> = order[keys.len()..].to_vec();
     let anchors = sep_keys.iter().map(|k| values.get_dyn(*k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
@@ -151,6 +153,85 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
         },
         removed_factors: removed,
     })
+}
+
+/// The marginalized keys that no factor of `removed` links to one another
+/// (the landmarks leaving a sliding window with their anchor state), chosen
+/// greedily, those whose factors reach the fewest variables first: each is
+/// eliminated on its own block, which is the same Schur complement as
+/// eliminating them jointly — the cubic cost of the joint block is what this
+/// avoids.
+fn independent_keys(graph: &Graph, removed: &[usize], keys: &[Key]) -> Vec<Key> {
+    let index: HashMap<Key, usize> = keys.iter().enumerate().map(|(i, &k)| (k, i)).collect();
+    // Per marginalized key: the other marginalized keys its factors reach,
+    // and how many variables they reach in all (the cost of eliminating it).
+    let mut linked: Vec<Vec<usize>> = vec![Vec::new(); keys.len()];
+    let mut reach = vec![0; keys.len()];
+    for &fi in removed {
+        let fk = graph.entries()[fi].factor.keys();
+        let marginalized: Vec<usize> = fk.iter().filter_map(|k| index.get(k).copied()).collect();
+        for &a in &marginalized {
+            reach[a] += fk.len();
+            linked[a].extend(marginalized.iter().filter(|&&b| b != a));
+        }
+    }
+    let mut by_reach: Vec<usize> = (0..keys.len()).collect();
+    by_reach.sort_by_key(|&i| (reach[i], i));
+    let mut chosen = vec![false; keys.len()];
+    for i in by_reach {
+        chosen[i] = !linked[i].iter().any(|&j| chosen[j]);
+    }
+    // In the caller's order.
+    keys.iter().zip(&chosen).filter(|(_, &c)| c).map(|(&k, _)| k).collect()
+}
+
+/// Eliminate the variable at rows/columns `block` of the normal equations
+/// `(h, g)` into the rows from `rest` on: `H_rr −= H_rb H_bb⁺ H_br`,
+/// `g_r −= H_rb H_bb⁺ g_b`, on the rows the block is coupled to (the others
+/// are unchanged). The rows of `block` are left as they were.
+fn eliminate_block(
+    h: &mut DMatrix<f64>,
+    g: &mut DVector<f64>,
+    block: std::ops::Range<usize>,
+    rest: usize,
+) -> Result<(), SolveError> {
+    let d = block.len();
+    let n = h.nrows();
+    let coupled: Vec<usize> = (rest..n).filter(|&r| block.clone().any(|c| h[(r, c)] != 0.0)).collect();
+    let hbb = h.view((block.start, block.start), (d, d)).into_owned();
+    let inv = ScaledEigen::new(&hbb, "information of a marginalized variable")?.pseudo_inverse(d);
+    // W = H_rb H_bb⁺ on the coupled rows.
+    let w = DMatrix::from_fn(coupled.len(), d, |a, j| {
+        (0..d).map(|k| h[(coupled[a], block.start + k)] * inv[(k, j)]).sum::<f64>()
+    });
+    for (a, &ra) in coupled.iter().enumerate() {
+        for &rb in &coupled {
+            h[(ra, rb)] -= (0..d).map(|k| w[(a, k)] * h[(rb, block.start + k)]).sum::<f64>();
+        }
+        g[ra] -= (0..d).map(|k| w[(a, k)] * g[block.start + k]).sum::<f64>();
+    }
+    Ok(())
+}
+
+/// The Schur complement of rows/columns `m` of `(h, g)` onto the rows after
+/// them (the separator): `H_ss − H_sm H_mm⁺ H_ms` and `g_s − H_sm H_mm⁺ g_m`.
+fn schur_complement(
+    h: &DMatrix<f64>,
+    g: &DVector<f64>,
+    m: std::ops::Range<usize>,
+) -> Result<(DMatrix<f64>, DVector<f64>), SolveError> {
+    let (m0, nm, ns) = (m.start, m.len(), h.nrows() - m.end);
+    let hss = h.view((m.end, m.end), (ns, ns)).into_owned();
+    let gs = g.rows(m.end, ns).into_owned();
+    if nm == 0 {
+        return Ok((hss, gs));
+    }
+    let hmm = h.view((m0, m0), (nm, nm)).into_owned();
+    let hms = h.view((m0, m.end), (nm, ns)).into_owned();
+    let gm = g.rows(m0, nm).into_owned();
+    let hmm_inv = ScaledEigen::new(&hmm, "information of the marginalized variables")?.pseudo_inverse(nm);
+    let w = hms.transpose() * hmm_inv;
+    Ok((hss - &w * &hms, gs - w * gm))
 }
 
 /// Add the whitened normal equations of the factors `factors` of `graph` at
@@ -198,7 +279,8 @@ fn add_normal_equations(
 struct ScaledEigen {
     live: Vec<usize>,
     scale: Vec<f64>,
-    eig: nalgebra::SymmetricEigen<f64, nalgebra::Dyn>,
+    eigenvalues: DVector<f64>,
+    eigenvectors: DMatrix<f64>,
     /// Indices of the eigenvalues above [`PRIOR_RANK_TOLERANCE`] × the largest.
     kept: Vec<usize>,
 }
@@ -213,21 +295,28 @@ impl ScaledEigen {
         let m = live.len();
         let a =
             DMatrix::from_fn(m, m, |r, c| 0.5 * (h[(live[r], live[c])] + h[(live[c], live[r])]) * scale[r] * scale[c]);
-        let eig = nalgebra::SymmetricEigen::new(a);
-        if !eig.eigenvalues.iter().chain(eig.eigenvectors.iter()).all(|x| x.is_finite()) {
+        // Nothing constrained (nalgebra's decomposition needs a row).
+        let (eigenvalues, eigenvectors) = match m {
+            0 => (DVector::zeros(0), DMatrix::zeros(0, 0)),
+            _ => {
+                let eig = nalgebra::SymmetricEigen::new(a);
+                (eig.eigenvalues, eig.eigenvectors)
+            }
+        };
+        if !eigenvalues.iter().chain(eigenvectors.iter()).all(|x| x.is_finite()) {
             return Err(SolveError::Singular(format!("the eigen-decomposition of the {what} failed")));
         }
-        let lmax = eig.eigenvalues.amax().max(f64::MIN_POSITIVE);
-        let kept = (0..m).filter(|&i| eig.eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
-        Ok(ScaledEigen { live, scale, eig, kept })
+        let lmax = eigenvalues.amax().max(f64::MIN_POSITIVE);
+        let kept = (0..m).filter(|&i| eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
+        Ok(ScaledEigen { live, scale, eigenvalues, eigenvectors, kept })
     }
 
     /// The pseudo-inverse of `h` (n × n): zero on the left-out rows.
     fn pseudo_inverse(&self, n: usize) -> DMatrix<f64> {
         let mut inv = DMatrix::zeros(n, n);
         for &k in &self.kept {
-            let v = self.eig.eigenvectors.column(k);
-            let l = self.eig.eigenvalues[k];
+            let v = self.eigenvectors.column(k);
+            let l = self.eigenvalues[k];
             for (r, &i) in self.live.iter().enumerate() {
                 let vi = v[r] * self.scale[r] / l;
                 for (c, &j) in self.live.iter().enumerate() {
@@ -244,8 +333,8 @@ impl ScaledEigen {
         let mut r = DMatrix::zeros(self.kept.len(), n);
         let mut e = DVector::zeros(self.kept.len());
         for (row, &k) in self.kept.iter().enumerate() {
-            let v = self.eig.eigenvectors.column(k);
-            let l = self.eig.eigenvalues[k].sqrt();
+            let v = self.eigenvectors.column(k);
+            let l = self.eigenvalues[k].sqrt();
             for (c, &j) in self.live.iter().enumerate() {
                 r[(row, j)] = l * v[c] / self.scale[c];
                 e[row] += v[c] * self.scale[c] * g[j] / l;

@@ -10,6 +10,30 @@ fn lm() -> LmOptions {
     LmOptions { function_tolerance: 1e-12, parameter_tolerance: 1e-12, ..LmOptions::default() }
 }
 
+/// The dense normal equations `(JᵀJ, Jᵀr)` of `factors` of `g` at `v`, each
+/// key's columns placed by `col` among `n`.
+fn dense_normal_equations(
+    g: &Graph,
+    v: &Values,
+    factors: &[usize],
+    col: impl Fn(Key) -> usize,
+    n: usize,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let (mut h, mut grad) = (DMatrix::zeros(n, n), DVector::zeros(n));
+    for &fi in factors {
+        let e = &g.entries()[fi];
+        let vars: Vec<&dyn DynVariable> = e.factor.keys().iter().map(|k| v.get_dyn(*k).unwrap()).collect();
+        let lin = e.factor.linearize(Vars::new(&vars)).unwrap();
+        let mut j = DMatrix::zeros(lin.residual.len(), n);
+        for (k, jk) in e.factor.keys().iter().zip(&lin.jacobians) {
+            j.view_mut((0, col(*k)), (jk.nrows(), jk.ncols())).copy_from(jk);
+        }
+        h += j.transpose() * &j;
+        grad += j.transpose() * &lin.residual;
+    }
+    (h, grad)
+}
+
 /// A linear-Gaussian chain: marginalizing x0 then solving equals solving the
 /// full problem, in solution and in information of the kept variables.
 #[test]
@@ -133,18 +157,7 @@ fn marginalization_survives_unconstrained_and_badly_scaled_variables() {
         k if k == X(1) => 5,
         _ => 8,
     };
-    let (mut h, mut grad) = (DMatrix::zeros(11, 11), DVector::zeros(11));
-    for &fi in &m.removed_factors {
-        let e = &g.entries()[fi];
-        let vars: Vec<&dyn DynVariable> = e.factor.keys().iter().map(|k| v.get_dyn(*k).unwrap()).collect();
-        let lin = e.factor.linearize(Vars::new(&vars)).unwrap();
-        let mut j = DMatrix::zeros(lin.residual.len(), 11);
-        for (k, jk) in e.factor.keys().iter().zip(&lin.jacobians) {
-            j.view_mut((0, cols(*k)), (jk.nrows(), jk.ncols())).copy_from(jk);
-        }
-        h += j.transpose() * &j;
-        grad += j.transpose() * &lin.residual;
-    }
+    let (h, grad) = dense_normal_equations(&g, &v, &m.removed_factors, cols, 11);
     // L0 has no information: the Schur complement over [X0, L1] alone.
     let idx = [0, 1, 2, 4];
     let hmm = DMatrix::from_fn(4, 4, |r, c| h[(idx[r], idx[c])]);
@@ -309,4 +322,56 @@ fn cluster_robust_covariances_are_identical_when_repeated() {
         let again = robust();
         assert!(first.iter().zip(again.iter()).all(|(a, b)| a.to_bits() == b.to_bits()), "{first} vs {again}");
     }
+}
+
+/// The landmarks leaving with their anchor are eliminated block by block
+/// before the anchor itself: the prior equals the dense Schur complement of
+/// all of them at once, also for a landmark that two rows see along only two
+/// of its three directions (its block is singular: the pseudo-inverse's case).
+#[test]
+fn landmarks_eliminated_one_by_one_give_the_joint_schur_complement() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+    let mut rand_mat = |r: usize, c: usize| DMatrix::from_fn(r, c, |_, _| rng.random::<f64>() - 0.5);
+    let mut g = Graph::new();
+    let i3 = DMatrix::identity(3, 3);
+    g.add(LinearFactor::new(vec![X(0)], vec![&i3 * 2.0], DVector::from_element(3, 0.1)), NoiseModel::Unit);
+    g.add(LinearFactor::new(vec![X(0), X(1)], vec![rand_mat(3, 3), i3.clone()], DVector::zeros(3)), NoiseModel::Unit);
+    for l in 0..5 {
+        // Landmark 4 has a single observation: two rows, three unknowns.
+        let seen_by: &[u64] = if l == 4 { &[1] } else { &[1, 2] };
+        for &k in seen_by {
+            let a = vec![rand_mat(2, 3), rand_mat(2, 3), rand_mat(2, 3)];
+            g.add(
+                LinearFactor::new(vec![X(0), L(l), X(k)], a, DVector::from_element(2, 0.05 * l as f64)),
+                NoiseModel::Unit,
+            );
+        }
+    }
+    let mut v = Values::new();
+    for i in 0..3 {
+        v.insert(X(i), Vector3::new(0.1 * i as f64, 0.2, -0.1));
+    }
+    let mut gone = vec![X(0)];
+    for l in 0..5 {
+        v.insert(L(l), Vector3::new(0.3, -0.1 * l as f64, 0.5));
+        gone.push(L(l));
+    }
+    let m = marginalize(&g, &v, &gone).unwrap();
+    // Dense over [X0, L0..L4 | X1, X2].
+    let col = |k: Key| match k {
+        k if k == X(0) => 0,
+        k if k == X(1) => 18,
+        k if k == X(2) => 21,
+        k => 3 + 3 * (0..5).position(|l| L(l) == k).unwrap(),
+    };
+    let every: Vec<usize> = (0..g.len()).collect();
+    let (h, grad) = dense_normal_equations(&g, &v, &every, col, 24);
+    let hmm = h.view((0, 0), (18, 18)).into_owned();
+    let hms = h.view((0, 18), (18, 6)).into_owned();
+    let inv = hmm.pseudo_inverse(1e-9).unwrap();
+    let hstar = h.view((18, 18), (6, 6)) - hms.transpose() * &inv * &hms;
+    let gstar = grad.rows(18, 6) - hms.transpose() * &inv * grad.rows(0, 18);
+    assert_relative_eq!(m.prior.information(), hstar, max_relative = 1e-8, epsilon = 1e-10);
+    let rte = m.prior.sqrt_information.transpose() * &m.prior.offset;
+    assert_relative_eq!(rte, gstar, max_relative = 1e-8, epsilon = 1e-10);
 }

@@ -7,7 +7,7 @@
 //! factor: every entry receives its terms in factor order, whatever the number
 //! of threads. The cut depends on the structure only, never on the threads.
 
-use super::{dot, Structure, System};
+use super::{dot, ElimPlan, Structure, System};
 use crate::linearized::{split_at_ends, Linearized};
 use rayon::prelude::*;
 use std::ops::Range;
@@ -138,6 +138,14 @@ impl AssemblyPlan {
     }
 }
 
+/// `g += Jᵀ r` for a Jacobian `j` of `m` rows (column-major) and its residual `r`.
+#[inline(always)]
+fn add_jtr(g: &mut [f64], j: &[f64], r: &[f64], m: usize) {
+    for (gk, col) in g.iter_mut().zip(j.chunks_exact(m)) {
+        *gk += dot(col, r);
+    }
+}
+
 impl Structure {
     /// Each entry of `J_bigᵀ J_small` stored for pair `pair`, as (position in
     /// H, value), row by row; `m` is the Jacobians' row count (a literal at the
@@ -260,14 +268,10 @@ impl Structure {
                 KeptTerm::Grad { k, .. } => {
                     let (p, b) = plan.kept[k];
                     let o = self.kept_offsets[b] - g0;
-                    let mut add = |m| {
-                        for (kk, col) in lins.jacobian(fi, p).chunks_exact(m).enumerate() {
-                            g[o + kk] += dot(col, r);
-                        }
-                    };
+                    let j = lins.jacobian(fi, p);
                     match m {
-                        2 => add(2),
-                        _ => add(m),
+                        2 => add_jtr(&mut g[o..], j, r, 2),
+                        _ => add_jtr(&mut g[o..], j, r, m),
                     }
                 }
                 KeptTerm::Pair { k, entry_off, .. } => {
@@ -299,38 +303,49 @@ impl Structure {
     /// One eliminated chunk's factors into its slices of H_ll, g_l and H_cl.
     fn assemble_elim(&self, chunk: &ElimChunk, lins: &Linearized, hll: &mut [f64], gl: &mut [f64], hcl: &mut [f64]) {
         let e0 = chunk.blocks.start;
-        let (hll0, gl0, hcl0) = (self.hll_offsets[e0], self.elim_start(e0), self.hcl_offsets[e0]);
+        let at = (self.hll_offsets[e0], self.elim_start(e0), self.hcl_offsets[e0]);
         for &fi in &chunk.factors {
-            let r = lins.residual(fi);
-            let m = r.len();
+            let m = lins.residual(fi).len();
             let Some(ep) = &self.plans[fi].elim else { continue };
-            if m == 0 {
-                continue;
-            }
-            let (ho, go) = (self.hll_offsets[ep.block] - hll0, self.elim_start(ep.block) - gl0);
-            let mut add = |m| {
-                let jl = lins.jacobian(fi, ep.pos);
-                let d = self.elim_dims[ep.block];
-                for (a, ca) in jl.chunks_exact(m).enumerate() {
-                    gl[go + a] += dot(ca, r);
-                    for (b, cb) in jl.chunks_exact(m).enumerate() {
-                        hll[ho + a + b * d] += dot(ca, cb);
-                    }
-                }
-                for &(q, off) in &ep.slots {
-                    let (jq, dc) = (lins.jacobian(fi, q), lins.ncols(fi, q));
-                    let off = off - hcl0;
-                    for (b, cb) in jl.chunks_exact(m).enumerate() {
-                        for (a, ca) in jq.chunks_exact(m).enumerate() {
-                            hcl[off + a + b * dc] += dot(ca, cb);
-                        }
-                    }
-                }
-            };
-            // Literal row counts of the common factors unroll the dot products.
+            // Literal row counts of the common factors unroll the dot products
+            // (each arm its own inlined copy).
             match m {
-                2 => add(2),
-                _ => add(m),
+                0 => {}
+                2 => self.add_elim_factor(fi, ep, lins, 2, at, (hll, gl, hcl)),
+                _ => self.add_elim_factor(fi, ep, lins, m, at, (hll, gl, hcl)),
+            }
+        }
+    }
+
+    /// Factor `fi`'s terms (`m` rows) on its eliminated block into the
+    /// chunk's slices of H_ll, g_l and H_cl, which start at `(hll0, gl0, hcl0)`.
+    #[inline(always)]
+    fn add_elim_factor(
+        &self,
+        fi: usize,
+        ep: &ElimPlan,
+        lins: &Linearized,
+        m: usize,
+        (hll0, gl0, hcl0): (usize, usize, usize),
+        (hll, gl, hcl): (&mut [f64], &mut [f64], &mut [f64]),
+    ) {
+        let r = lins.residual(fi);
+        let (ho, go) = (self.hll_offsets[ep.block] - hll0, self.elim_start(ep.block) - gl0);
+        let jl = lins.jacobian(fi, ep.pos);
+        let d = self.elim_dims[ep.block];
+        for (a, ca) in jl.chunks_exact(m).enumerate() {
+            gl[go + a] += dot(ca, r);
+            for (b, cb) in jl.chunks_exact(m).enumerate() {
+                hll[ho + a + b * d] += dot(ca, cb);
+            }
+        }
+        for &(q, off) in &ep.slots {
+            let (jq, dc) = (lins.jacobian(fi, q), lins.ncols(fi, q));
+            let off = off - hcl0;
+            for (b, cb) in jl.chunks_exact(m).enumerate() {
+                for (a, ca) in jq.chunks_exact(m).enumerate() {
+                    hcl[off + a + b * dc] += dot(ca, cb);
+                }
             }
         }
     }

@@ -173,13 +173,14 @@ impl Structure {
         }
         let mut scratch = Scratch::default();
         for (e, &d) in self.elim_dims.iter().enumerate() {
-            // Literal sizes let the compiler unroll the inlined loops.
-            let mut elim = |d| self.eliminate(e, d, sys, damping, elim_inv, &mut scratch, h, &mut g);
+            // Literal sizes let the compiler unroll the inlined loops (each
+            // arm its own copy: through a closure the size stayed a variable).
+            let s = &mut scratch;
             match d {
-                1 => elim(1),
-                2 => elim(2),
-                3 => elim(3),
-                _ => elim(d),
+                1 => self.eliminate(e, 1, sys, damping, elim_inv, s, h, &mut g),
+                2 => self.eliminate(e, 2, sys, damping, elim_inv, s, h, &mut g),
+                3 => self.eliminate(e, 3, sys, damping, elim_inv, s, h, &mut g),
+                _ => self.eliminate(e, d, sys, damping, elim_inv, s, h, &mut g),
             }?;
         }
         Ok(g)

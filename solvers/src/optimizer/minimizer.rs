@@ -30,6 +30,8 @@ pub(super) struct Minimizer<'a> {
     trial: Vec<Box<dyn DynVariable>>,
     trial_lins: Linearized,
     pub sys: System,
+    /// Whether `sys` is assembled at the current point (no step accepted since).
+    pub sys_current: bool,
     pub summary: Summary,
     /// The free variables (kept, then eliminated).
     free: Vec<usize>,
@@ -88,6 +90,7 @@ impl<'a> Minimizer<'a> {
             trial,
             trial_lins: Linearized::default(),
             sys: System::default(),
+            sys_current: false,
             summary,
             free,
             previous_decrease: f64::NAN,
@@ -147,6 +150,7 @@ impl<'a> Minimizer<'a> {
     fn assemble(&mut self, strategy: &mut TrustRegion) -> Point {
         let t = Instant::now();
         self.structure.assemble_into(&self.lins, &mut self.sys);
+        self.sys_current = true;
         self.summary.time_build += t.elapsed().as_secs_f64();
         let g: Vec<f64> = self.sys.g.iter().copied().chain(self.sys.gl.iter().copied()).collect();
         let gmax = g.iter().fold(0.0f64, |m, v| m.max(v.abs()));
@@ -239,6 +243,7 @@ impl<'a> Minimizer<'a> {
         let decrease = self.cost - new_cost;
         std::mem::swap(&mut self.vars, &mut self.trial);
         std::mem::swap(&mut self.lins, &mut self.trial_lins);
+        self.sys_current = false;
         self.cost = new_cost;
         let remaining = remaining_decrease(decrease, self.previous_decrease);
         self.previous_decrease = decrease;

@@ -151,9 +151,12 @@ impl Optimizer {
         let mut m = Minimizer::new(o, &layout, structure, entries, vars, (lins, cost), summary);
         m.run()?;
         // `lins` is the linearization at the final values (trial points are
-        // linearized when tried), so the covariance needs no second pass.
+        // linearized when tried), so the covariance needs no second pass;
+        // nor a second assembly when the stop was decided at that point.
         let covariances = at_solution.map(|f| {
-            m.structure.assemble_into(&m.lins, &mut m.sys);
+            if !m.sys_current {
+                m.structure.assemble_into(&m.lins, &mut m.sys);
+            }
             f(&layout, &mut m.structure, &m.sys, &m.lins)
         });
         let mut out = initial.clone();
