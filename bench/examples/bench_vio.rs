@@ -8,7 +8,11 @@
 //! `--inverse-depth-only`).
 //! Covariance recovery is included (each frame's σ).
 //!
-//! `cargo run --release -p tumble-bench --example bench_vio [-- --duration S]`
+//! `cargo run --release -p tumble-bench --example bench_vio [-- --duration S] [--repeat N]`
+//!
+//! With `--repeat N` each case runs N times and the run of median speed is
+//! printed, with every run's speed (the wall time of a 2-core virtual machine
+//! varies by ±20 % from run to run).
 
 use tumble::sim::{simulate, Scenario, SimConfig};
 use tumble::vio::{read_eqvio, run, summarize, VioInput, VioOptions};
@@ -17,8 +21,9 @@ const TARGET_REALTIME: f64 = 20.0;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
-    let duration: f64 =
-        args.iter().position(|a| a == "--duration").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(60.0);
+    let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|i| args.get(i + 1));
+    let duration: f64 = value("--duration").and_then(|v| v.parse().ok()).unwrap_or(60.0);
+    let repeat: usize = value("--repeat").and_then(|v| v.parse().ok()).unwrap_or(1).max(1);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("thread pool");
     let cfg = SimConfig { duration_s: Some(duration.max(20.0)), ..SimConfig::default() };
     let sim = simulate(Scenario::Flight, &cfg, 11).expect("simulation");
@@ -26,9 +31,19 @@ fn main() {
     let per_frame = input.frames.iter().map(|f| f.features.len()).sum::<usize>() as f64 / input.frames.len() as f64;
     let opts = VioOptions::for_simulation(&cfg);
     let report = |name: &str, input: &VioInput, opts: &VioOptions| -> f64 {
-        let out = pool.install(|| run(input, opts, None)).expect("vio");
-        let s = summarize(input, opts, &out, 10.0);
+        let mut runs: Vec<_> = (0..repeat)
+            .map(|_| {
+                let out = pool.install(|| run(input, opts, None)).expect("vio");
+                summarize(input, opts, &out, 10.0)
+            })
+            .collect();
+        runs.sort_by(|a, b| a.realtime_factor.total_cmp(&b.realtime_factor));
+        let speeds: Vec<String> = runs.iter().map(|s| format!("{:.1}×", s.realtime_factor)).collect();
+        let s = &runs[repeat / 2];
         println!("{name}:");
+        if repeat > 1 {
+            println!("  {repeat} runs, real-time factors {} (the median run below)", speeds.join(", "));
+        }
         println!("  {}", s.table().replace('\n', "\n  "));
         println!(
             "  backend speed on one core: {:.1}× real time vs target {TARGET_REALTIME:.0}× → ratio {:.2}",
