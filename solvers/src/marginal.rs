@@ -223,9 +223,6 @@ fn schur_complement(
     let (m0, nm, ns) = (m.start, m.len(), h.nrows() - m.end);
     let hss = h.view((m.end, m.end), (ns, ns)).into_owned();
     let gs = g.rows(m.end, ns).into_owned();
-    if nm == 0 {
-        return Ok((hss, gs));
-    }
     let hmm = h.view((m0, m0), (nm, nm)).into_owned();
     let hms = h.view((m0, m.end), (nm, ns)).into_owned();
     let gm = g.rows(m0, nm).into_owned();

@@ -74,12 +74,9 @@ impl std::fmt::Display for Disturbance {
     }
 }
 
+/// Median of `v` (0 when empty).
 fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let k = v.len() / 2;
-    *v.select_nth_unstable_by(k, f64::total_cmp).1
+    crate::model::numeric::median(&mut v).unwrap_or(0.0)
 }
 
 /// Largest turn of a static log's gravity direction (its mean over 10 s)

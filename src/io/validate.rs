@@ -155,8 +155,7 @@ fn sampled_median(n: usize, f: impl Fn(usize) -> f64) -> f64 {
     }
     let stride = n.div_ceil(MEDIAN_SAMPLES);
     let mut v: Vec<f64> = (0..n).step_by(stride).map(f).collect();
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
+    crate::model::numeric::median(&mut v).unwrap_or(0.0)
 }
 
 /// Median step between samples \[s\] (from at most 65 536 steps spread over the recording).

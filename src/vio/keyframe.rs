@@ -41,11 +41,7 @@ impl FeatureMotion<'_> {
             }
         }
         let n = d.len();
-        if n == 0 {
-            return (f64::INFINITY, 0);
-        }
-        let (_, median, _) = d.select_nth_unstable_by(n / 2, f64::total_cmp);
-        (*median, n)
+        crate::model::numeric::median(&mut d).map_or((f64::INFINITY, 0), |m| (m, n))
     }
 }
 

@@ -124,9 +124,7 @@ impl StereoStats {
     }
     /// Median of `v` (NaN when empty).
     fn median(v: &[f64]) -> f64 {
-        let mut s = v.to_vec();
-        s.sort_by(f64::total_cmp);
-        s.get(s.len() / 2).copied().unwrap_or(f64::NAN)
+        crate::model::numeric::median(&mut v.to_vec()).unwrap_or(f64::NAN)
     }
     /// Median epipolar distance of the matches \[px\].
     pub fn median_epipolar_px(&self) -> f64 {
