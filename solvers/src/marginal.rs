@@ -459,6 +459,44 @@ pub struct RobustCovariances {
     pub robust: Covariances,
     /// Clusters `G`.
     pub clusters: usize,
+    /// Each cluster's influence on the keys, `H⁻¹ g_c` (rows as in
+    /// `model`'s joint matrix), with its label (`None`: a factor's own
+    /// cluster), in label order: what [`RobustCovariances::regrouped`] sums.
+    pub influences: Vec<(Option<usize>, DVector<f64>)>,
+}
+
+impl RobustCovariances {
+    /// The cluster-robust covariances of the same keys with the clusters
+    /// merged into coarser ones: labelled cluster `c` into `group(c)`
+    /// (unlabelled ones stay alone). E.g. per-frame labels grouped into
+    /// blocks of `b` frames with `|c| c / b`: one linearization gives the
+    /// sandwich at every block length. The number of groups is returned with it.
+    pub fn regrouped(&self, group: impl Fn(usize) -> usize) -> (Covariances, usize) {
+        let p = self.model.joint.nrows();
+        let mut grouped: BTreeMap<usize, DVector<f64>> = BTreeMap::new();
+        let mut alone = Vec::new();
+        for (c, u) in &self.influences {
+            match c {
+                Some(c) => *grouped.entry(group(*c)).or_insert_with(|| DVector::zeros(p)) += u,
+                None => alone.push(u),
+            }
+        }
+        let g = grouped.len() + alone.len();
+        let joint = sandwich(grouped.values().chain(alone), g, p);
+        (Covariances { keys: self.model.keys.clone(), offsets: self.model.offsets.clone(), joint }, g)
+    }
+}
+
+/// `(G/(G−1)) Σ_c u_c u_cᵀ` over the `g` clusters' influences `u_c`.
+fn sandwich<'a>(influences: impl Iterator<Item = &'a DVector<f64>>, g: usize, p: usize) -> DMatrix<f64> {
+    let mut robust = DMatrix::zeros(p, p);
+    for u in influences {
+        robust += u * u.transpose();
+    }
+    if g > 1 {
+        robust *= g as f64 / (g - 1) as f64;
+    }
+    robust
 }
 
 /// Cluster-robust covariances: [`RobustCovariances`] at a solution, from an
@@ -511,17 +549,13 @@ pub(crate) fn robust_covariances_of_system(
         }
     }
     let g = scores.len();
-    let mut robust = DMatrix::zeros(p, p);
-    for u in scores.values() {
-        robust += u * u.transpose();
-    }
-    if g > 1 {
-        robust *= g as f64 / (g - 1) as f64;
-    }
+    let robust = sandwich(scores.values(), g, p);
+    let influences = scores.into_iter().map(|(c, u)| ((c < labelled).then_some(c), u)).collect();
     Ok(RobustCovariances {
         model: Covariances { keys: keys.to_vec(), offsets: offsets.clone(), joint: rows_of(&full, &cols) },
         robust: Covariances { keys: keys.to_vec(), offsets, joint: robust },
         clusters: g,
+        influences,
     })
 }
 

@@ -324,6 +324,36 @@ fn cluster_robust_covariances_are_identical_when_repeated() {
     }
 }
 
+/// Fine clusters regrouped into coarse ones give the sandwich computed with
+/// the coarse labels directly (unlabelled factors stay clusters of their
+/// own), with the same count of clusters.
+#[test]
+fn regrouped_clusters_give_the_coarse_sandwich() {
+    let mut g = Graph::new();
+    let (mut fine, mut coarse) = (Vec::new(), Vec::new());
+    for i in 0..60 {
+        let x = i as f64 / 60.0;
+        add_line_point(&mut g, x, 1.0 + 2.0 * x + 0.02 * ((i * 7) % 5) as f64 - 0.03 * ((i / 10) % 3) as f64);
+        fine.push(Some(i));
+        coarse.push(Some(i / 10));
+    }
+    add_line_point(&mut g, 0.5, 2.1);
+    fine.push(None);
+    coarse.push(None);
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(1.0, 2.0));
+    let (sol, _) = Optimizer::new(lm()).optimize(&g, &v).unwrap();
+    let by_fine = cluster_robust_covariances(&g, &sol, &[X(0)], &fine).unwrap();
+    let direct = cluster_robust_covariances(&g, &sol, &[X(0)], &coarse).unwrap();
+    let (regrouped, clusters) = by_fine.regrouped(|c| c / 10);
+    assert_eq!((by_fine.clusters, clusters, direct.clusters), (61, 7, 7));
+    let (a, b) = (regrouped.get(X(0)).unwrap(), direct.robust.get(X(0)).unwrap());
+    assert!((&a - &b).norm() <= 1e-12 * b.norm(), "{a} vs {b}");
+    // Regrouping into the same clusters changes nothing.
+    let (same, _) = by_fine.regrouped(|c| c);
+    assert!((same.get(X(0)).unwrap() - by_fine.robust.get(X(0)).unwrap()).norm() <= 1e-12 * b.norm());
+}
+
 /// The landmarks leaving with their anchor are eliminated block by block
 /// before the anchor itself: the prior equals the dense Schur complement of
 /// all of them at once, also for a landmark that two rows see along only two

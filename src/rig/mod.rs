@@ -35,6 +35,7 @@ mod split;
 pub use crate::model::target::{CameraCorners, Corner, RigInput, Target, View};
 pub use calibrate::calibrate_rig;
 pub use output::{summary_markdown, write_rig};
+pub use solve::COARSE_BLOCKS;
 
 use crate::error::OptionError;
 use nalgebra::{Isometry3, Matrix3, Vector3};
@@ -282,21 +283,32 @@ pub struct RigResult {
     pub split: Option<crate::model::split::SplitCheck>,
 }
 
-/// How the rig's σ were found: each is the larger of the noise model's
+/// How the rig's σ were found: each is the largest of the noise model's
 /// (the corners' scatter, the IMU's noise figures) and the cluster-robust
-/// ("sandwich") one over blocks of consecutive frames, which also holds when
+/// ("sandwich") ones over blocks of consecutive frames, which also hold when
 /// the corners' errors are alike in neighbouring views (a detector's bias
 /// that depends on the view, a target that is not flat, a lens the model
 /// fits imperfectly) — errors the scatter alone does not show.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SigmaSource {
-    /// Frames per block (⌊√frames⌋, the batch-means rule).
-    pub block_frames: usize,
-    /// Blocks (clusters).
-    pub blocks: usize,
+    /// The partitions of the frames into blocks, finest first: ⌊√frames⌋
+    /// frames per block (the batch-means rule), then
+    /// [`COARSE_BLOCKS`] blocks (errors alike for seconds).
+    pub partitions: Vec<BlockPartition>,
     /// The largest ratio of a cluster-robust σ to the noise model's, over the
-    /// estimated parameters (≈ 1 when the corners' errors are independent).
+    /// estimated parameters and partitions (≈ 1 when the corners' errors are
+    /// independent).
     pub largest_ratio: f64,
+}
+
+/// One partition of the frames into blocks of consecutive frames (clusters
+/// of the cluster-robust covariance).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct BlockPartition {
+    /// Frames per block.
+    pub block_frames: usize,
+    /// Blocks of frames (clusters; the target's gauge is one more of its own).
+    pub blocks: usize,
 }
 
 /// A determined / weak / not determined verdict on one parameter.

@@ -155,7 +155,7 @@ pub fn rig_json(rig: &RigResult) -> Result<String, OutputError> {
         gravity_in_target_m_s2: rig.gravity_in_target.into(),
         imu_noise_source: &rig.noise_source,
         imu_chi2_per_dof: rig.imu_chi2_per_dof,
-        sigma_source: rig.sigma_source,
+        sigma_source: rig.sigma_source.clone(),
         frames: rig.frames,
         iterations: rig.iterations,
         converged: rig.converged,
@@ -211,12 +211,13 @@ pub fn summary_markdown(rig: &RigResult) -> String {
         "IMU residuals: χ²/dof {:.2} with the noise of {}. {} frames, {} iterations, {:.1} s.",
         rig.imu_chi2_per_dof, rig.noise_source, rig.frames, rig.iterations, rig.seconds
     );
-    let q = rig.sigma_source;
+    let q = &rig.sigma_source;
+    let partitions: Vec<String> =
+        q.partitions.iter().map(|p| format!("{} blocks of {} frames", p.blocks, p.block_frames)).collect();
     let _ = writeln!(
         s,
-        "σ: the larger of the noise model's and the cluster-robust one over {} blocks of {} frames; the cluster-robust σ are up to {:.1}× the noise model's{}.",
-        q.blocks,
-        q.block_frames,
+        "σ: the largest of the noise model's and the cluster-robust ones over {}; the cluster-robust σ are up to {:.1}× the noise model's{}.",
+        partitions.join(" and "),
         q.largest_ratio,
         if q.largest_ratio > 2.0 { " (the corners' errors are alike in neighbouring views)" } else { "" }
     );

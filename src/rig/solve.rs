@@ -16,7 +16,7 @@ use tumble_factors::rig::{TargetCorner, TargetGauge};
 use tumble_factors::{bias_random_walk_axes, ImuFactor};
 use tumble_solvers::sophus_lie::Isometry3F64;
 use tumble_solvers::{
-    AutoDiff, Graph, Huber, Key, LmOptions, NoiseModel, Optimizer, RobustCovariances, Values, B, V, X,
+    AutoDiff, Covariances, Graph, Huber, Key, LmOptions, NoiseModel, Optimizer, RobustCovariances, Values, B, V, X,
 };
 
 /// The target's pose `T_WT`.
@@ -396,11 +396,12 @@ pub(super) struct Joint {
     /// The last pass's graph, and its corner factors.
     graph: Graph,
     corners: Vec<CornerEntry>,
-    /// The covariances of `cov_keys`: the noise model's and the cluster-robust.
-    cov: RobustCovariances,
+    /// The covariances of `cov_keys`: the noise model's, then the
+    /// cluster-robust ones over each partition into blocks of frames.
+    covs: Vec<Covariances>,
     cov_keys: Vec<Key>,
-    /// Frames per cluster of the robust covariance.
-    block: usize,
+    /// The partitions of the cluster-robust covariances, as `covs[1..]`.
+    partitions: Vec<super::BlockPartition>,
     /// Every pass converged; iterations over all passes.
     pub converged: bool,
     iterations: usize,
@@ -420,10 +421,7 @@ impl Joint {
     pub(super) fn time_offset(&self, start: &Start, o: &RigOptions) -> Result<(f64, f64), RigError> {
         let td = start.frame_offset + self.offset()?;
         let sigma = if o.estimate_time_offset {
-            [&self.cov.model, &self.cov.robust]
-                .iter()
-                .map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt()))
-                .fold(0.0, f64::max)
+            self.covs.iter().map(|c| c.get(OFFSET).map_or(f64::NAN, |m| m[(0, 0)].sqrt())).fold(0.0, f64::max)
         } else {
             f64::NAN
         };
@@ -504,20 +502,47 @@ fn starting_values(o: &RigOptions, start: &Start) -> Values {
     values
 }
 
-/// A factor's cluster for the robust covariance: the block of `block` frames
-/// of the first frame whose pose, velocity or bias it holds (a corner's
-/// frame, an IMU link's or a bias walk's first); the target's gauge is a
-/// cluster of its own.
-fn clusters(graph: &Graph, block: usize) -> Vec<Option<usize>> {
+/// A factor's cluster for the robust covariance: the first frame whose pose,
+/// velocity or bias it holds (a corner's frame, an IMU link's or a bias
+/// walk's first), grouped into blocks of frames afterwards
+/// ([`robust_partitions`]); the target's gauge is a cluster of its own.
+fn clusters(graph: &Graph) -> Vec<Option<usize>> {
     graph
         .entries()
         .iter()
         .map(|e| {
             let per_frame = |k: &&Key| [X(0), V(0), B(0)].iter().any(|f| f.chr() == k.chr());
             let frame = e.factor.keys().iter().find(per_frame)?;
-            Some(frame.index() as usize / block)
+            Some(frame.index() as usize)
         })
         .collect()
+}
+
+/// Blocks of the coarse partition of the cluster-robust covariance.
+///
+/// Batch means over blocks of √N frames are the most precise when the
+/// corners' errors are correlated over less than a block; errors that follow
+/// the hand's motion (the same view geometry for seconds, an IMU error the
+/// model lacks) stay alike for longer and make them too small. A fixed,
+/// small number of blocks is right whatever the correlation's length, at the
+/// price of a noisier σ (Ibragimov & Müller 2010, "t-statistic based
+/// correlation and heterogeneity robust inference", study 4–16 groups).
+pub const COARSE_BLOCKS: usize = 8;
+
+/// The cluster-robust covariances over blocks of ⌊√N⌋ consecutive frames and
+/// over [`COARSE_BLOCKS`] blocks (when those are longer), from per-frame
+/// clusters.
+fn robust_partitions(cov: &RobustCovariances, frames: usize) -> (Vec<super::BlockPartition>, Vec<Covariances>) {
+    let fine = ((frames as f64).sqrt().floor() as usize).max(1);
+    let coarse = frames.div_ceil(COARSE_BLOCKS);
+    let mut partitions = Vec::new();
+    let mut covs = Vec::new();
+    for block_frames in std::iter::once(fine).chain((coarse > fine).then_some(coarse)) {
+        let (c, _) = cov.regrouped(|frame| frame / block_frames);
+        partitions.push(super::BlockPartition { block_frames, blocks: frames.div_ceil(block_frames) });
+        covs.push(c);
+    }
+    (partitions, covs)
 }
 
 /// Whitened χ² per degree of freedom of the IMU factors `imu_factors` at `values`.
@@ -536,11 +561,12 @@ fn imu_chi2_per_dof(graph: &Graph, values: &Values, imu_factors: &[usize]) -> f6
 /// Stage 6: the joint solve, twice when the corners' rates need the gyro
 /// bias the first solve found; the covariances of the calibration.
 ///
-/// The σ are the larger of the noise model's and the cluster-robust one over
-/// blocks of √N consecutive frames (batch means' rule): corner errors that
-/// depend on the view's geometry (the detector's bias, the target's
-/// flatness, the lens model's misfit) are alike in neighbouring views, and
-/// the corners' scatter alone does not show them.
+/// The σ are the largest of the noise model's and the cluster-robust ones
+/// over blocks of √N consecutive frames (batch means' rule) and over
+/// [`COARSE_BLOCKS`] blocks: corner errors that depend on the view's
+/// geometry (the detector's bias, the target's flatness, the lens model's
+/// misfit) are alike in neighbouring views, and the corners' scatter alone
+/// does not show them.
 pub(super) fn joint_solve(
     input: &RigInput,
     o: &RigOptions,
@@ -553,7 +579,6 @@ pub(super) fn joint_solve(
     let gravity = Vector3::new(0.0, 0.0, -o.gravity);
     let gyro_of = |b: &Vector6<f64>| -> Vector3<f64> { b.fixed_rows::<3>(3).into_owned() };
     let mut gyro_bias: Vec<Vector3<f64>> = start.state.bias.iter().map(gyro_of).collect();
-    let block = ((frames.len() as f64).sqrt().floor() as usize).max(1);
     let mut keys: Vec<Key> = Vec::new();
     let mut solution = starting_values(o, start);
     let (mut converged, mut iterations) = (true, 0);
@@ -567,7 +592,7 @@ pub(super) fn joint_solve(
             keys.push(OFFSET);
         }
         let (sol, summary, c) = Optimizer::new(opts)
-            .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters(&graph, block))
+            .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters(&graph))
             .map_err(|e| RigError::Solver { what: "joint solve", source: e })?;
         progress(&format!(
             "  {} iterations, cost {:.4e} → {:.4e} ({:?}, {:.1} s)",
@@ -594,7 +619,9 @@ pub(super) fn joint_solve(
     }
     let (graph, corners, cov, imu_chi2_per_dof) = last.ok_or_else(|| RigError::Internal("no solve ran".into()))?;
     let cov = cov.map_err(|e| RigError::Solver { what: "covariances", source: e })?;
-    Ok(Joint { solution, graph, corners, cov, cov_keys: keys, block, converged, iterations, imu_chi2_per_dof })
+    let (partitions, robust) = robust_partitions(&cov, frames.len());
+    let covs = std::iter::once(cov.model).chain(robust).collect();
+    Ok(Joint { solution, graph, corners, covs, cov_keys: keys, partitions, converged, iterations, imu_chi2_per_dof })
 }
 
 /// Stage 7, one camera: its calibration with σ (the larger of the two
@@ -616,7 +643,7 @@ pub(super) fn camera_result(
     let sd = |m: &Matrix3<f64>| Vector3::new(m[(0, 0)].sqrt(), m[(1, 1)].sqrt(), m[(2, 2)].sqrt());
     let (mut rotation_sigma, mut translation_sigma) = (Vector3::zeros(), Vector3::zeros());
     let mut model_sigma = [0.0f64; 8];
-    for cv in [&joint.cov.model, &joint.cov.robust] {
+    for cv in &joint.covs {
         let ce = cv.get(extrinsic(c)).ok_or_else(|| RigError::Internal("no covariance of T_BC".into()))?;
         // Tangent [ω, ν] on the right: rotation about camera axes, translation along them.
         rotation_sigma = rotation_sigma.sup(&sd(&(r * ce.fixed_view::<3, 3>(0, 0) * r.transpose())));
@@ -659,16 +686,17 @@ pub(super) fn results(
     mut notes: Vec<String>,
 ) -> Result<RigResult, RigError> {
     let solution = &joint.solution;
-    let cov = &joint.cov;
     let mut largest_ratio: f64 = 0.0;
     for k in &joint.cov_keys {
-        if let (Some(m), Some(r)) = (cov.model.get(*k), cov.robust.get(*k)) {
-            for i in 0..m.nrows() {
-                largest_ratio = largest_ratio.max((r[(i, i)] / m[(i, i)]).sqrt());
+        for robust in &joint.covs[1..] {
+            if let (Some(m), Some(r)) = (joint.covs[0].get(*k), robust.get(*k)) {
+                for i in 0..m.nrows() {
+                    largest_ratio = largest_ratio.max((r[(i, i)] / m[(i, i)]).sqrt());
+                }
             }
         }
     }
-    let sigma_source = super::SigmaSource { block_frames: joint.block, blocks: cov.clusters, largest_ratio };
+    let sigma_source = super::SigmaSource { partitions: joint.partitions.clone(), largest_ratio };
     let (time_offset_s, time_offset_sigma_s) = joint.time_offset(start, o)?;
     let cameras =
         (0..input.cameras.len()).map(|c| camera_result(input, o, start, joint, c)).collect::<Result<Vec<_>, _>>()?;
