@@ -1,13 +1,14 @@
 //! Evaluate the estimator on every real EuRoC recording the project has and
 //! print one table: each whole sequence under `euroc/full_imu/` (real IMU,
-//! a simulated camera along the ground truth) and V1_01 with EqVIO's real
+//! a simulated stereo camera along the ground truth, EuRoC's two cameras 0.11 m
+//! apart) and V1_01 with EqVIO's real
 //! feature tracks (first 30 s), against EuRoC's ground truth with biases; and
 //! `imu_april` (72 s of real IMU in front of an AprilGrid, its real corners as
 //! features, EuRoC's calibration of the cameras) against a per-frame PnP of
 //! the corners with that calibration (no biases to compare; aligned in 6 DOF,
 //! as the target's tilt against gravity is known only to the accelerometer's bias).
 //!
-//! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--inverse-depth-only] [--seed N]
+//! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--inverse-depth-only] [--mono] [--seed N]
 //! [--noise-in-flight] [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--from SECONDS] [--only TEXT] [--out DIR]
 //! [--markdown]`
 //!
@@ -24,7 +25,8 @@
 //! noise to the static start's spread, `--zoh` integrates with the zero-order
 //! hold instead of the midpoint rule, `--fixed-noise` does not measure the
 //! noise in motion, `--inverse-depth-only` fixes each landmark's bearing at
-//! its anchor pixel (VINS-Mono's landmarks), `--walk-scale G,A` multiplies the bias random walks given
+//! its anchor pixel (VINS-Mono's landmarks), `--mono` simulates cam0
+//! alone, `--walk-scale G,A` multiplies the bias random walks given
 //! (gyro, accelerometer; `docs/vio.md`, "The bias random walk in flight"),
 //! `--noise-in-flight` gives each case the noise its IMU shows in flight on
 //! the *other* sequences under `full_imu/` (`tumble allan --groundtruth` on
@@ -64,7 +66,8 @@ impl Args {
     fn parse() -> Result<Args, String> {
         let args: Vec<String> = std::env::args().skip(1).collect();
         let value = |f: &str| args.iter().position(|a| a == f).and_then(|i| args.get(i + 1)).cloned();
-        const FLAGS: [&str; 6] = [
+        const FLAGS: [&str; 7] = [
+            "--mono",
             "--noise-from-static",
             "--noise-in-flight",
             "--zoh",
@@ -149,6 +152,9 @@ fn main() {
     }
 }
 
+/// The distance between EuRoC's cam0 and cam1 \[m\] (their `sensor.yaml`s: 0.1101).
+const EUROC_BASELINE_M: f64 = 0.11;
+
 /// Every case: each whole sequence with a simulated camera, V1_01 with
 /// EqVIO's tracks, imu_april against its PnP truth (and with its camera
 /// estimated online from EuRoC's calibration and from a wrong one).
@@ -156,7 +162,12 @@ fn cases(args: &Args, data: &Path, seqs: Vec<PathBuf>, opts: &VioOptions) -> Vec
     let mut cases: Vec<(String, Case, VioOptions)> = Vec::new();
     for s in seqs {
         let name = format!("{} (sim. camera)", s.file_name().unwrap_or_default().to_string_lossy());
-        let source = VioSource { simulate_camera: Some(args.seed), ..Default::default() };
+        let baseline = if args.has("--mono") { 0.0 } else { EUROC_BASELINE_M };
+        let source = VioSource {
+            simulate_camera: Some(args.seed),
+            simulated_stereo_baseline_m: Some(baseline),
+            ..Default::default()
+        };
         cases.push((name, Case::Source(s, Box::new(source)), opts.clone()));
     }
     let eqvio = data.join("eqvio_V1_01_30s.csv");

@@ -106,11 +106,11 @@ pub struct EstimatorArgs {
     /// from the window's IMU residuals (and raising it where they show more).
     #[arg(long)]
     pub fixed_noise: bool,
-    /// Also put cam1's matches into the sliding window (not only into the
-    /// initialization): more landmarks and constraints, about half the speed;
-    /// on four simulated walks it was not consistently more accurate.
+    /// Use cam1's matches for the initialization only, not in the sliding
+    /// window (by default they enter it: the baseline fixes far landmarks'
+    /// depths; about 1.5× faster without, and less accurate — docs/vio.md).
     #[arg(long)]
-    pub stereo_window: bool,
+    pub stereo_init_only: bool,
     /// VINS-Mono's landmarks: the bearing fixed at the anchor pixel and the
     /// inverse depth alone estimated, instead of both (OpenVINS' and Basalt's
     /// three parameters, the default). About 1.4× faster, but the anchor
@@ -152,7 +152,7 @@ impl EstimatorArgs {
         set(&mut o.gates.triangulation_px, self.triangulation_gate);
         set(&mut o.noise.gravity, gravity);
         o.window.solve_every_frame |= self.solve_every_frame;
-        o.window.stereo |= self.stereo_window;
+        o.window.stereo &= !self.stereo_init_only;
         o.window.landmark_bearings &= !self.inverse_depth_only;
         o.noise.from_static |= self.noise_from_static;
         o.noise.measure_in_motion &= !self.fixed_noise;
@@ -215,6 +215,12 @@ pub struct VioArgs {
     /// simulated vision; an evaluation aid for IMU + ground-truth recordings).
     #[arg(long)]
     simulate_camera: bool,
+    /// The simulated camera's second camera, this far to the right of the
+    /// first [m] (0: one camera). By default as the dataset has them: the
+    /// distance between cam0 and cam1 when both have a sensor.yaml (EuRoC:
+    /// 0.11), else one camera.
+    #[arg(long, value_name = "METRES", requires = "simulate_camera")]
+    simulate_stereo: Option<f64>,
     /// Seed of the simulated camera's landmarks and noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -250,6 +256,7 @@ impl VioArgs {
             calibration: cal,
             groundtruth: self.groundtruth.clone(),
             simulate_camera: self.simulate_camera.then_some(self.seed),
+            simulated_stereo_baseline_m: self.simulate_stereo,
             mono: self.mono,
             frontend: self.frontend.options(),
             frontend_dir: out.clone(),
@@ -258,7 +265,14 @@ impl VioArgs {
         let vin = open_input(&input, &source)?;
         if let (Some(st), Some(baseline)) = (&vin.stereo, vin.stereo_baseline_m()) {
             let matches: usize = st.features.iter().map(Vec::len).sum();
-            println!("stereo: {matches} matches in cam1 ({baseline:.3} m from cam0) for the initialization (--mono to ignore)");
+            let used = if opts.window.stereo {
+                "the initialization and the window (--stereo-init-only: the initialization only"
+            } else {
+                "the initialization (without --stereo-init-only: the window too"
+            };
+            println!(
+                "stereo: {matches} matches in cam1 ({baseline:.3} m from cam0) for {used}; --mono to ignore them)"
+            );
         }
         let given = self.noise.as_deref().map(ImuNoise::read).transpose()?;
         // --noise, else a --config file's noise.imu, else the dataset's, else the defaults.

@@ -21,6 +21,11 @@ pub struct VioSource {
     /// No camera data: a simulated camera (EuRoC cam0 model) flies the ground
     /// truth, with this seed for its landmarks and noise.
     pub simulate_camera: Option<u64>,
+    /// The simulated camera's second camera, this far to the right of the
+    /// first \[m\] (`Some(0.0)`: one camera). `None`: as the dataset has
+    /// them — the distance between `cam0` and `cam1` when both have a
+    /// `sensor.yaml` (EuRoC: 0.110 m), else one camera.
+    pub simulated_stereo_baseline_m: Option<f64>,
     /// Ignore `cam0/tracks_cam1.csv` (initialize from cam0 alone).
     pub mono: bool,
     /// The frontend's settings, used when cam0 has images but no `tracks.csv`.
@@ -51,6 +56,9 @@ pub enum OpenError {
     /// A file of the input is wrong (named with its line).
     #[error(transparent)]
     Input(#[from] InputError),
+    /// An option of the source is invalid.
+    #[error("{0}")]
+    Option(String),
     /// The visual frontend failed on the images.
     #[error("{}: the visual frontend failed: {message}", path.display())]
     Frontend {
@@ -88,8 +96,17 @@ impl VioInput {
                 ));
             }
             if let Some(seed) = source.simulate_camera {
-                let cam = crate::sim::CameraSettings::default();
-                notes.push(format!("camera: simulated (EuRoC cam0 model) along the ground truth, seed {seed}"));
+                let baseline = source.simulated_stereo_baseline_m.unwrap_or_else(|| dataset_baseline(&ds));
+                let cam = crate::sim::CameraSettings { stereo_baseline_m: baseline, ..Default::default() };
+                cam.check().map_err(|e| OpenError::Option(format!("the simulated camera: {e}")))?;
+                notes.push(format!(
+                    "camera: simulated (EuRoC cam0 model{}) along the ground truth, seed {seed}",
+                    if baseline > 0.0 {
+                        format!(", and a second camera {baseline:.3} m to its right")
+                    } else {
+                        String::new()
+                    }
+                ));
                 let (input, smoothing) = VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?;
                 notes.extend(smoothing.into_iter().map(|n| format!("camera: {n}")));
                 input
@@ -128,5 +145,15 @@ impl VioInput {
         input.name = path.display().to_string();
         warnings.extend(input.limit_to_imu()?);
         Ok(OpenedVio { input, notes, warnings, frontend })
+    }
+}
+
+/// The distance between the dataset's `cam0` and `cam1` \[m\], when both
+/// have their pose in the body frame (`sensor.yaml`); 0 otherwise.
+fn dataset_baseline(ds: &crate::io::asl::AslDataset) -> f64 {
+    let pose = |name: &str| ds.cameras.iter().find(|c| c.name == name).and_then(|c| c.t_bs);
+    match (pose("cam0"), pose("cam1")) {
+        (Some(a), Some(b)) => (a.translation.vector - b.translation.vector).norm(),
+        _ => 0.0,
     }
 }

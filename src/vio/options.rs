@@ -66,7 +66,10 @@ pub struct WindowOptions {
     /// With a second camera ([`super::VioInput::stereo`]): also put its matches into
     /// the window (reprojections from cam1, and at a landmark's anchor a
     /// factor on its depth alone; single-frame stereo tracks triangulated).
-    /// Off, the second camera serves the initialization only.
+    /// On by default: the baseline fixes far landmarks' depths, which the
+    /// motion's parallax alone does not in a large hall (docs/vio.md).
+    /// Off, or with the online camera calibration, the second camera serves
+    /// the initialization only.
     pub stereo: bool,
     /// Estimate each landmark's bearing with its inverse depth (three
     /// parameters, the anchor observation a residual like every other: the
@@ -271,7 +274,7 @@ impl Default for WindowOptions {
             keyframe_parallax_px: 15.0,
             keyframe_max_interval_s: 1.0,
             solve_every_frame: false,
-            stereo: false,
+            stereo: true,
             landmark_bearings: true,
         }
     }

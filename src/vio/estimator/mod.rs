@@ -15,7 +15,7 @@ use super::online_calib::{CameraEstimate, CameraPrior};
 use super::rest::RestDetector;
 use super::startup::Startup;
 use super::window::{InitState, StateValues, Window};
-use super::{Init, VioError, VioInput, VioOptions};
+use super::{Init, VioError, VioInput, VioOptions, WindowOptions};
 use crate::model::geometry::parts;
 use nalgebra::{UnitQuaternion, Vector3, Vector6};
 use std::time::Instant;
@@ -386,7 +386,7 @@ impl<'a> Estimator<'a> {
     /// Remove the newest state (a frame that is not a keyframe).
     fn drop_newest(&mut self) {
         let sid = self.window.drop_newest();
-        self.landmarks.remove_state(sid);
+        self.landmarks.remove_newest_state(sid, &mut self.window.values);
     }
 
     /// One Levenberg–Marquardt solve of `graph` from `values` with the
@@ -562,15 +562,25 @@ pub fn run_observed(
 ) -> Result<VioResult, VioError> {
     opts.validate()?;
     input.check()?;
-    if opts.camera.online() && opts.window.stereo && input.stereo.is_some() {
-        return Err(VioError::Invalid(
-            "the online camera calibration (camera.extrinsics, camera.time_offset) estimates the first camera alone: \
-             run it without the second camera in the window (--mono)"
-                .into(),
-        ));
-    }
+    // The online camera calibration estimates the first camera alone: the
+    // second one then serves the initialization only.
+    let init_only = opts.camera.online() && opts.window.stereo && input.stereo.is_some();
+    let mono_window;
+    let opts = if init_only {
+        mono_window = VioOptions { window: WindowOptions { stereo: false, ..opts.window.clone() }, ..opts.clone() };
+        &mono_window
+    } else {
+        opts
+    };
     let t0 = Instant::now();
     let mut est = Estimator::new(input, opts);
+    if init_only {
+        est.warnings.push(
+            "the online camera calibration estimates the first camera alone: the second camera's matches serve \
+             the initialization only, not the window"
+                .into(),
+        );
+    }
     let mut out = VioResult::default();
     for i in 0..input.frames.len() {
         if let Some(e) = est.process(i) {
