@@ -518,25 +518,18 @@ impl Landmarks {
         }
     }
 
-    /// Remove the newest state `sid` (a frame that is not a keyframe) from
-    /// every track. A landmark anchored in it (a stereo track triangulated in
-    /// that frame alone) loses its anchor: it leaves `values` and its track
-    /// is triangulated again from the observations left (kept, it would
-    /// stay in the window without its anchor, never projected nor
-    /// triangulated again — its track lost to the window).
-    pub fn remove_newest_state(&mut self, sid: u64, values: &mut Values) {
+    /// Remove state `sid`'s observations from every track. A landmark still
+    /// anchored in it (a stereo track triangulated in a frame then dropped
+    /// as not a keyframe; those anchored in the oldest state are forgotten
+    /// before it is marginalized) leaves `values`, and its track is
+    /// triangulated again from the observations left: kept, it would stay in
+    /// the window without its anchor, never projected nor triangulated again.
+    pub fn remove_state(&mut self, sid: u64, values: &mut Values) {
         for tr in self.tracks.values_mut() {
             if let Some((lid, _)) = tr.landmark.filter(|&(_, anchor)| anchor == sid) {
                 values.remove(L(lid));
                 tr.landmark = None;
             }
-        }
-        self.remove_state(sid);
-    }
-
-    /// Remove state `sid`'s observations from every track.
-    pub fn remove_state(&mut self, sid: u64) {
-        for tr in self.tracks.values_mut() {
             tr.obs.retain(|o| o.sid != sid);
         }
     }
@@ -632,7 +625,7 @@ mod tests {
         lm.triangulate(&inp, &seen, &mut values, &VioOptions::default());
         let (lid, _) = lm.tracks[&7].landmark.expect("triangulated");
         lm.tracks.get_mut(&7).expect("track").landmark = Some((lid, 4));
-        lm.remove_newest_state(4, &mut values);
+        lm.remove_state(4, &mut values);
         assert!(lm.tracks[&7].landmark.is_none() && !values.contains(L(lid)));
         lm.triangulate(&inp, &seen[..4], &mut values, &VioOptions::default());
         assert_eq!(lm.anchored_in(0).len(), 1, "triangulated again from the four frames left");
@@ -653,7 +646,7 @@ mod tests {
     fn two_disagreeing_rays_wait() {
         let (inp, mut values, mut lm) = five_views(40.0);
         for sid in [1, 3, 4] {
-            lm.remove_state(sid);
+            lm.remove_state(sid, &mut values);
         }
         lm.triangulate(&inp, &[0, 2], &mut values, &VioOptions::default());
         assert_eq!(lm.count(), 0);

@@ -89,7 +89,7 @@ pub(crate) fn marginalize_oldest(
     let m = marginalize(&graph, &window.values, &keys)?;
     window.remove_oldest(m.prior, &keys);
     landmarks.forget(&anchored.iter().map(|&(id, _)| id).collect::<Vec<_>>());
-    landmarks.remove_state(old);
+    landmarks.remove_state(old, &mut window.values);
     Ok(())
 }
 

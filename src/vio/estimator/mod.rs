@@ -386,7 +386,7 @@ impl<'a> Estimator<'a> {
     /// Remove the newest state (a frame that is not a keyframe).
     fn drop_newest(&mut self) {
         let sid = self.window.drop_newest();
-        self.landmarks.remove_newest_state(sid, &mut self.window.values);
+        self.landmarks.remove_state(sid, &mut self.window.values);
     }
 
     /// One Levenberg–Marquardt solve of `graph` from `values` with the
