@@ -80,9 +80,9 @@ pub struct Marginalization {
     pub removed_factors: Vec<usize>,
 }
 
-/// Eigenvalues below this (relative to the largest) are dropped from the prior
-/// and from the pseudo-inverses of the marginalized blocks; every eigen-decomposition
-/// is of the information scaled to a unit diagonal (see `ScaledEigen`).
+/// Pivots below this are dropped from the prior and from the generalized
+/// inverses of the marginalized blocks: every factorization is a pivoted
+/// Cholesky of the information scaled to a unit diagonal (see `ScaledCholesky`).
 pub const PRIOR_RANK_TOLERANCE: f64 = 1e-10;
 
 /// Marginalize `keys` out of `graph` at `values`: the factors touching them are
@@ -140,7 +140,7 @@ pub fn marginalize(graph: &Graph, values: &Values, keys: &[Key]) -> Result<Margi
         start += d;
     }
     let (hstar, gstar) = schur_complement(&h, &g, ni..nm)?;
-    let (r, e) = ScaledEigen::new(&hstar, "marginal information")?.sqrt_with_offset(n - nm, &gstar);
+    let (r, e) = ScaledCholesky::new(&hstar, "marginal information")?.sqrt_with_offset(n - nm, &gstar);
     let sep_keys: Vec<Key> = order[keys.len()..].to_vec();
     let anchors = sep_keys.iter().map(|k| values.get_dyn(*k).map(|v| v.clone_box())).collect::<Result<_, _>>()?;
     Ok(Marginalization {
@@ -199,7 +199,7 @@ fn eliminate_block(
     let n = h.nrows();
     let coupled: Vec<usize> = (rest..n).filter(|&r| block.clone().any(|c| h[(r, c)] != 0.0)).collect();
     let hbb = h.view((block.start, block.start), (d, d)).into_owned();
-    let inv = ScaledEigen::new(&hbb, "information of a marginalized variable")?.pseudo_inverse(d);
+    let inv = ScaledCholesky::new(&hbb, "information of a marginalized variable")?.pseudo_inverse(d);
     // W = H_rb H_bb⁺ on the coupled rows.
     let w = DMatrix::from_fn(coupled.len(), d, |a, j| {
         (0..d).map(|k| h[(coupled[a], block.start + k)] * inv[(k, j)]).sum::<f64>()
@@ -226,7 +226,7 @@ fn schur_complement(
     let hmm = h.view((m0, m0), (nm, nm)).into_owned();
     let hms = h.view((m0, m.end), (nm, ns)).into_owned();
     let gm = g.rows(m0, nm).into_owned();
-    let hmm_inv = ScaledEigen::new(&hmm, "information of the marginalized variables")?.pseudo_inverse(nm);
+    let hmm_inv = ScaledCholesky::new(&hmm, "information of the marginalized variables")?.pseudo_inverse(nm);
     let w = hms.transpose() * hmm_inv;
     Ok((hss - &w * &hms, gs - w * gm))
 }
@@ -266,24 +266,36 @@ fn add_normal_equations(
     Ok(cost)
 }
 
-/// The eigen-decomposition of the symmetric positive semi-definite `h` (an
-/// information matrix) scaled to a unit diagonal (Jacobi): `h = S⁻¹ V Λ Vᵀ S⁻¹`
-/// on its rows with a positive diagonal (`live`, with `scale` = S = diag^-½);
-/// rows with a zero diagonal (variables no factor constrains) are left out.
+/// The pivoted Cholesky factorization of the symmetric positive
+/// semi-definite `h` (an information matrix) scaled to a unit diagonal
+/// (Jacobi): `S h S = P L Lᵀ Pᵀ` on its rows with a positive diagonal
+/// (`live`, with `scale` = S = diag^-½), `L` lower-trapezoidal of the rank
+/// found, `P` the order of the pivots. Rows with a zero diagonal (variables no
+/// factor constrains) are left out.
+///
+/// Each step takes the largest diagonal left as its pivot and stops when it
+/// is at most [`PRIOR_RANK_TOLERANCE`] (the scaled diagonal is 1): what is
+/// left then is a semi-definite remainder whose eigenvalues are all below
+/// `m` × that tolerance, dropped as the directions the information does not
+/// determine (a sliding window's gauge), and rounding's negative ones with
+/// them. A third of the cost of a full pivoted LU and ~20× less than an
+/// eigen-decomposition of the same matrix; any generalized inverse gives the
+/// same Schur complement of a semi-definite matrix, and any square root the
+/// same prior up to an orthogonal rotation of its rows.
+///
 /// Without the scaling, information spanning ten orders of magnitude (a gyro
-/// bias next to an unobserved landmark) could make the decomposition return
-/// NaN, and a prior silently lost every row.
-struct ScaledEigen {
+/// bias next to an unobserved landmark) would be truncated by its units.
+struct ScaledCholesky {
     live: Vec<usize>,
     scale: Vec<f64>,
-    eigenvalues: DVector<f64>,
-    eigenvectors: DMatrix<f64>,
-    /// Indices of the eigenvalues above [`PRIOR_RANK_TOLERANCE`] × the largest.
-    kept: Vec<usize>,
+    /// Pivot order: position `i` of the factorization is live row `pivots[i]`.
+    pivots: Vec<usize>,
+    /// `L` (m × rank), in pivot order.
+    l: DMatrix<f64>,
 }
 
-impl ScaledEigen {
-    fn new(h: &DMatrix<f64>, what: &str) -> Result<ScaledEigen, SolveError> {
+impl ScaledCholesky {
+    fn new(h: &DMatrix<f64>, what: &str) -> Result<ScaledCholesky, SolveError> {
         if !h.iter().all(|x| x.is_finite()) {
             return Err(SolveError::Singular(format!("the {what} is not finite")));
         }
@@ -292,52 +304,87 @@ impl ScaledEigen {
         let m = live.len();
         let a =
             DMatrix::from_fn(m, m, |r, c| 0.5 * (h[(live[r], live[c])] + h[(live[c], live[r])]) * scale[r] * scale[c]);
-        // Nothing constrained (nalgebra's decomposition needs a row).
-        let (eigenvalues, eigenvectors) = match m {
-            0 => (DVector::zeros(0), DMatrix::zeros(0, 0)),
-            _ => {
-                let eig = nalgebra::SymmetricEigen::new(a);
-                (eig.eigenvalues, eig.eigenvectors)
+        let mut pivots: Vec<usize> = (0..m).collect();
+        let mut l = DMatrix::<f64>::zeros(m, m);
+        // The diagonal left after the steps so far, in pivot order.
+        let mut left: Vec<f64> = (0..m).map(|i| a[(i, i)]).collect();
+        let mut rank = 0;
+        while rank < m {
+            let k = rank;
+            let p = (k..m).max_by(|&i, &j| left[i].total_cmp(&left[j])).unwrap_or(k);
+            if left[p].is_nan() || left[p] <= PRIOR_RANK_TOLERANCE {
+                break;
             }
-        };
-        if !eigenvalues.iter().chain(eigenvectors.iter()).all(|x| x.is_finite()) {
-            return Err(SolveError::Singular(format!("the eigen-decomposition of the {what} failed")));
+            pivots.swap(k, p);
+            left.swap(k, p);
+            l.swap_rows(k, p);
+            let d = left[k].sqrt();
+            l[(k, k)] = d;
+            for i in k + 1..m {
+                let dot: f64 = (0..k).map(|j| l[(i, j)] * l[(k, j)]).sum();
+                let v = (a[(pivots[i], pivots[k])] - dot) / d;
+                l[(i, k)] = v;
+                left[i] -= v * v;
+            }
+            rank += 1;
         }
-        let lmax = eigenvalues.amax().max(f64::MIN_POSITIVE);
-        let kept = (0..m).filter(|&i| eigenvalues[i] > PRIOR_RANK_TOLERANCE * lmax).collect();
-        Ok(ScaledEigen { live, scale, eigenvalues, eigenvectors, kept })
+        if !l.iter().all(|x| x.is_finite()) {
+            return Err(SolveError::Singular(format!("the factorization of the {what} failed")));
+        }
+        let l = l.columns(0, rank).into_owned();
+        Ok(ScaledCholesky { live, scale, pivots, l })
     }
 
-    /// The pseudo-inverse of `h` (n × n): zero on the left-out rows.
+    fn rank(&self) -> usize {
+        self.l.ncols()
+    }
+
+    /// `L₁₁⁻¹ b` for the leading rank × rank block of `L` (forward substitution).
+    fn forward(&self, b: &mut [f64]) {
+        for i in 0..self.rank() {
+            let s: f64 = (0..i).map(|j| self.l[(i, j)] * b[j]).sum();
+            b[i] = (b[i] - s) / self.l[(i, i)];
+        }
+    }
+
+    /// A generalized inverse of `h` (n × n): `S P (L₁₁ L₁₁ᵀ)⁻¹ Pᵀ S` on the
+    /// pivots kept, zero elsewhere (`h G h = h` on the rank found).
     fn pseudo_inverse(&self, n: usize) -> DMatrix<f64> {
+        let r = self.rank();
+        // W = L₁₁⁻¹ column by column, then (L₁₁ L₁₁ᵀ)⁻¹ = Wᵀ W.
+        let mut w = DMatrix::<f64>::zeros(r, r);
+        for c in 0..r {
+            let mut e = vec![0.0; r];
+            e[c] = 1.0;
+            self.forward(&mut e);
+            w.column_mut(c).copy_from_slice(&e);
+        }
+        let g11 = w.tr_mul(&w);
         let mut inv = DMatrix::zeros(n, n);
-        for &k in &self.kept {
-            let v = self.eigenvectors.column(k);
-            let l = self.eigenvalues[k];
-            for (r, &i) in self.live.iter().enumerate() {
-                let vi = v[r] * self.scale[r] / l;
-                for (c, &j) in self.live.iter().enumerate() {
-                    inv[(i, j)] += vi * v[c] * self.scale[c];
-                }
+        for a in 0..r {
+            let (ra, sa) = (self.live[self.pivots[a]], self.scale[self.pivots[a]]);
+            for b in 0..r {
+                let (rb, sb) = (self.live[self.pivots[b]], self.scale[self.pivots[b]]);
+                inv[(ra, rb)] = sa * g11[(a, b)] * sb;
             }
         }
         inv
     }
 
-    /// A square root `R` of `h` (rank × n, RᵀR = h on the kept eigenvalues)
-    /// and the offset `e` with Rᵀe = `g` (the gradient) on the same subspace.
+    /// A square root `R` of `h` (rank × n, RᵀR = h on the rank found) and the
+    /// offset `e` with Rᵀe = `g` (the gradient) on the same subspace.
     fn sqrt_with_offset(&self, n: usize, g: &DVector<f64>) -> (DMatrix<f64>, DVector<f64>) {
-        let mut r = DMatrix::zeros(self.kept.len(), n);
-        let mut e = DVector::zeros(self.kept.len());
-        for (row, &k) in self.kept.iter().enumerate() {
-            let v = self.eigenvectors.column(k);
-            let l = self.eigenvalues[k].sqrt();
-            for (c, &j) in self.live.iter().enumerate() {
-                r[(row, j)] = l * v[c] / self.scale[c];
-                e[row] += v[c] * self.scale[c] * g[j] / l;
+        let r = self.rank();
+        let mut sqrt = DMatrix::zeros(r, n);
+        for (i, &p) in self.pivots.iter().enumerate() {
+            let col = self.live[p];
+            for k in 0..r.min(i + 1) {
+                sqrt[(k, col)] = self.l[(i, k)] / self.scale[p];
             }
         }
-        (r, e)
+        let mut e: Vec<f64> = self.pivots[..r].iter().map(|&p| self.scale[p] * g[self.live[p]]).collect();
+        self.forward(&mut e);
+        (sqrt, DVector::from_vec(e))
     }
 }
 
@@ -632,4 +679,48 @@ pub fn information_log_det(graph: &Graph, values: &Values) -> Result<(f64, f64),
     let chol = nalgebra::Cholesky::new(h)
         .ok_or_else(|| SolveError::Singular("the information of the free variables is singular".into()))?;
     Ok((chi2, 2.0 * chol.l_dirty().diagonal().iter().map(|d| d.ln()).sum::<f64>()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `(S Jᵀ J S)` for Jacobian rows `rows` of four unknowns, the third of
+    /// which no row constrains, scaled by S six orders of magnitude apart.
+    fn information(rows: &[[f64; 4]]) -> DMatrix<f64> {
+        let j = DMatrix::from_fn(rows.len(), 4, |r, c| rows[r][c]);
+        let s = DMatrix::from_diagonal(&DVector::from_vec(vec![1e3, 1.0, 1.0, 1e-3]));
+        &s * j.tr_mul(&j) * &s
+    }
+
+    const RANK_TWO: [[f64; 4]; 2] = [[1.0, 2.0, 0.0, 0.5], [0.0, 1.0, 0.0, -1.0]];
+
+    #[test]
+    fn the_factor_is_a_square_root_and_a_generalized_inverse() {
+        let h = information(&RANK_TWO);
+        let f = ScaledCholesky::new(&h, "test").unwrap();
+        assert_eq!(f.rank(), 2);
+        let scale = h.amax();
+        // A gradient in the range of h: Rᵀe reproduces it.
+        let g = &h * DVector::from_vec(vec![0.3, -1.0, 5.0, 2.0]);
+        let (r, e) = f.sqrt_with_offset(4, &g);
+        assert!((r.tr_mul(&r) - &h).amax() < 1e-12 * scale, "{}", (r.tr_mul(&r) - &h).amax());
+        assert!((r.tr_mul(&e) - &g).amax() < 1e-12 * g.amax());
+        let inv = f.pseudo_inverse(4);
+        assert!((&h * &inv * &h - &h).amax() < 1e-9 * scale, "{}", (&h * &inv * &h - &h).amax());
+        assert!(inv.row(2).iter().chain(inv.column(2).iter()).all(|x| *x == 0.0));
+    }
+
+    #[test]
+    fn information_below_the_tolerance_is_dropped_and_non_finite_refused() {
+        // A third row 10⁻⁹ of the others adds an eigenvalue ~10⁻¹⁸ of theirs.
+        let h = information(&[RANK_TWO[0], RANK_TWO[1], [0.0, 0.0, 0.0, 1e-9]]);
+        assert_eq!(ScaledCholesky::new(&h, "test").unwrap().rank(), 2);
+        let h = information(&[RANK_TWO[0], RANK_TWO[1], [0.0, 0.0, 0.0, 1e-3]]);
+        assert_eq!(ScaledCholesky::new(&h, "test").unwrap().rank(), 3);
+        let mut h = information(&RANK_TWO);
+        h[(0, 1)] = f64::NAN;
+        assert!(ScaledCholesky::new(&h, "test").is_err());
+        assert_eq!(ScaledCholesky::new(&DMatrix::zeros(0, 0), "test").unwrap().rank(), 0);
+    }
 }

@@ -127,6 +127,52 @@ fn a_minimum_with_identical_columns_is_converged() {
     assert!((x[0] - 0.2578).abs() < 1e-3 && (x[1] - 0.2578).abs() < 1e-3, "{x:?}");
 }
 
+/// A straight line `y = p₀ + p₁ x` through scattered points: a quadratic cost.
+struct Line {
+    keys: Vec<Key>,
+    x: f64,
+    y: f64,
+}
+
+impl AutoDiffResidual<2> for Line {
+    fn keys(&self) -> &[Key] {
+        &self.keys
+    }
+    fn residual_dim(&self) -> usize {
+        1
+    }
+    fn residual<T: Real>(&self, p: &[&[T]]) -> Vec<T> {
+        vec![T::from(self.y) - p[0][0] - p[0][1] * T::from(self.x)]
+    }
+}
+
+/// An anytime solve that stops where the model predicts less than the
+/// tolerance ends at the same minimum as one that tries that last step, and
+/// tries one step fewer (each tried step is an evaluation of every factor):
+/// on a quadratic cost the first step lands on the minimum, where the next
+/// one's model decrease is rounding.
+#[test]
+fn a_step_the_model_says_gains_nothing_is_not_tried() {
+    let mut g = Graph::new();
+    for (x, y) in [(0.0, 1.1), (1.0, 2.9), (2.0, 5.2), (3.0, 6.8)] {
+        g.add(AutoDiff::new(Line { keys: vec![X(0)], x, y }), NoiseModel::Unit);
+    }
+    let mut v = Values::new();
+    v.insert(X(0), Vector2::new(0.0, 0.0));
+    let anytime = LmOptions { function_tolerance: 1e-6, check_stationarity: false, ..LmOptions::default() };
+    let solve = |o: LmOptions| {
+        let (sol, s) = Optimizer::new(o).optimize(&g, &v).unwrap();
+        (*sol.get::<Vector2<f64>>(X(0)).unwrap(), s)
+    };
+    let (b_tried, tried) = solve(anytime.clone());
+    let (b, s) = solve(LmOptions { stop_on_predicted_decrease: true, ..anytime });
+    assert_eq!(s.termination, Termination::FunctionTolerance);
+    // Within the damping of the first step (10⁻⁸ of the curvature).
+    assert!((b - b_tried).norm() < 1e-6 * b.norm(), "{b:?} against {b_tried:?}");
+    assert!((s.final_cost / tried.final_cost - 1.0).abs() < 1e-9, "{} against {}", s.final_cost, tried.final_cost);
+    assert_eq!((s.log.len(), tried.log.len()), (1, 2), "steps tried");
+}
+
 /// Options no solve can honour are refused before any work, naming the option.
 #[test]
 fn bad_options_are_refused_by_name() {
@@ -139,6 +185,7 @@ fn bad_options_are_refused_by_name() {
         (LmOptions { initial_lambda: 0.0, ..LmOptions::default() }, "initial_lambda"),
         (LmOptions { min_lambda_decrease: 1.5, ..LmOptions::default() }, "min_lambda_decrease"),
         (LmOptions { parameter_tolerance: f64::NAN, ..LmOptions::default() }, "parameter_tolerance"),
+        (LmOptions { stop_on_predicted_decrease: true, ..LmOptions::default() }, "stop_on_predicted_decrease"),
     ] {
         let e = Optimizer::new(o).optimize(&g, &v).unwrap_err().to_string();
         assert!(e.contains(name), "{e}");

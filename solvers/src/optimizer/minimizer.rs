@@ -189,11 +189,14 @@ impl<'a> Minimizer<'a> {
                 Ok(false) => {}
                 Err(DampingExhausted) => return Ok(Outcome::Stop(Termination::NoProgress)),
             }
+            let predicted = predicted_decrease(&delta, &p.g, &hd);
+            if self.model_says_stop(predicted, strategy) {
+                return Ok(Outcome::Stop(Termination::FunctionTolerance));
+            }
             let step_norm = delta.iter().map(|v| v * v).sum::<f64>().sqrt();
             let small_step = step_norm <= o.parameter_tolerance * (p.x_norm + o.parameter_tolerance);
             let trial_cost = self.try_step(&delta);
             let linearized = trial_cost.is_some();
-            let predicted = predicted_decrease(&delta, &p.g, &hd);
             let (new_cost, accepted, rho) = match trial_cost {
                 Some(c) => {
                     let rho = if predicted > 0.0 { (self.cost - c) / predicted } else { -1.0 };
@@ -223,6 +226,16 @@ impl<'a> Minimizer<'a> {
                 return Ok(Outcome::Stop(Termination::NoProgress));
             }
         }
+    }
+
+    /// [`LmOptions::stop_on_predicted_decrease`]: whether a step of model
+    /// decrease `predicted`, no more damped than the first, gains too little
+    /// to be tried.
+    fn model_says_stop(&self, predicted: f64, strategy: &TrustRegion) -> bool {
+        let o = self.o;
+        o.stop_on_predicted_decrease
+            && (strategy.undamped() || strategy.lambda <= o.initial_lambda)
+            && (0.0..=o.function_tolerance * self.cost).contains(&predicted)
     }
 
     /// Retract the current point by `delta` into the trial buffers and

@@ -114,6 +114,18 @@ pub struct LmOptions {
     /// the problem's curvature, doubling it leaves the step as long, and one
     /// lucky step can throw the parameters out of the model's reach.
     pub trust_radius: bool,
+    /// End the solve as [`Termination::FunctionTolerance`](super::Termination::FunctionTolerance) before trying a
+    /// step whose model decrease −gᵀδ − ½δᵀHδ is at most
+    /// `function_tolerance` × the cost, when that step is no more damped than
+    /// the first (λ ≤ `initial_lambda`, or Gauss–Newton): the quadratic model
+    /// of the current linearization says that no step gains what the
+    /// tolerance asks for, so the step's evaluation (a linearization) and, with
+    /// covariances, a second assembly at its point are saved. A damped step's
+    /// model decrease understates the undamped one, hence the condition on λ.
+    /// For anytime solves (the VIO window, re-solved at the next frame); not
+    /// with [`LmOptions::check_stationarity`], which checks the stops it
+    /// proposes at the next linearization.
+    pub stop_on_predicted_decrease: bool,
 }
 
 impl Default for LmOptions {
@@ -136,6 +148,7 @@ impl Default for LmOptions {
             check_stationarity: true,
             keep_largest_scale: true,
             trust_radius: true,
+            stop_on_predicted_decrease: false,
         }
     }
 }
@@ -144,7 +157,8 @@ impl LmOptions {
     /// Refuse options no solve can honour: tolerances and damping bounds
     /// that are negative or not finite, `min_diagonal > max_diagonal`, an
     /// initial damping outside `(0, max_lambda]`, or a `min_lambda_decrease`
-    /// outside `(0, 1)`. [`Optimizer::optimize`](super::Optimizer::optimize) calls it first.
+    /// outside `(0, 1)`, `stop_on_predicted_decrease` with
+    /// `check_stationarity`. [`Optimizer::optimize`](super::Optimizer::optimize) calls it first.
     pub fn validate(&self) -> Result<(), SolveError> {
         let bad = |name: &str, v: f64, what: &str| Err(SolveError::Config(format!("{name} = {v}: {what}")));
         for (name, v) in [
@@ -169,6 +183,13 @@ impl LmOptions {
         }
         if self.min_lambda_decrease.is_nan() || self.min_lambda_decrease <= 0.0 || self.min_lambda_decrease >= 1.0 {
             return bad("min_lambda_decrease", self.min_lambda_decrease, "must lie in (0, 1)");
+        }
+        if self.stop_on_predicted_decrease && self.check_stationarity && self.method != Method::GaussNewton {
+            return Err(SolveError::Config(
+                "stop_on_predicted_decrease with check_stationarity: the stops it proposes are checked at the next \
+                 linearization, which the other stops before; choose one"
+                    .into(),
+            ));
         }
         Ok(())
     }

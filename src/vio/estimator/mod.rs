@@ -407,8 +407,10 @@ impl<'a> Estimator<'a> {
             eliminate,
             log_iterations: false,
             // An anytime solve with a fixed budget, re-solved at the next
-            // frame: a tolerance ends it without the stationarity check.
+            // frame: a tolerance ends it without the stationarity check, and
+            // a step the model says gains less than the tolerance is not tried.
             check_stationarity: false,
+            stop_on_predicted_decrease: true,
             ..LmOptions::default()
         });
         if !self.opts.solver.covariances {
