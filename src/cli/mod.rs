@@ -214,6 +214,8 @@ mod tests {
             &["vio", "v", "--estimate-time-offset", "--out", "o"],
             &["vio", "v", "--out", "o", "--rig", "rig/"],
             &["vio", "--print-config"],
+            &["sim", "flight", "--print-config"],
+            &["sim", "rig", "--print-config"],
             &["track", "v", "--out", "o", "--stereo"],
             &["eval", "--estimate", "e", "--groundtruth", "g", "--align", "sim3", "--rpe-distances", "1,2"],
             &["run", "--vio", "v", "--out", "o", "--skip", "calibrate,allan", "--pixel-sigma", "2"],
@@ -231,6 +233,7 @@ mod tests {
             &["calibrate", "r.csv", "--out", "o", "--gyro-unit", "furlongs"][..],
             &["run", "--vio", "v", "--out", "o", "--skip", "nothing"],
             &["allan", "r.csv", "--out", "o", "--span", "5:1"],
+            &["sim", "walk"],
         ] {
             let argv = std::iter::once("tumble").chain(bad.iter().copied());
             assert!(Cli::try_parse_from(argv).is_err(), "{bad:?}");

@@ -15,8 +15,8 @@ pub struct SimArgs {
     #[arg(value_parser = clap::builder::PossibleValuesParser::new(SCENARIOS))]
     scenario: String,
     /// Output folder (gets mav0/ and truth.json).
-    #[arg(long)]
-    out: PathBuf,
+    #[arg(long, required_unless_present = "print_config")]
+    out: Option<PathBuf>,
     /// YAML config: IMU model, effects, durations, camera (every key optional).
     #[arg(long)]
     config: Option<PathBuf>,
@@ -80,6 +80,7 @@ impl SimArgs {
             print!("{}", serde_saphyr::to_string(&cfg)?);
             return Ok(());
         }
+        let out = self.out.ok_or("give --out (or --print-config)")?;
         if self.duration.is_some() {
             cfg.duration_s = self.duration;
         }
@@ -102,7 +103,7 @@ impl SimArgs {
                 b.set_position(done as u64);
             }
         };
-        let sim = tumble::sim::simulate_and_write_with(scenario, &cfg, self.seed, &self.out, &mut progress)?;
+        let sim = tumble::sim::simulate_and_write_with(scenario, &cfg, self.seed, &out, &mut progress)?;
         if let Some(b) = bar {
             b.finish_and_clear();
         }
@@ -115,7 +116,7 @@ impl SimArgs {
                 .as_ref()
                 .map(|t| format!(", {} frames, {} feature observations", t.frames.len(), t.observations.len()))
                 .unwrap_or_default(),
-            self.out.display(),
+            out.display(),
             start.elapsed().as_secs_f64()
         );
         Ok(())
@@ -134,6 +135,7 @@ impl SimArgs {
         if !self.hide.is_empty() || !self.pause.is_empty() {
             return Err("sim rig: --hide and --pause are for the IMU scenarios".into());
         }
+        let out = self.out.ok_or("give --out (or --print-config)")?;
         let settings = tumble::sim::rig_recording::rig_settings(
             self.duration.unwrap_or(tumble::sim::target::RigSimSettings::default().duration_s),
             self.stereo_baseline.unwrap_or(0.0),
@@ -157,7 +159,7 @@ impl SimArgs {
             &settings,
             images.as_ref(),
             self.seed,
-            &self.out,
+            &out,
             &mut progress,
         )?;
         if let Some(b) = bar {
@@ -171,10 +173,10 @@ impl SimArgs {
             settings.duration_s,
             sim.input.cameras.len(),
             if images.is_some() { "rendered frames" } else { "views of the target's corners" },
-            self.out.display(),
+            out.display(),
             start.elapsed().as_secs_f64(),
-            self.out.display(),
-            self.out.join("target.yaml").display()
+            out.display(),
+            out.join("target.yaml").display()
         );
         Ok(())
     }

@@ -120,8 +120,11 @@ pub fn allan_steady_std(n: f64, k: f64) -> f64 {
     (n * k).sqrt()
 }
 
-/// The warning a run whose noise meter raised the white noise gets: on a
-/// platform that shakes its IMU beyond the figures given the biases also
+/// The warning a run whose noise meter raised the white noise gets, naming
+/// the two causes: errors of the IMU the estimator is not given (an
+/// uncalibrated scale or misalignment: on a simulated flight of the BMI055
+/// model the meter reads the gyro ×4.9 with them and ×0.9 without), or a
+/// platform that shakes its IMU beyond the figures given — the biases then also
 /// wander more, over seconds, than the random walk given allows (on EuRoC's
 /// flights the gyro's slow error is 5–18× what the datasheet's walk allows
 /// over 2–10 s, [`crate::allan::in_motion`]), and the bias σ then come out
@@ -131,11 +134,12 @@ pub fn slow_error_warning(noise: &super::noise_meter::NoiseReport) -> Option<Str
     let ratio = [noise.in_use[0] / noise.given[0], noise.in_use[1] / noise.given[1]];
     (ratio[0] > 1.0 || ratio[1] > 1.0).then(|| {
         format!(
-            "the IMU's white noise in motion was raised beyond the figures given (gyro ×{:.1}, accelerometer ×{:.1}): \
-             a platform that shakes its IMU so also makes its biases wander more than the random walk given allows, and the \
-             bias σ may then be several times too small (EuRoC: 3–10×); give the noise the platform shows in use \
-             (tumble allan --groundtruth on a recording with a motion capture, then --noise; docs/vio.md, \"Given the \
-             noise its IMU shows in flight\")",
+            "the IMU's white noise in motion was raised beyond the figures given (gyro ×{:.1}, accelerometer ×{:.1}). \
+             Either the IMU has errors the estimator is not given — an uncalibrated scale or misalignment grows with \
+             the motion (tumble calibrate, then --calibration) — or the platform shakes it: that also makes its biases \
+             wander more than the random walk given allows, and the bias σ may then be several times too small \
+             (EuRoC: 3–10×); give the noise the platform shows in use (tumble allan --groundtruth on a recording with \
+             a motion capture, then --noise; docs/vio.md, \"Given the noise its IMU shows in flight\")",
             ratio[0], ratio[1]
         )
     })

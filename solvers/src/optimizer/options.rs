@@ -186,8 +186,8 @@ impl LmOptions {
         }
         if self.stop_on_predicted_decrease && self.check_stationarity && self.method != Method::GaussNewton {
             return Err(SolveError::Config(
-                "stop_on_predicted_decrease with check_stationarity: the stops it proposes are checked at the next \
-                 linearization, which the other stops before; choose one"
+                "stop_on_predicted_decrease with check_stationarity: the first ends a solve at once where the second \
+                 checks every stop at the next linearization; choose one"
                     .into(),
             ));
         }
