@@ -479,9 +479,10 @@ impl Run<'_> {
         });
         self.warnings.extend(summary.warnings.iter().map(|w| format!("vio: {w}")));
         let mut headline = format!(
-            "{:.1} m in {:.0} s, closed loop {:.3} m (IMU only {:.1} m)",
+            "{:.1} m in {:.0} s, {} {:.3} m (IMU only {:.1} m)",
             summary.walked_m(),
             summary.duration_s,
+            if summary.returns_to_start == Some(false) { "end to start" } else { "closed loop" },
             summary.closed_loop_error_m,
             summary.imu_only_closed_loop_error_m
         );

@@ -354,3 +354,77 @@ fn a_refused_simulation_leaves_no_files() {
     assert!(err.contains("at least"), "{err}");
     assert!(!out.exists(), "{} was left behind", out.display());
 }
+
+/// `sim replay`: a window of a recording keeps its IMU samples and ground
+/// truth as they were, and its camera sees the landmarks where they project
+/// from the recorded poses (the stamps' convention checked end to end).
+#[test]
+fn a_replayed_window_keeps_the_recording_and_sees_from_its_path() {
+    use tumble::sim::replay_recording::{replay_and_write, ReplaySettings};
+    let source = out_dir("replay-source");
+    let c = SimConfig { duration_s: Some(20.0), ..SimConfig::default() };
+    let s = simulate_and_write(Scenario::Flight, &c, 2, &source).unwrap();
+    let settings =
+        ReplaySettings { start_s: 5.0, duration_s: Some(8.0), camera: c.camera.clone(), images: None, seed: 3 };
+    let out = out_dir("replay");
+    let done = replay_and_write(&source, &settings, &out, &mut |_, _| {}).unwrap();
+    assert_eq!(done.window_s, [5.0, 13.0]);
+    let (src, got) =
+        (read_asl(&source, &ImuTextFormat::default()).unwrap(), read_asl(&out, &ImuTextFormat::default()).unwrap());
+    // The IMU's samples in the window, values and stamps as recorded.
+    let first = src.imu.t.partition_point(|&t| t < 5.0);
+    assert_eq!(got.imu.len(), done.imu_samples);
+    assert_eq!(got.imu.len(), 1601, "8 s at 200 Hz, both ends");
+    for i in [0, 700, got.imu.len() - 1] {
+        assert_eq!(got.imu.t_ns(i), src.imu.t_ns(first + i));
+        assert_eq!((got.imu.gyro[i], got.imu.accel[i]), (src.imu.gyro[first + i], src.imu.accel[first + i]));
+    }
+    let gt = got.groundtruth.as_ref().unwrap();
+    assert_eq!((gt.t_ns[0], *gt.t_ns.last().unwrap()), (got.imu.t_ns(0), got.imu.t_ns(got.imu.len() - 1)));
+    // Every frame's features lie where their landmarks project from the
+    // recorded pose at the frame's stamp: the pixel noise's 0.5 px, unbiased.
+    let tracks = read_tracks(&out.join("mav0/cam0/tracks.csv")).unwrap();
+    assert_eq!(tracks.len(), done.observations);
+    let landmark_of = truth_rows(&out.join("truth/observations.csv"));
+    let landmarks = truth_rows(&out.join("truth/landmarks.csv"));
+    let model = c.camera.model();
+    let body_from_camera = c.camera.body_from_camera();
+    let mut errors: Vec<[f64; 2]> = Vec::new();
+    for ((t_ns, _, uv), row) in tracks.iter().zip(&landmark_of) {
+        assert!(row[3] == 0.0 || row[3] == 1.0);
+        if row[3] == 1.0 {
+            continue; // an injected outlier
+        }
+        let k = s.motion.at((t_ns - src.imu.t0_ns) as f64 * 1e-9);
+        let world_from_body = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(k.position),
+            nalgebra::UnitQuaternion::from_matrix(&k.rotation),
+        );
+        let l = &landmarks[row[2] as usize];
+        let p = (world_from_body * body_from_camera).inverse() * nalgebra::Point3::new(l[1], l[2], l[3]);
+        let projected = model.project(&[p.x, p.y, p.z]).unwrap();
+        errors.push([uv[0] - projected[0], uv[1] - projected[1]]);
+    }
+    assert!(errors.len() > 10_000, "{} observations", errors.len());
+    let n = errors.len() as f64;
+    let mean = [0, 1].map(|k| errors.iter().map(|e| e[k]).sum::<f64>() / n);
+    let rms = (errors.iter().map(|e| e[0] * e[0] + e[1] * e[1]).sum::<f64>() / (2.0 * n)).sqrt();
+    assert!(mean.iter().all(|m| m.abs() < 0.02), "mean offset {mean:?} px");
+    assert!((rms - c.camera.pixel_noise_px).abs() < 0.05, "rms {rms} px against {} px", c.camera.pixel_noise_px);
+    // A window beyond the recording is refused, naming it; nothing is written.
+    let late = ReplaySettings { start_s: 19.5, ..settings };
+    let refused = out_dir("replay-late");
+    let err = replay_and_write(&source, &late, &refused, &mut |_, _| {}).unwrap_err().to_string();
+    assert!(err.contains("overlap") && err.contains("replay-source"), "{err}");
+    assert!(!refused.exists());
+}
+
+/// The numbers of each data row of a truth CSV.
+fn truth_rows(path: &std::path::Path) -> Vec<Vec<f64>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+        .collect()
+}

@@ -216,6 +216,7 @@ mod tests {
             &["vio", "--print-config"],
             &["sim", "flight", "--print-config"],
             &["sim", "rig", "--print-config"],
+            &["sim", "replay", "--from", "MH_03", "--start", "40", "--duration", "30", "--images", "--out", "o"],
             &["track", "v", "--out", "o", "--stereo"],
             &["eval", "--estimate", "e", "--groundtruth", "g", "--align", "sim3", "--rpe-distances", "1,2"],
             &["run", "--vio", "v", "--out", "o", "--skip", "calibrate,allan", "--pixel-sigma", "2"],
@@ -234,6 +235,7 @@ mod tests {
             &["run", "--vio", "v", "--out", "o", "--skip", "nothing"],
             &["allan", "r.csv", "--out", "o", "--span", "5:1"],
             &["sim", "walk"],
+            &["sim", "replay", "--out", "o"],
         ] {
             let argv = std::iter::once("tumble").chain(bad.iter().copied());
             assert!(Cli::try_parse_from(argv).is_err(), "{bad:?}");

@@ -8,12 +8,23 @@ use tumble::sim::{Scenario, SimConfig};
 /// Flags of `tumble sim`.
 #[derive(Args)]
 pub struct SimArgs {
-    /// What to simulate: an IMU scenario, or `rig` (a camera–IMU rig waved
+    /// What to simulate: an IMU scenario; `rig` (a camera–IMU rig waved
     /// before a checkerboard, for `tumble calibrate-rig X --target
     /// X/target.yaml`; its camera is EuRoC's cam0 with a 3 ms time offset;
-    /// of --config it reads the `images` key).
+    /// of --config it reads the `images` key); or `replay` (a window of a
+    /// real recording, --from, its IMU as recorded and a camera flown along
+    /// its ground truth in a box around the path; of --config it reads the
+    /// `camera` and `images` keys).
     #[arg(value_parser = clap::builder::PossibleValuesParser::new(SCENARIOS))]
     scenario: String,
+    /// The recording `replay` flies its camera through: an ASL folder with
+    /// IMU and ground truth (e.g. a EuRoC Machine Hall flight).
+    #[arg(long, value_name = "DIR", required_if_eq("scenario", "replay"))]
+    from: Option<PathBuf>,
+    /// Where `replay`'s window starts, after the recording's first IMU sample [s]
+    /// (0: its start; later: an estimator starts in motion).
+    #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
+    start: f64,
     /// Output folder (gets mav0/ and truth.json).
     #[arg(long, required_unless_present = "print_config")]
     out: Option<PathBuf>,
@@ -59,14 +70,26 @@ pub struct SimArgs {
     hide: Vec<String>,
 }
 
-/// The scenarios `tumble sim` takes: the IMU scenarios, then `rig`.
-const SCENARIOS: [&str; 6] =
-    [Scenario::NAMES[0], Scenario::NAMES[1], Scenario::NAMES[2], Scenario::NAMES[3], Scenario::NAMES[4], "rig"];
+/// The scenarios `tumble sim` takes: the IMU scenarios, then `rig` and `replay`.
+const SCENARIOS: [&str; 7] = [
+    Scenario::NAMES[0],
+    Scenario::NAMES[1],
+    Scenario::NAMES[2],
+    Scenario::NAMES[3],
+    Scenario::NAMES[4],
+    "rig",
+    "replay",
+];
 
 impl SimArgs {
     pub fn run(self) -> CliResult {
-        if self.scenario == "rig" {
-            return self.run_rig();
+        if self.scenario != "replay" && (self.from.is_some() || self.start != 0.0) {
+            return Err("sim: --from and --start are for the replay scenario".into());
+        }
+        match self.scenario.as_str() {
+            "rig" => return self.run_rig(),
+            "replay" => return self.run_replay(),
+            _ => {}
         }
         let scenario: Scenario = self.scenario.parse()?;
         let mut cfg = match &self.config {
@@ -94,19 +117,9 @@ impl SimArgs {
             cfg.images = Some(tumble::sim::render::ImageSettings::default());
         }
         let start = std::time::Instant::now();
-        let bar = cfg.images.is_some().then(|| {
-            super::common::progress_bar(0, "rendering [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})")
-        });
-        let mut progress = |done: usize, total: usize| {
-            if let Some(b) = &bar {
-                b.set_length(total as u64);
-                b.set_position(done as u64);
-            }
-        };
-        let sim = tumble::sim::simulate_and_write_with(scenario, &cfg, self.seed, &out, &mut progress)?;
-        if let Some(b) = bar {
-            b.finish_and_clear();
-        }
+        let bar = RenderBar::new(cfg.images.is_some());
+        let sim = tumble::sim::simulate_and_write_with(scenario, &cfg, self.seed, &out, &mut |d, t| bar.update(d, t))?;
+        bar.finish();
         println!(
             "simulated {:?}: {} IMU samples over {:.1} s{}, written to {} in {:.2} s",
             scenario,
@@ -122,49 +135,43 @@ impl SimArgs {
         Ok(())
     }
 
-    /// `tumble sim rig`: the rig recording, its frames rendered with --images.
-    fn run_rig(self) -> CliResult {
+    /// The config of `rig` and `replay` (`--config` or the defaults) and the
+    /// output folder; None when the config was printed (`--print-config`).
+    /// Errors: flags of the simulated IMU scenarios, no `--out`.
+    fn camera_recording_config(&self) -> Result<Option<(SimConfig, PathBuf)>, Box<dyn std::error::Error>> {
         let cfg = match &self.config {
             Some(p) => SimConfig::read(p)?,
             None => SimConfig::default(),
         };
         if self.print_config {
             print!("{}", serde_saphyr::to_string(&cfg)?);
-            return Ok(());
+            return Ok(None);
         }
         if !self.hide.is_empty() || !self.pause.is_empty() {
-            return Err("sim rig: --hide and --pause are for the IMU scenarios".into());
+            return Err(format!("sim {}: --hide and --pause are for the simulated IMU scenarios", self.scenario).into());
         }
-        let out = self.out.ok_or("give --out (or --print-config)")?;
+        let out = self.out.clone().ok_or("give --out (or --print-config)")?;
+        Ok(Some((cfg, out)))
+    }
+
+    /// `tumble sim rig`: the rig recording, its frames rendered with --images.
+    fn run_rig(self) -> CliResult {
+        let Some((cfg, out)) = self.camera_recording_config()? else { return Ok(()) };
         let settings = tumble::sim::rig_recording::rig_settings(
             self.duration.unwrap_or(tumble::sim::target::RigSimSettings::default().duration_s),
             self.stereo_baseline.unwrap_or(0.0),
         );
-        let images = match (self.images, cfg.images) {
-            (false, _) => None,
-            (true, Some(i)) => Some(i),
-            (true, None) => Some(tumble::sim::render::ImageSettings::default()),
-        };
+        let images = self.images.then(|| cfg.images.unwrap_or_default());
         let start = std::time::Instant::now();
-        let bar = images.is_some().then(|| {
-            super::common::progress_bar(0, "rendering [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})")
-        });
-        let mut progress = |done: usize, total: usize| {
-            if let Some(b) = &bar {
-                b.set_length(total as u64);
-                b.set_position(done as u64);
-            }
-        };
+        let bar = RenderBar::new(images.is_some());
         let sim = tumble::sim::rig_recording::write_rig_recording(
             &settings,
             images.as_ref(),
             self.seed,
             &out,
-            &mut progress,
+            &mut |d, t| bar.update(d, t),
         )?;
-        if let Some(b) = bar {
-            b.finish_and_clear();
-        }
+        bar.finish();
         let views: usize = sim.input.cameras.iter().map(|c| c.views.len()).sum();
         println!(
             "simulated rig: {} IMU samples over {:.1} s, {} camera(s), {views} {}, written to {} in {:.2} s \
@@ -179,5 +186,72 @@ impl SimArgs {
             out.join("target.yaml").display()
         );
         Ok(())
+    }
+
+    /// `tumble sim replay`: a window of a real recording with a simulated camera.
+    fn run_replay(self) -> CliResult {
+        let Some((cfg, out)) = self.camera_recording_config()? else { return Ok(()) };
+        let source = self.from.ok_or("sim replay: give the recording with --from DIR")?;
+        let mut camera = cfg.camera;
+        if let Some(b) = self.stereo_baseline {
+            camera.stereo_baseline_m = b;
+        }
+        let images = self.images.then(|| cfg.images.unwrap_or_default());
+        let settings = tumble::sim::replay_recording::ReplaySettings {
+            start_s: self.start,
+            duration_s: self.duration,
+            camera,
+            images,
+            seed: self.seed,
+        };
+        let start = std::time::Instant::now();
+        let bar = RenderBar::new(settings.images.is_some());
+        let done =
+            tumble::sim::replay_recording::replay_and_write(&source, &settings, &out, &mut |d, t| bar.update(d, t))?;
+        bar.finish();
+        for note in &done.notes {
+            println!("note: {note}");
+        }
+        let h = done.scene_half_extent;
+        println!(
+            "replayed {} over {:.1}–{:.1} s: {} IMU samples, {} {} ({} feature observations) in a {:.0} × {:.0} × {:.0} m \
+             box, written to {} in {:.2} s",
+            source.display(),
+            done.window_s[0],
+            done.window_s[1],
+            done.imu_samples,
+            done.frames,
+            if settings.images.is_some() { "rendered frames" } else { "frames of feature tracks" },
+            done.observations,
+            2.0 * h[0],
+            2.0 * h[1],
+            2.0 * h[2],
+            out.display(),
+            start.elapsed().as_secs_f64()
+        );
+        Ok(())
+    }
+}
+
+/// A progress bar over rendered frames, shown only when frames are rendered.
+struct RenderBar(Option<indicatif::ProgressBar>);
+
+impl RenderBar {
+    fn new(shown: bool) -> RenderBar {
+        RenderBar(shown.then(|| {
+            super::common::progress_bar(0, "rendering [{bar:40}] {pos}/{len} frames {elapsed_precise} (eta {eta})")
+        }))
+    }
+    /// `done` of `total` frames rendered.
+    fn update(&self, done: usize, total: usize) {
+        if let Some(b) = &self.0 {
+            b.set_length(total as u64);
+            b.set_position(done as u64);
+        }
+    }
+    fn finish(self) {
+        if let Some(b) = self.0 {
+            b.finish_and_clear();
+        }
     }
 }

@@ -224,9 +224,11 @@ pub struct VioArgs {
     /// Seed of the simulated camera's landmarks and noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Ignore cam0/tracks_cam1.csv (cam0's features matched into cam1, as
-    /// `tumble track --stereo` or `tumble sim --stereo-baseline` write them):
-    /// initialize from cam0 alone.
+    /// One camera: ignore cam0/tracks_cam1.csv (cam0's features matched into
+    /// cam1, as `tumble track --stereo` or `tumble sim --stereo-baseline`
+    /// write them) and, when the frontend tracks the images, do not match
+    /// them into cam1 (it does when cam1/ has images and both cameras their
+    /// extrinsics).
     #[arg(long)]
     mono: bool,
     /// Also record the run for the rerun viewer into this .rrd file: images with

@@ -33,6 +33,21 @@ impl Trajectory {
         self.t_ns.is_empty()
     }
 
+    /// The states with times in `[from_ns, to_ns]` \[ns\].
+    pub fn between(&self, from_ns: i64, to_ns: i64) -> Trajectory {
+        let a = self.t_ns.partition_point(|&t| t < from_ns);
+        let b = self.t_ns.partition_point(|&t| t <= to_ns).max(a);
+        let part = |v: &Option<Vec<[f64; 3]>>| v.as_ref().map(|v| v[a..b].to_vec());
+        Trajectory {
+            t_ns: self.t_ns[a..b].to_vec(),
+            p: self.p[a..b].to_vec(),
+            q: self.q[a..b].to_vec(),
+            v: part(&self.v),
+            bias_gyro: part(&self.bias_gyro),
+            bias_accel: part(&self.bias_accel),
+        }
+    }
+
     /// A trajectory from TUM rows held in memory (`t x y z qx qy qz qw`, `t`
     /// in seconds), checked as a TUM file would be: finite values, strictly
     /// increasing times and unit quaternions, each refused by its row (named

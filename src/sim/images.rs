@@ -51,24 +51,34 @@ pub fn write_images(
     let tracks = sim.tracks.as_ref().ok_or("images: the scenario has no camera (walk and flight have one)")?;
     let scene = render_scene(sim)?;
     let c = &sim.config.camera;
+    // Each frame exposed at its stamp plus the camera's time offset (IMU time).
+    let frames: Vec<(f64, i64)> = tracks.frames.iter().map(|&t| (t + c.time_offset_s, sim.stamp_ns(t))).collect();
+    render_cameras(&scene, c, sim.motion.as_ref(), &frames, settings, sim.seed, out, progress)
+}
+
+/// Render `frames` (each the IMU time at the middle of its exposure \[s\]
+/// and its stamp \[ns\]) of camera `c` and, with a stereo baseline, of its
+/// second camera, carried along `motion` through `scene`, into
+/// `out/mav0/camN/data/<stamp>.png`; `progress(done, total)` after each batch.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn render_cameras(
+    scene: &RenderScene,
+    c: &CameraSettings,
+    motion: &dyn Motion,
+    frames: &[(f64, i64)],
+    settings: &ImageSettings,
+    seed: u64,
+    out: &Path,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<(), SimError> {
     let mut cameras: Vec<Isometry3<f64>> = vec![c.body_from_camera()];
     if c.stereo_baseline_m > 0.0 {
         cameras.push(c.body_from_second_camera());
     }
-    // Each frame exposed at its stamp plus the camera's time offset (IMU time).
-    let frames: Vec<(f64, i64)> = tracks.frames.iter().map(|&t| (t + c.time_offset_s, sim.stamp_ns(t))).collect();
     let mut progress = Progress { done: 0, total: frames.len() * cameras.len(), report: progress };
     for (index, body_from_camera) in cameras.iter().enumerate() {
-        let camera = CameraFrames {
-            scene: &scene,
-            camera: c,
-            motion: sim.motion.as_ref(),
-            body_from_camera,
-            settings,
-            seed: sim.seed,
-            index,
-        };
-        camera.render(&frames, &out.join("mav0").join(format!("cam{index}")).join("data"), &mut progress)?;
+        let camera = CameraFrames { scene, camera: c, motion, body_from_camera, settings, seed, index };
+        camera.render(frames, &out.join("mav0").join(format!("cam{index}")).join("data"), &mut progress)?;
     }
     Ok(())
 }

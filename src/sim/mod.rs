@@ -19,6 +19,7 @@ pub use crate::model::imu_model as model;
 pub(crate) mod motion;
 pub mod render;
 pub(crate) mod replay_bands;
+pub mod replay_recording;
 pub mod rig_recording;
 pub mod target;
 pub(crate) mod writer;

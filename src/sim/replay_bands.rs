@@ -138,6 +138,21 @@ fn accelerations(replay: &Replay, imu: &ImuData) -> Option<(Vec<[f64; 3]>, Vec<[
     Some((a_gt, a_imu))
 }
 
+/// The path a camera on the body flies along a recorded ground truth
+/// `recorded` (time from the IMU's first sample): [`body_path`] with the
+/// cut [`position_smoothing`] finds against `imu`, or the ground truth as
+/// it is when every band agrees. Returns the path and a note for the user
+/// on where the cut fell (None without one).
+pub fn camera_path(recorded: Replay, imu: &ImuData) -> (Replay, Option<String>) {
+    let smoothing = position_smoothing(&recorded, imu);
+    let note = smoothing.as_ref().and_then(|s| s.note());
+    let path = match &smoothing {
+        Some(s) if s.sigma_s > 0.0 => body_path(&recorded, imu, s.sigma_s),
+        _ => recorded,
+    };
+    (path, note)
+}
+
 /// The path the body moved along, for a camera to fly: `replay`'s positions
 /// below the cut-off of a Gaussian of `sigma_s` \[s\], the IMU's own motion
 /// above it (`imu` on the replay's time axis), rotations as recorded.

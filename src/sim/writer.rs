@@ -12,7 +12,7 @@
 
 use super::imu::SimulatedImu;
 use super::SimError;
-use super::Simulation;
+use super::{SimulatedTracks, Simulation};
 use crate::error::InputError;
 use crate::io::trajectory::{write_asl_groundtruth, Trajectory};
 use nalgebra::Isometry3;
@@ -196,18 +196,6 @@ pub(crate) fn imu_sensor_yaml(header: &str, comment: &str, rate_hz: f64, noise: 
     )
 }
 
-/// `sensor.yaml` of camera 0 or (stereo) camera 1.
-fn camera_yaml(sim: &Simulation, second: bool) -> String {
-    let c = &sim.config.camera;
-    let t = if second { c.body_from_second_camera() } else { c.body_from_camera() };
-    let comment = if sim.config.images.is_some() {
-        "simulated camera (rendered images in data/)"
-    } else {
-        "simulated camera (no images; features in tracks.csv)"
-    };
-    camera_sensor_yaml(c, &t, comment)
-}
-
 /// An ASL `camN/sensor.yaml` of camera `c` mounted at `body_from_camera`.
 pub(crate) fn camera_sensor_yaml(
     c: &super::CameraSettings,
@@ -262,6 +250,65 @@ pub fn groundtruth(sim: &Simulation) -> Trajectory {
     tr
 }
 
+/// What a simulated camera writes beside its frames: `sensor.yaml`,
+/// `data.csv`, its tracks and their truth.
+pub(crate) struct CameraFiles<'a> {
+    /// The camera (and its stereo partner, with a baseline).
+    pub camera: &'a super::CameraSettings,
+    /// The `comment:` of its `sensor.yaml`.
+    pub comment: &'a str,
+    /// Whether its frames are rendered: the tracks then go to `truth/`, for
+    /// the estimators to track the images instead.
+    pub images: bool,
+}
+
+impl CameraFiles<'_> {
+    /// Write `mav0/cam0/` (and `cam1/` with a stereo baseline) and the tracks'
+    /// truth (`truth/observations.csv`, `truth/landmarks.csv`) of `tracks`
+    /// into `out`, each frame time `t` \[s\] stamped `stamp_ns(t)`.
+    pub fn write(&self, tracks: &SimulatedTracks, stamp_ns: &dyn Fn(f64) -> i64, out: &Path) -> Result<(), InputError> {
+        let (c, ns) = (self.camera, stamp_ns);
+        let mav0 = out.join("mav0");
+        let cam = mav0.join("cam0");
+        write_text(&cam.join("sensor.yaml"), &camera_sensor_yaml(c, &c.body_from_camera(), self.comment))?;
+        let mut frames = String::from("#timestamp [ns],filename\n");
+        for &t in &tracks.frames {
+            frames.push_str(&format!("{0},{0}.png\n", ns(t)));
+        }
+        write_text(&cam.join("data.csv"), &frames)?;
+        // A tracks file (full precision, unlike the frontend's `write_tracks`).
+        let track_rows = |obs: &[super::camera::Observation]| {
+            let mut text = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
+            for o in obs {
+                text.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
+            }
+            text
+        };
+        let mut truth_obs = String::from("#timestamp [ns],track_id,landmark_id,outlier\n");
+        for o in &tracks.observations {
+            truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
+        }
+        // With images the estimators track them: the simulated tracks (exact
+        // projections plus the configured noise) go to truth/ beside the rest.
+        let track_dir = if self.images { out.join("truth") } else { cam.clone() };
+        write_text(&track_dir.join("tracks.csv"), &track_rows(&tracks.observations))?;
+        if c.stereo_baseline_m > 0.0 {
+            // The second camera's matches beside cam0's tracks, as `tumble
+            // track --stereo` writes them, and its sensor.yaml in cam1/.
+            write_text(&track_dir.join("tracks_cam1.csv"), &track_rows(&tracks.stereo))?;
+            let cam1 = mav0.join("cam1");
+            write_text(&cam1.join("sensor.yaml"), &camera_sensor_yaml(c, &c.body_from_second_camera(), self.comment))?;
+            write_text(&cam1.join("data.csv"), &frames)?;
+        }
+        write_text(&out.join("truth").join("observations.csv"), &truth_obs)?;
+        let mut lm = String::from("#landmark_id,x [m],y [m],z [m]\n");
+        for (j, p) in tracks.landmarks.iter().enumerate() {
+            lm.push_str(&format!("{j},{},{},{}\n", p[0], p[1], p[2]));
+        }
+        write_text(&out.join("truth").join("landmarks.csv"), &lm)
+    }
+}
+
 /// Write the simulation into `out` (created if needed).
 pub fn write_asl(sim: &Simulation, out: &Path) -> Result<(), InputError> {
     write_imu_csv(&out.join("mav0").join("imu0").join("data.csv"), sim)?;
@@ -276,45 +323,14 @@ fn write_rest(sim: &Simulation, out: &Path) -> Result<(), InputError> {
     create(&gt)?;
     write_asl_groundtruth(&gt, &groundtruth(sim))?;
     let t0 = sim.config.t0_ns;
-    let ns = |t: f64| sim.stamp_ns(t);
     if let Some(tr) = &sim.tracks {
-        let cam = mav0.join("cam0");
-        write_text(&cam.join("sensor.yaml"), &camera_yaml(sim, false))?;
-        let mut frames = String::from("#timestamp [ns],filename\n");
-        for &t in &tr.frames {
-            frames.push_str(&format!("{0},{0}.png\n", ns(t)));
-        }
-        write_text(&cam.join("data.csv"), &frames)?;
-        // A tracks file (full precision, unlike the frontend's `write_tracks`).
-        let tracks = |obs: &[super::camera::Observation]| {
-            let mut text = String::from("#timestamp [ns],track_id,u [px],v [px]\n");
-            for o in obs {
-                text.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.uv[0], o.uv[1]));
-            }
-            text
+        let comment = if sim.config.images.is_some() {
+            "simulated camera (rendered images in data/)"
+        } else {
+            "simulated camera (no images; features in tracks.csv)"
         };
-        let mut truth_obs = String::from("#timestamp [ns],track_id,landmark_id,outlier\n");
-        for o in &tr.observations {
-            truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
-        }
-        // With images the estimators track them: the simulated tracks (exact
-        // projections plus the configured noise) go to truth/ beside the rest.
-        let track_dir = if sim.config.images.is_some() { out.join("truth") } else { cam.clone() };
-        write_text(&track_dir.join("tracks.csv"), &tracks(&tr.observations))?;
-        if sim.config.camera.stereo_baseline_m > 0.0 {
-            // The second camera's matches beside cam0's tracks, as `tumble
-            // track --stereo` writes them, and its sensor.yaml in cam1/.
-            write_text(&track_dir.join("tracks_cam1.csv"), &tracks(&tr.stereo))?;
-            let cam1 = mav0.join("cam1");
-            write_text(&cam1.join("sensor.yaml"), &camera_yaml(sim, true))?;
-            write_text(&cam1.join("data.csv"), &frames)?;
-        }
-        write_text(&out.join("truth").join("observations.csv"), &truth_obs)?;
-        let mut lm = String::from("#landmark_id,x [m],y [m],z [m]\n");
-        for (j, p) in tr.landmarks.iter().enumerate() {
-            lm.push_str(&format!("{j},{},{},{}\n", p[0], p[1], p[2]));
-        }
-        write_text(&out.join("truth").join("landmarks.csv"), &lm)?;
+        let files = CameraFiles { camera: &sim.config.camera, comment, images: sim.config.images.is_some() };
+        files.write(tr, &|t| sim.stamp_ns(t), out)?;
     }
     let truth = serde_json::json!({
         "generator": format!("tumble {}", env!("CARGO_PKG_VERSION")),

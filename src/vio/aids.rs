@@ -128,12 +128,8 @@ impl VioInput {
         let recorded =
             crate::sim::motion::Replay::new(gt, t0).map_err(|e| InputError::file(&ds.root, e.to_string()))?;
         let imu = ds.imu.calibrated(calibration);
-        let smoothing = crate::sim::replay_bands::position_smoothing(&recorded, &imu);
-        let notes: Vec<String> = smoothing.as_ref().and_then(|s| s.note()).into_iter().collect();
-        let motion = match &smoothing {
-            Some(s) if s.sigma_s > 0.0 => crate::sim::replay_bands::body_path(&recorded, &imu, s.sigma_s),
-            _ => recorded,
-        };
+        let (motion, note) = crate::sim::replay_bands::camera_path(recorded, &imu);
+        let notes: Vec<String> = note.into_iter().collect();
         let (scene, cam) = crate::sim::camera::room_around(motion.positions(), cam);
         let tracks = crate::sim::camera::simulate_tracks(&motion, &cam, &scene, seed);
         // Frames where both the ground truth and the IMU are.

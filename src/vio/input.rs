@@ -234,6 +234,19 @@ impl VioInput {
         tracks: Option<Vec<(i64, u64, [f64; 2])>>,
         stereo_tracks: bool,
     ) -> Result<VioInput, InputError> {
+        let beside_cam0 = ds.cameras.first().map(|c| ds.root.join(&c.name).join("tracks_cam1.csv"));
+        Self::from_dataset_with_stereo(ds, calibration, tracks, beside_cam0.filter(|_| stereo_tracks).as_deref())
+    }
+
+    /// As [`VioInput::from_dataset`], cam1's matches read from `stereo_tracks`
+    /// when it is given and exists (e.g. the frontend's `tracks_cam1.csv`
+    /// beside the cam0 tracks it made; None: one camera).
+    pub fn from_dataset_with_stereo(
+        ds: asl::AslDataset,
+        calibration: Option<&ImuCalibration>,
+        tracks: Option<Vec<(i64, u64, [f64; 2])>>,
+        stereo_tracks: Option<&Path>,
+    ) -> Result<VioInput, InputError> {
         let cam = ds.cameras.first().ok_or_else(|| {
             InputError::file(&ds.root, "no cam0/ folder: the estimator needs feature tracks")
                 .with_hint("simulate one with `tumble sim walk --out DIR`, or give an EqVIO .csv")
@@ -272,23 +285,22 @@ impl VioInput {
             crate::model::geometry::from_nalgebra(&imu_t_bs.map_or(cam_t_bs, |b| b.inverse() * cam_t_bs))
         };
         let body_from_camera = body_from(cam.t_bs);
-        let stereo_path = cam_dir.join("tracks_cam1.csv");
-        let stereo = match (stereo_tracks, stereo_path.is_file()) {
-            (false, _) | (true, false) => None,
-            (true, true) => {
+        let stereo = match stereo_tracks.filter(|p| p.is_file()) {
+            None => None,
+            Some(stereo_path) => {
                 let cam1 = ds.cameras.get(1).ok_or_else(|| {
-                    InputError::file(&stereo_path, "stereo matches but no cam1/ folder with the second camera")
+                    InputError::file(stereo_path, "stereo matches but no cam1/ folder with the second camera")
                 })?;
                 let yaml1 = ds.root.join(&cam1.name).join("sensor.yaml");
                 let camera = cam1.model.ok_or_else(|| InputError::file(&yaml1, "camera intrinsics missing"))?;
                 if cam1.t_bs.is_none() || cam.t_bs.is_none() {
                     return Err(InputError::file(&yaml1, "T_BS missing: stereo needs both cameras' extrinsics"));
                 }
-                let (obs1, lines) = asl::read_tracks_with_lines(&stereo_path)?;
+                let (obs1, lines) = asl::read_tracks_with_lines(stereo_path)?;
                 let mut features = vec![Vec::new(); frame_ns.len()];
                 for ((t, id, uv), line) in obs1.into_iter().zip(lines) {
                     let k = frame_ns.binary_search(&t).map_err(|_| {
-                        InputError::at(&stereo_path, line, format!("no cam0 observation at {t} ns to match"))
+                        InputError::at(stereo_path, line, format!("no cam0 observation at {t} ns to match"))
                     })?;
                     features[k].push((id, uv));
                 }

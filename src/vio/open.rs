@@ -26,7 +26,9 @@ pub struct VioSource {
     /// them — the distance between `cam0` and `cam1` when both have a
     /// `sensor.yaml` (EuRoC: 0.110 m), else one camera.
     pub simulated_stereo_baseline_m: Option<f64>,
-    /// Ignore `cam0/tracks_cam1.csv` (initialize from cam0 alone).
+    /// One camera: ignore `cam0/tracks_cam1.csv`, and keep the frontend from
+    /// matching cam0's features into cam1 (it does when `cam1/` has images
+    /// and both cameras their extrinsics).
     pub mono: bool,
     /// The frontend's settings, used when cam0 has images but no `tracks.csv`.
     pub frontend: FrontendOptions,
@@ -115,18 +117,25 @@ impl VioInput {
                     .cameras
                     .first()
                     .is_some_and(|c| !ds.root.join(&c.name).join("tracks.csv").is_file() && !c.frames.is_empty());
-                let tracks = if needs_frontend {
-                    let (obs, report) = track_asl_into(&ds, 0, &source.frontend, &source.frontend_dir, progress)
+                // The frontend matches cam0's features into cam1 when the
+                // folder has a second camera with its extrinsic, as a
+                // simulated camera is given one: with 11 cm between EuRoC's
+                // cameras the matches' depths carry the scale where the
+                // parallax between keyframes does not (a hall).
+                let frontend_options =
+                    FrontendOptions { stereo: !source.mono && has_stereo_pair(&ds), ..source.frontend.clone() };
+                let (tracks, stereo_tracks) = if needs_frontend {
+                    let (obs, report) = track_asl_into(&ds, 0, &frontend_options, &source.frontend_dir, progress)
                         .map_err(|e| OpenError::Frontend { path: ds.root.clone(), message: e.0 })?;
                     frontend = Some(report);
-                    Some(obs)
+                    let right = frontend_options.stereo.then(|| source.frontend_dir.join("tracks_cam1.csv"));
+                    (Some(obs), right)
                 } else {
-                    None
+                    // Stereo matches next to cam0's tracks.csv.
+                    let beside = ds.cameras.first().map(|c| ds.root.join(&c.name).join("tracks_cam1.csv"));
+                    (None, beside.filter(|_| !source.mono))
                 };
-                // Stereo matches next to cam0's tracks.csv (not with the tracks
-                // the frontend just made).
-                let stereo = !source.mono && tracks.is_none();
-                let input = VioInput::from_dataset(ds, cal, tracks, stereo)?;
+                let input = VioInput::from_dataset_with_stereo(ds, cal, tracks, stereo_tracks.as_deref())?;
                 match &source.rig {
                     Some(rig) if rig.time_offset_s != 0.0 => input.with_time_offsets(rig.time_offset_s, 0.0),
                     _ => input,
@@ -155,5 +164,15 @@ fn dataset_baseline(ds: &crate::io::asl::AslDataset) -> f64 {
     match (pose("cam0"), pose("cam1")) {
         (Some(a), Some(b)) => (a.translation.vector - b.translation.vector).norm(),
         _ => 0.0,
+    }
+}
+
+/// Whether `ds` has a second camera the frontend can match cam0's features
+/// into: `cam1/` with its intrinsics, both cameras' extrinsics and images.
+fn has_stereo_pair(ds: &crate::io::asl::AslDataset) -> bool {
+    let cam = |name: &str| ds.cameras.iter().find(|c| c.name == name);
+    match (cam("cam0"), cam("cam1")) {
+        (Some(c0), Some(c1)) => c0.t_bs.is_some() && c1.t_bs.is_some() && c1.model.is_some() && !c1.frames.is_empty(),
+        _ => false,
     }
 }

@@ -254,6 +254,16 @@ impl Summary {
         ))
     }
 
+    /// What the distance between the last and the first position is: the
+    /// closed-loop error, unless the ground truth shows a path that does not
+    /// return to its start.
+    pub fn loop_label(&self) -> &'static str {
+        match self.returns_to_start {
+            Some(false) => "end-to-start distance (the ground truth does not return to its start)",
+            _ => "closed-loop error",
+        }
+    }
+
     /// A few lines for the terminal.
     pub fn table(&self) -> String {
         let opt = |v: Option<f64>, unit: &str| v.map_or("—".to_string(), |x| format!("{x:.4} {unit}"));
@@ -265,7 +275,7 @@ impl Summary {
         });
         format!(
             "duration {:.1} s, path {:.2} m{}, {} frames ({} keyframes), {} resets{}\n\
-             closed-loop error: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
+             {}: fused {:.3} m ({:.3} % of the {} path) vs IMU only {:.3} m\n\
              ATE (position+yaw aligned) {}\n\
              bias RMSE after {:.1} s: gyro {}, accel {}{}\n\
              {}{}{}{}{}speed: {:.1}× real time; per-frame solve median {:.2} ms, 95th percentile {:.2} ms",
@@ -280,6 +290,7 @@ impl Summary {
             } else {
                 String::new()
             },
+            self.loop_label(),
             self.closed_loop_error_m,
             self.closed_loop_percent(),
             if self.groundtruth_distance_m.is_some() { "ground-truth" } else { "estimated" },
