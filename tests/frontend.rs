@@ -556,7 +556,7 @@ fn rendered_flight_tracking(settings: &tumble::sim::render::ImageSettings, secon
     use tumble::sim::{images::render_scene, simulate, Scenario, SimConfig};
     let cfg = SimConfig { duration_s: Some(60.0), ..SimConfig::default() };
     let sim = simulate(Scenario::Flight, &cfg, 1).unwrap();
-    let scene = render_scene(&sim).unwrap();
+    let scene = render_scene(&sim);
     let c = &sim.config.camera;
     let model = c.model();
     let [w, h] = c.resolution.map(|x| x as usize);

@@ -48,8 +48,9 @@ fn wall_with_square(depth: f64, centre: [f64; 2], side: f64) -> RenderScene {
         v_axis: Vector3::y(),
         size: [4.0, 4.0],
         texture: Arc::new(Texture::new(n, n, data)),
+        ring: None,
     };
-    RenderScene { planes: vec![plane], background: 1.0 }
+    RenderScene { planes: vec![plane], walls: Vec::new(), background: 1.0 }
 }
 
 /// The darkness-weighted centroid of the image about `around` (a 61 px window) \[px\].
@@ -190,7 +191,7 @@ fn gradient_percentiles<'a>(paths: impl Iterator<Item = &'a std::path::Path>) ->
 fn scenarios_without_rendered_frames_are_refused_up_front() {
     use tumble::sim::{render::ImageSettings, simulate_and_write, Scenario, SimConfig};
     let cfg = SimConfig { images: Some(ImageSettings::default()), ..SimConfig::default() };
-    for (scenario, why) in [(Scenario::Static, "no camera"), (Scenario::Corridor, "curved walls")] {
+    for (scenario, why) in [(Scenario::Static, "no camera"), (Scenario::Tumble, "no camera")] {
         let dir = std::env::temp_dir().join(format!("tumble_render_refused_{}_{scenario:?}", std::process::id()));
         let e = match simulate_and_write(scenario, &cfg, 1, &dir) {
             Err(e) => e.to_string(),
@@ -202,4 +203,41 @@ fn scenarios_without_rendered_frames_are_refused_up_front() {
     let bad = ImageSettings { vignetting: 1.5, ..ImageSettings::default() };
     let cfg = SimConfig { images: Some(bad), ..SimConfig::default() };
     assert!(cfg.check().unwrap_err().to_string().contains("images.vignetting"));
+}
+
+/// A ring corridor's surfaces are where its geometry says: the walls on
+/// their ellipses, the floor and ceiling only between them (a ray aimed at
+/// the floor beyond the inner wall meets the wall instead).
+#[test]
+fn a_corridor_is_hit_on_its_walls_floor_and_ceiling() {
+    use nalgebra::{Isometry3, Vector3};
+    use tumble::sim::Corridor;
+    let c = Corridor::default(); // centre line 14 × 7 m, 1.5 m to each wall, 3 m high
+    let scene = RenderScene::corridor(&c, 1);
+    assert_eq!((scene.planes.len(), scene.walls.len()), (2, 2));
+    let eye = Isometry3::translation(14.0, 0.0, 1.3); // on the centre line, axes as the world's
+    let seen = scene.seen_from(&eye);
+    let [ao, bo] = c.outer();
+    let outer_y = bo * (1.0 - (14.0 / ao).powi(2)).sqrt();
+    let down_left = Vector3::<f64>::new(-1.0, 0.0, -0.5).normalize();
+    for (direction, surface, distance) in [
+        (Vector3::x(), 3, 1.5),                                            // the outer wall
+        (-Vector3::x(), 2, 1.5),                                           // the inner wall (the block)
+        (-Vector3::z(), 0, 1.3),                                           // the floor
+        (Vector3::z(), 1, 1.7),                                            // the ceiling
+        (Vector3::y(), 3, outer_y),                                        // along the corridor, the bend's wall
+        (Vector3::new(-1.0, 0.0, -1.0).normalize(), 0, 1.3 * 2f64.sqrt()), // the floor by the wall
+        (down_left, 2, 1.5 / down_left.x.abs()),                           // the block, not the floor behind it
+    ] {
+        let hit = seen.hit(&direction, 0.02).unwrap_or_else(|| panic!("{direction:?} hits nothing"));
+        assert_eq!(hit.plane, surface, "{direction:?}: {hit:?}");
+        assert!((hit.distance_m - distance).abs() < 1e-9, "{direction:?}: {} m, not {distance} m", hit.distance_m);
+        let [w, h] = scene.texture(surface).size();
+        assert!((0.0..w as f64).contains(&hit.uv[0]) && (0.0..h as f64).contains(&hit.uv[1]), "{hit:?}");
+        let point = Vector3::new(14.0, 0.0, 1.3) + direction * hit.distance_m;
+        if surface >= 2 {
+            let [a, b] = if surface == 2 { c.inner() } else { c.outer() };
+            assert!(((point.x / a).powi(2) + (point.y / b).powi(2) - 1.0).abs() < 1e-9, "{point:?}");
+        }
+    }
 }

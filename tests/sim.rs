@@ -404,6 +404,10 @@ fn a_replayed_window_keeps_the_recording_and_sees_from_its_path() {
         let p = (world_from_body * body_from_camera).inverse() * nalgebra::Point3::new(l[1], l[2], l[3]);
         let projected = model.project(&[p.x, p.y, p.z]).unwrap();
         errors.push([uv[0] - projected[0], uv[1] - projected[1]]);
+        // The truth's own pixel is that projection, to within what the
+        // replay's path (the ground truth as written and read back, between
+        // its samples) differs from the simulator's motion.
+        assert!((row[4] - projected[0]).abs() < 5e-3 && (row[5] - projected[1]).abs() < 5e-3, "{row:?} {projected:?}");
     }
     assert!(errors.len() > 10_000, "{} observations", errors.len());
     let n = errors.len() as f64;

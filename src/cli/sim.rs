@@ -49,7 +49,8 @@ pub struct SimArgs {
     /// the config's pauses_s).
     #[arg(long, value_name = "START,LENGTH", value_parser = tumble::sim::parse_pause)]
     pause: Vec<[f64; 2]>,
-    /// Render the camera's frames as images (walk and flight; cam1 too with
+    /// Render the camera's frames as images (walk, flight, corridor, rig and
+    /// replay; cam1 too with
     /// --stereo-baseline): camN/data/<stamp>.png, exposed as the config's
     /// `images` key says (defaults: 3 ms exposure, 2 grey levels of read noise,
     /// 25 % vignetting). The simulated tracks then go to truth/ and `tumble vio`

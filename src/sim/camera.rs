@@ -150,6 +150,8 @@ pub struct Observation {
     pub landmark: usize,
     /// Measured pixel `[u, v]` \[px\].
     pub uv: [f64; 2],
+    /// Where the landmark projects, without noise (an outlier's too) \[px\].
+    pub true_uv: [f64; 2],
     /// True when this observation is an injected outlier.
     pub outlier: bool,
 }
@@ -295,6 +297,7 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, scene: &Scene, s
             };
             track_of[j] = Some(track);
             let outlier = rng.random_bool(s.outlier_fraction);
+            let true_uv = uv;
             let uv = if outlier {
                 [rng.random_range(0.0..w), rng.random_range(0.0..h)]
             } else {
@@ -302,13 +305,13 @@ pub fn simulate_tracks(motion: &dyn Motion, s: &CameraSettings, scene: &Scene, s
                 let nv: f64 = StandardNormal.sample(&mut rng);
                 [uv[0] + s.pixel_noise_px * nu, uv[1] + s.pixel_noise_px * nv]
             };
-            observations.push(Observation { t, track, landmark: j, uv, outlier });
+            observations.push(Observation { t, track, landmark: j, uv, true_uv, outlier });
             if s.stereo_baseline_m > 0.0 {
                 if let Some(uv1) = pixel(c1_t_c * c_t_w * Point3::from(landmarks[j])) {
                     let nu: f64 = StandardNormal.sample(&mut stereo_rng);
                     let nv: f64 = StandardNormal.sample(&mut stereo_rng);
                     let uv = [uv1[0] + s.pixel_noise_px * nu, uv1[1] + s.pixel_noise_px * nv];
-                    stereo.push(Observation { t, track, landmark: j, uv, outlier: false });
+                    stereo.push(Observation { t, track, landmark: j, uv, true_uv: uv1, outlier: false });
                 }
             }
         }

@@ -37,7 +37,7 @@ impl Default for Corridor {
 
 /// Perimeter of an ellipse with semi-axes `a`, `b` (Ramanujan's second
 /// approximation, relative error < 1e-9 for the axes ratios used here) \[m\].
-fn ellipse_perimeter(a: f64, b: f64) -> f64 {
+pub(crate) fn ellipse_perimeter(a: f64, b: f64) -> f64 {
     let h = ((a - b) / (a + b)).powi(2);
     PI * (a + b) * (1.0 + 3.0 * h / (10.0 + (4.0 - 3.0 * h).sqrt()))
 }

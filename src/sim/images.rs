@@ -13,34 +13,28 @@ use rayon::prelude::*;
 use std::path::Path;
 
 /// The scene a simulation's camera sees, as textured planes.
-pub fn render_scene(sim: &Simulation) -> Result<RenderScene, SimError> {
+pub fn render_scene(sim: &Simulation) -> RenderScene {
     match sim.scene {
-        Scene::Room(centre) => Ok(RenderScene::room(centre, sim.config.camera.room_half_extent, sim.seed)),
-        Scene::Corridor(_) => Err(CORRIDOR_NOT_RENDERED.into()),
+        Scene::Room(centre) => RenderScene::room(centre, sim.config.camera.room_half_extent, sim.seed),
+        Scene::Corridor(c) => RenderScene::corridor(&c, sim.seed),
     }
 }
 
 /// Whether `scenario` under `config` has frames that can be rendered:
-/// refused before anything is simulated when it has no camera or a scene
-/// that is not rendered (the corridor).
+/// refused before anything is simulated when it has no camera.
 pub fn check_renderable(scenario: super::Scenario, config: &super::SimConfig) -> Result<(), SimError> {
     if !config.has_camera(scenario) {
-        return Err(format!("images: the {scenario:?} scenario has no camera (walk and flight have one)").into());
-    }
-    if scenario == super::Scenario::Corridor {
-        return Err(CORRIDOR_NOT_RENDERED.into());
+        return Err(
+            format!("images: the {scenario:?} scenario has no camera (walk, flight and corridor have one)").into()
+        );
     }
     Ok(())
 }
 
-/// Why a corridor is not rendered.
-const CORRIDOR_NOT_RENDERED: &str = "images: the corridor's curved walls are not rendered (rooms are: the walk and \
-     the flight); simulate the corridor without --images for its feature tracks";
-
 /// Render every frame of every simulated camera of `sim` with `settings`
 /// into `out/mav0/camN/data/<stamp>.png` (the stamps of `camN/data.csv`),
 /// calling `progress(done, total)` after each frame. Errors: a simulation
-/// without a camera, a scene that is not rendered, a file not written.
+/// without a camera, a file not written.
 pub fn write_images(
     sim: &Simulation,
     settings: &ImageSettings,
@@ -48,8 +42,9 @@ pub fn write_images(
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(), SimError> {
     settings.check()?;
-    let tracks = sim.tracks.as_ref().ok_or("images: the scenario has no camera (walk and flight have one)")?;
-    let scene = render_scene(sim)?;
+    let tracks =
+        sim.tracks.as_ref().ok_or("images: the scenario has no camera (walk, flight and corridor have one)")?;
+    let scene = render_scene(sim);
     let c = &sim.config.camera;
     // Each frame exposed at its stamp plus the camera's time offset (IMU time).
     let frames: Vec<(f64, i64)> = tracks.frames.iter().map(|&t| (t + c.time_offset_s, sim.stamp_ns(t))).collect();

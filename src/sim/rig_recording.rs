@@ -278,5 +278,6 @@ fn checkerboard_plane(s: &RigSimSettings, inner: [usize; 2], spacing: [f64; 2]) 
         v_axis: r_wt * Vector3::y(),
         size: extent,
         texture: Arc::new(Texture::new(BOARD_TEXELS, BOARD_TEXELS, data)),
+        ring: None,
     }
 }

@@ -7,7 +7,7 @@
 //! OUT/mav0/cam0/{data.csv,tracks.csv,sensor.yaml}   when a camera was simulated
 //! OUT/mav0/state_groundtruth_estimate0/data.csv     p, q, v, b_w, b_a
 //! OUT/truth.json                               every parameter, the seed, static intervals
-//! OUT/truth/{landmarks.csv,observations.csv}   landmark positions, which landmark each track sees
+//! OUT/truth/{landmarks.csv,observations.csv}   landmark positions, which landmark each observation sees and where it projects
 //! ```
 
 use super::imu::SimulatedImu;
@@ -284,9 +284,10 @@ impl CameraFiles<'_> {
             }
             text
         };
-        let mut truth_obs = String::from("#timestamp [ns],track_id,landmark_id,outlier\n");
+        let mut truth_obs = String::from("#timestamp [ns],track_id,landmark_id,outlier,u_true [px],v_true [px]\n");
         for o in &tracks.observations {
-            truth_obs.push_str(&format!("{},{},{},{}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
+            let [u, v] = o.true_uv;
+            truth_obs.push_str(&format!("{},{},{},{},{u},{v}\n", ns(o.t), o.track, o.landmark, u8::from(o.outlier)));
         }
         // With images the estimators track them: the simulated tracks (exact
         // projections plus the configured noise) go to truth/ beside the rest.

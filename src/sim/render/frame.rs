@@ -21,7 +21,7 @@ fn radiance(scene: &RenderScene, seen: &SeenPlanes, ray: &Vector3<f64>, spread: 
     // The footprint's two sides are t·spread and t·spread / cos: their
     // geometric mean (the longer alone blurs walls seen at a glance).
     let metres = hit.distance_m * spread / hit.incidence.max(1e-3).sqrt();
-    scene.planes[hit.plane].texture.sample(hit.uv[0], hit.uv[1], metres * hit.texels_per_m)
+    scene.texture(hit.plane).sample(hit.uv[0], hit.uv[1], metres * hit.texels_per_m)
 }
 
 /// The radiance of every pixel in \[0, 1\] (row-major), averaged over the

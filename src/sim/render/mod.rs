@@ -2,7 +2,8 @@
 //! (pure Rust, `rayon` across image rows) from a textured scene through the
 //! same lens model the estimators use.
 //!
-//! - **Scene** ([`scene`]): textured rectangles — a room's or hall's six faces
+//! - **Scene** ([`scene`]): textured rectangles and elliptical walls — a
+//!   room's or hall's six faces, a ring corridor's walls, floor and ceiling —
 //!   with "dead leaves" textures (sharp edges and corners at every scale, the
 //!   power spectrum of natural images).
 //! - **Anti-aliasing that moves no edge** ([`texture`]): each pixel shows its

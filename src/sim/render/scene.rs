@@ -1,8 +1,11 @@
-//! What the rendered camera sees: textured rectangles in the world frame
-//! (the six faces of a room or hall).
+//! What the rendered camera sees, in the world frame: textured rectangles
+//! (the six faces of a room or hall) and elliptical walls (a ring
+//! corridor's, with its floor and ceiling as rectangles cut to the ring).
 
+use super::super::corridor::Corridor;
 use super::texture::{dead_leaves, Texture};
 use nalgebra::{Isometry3, Vector3};
+use rayon::prelude::*;
 use std::sync::Arc;
 
 /// A textured rectangle: the points `origin + a·u_axis + b·v_axis` with
@@ -20,6 +23,55 @@ pub struct Plane {
     pub size: [f64; 2],
     /// Its surface.
     pub texture: Arc<Texture>,
+    /// Only the part of the rectangle within this elliptical ring is there
+    /// (a ring corridor's floor and ceiling); None: all of it.
+    pub ring: Option<PlaneRing>,
+}
+
+/// An elliptical ring on a [`Plane`], in the plane's own coordinates \[m
+/// along `u_axis` and `v_axis` from `origin`\]: the points outside the
+/// inner ellipse and inside the outer one, both about `centre`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneRing {
+    /// Centre of both ellipses \[m\].
+    pub centre: [f64; 2],
+    /// Semi-axes of the inner ellipse along u and v \[m\].
+    pub inner: [f64; 2],
+    /// Semi-axes of the outer ellipse along u and v \[m\].
+    pub outer: [f64; 2],
+}
+
+impl PlaneRing {
+    /// Whether the point `(a, b)` \[m, plane coordinates\] is on the ring.
+    fn holds(&self, a: f64, b: f64) -> bool {
+        let (x, y) = (a - self.centre[0], b - self.centre[1]);
+        let inside = |s: [f64; 2]| (x / s[0]).powi(2) + (y / s[1]).powi(2) < 1.0;
+        inside(self.outer) && !inside(self.inner)
+    }
+}
+
+/// A vertical wall on the ellipse `x²/a² + y²/b² = 1` about the world's z
+/// axis, from `z0` up `height` \[m\], seen from either side. Texture u runs
+/// with the angle θ of `(x/a, y/b)` (counter-clockwise from +x, the whole
+/// texture width once around), v upwards over the height.
+#[derive(Debug, Clone)]
+pub struct EllipticWall {
+    /// Semi-axes along world x and y \[m\].
+    pub semi_axes: [f64; 2],
+    /// Height of the wall's foot \[m, world z\].
+    pub z0: f64,
+    /// Height of the wall \[m\].
+    pub height: f64,
+    /// Its surface.
+    pub texture: Arc<Texture>,
+}
+
+impl EllipticWall {
+    /// Level-0 texels per radian of θ and per metre of height.
+    fn texels_per_unit(&self) -> [f64; 2] {
+        let [w, h] = self.texture.size();
+        [w as f64 / (2.0 * std::f64::consts::PI), h as f64 / self.height]
+    }
 }
 
 impl Plane {
@@ -34,11 +86,14 @@ impl Plane {
     }
 }
 
-/// The rendered world: planes, and the radiance of rays that hit none.
+/// The rendered world: planes and curved walls, and the radiance of rays
+/// that hit none.
 #[derive(Debug, Clone)]
 pub struct RenderScene {
-    /// The surfaces; a ray shows the nearest it hits.
+    /// The flat surfaces; a ray shows the nearest surface it hits.
     pub planes: Vec<Plane>,
+    /// The curved walls (a ring corridor's).
+    pub walls: Vec<EllipticWall>,
     /// Radiance where nothing is hit, in \[0, 1\].
     pub background: f64,
 }
@@ -55,9 +110,18 @@ const LEAF_SIDES_M: [f64; 2] = [0.05, 2.5];
 /// longer than 4096 texels get coarser texels (a 20 m hall wall: 5 mm).
 const MAX_TEXTURE_SIDE: usize = 4096;
 
-/// Texture side for `metres` at about `texel_m` per texel, a power of two.
+/// Most texels of a curved wall's texture (a power of two: 64 MiB of level 0).
+const MAX_WALL_TEXELS: usize = 1 << 24;
+
+/// Texture side for `metres` at about `texel_m` per texel, a power of two
+/// of at most [`MAX_TEXTURE_SIDE`].
 fn texture_side(metres: f64, texel_m: f64) -> usize {
-    ((metres / texel_m).ceil() as usize).next_power_of_two().clamp(16, MAX_TEXTURE_SIDE)
+    wall_side(metres, texel_m).min(MAX_TEXTURE_SIDE)
+}
+
+/// [`texture_side`] without its cap: a curved wall's length (at least 16).
+fn wall_side(metres: f64, texel_m: f64) -> usize {
+    ((metres / texel_m).ceil() as usize).next_power_of_two().max(16)
 }
 
 impl RenderScene {
@@ -67,22 +131,72 @@ impl RenderScene {
         let h = Vector3::from(half);
         let lo = centre - h;
         let e = [Vector3::x(), Vector3::y(), Vector3::z()];
-        let mut planes = Vec::new();
-        for axis in 0..3 {
-            let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
-            for side in 0..2 {
+        // The faces' textures are drawn in parallel, each from its own seed.
+        let planes = (0..6)
+            .into_par_iter()
+            .map(|face| {
+                let (axis, side) = (face / 2, face % 2);
+                let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
                 let mut origin = lo;
                 origin[axis] += 2.0 * h[axis] * side as f64;
                 let size = [2.0 * h[a], 2.0 * h[b]];
                 let [w, ht] = size.map(|m| texture_side(m, ROOM_TEXEL_M));
                 let texel_m = size[0] / w as f64;
                 let sides = LEAF_SIDES_M.map(|m| m / texel_m);
-                let face_seed = seed.wrapping_mul(6).wrapping_add((2 * axis + side) as u64);
+                let face_seed = seed.wrapping_mul(6).wrapping_add(face as u64);
                 let texture = Arc::new(dead_leaves(w, ht, sides, face_seed));
-                planes.push(Plane { origin, u_axis: e[a], v_axis: e[b], size, texture });
-            }
+                Plane { origin, u_axis: e[a], v_axis: e[b], size, texture, ring: None }
+            })
+            .collect();
+        RenderScene { planes, walls: Vec::new(), background: 0.5 }
+    }
+
+    /// A ring corridor ([`Corridor`]): its inner wall (the block's face), its
+    /// outer wall, and the floor (z = 0) and ceiling between them, each with
+    /// its own dead-leaves texture seeded by `seed`.
+    pub fn corridor(c: &Corridor, seed: u64) -> RenderScene {
+        let face_seed = |k: u64| seed.wrapping_mul(6).wrapping_add(k);
+        let [ao, bo] = c.outer();
+        let ring = PlaneRing { centre: [ao, bo], inner: c.inner(), outer: [ao, bo] };
+        let size = [2.0 * ao, 2.0 * bo];
+        let planes = [0.0, c.height]
+            .into_par_iter()
+            .enumerate()
+            .map(|(k, z)| {
+                let [w, h] = size.map(|m| texture_side(m, ROOM_TEXEL_M));
+                let sides = LEAF_SIDES_M.map(|m| m / (size[0] / w as f64));
+                let texture = Arc::new(dead_leaves(w, h, sides, face_seed(k as u64)));
+                let origin = Vector3::new(-ao, -bo, z);
+                Plane { origin, u_axis: Vector3::x(), v_axis: Vector3::y(), size, texture, ring: Some(ring) }
+            })
+            .collect();
+        let walls = [c.inner(), c.outer()]
+            .into_par_iter()
+            .enumerate()
+            .map(|(k, semi_axes)| {
+                // Texels of ROOM_TEXEL_M, both sides halved together until the
+                // texture fits the budget (the perimeter is tens of metres):
+                // the texels stay about as long as they are high.
+                let around = super::super::corridor::ellipse_perimeter(semi_axes[0], semi_axes[1]);
+                let (mut w, mut h) = (wall_side(around, ROOM_TEXEL_M), wall_side(c.height, ROOM_TEXEL_M));
+                while w * h > MAX_WALL_TEXELS && w > 16 && h > 16 {
+                    (w, h) = (w / 2, h / 2);
+                }
+                let texel_m = (around / w as f64).max(c.height / h as f64);
+                let sides = LEAF_SIDES_M.map(|m| m / texel_m);
+                let texture = Arc::new(dead_leaves(w, h, sides, face_seed(2 + k as u64)));
+                EllipticWall { semi_axes, z0: 0.0, height: c.height, texture }
+            })
+            .collect();
+        RenderScene { planes, walls, background: 0.5 }
+    }
+
+    /// The texture of surface `k` of a [`Hit`]: the planes, then the walls.
+    pub fn texture(&self, k: usize) -> &Texture {
+        match self.planes.get(k) {
+            Some(p) => &p.texture,
+            None => &self.walls[k - self.planes.len()].texture,
         }
-        RenderScene { planes, background: 0.5 }
     }
 
     /// The planes as seen from the camera pose `world_from_camera`, for
@@ -106,10 +220,20 @@ impl RenderScene {
                     v0: p.v_axis.dot(&(eye - p.origin)) * sv,
                     size: [p.size[0] * su, p.size[1] * sv],
                     texels_per_m: 0.5 * (su + sv),
+                    ring: p.ring,
+                    texels: [su, sv],
                 }
             })
             .collect();
-        SeenPlanes { planes }
+        let walls = self
+            .walls
+            .iter()
+            .map(|w| {
+                let [tu, tv] = w.texels_per_unit();
+                SeenWall { semi_axes: w.semi_axes, z: [w.z0, w.z0 + w.height], texels_per_unit: [tu, tv] }
+            })
+            .collect();
+        SeenPlanes { planes, walls, world_from_camera: world_from_camera.rotation, eye, first_wall: self.planes.len() }
     }
 }
 
@@ -125,18 +249,33 @@ struct SeenPlane {
     v0: f64,
     size: [f64; 2],
     texels_per_m: f64,
+    ring: Option<PlaneRing>,
+    texels: [f64; 2],
 }
 
-/// Where a camera pose sees a scene's planes ([`RenderScene::seen_from`]).
+/// A curved wall as the world holds it (it is intersected in the world frame).
+#[derive(Debug, Clone, Copy)]
+struct SeenWall {
+    semi_axes: [f64; 2],
+    z: [f64; 2],
+    texels_per_unit: [f64; 2],
+}
+
+/// Where a camera pose sees a scene's surfaces ([`RenderScene::seen_from`]).
 #[derive(Debug, Clone)]
 pub struct SeenPlanes {
     planes: Vec<SeenPlane>,
+    walls: Vec<SeenWall>,
+    world_from_camera: nalgebra::UnitQuaternion<f64>,
+    eye: Vector3<f64>,
+    first_wall: usize,
 }
 
 /// Where a ray meets the scene.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Hit {
-    /// Index of the plane in [`RenderScene::planes`].
+    /// Index of the surface: [`RenderScene::planes`], then
+    /// [`RenderScene::walls`] (see [`RenderScene::texture`]).
     pub plane: usize,
     /// Distance along the (unit) ray \[m\].
     pub distance_m: f64,
@@ -144,12 +283,12 @@ pub struct Hit {
     pub incidence: f64,
     /// Texture coordinates \[level-0 texels\].
     pub uv: [f64; 2],
-    /// Level-0 texels per metre on the plane (mean of its two axes).
+    /// Level-0 texels per metre on the surface there (mean of its two axes).
     pub texels_per_m: f64,
 }
 
 impl SeenPlanes {
-    /// The nearest plane the unit camera-frame ray `ray` hits beyond `near` \[m\].
+    /// The nearest surface the unit camera-frame ray `ray` hits beyond `near` \[m\].
     pub fn hit(&self, ray: &Vector3<f64>, near: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         for (k, p) in self.planes.iter().enumerate() {
@@ -160,11 +299,58 @@ impl SeenPlanes {
                 continue;
             }
             let (a, b) = (p.u.dot(ray) * t + p.u0, p.v.dot(ray) * t + p.v0);
-            if (0.0..p.size[0]).contains(&a) && (0.0..p.size[1]).contains(&b) {
+            let on_ring = |r: &PlaneRing| r.holds(a / p.texels[0], b / p.texels[1]);
+            if (0.0..p.size[0]).contains(&a) && (0.0..p.size[1]).contains(&b) && p.ring.as_ref().is_none_or(on_ring) {
                 let (incidence, texels_per_m) = (cos.abs(), p.texels_per_m);
                 best = Some(Hit { plane: k, distance_m: t, incidence, uv: [a, b], texels_per_m });
             }
         }
+        if !self.walls.is_empty() {
+            let d = self.world_from_camera * ray;
+            for (k, w) in self.walls.iter().enumerate() {
+                let nearest = best.map_or(f64::INFINITY, |b| b.distance_m);
+                if let Some(hit) = w.hit(&self.eye, &d, near, nearest) {
+                    best = Some(Hit { plane: self.first_wall + k, ..hit });
+                }
+            }
+        }
         best
+    }
+}
+
+impl SeenWall {
+    /// Where the world-frame unit ray `d` from `eye` first meets the wall
+    /// beyond `near` and before `nearest` \[m\] (`plane` left 0 for the
+    /// caller to set).
+    fn hit(&self, eye: &Vector3<f64>, d: &Vector3<f64>, near: f64, nearest: f64) -> Option<Hit> {
+        let [a, b] = self.semi_axes;
+        // |e + t·d|² = 1 in the ellipse's unit-circle coordinates: A t² + 2B t + C = 0.
+        let (ex, ey, dx, dy) = (eye.x / a, eye.y / b, d.x / a, d.y / b);
+        let (qa, qb, qc) = (dx * dx + dy * dy, ex * dx + ey * dy, ex * ex + ey * ey - 1.0);
+        let disc = qb * qb - qa * qc;
+        if qa <= 0.0 || disc < 0.0 {
+            return None;
+        }
+        let root = disc.sqrt();
+        [(-qb - root) / qa, (-qb + root) / qa].into_iter().find_map(|t| {
+            let z = eye.z + t * d.z;
+            if t <= near || t >= nearest || z < self.z[0] || z >= self.z[1] {
+                return None;
+            }
+            let (x, y) = (ex + t * dx, ey + t * dy);
+            // (x, y) = (cos θ, sin θ): the wall's normal there is along
+            // (x/a, y/b), and a radian of θ is |d(a cos θ, b sin θ)/dθ| metres.
+            let normal = Vector3::new(x / a, y / b, 0.0).normalize();
+            let theta = y.atan2(x).rem_euclid(2.0 * std::f64::consts::PI);
+            let metres_per_rad = (a * a * y * y + b * b * x * x).sqrt();
+            let [tu, tv] = self.texels_per_unit;
+            Some(Hit {
+                plane: 0,
+                distance_m: t,
+                incidence: normal.dot(d).abs(),
+                uv: [theta * tu, (z - self.z[0]) * tv],
+                texels_per_m: 0.5 * (tu / metres_per_rad + tv),
+            })
+        })
     }
 }
