@@ -482,7 +482,7 @@ impl Run<'_> {
             "{:.1} m in {:.0} s, {} {:.3} m (IMU only {:.1} m)",
             summary.walked_m(),
             summary.duration_s,
-            if summary.returns_to_start == Some(false) { "end to start" } else { "closed loop" },
+            if summary.ends_elsewhere() { "end to start" } else { "closed loop" },
             summary.closed_loop_error_m,
             summary.imu_only_closed_loop_error_m
         );

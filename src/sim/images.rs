@@ -46,26 +46,29 @@ pub fn write_images(
         sim.tracks.as_ref().ok_or("images: the scenario has no camera (walk, flight and corridor have one)")?;
     let scene = render_scene(sim);
     let c = &sim.config.camera;
-    // Each frame exposed at its stamp plus the camera's time offset (IMU time).
-    let frames: Vec<(f64, i64)> = tracks.frames.iter().map(|&t| (t + c.time_offset_s, sim.stamp_ns(t))).collect();
-    render_cameras(&scene, c, sim.motion.as_ref(), &frames, settings, sim.seed, out, progress)
+    let stamp = |t: f64| sim.stamp_ns(t);
+    render_cameras(&scene, c, sim.motion.as_ref(), &tracks.frames, &stamp, settings, sim.seed, out, progress)
 }
 
-/// Render `frames` (each the IMU time at the middle of its exposure \[s\]
-/// and its stamp \[ns\]) of camera `c` and, with a stereo baseline, of its
-/// second camera, carried along `motion` through `scene`, into
-/// `out/mav0/camN/data/<stamp>.png`; `progress(done, total)` after each batch.
+/// Render the frames at `frame_times` \[s\], each stamped `stamp_ns(t)`, of
+/// camera `c` and, with a stereo baseline, of its second camera, carried
+/// along `motion` through `scene`, into `out/mav0/camN/data/<stamp>.png`;
+/// `progress(done, total)` after each batch.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn render_cameras(
     scene: &RenderScene,
     c: &CameraSettings,
     motion: &dyn Motion,
-    frames: &[(f64, i64)],
+    frame_times: &[f64],
+    stamp_ns: &dyn Fn(f64) -> i64,
     settings: &ImageSettings,
     seed: u64,
     out: &Path,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(), SimError> {
+    // Each frame exposed at its stamp plus the camera's time offset (IMU time).
+    let frames: Vec<(f64, i64)> = frame_times.iter().map(|&t| (t + c.time_offset_s, stamp_ns(t))).collect();
+    let frames = &frames[..];
     let mut cameras: Vec<Isometry3<f64>> = vec![c.body_from_camera()];
     if c.stereo_baseline_m > 0.0 {
         cameras.push(c.body_from_second_camera());

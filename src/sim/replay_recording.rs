@@ -109,7 +109,7 @@ pub fn replay_and_write(
     let stamp = |t: f64| ds.imu.t0_ns + (t * 1e9).round() as i64;
     let mut imu_samples = 0;
     crate::io::staging::write_staged(out, |stage| -> Result<Vec<PathBuf>, SimError> {
-        imu_samples = write_sensors(&ds, gt, window, stage)?;
+        imu_samples = write_sensors(&ds, gt, window, &stamp, stage)?;
         let comment = match s.images {
             Some(_) => "simulated camera along a recorded path (rendered images in data/)",
             None => "simulated camera along a recorded path (no images; features in tracks.csv)",
@@ -118,8 +118,7 @@ pub fn replay_and_write(
         if let Some(images) = &s.images {
             let Scene::Room(centre) = scene else { unreachable!("room_around gives a room") };
             let render = RenderScene::room(centre, camera.room_half_extent, s.seed);
-            let frames: Vec<(f64, i64)> = tracks.frames.iter().map(|&t| (t + camera.time_offset_s, stamp(t))).collect();
-            render_cameras(&render, &camera, &motion, &frames, images, s.seed, stage, progress)?;
+            render_cameras(&render, &camera, &motion, &tracks.frames, &stamp, images, s.seed, stage, progress)?;
         }
         write_text(&stage.join("truth.json"), &truth_json(&ds, s, &camera, &scene, window, note.as_deref())?)?;
         crate::io::staging::files_under(stage).map_err(|e| SimError::from(format!("{}: {e}", stage.display())))
@@ -169,8 +168,15 @@ fn within(mut tracks: SimulatedTracks, window: [f64; 2]) -> SimulatedTracks {
 }
 
 /// The window's IMU samples (and the source's `imu0/sensor.yaml`) and ground
-/// truth into `out/mav0/`; returns the samples written.
-fn write_sensors(ds: &AslDataset, gt: &Trajectory, window: [f64; 2], out: &Path) -> Result<usize, SimError> {
+/// truth into `out/mav0/` (the window's ends stamped `stamp_ns`); returns
+/// the samples written.
+fn write_sensors(
+    ds: &AslDataset,
+    gt: &Trajectory,
+    window: [f64; 2],
+    stamp_ns: &dyn Fn(f64) -> i64,
+    out: &Path,
+) -> Result<usize, SimError> {
     let mav0 = out.join("mav0");
     let imu_dir = mav0.join("imu0");
     std::fs::create_dir_all(&imu_dir).map_err(|e| format!("{}: {e}", imu_dir.display()))?;
@@ -184,8 +190,7 @@ fn write_sensors(ds: &AslDataset, gt: &Trajectory, window: [f64; 2], out: &Path)
     }
     let gt_dir = mav0.join("state_groundtruth_estimate0");
     std::fs::create_dir_all(&gt_dir).map_err(|e| format!("{}: {e}", gt_dir.display()))?;
-    let ns = |t: f64| ds.imu.t0_ns + (t * 1e9).round() as i64;
-    write_asl_groundtruth(&gt_dir.join("data.csv"), &gt.between(ns(window[0]), ns(window[1])))?;
+    write_asl_groundtruth(&gt_dir.join("data.csv"), &gt.between(stamp_ns(window[0]), stamp_ns(window[1])))?;
     Ok(imu.len())
 }
 

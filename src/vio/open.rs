@@ -124,18 +124,16 @@ impl VioInput {
                 // parallax between keyframes does not (a hall).
                 let frontend_options =
                     FrontendOptions { stereo: !source.mono && has_stereo_pair(&ds), ..source.frontend.clone() };
-                let (tracks, stereo_tracks) = if needs_frontend {
+                let input = if needs_frontend {
                     let (obs, report) = track_asl_into(&ds, 0, &frontend_options, &source.frontend_dir, progress)
                         .map_err(|e| OpenError::Frontend { path: ds.root.clone(), message: e.0 })?;
                     frontend = Some(report);
                     let right = frontend_options.stereo.then(|| source.frontend_dir.join("tracks_cam1.csv"));
-                    (Some(obs), right)
+                    VioInput::from_dataset_with_stereo(ds, cal, Some(obs), right.as_deref())?
                 } else {
                     // Stereo matches next to cam0's tracks.csv.
-                    let beside = ds.cameras.first().map(|c| ds.root.join(&c.name).join("tracks_cam1.csv"));
-                    (None, beside.filter(|_| !source.mono))
+                    VioInput::from_dataset(ds, cal, None, !source.mono)?
                 };
-                let input = VioInput::from_dataset_with_stereo(ds, cal, tracks, stereo_tracks.as_deref())?;
                 match &source.rig {
                     Some(rig) if rig.time_offset_s != 0.0 => input.with_time_offsets(rig.time_offset_s, 0.0),
                     _ => input,

@@ -254,13 +254,20 @@ impl Summary {
         ))
     }
 
-    /// What the distance between the last and the first position is: the
-    /// closed-loop error, unless the ground truth shows a path that does not
-    /// return to its start.
+    /// Whether the ground truth shows a path that does not return to its
+    /// start: the distance between the last and the first position is then
+    /// no closed-loop error.
+    pub fn ends_elsewhere(&self) -> bool {
+        self.returns_to_start == Some(false)
+    }
+
+    /// What the distance between the last and the first position is (see
+    /// [`Summary::ends_elsewhere`]).
     pub fn loop_label(&self) -> &'static str {
-        match self.returns_to_start {
-            Some(false) => "end-to-start distance (the ground truth does not return to its start)",
-            _ => "closed-loop error",
+        if self.ends_elsewhere() {
+            "end-to-start distance (the ground truth does not return to its start)"
+        } else {
+            "closed-loop error"
         }
     }
 

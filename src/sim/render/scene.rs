@@ -219,7 +219,6 @@ impl RenderScene {
                     v: r * p.v_axis * sv,
                     v0: p.v_axis.dot(&(eye - p.origin)) * sv,
                     size: [p.size[0] * su, p.size[1] * sv],
-                    texels_per_m: 0.5 * (su + sv),
                     ring: p.ring,
                     texels: [su, sv],
                 }
@@ -248,8 +247,8 @@ struct SeenPlane {
     v: Vector3<f64>,
     v0: f64,
     size: [f64; 2],
-    texels_per_m: f64,
     ring: Option<PlaneRing>,
+    /// Level-0 texels per metre along u and v.
     texels: [f64; 2],
 }
 
@@ -301,7 +300,7 @@ impl SeenPlanes {
             let (a, b) = (p.u.dot(ray) * t + p.u0, p.v.dot(ray) * t + p.v0);
             let on_ring = |r: &PlaneRing| r.holds(a / p.texels[0], b / p.texels[1]);
             if (0.0..p.size[0]).contains(&a) && (0.0..p.size[1]).contains(&b) && p.ring.as_ref().is_none_or(on_ring) {
-                let (incidence, texels_per_m) = (cos.abs(), p.texels_per_m);
+                let (incidence, texels_per_m) = (cos.abs(), 0.5 * (p.texels[0] + p.texels[1]));
                 best = Some(Hit { plane: k, distance_m: t, incidence, uv: [a, b], texels_per_m });
             }
         }
