@@ -296,6 +296,8 @@ fn an_aprilgrid_is_detected_where_it_projects() {
     let (frames, truth) = target_views(&target, &poses, &dir);
     let (views, stats) = tumble::rig::detect::detect_camera(&frames, &target, &mut |m| println!("{m}")).unwrap();
     println!("{}", stats.line());
+    // OpenCV's markers have a 1-cell border (Kalibr prints 2): found all the same.
+    assert_eq!(stats.tag_border_cells, Some(1));
     for (v, h) in views.iter().zip(&truth) {
         // Every corner of a tag wholly in the image (5 px in from its edges) is found.
         let inside = |id: usize| {
@@ -328,6 +330,29 @@ fn an_aprilgrid_is_detected_where_it_projects() {
     let e = tumble::rig::detect::detect_camera(&frames, &wrong, &mut |_| {}).unwrap_err().to_string();
     assert!(e.contains("layout") && e.contains(&dir.display().to_string()), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// tumble's AprilTag 36h11 codes are OpenCV's: every tag as Kalibr prints it
+/// ([`tumble::model::tag36h11`]) is OpenCV's drawn marker turned half a turn.
+#[test]
+fn the_printed_tags_are_opencvs_markers_turned_half_a_turn() {
+    use opencv::prelude::*;
+    let dict = opencv::aruco::get_predefined_dictionary(opencv::aruco::PREDEFINED_DICTIONARY_NAME::DICT_APRILTAG_36h11)
+        .unwrap();
+    let family = tumble::model::tag36h11::CODES.len();
+    assert_eq!(dict.bytes_list().rows() as usize, family);
+    for id in 0..family {
+        let mut marker = Mat::default();
+        // One pixel a cell, a 1-cell border.
+        opencv::aruco::draw_marker(&dict, id as i32, 8, &mut marker, 1).unwrap();
+        for row in 0..6 {
+            for col in 0..6 {
+                let white = *marker.at_2d::<u8>(1 + row as i32, 1 + col as i32).unwrap() > 127;
+                let printed = tumble::model::tag36h11::data_cell_is_white(id, 5 - row, 5 - col);
+                assert_eq!(printed, Some(white), "tag {id}, OpenCV's cell ({row}, {col})");
+            }
+        }
+    }
 }
 
 /// A rendered checkerboard: every inner corner where it projects, and the

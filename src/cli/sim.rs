@@ -9,7 +9,7 @@ use tumble::sim::{Scenario, SimConfig};
 #[derive(Args)]
 pub struct SimArgs {
     /// What to simulate: an IMU scenario; `rig` (a camera–IMU rig waved
-    /// before a checkerboard, for `tumble calibrate-rig X --target
+    /// before a checkerboard or --target, for `tumble calibrate-rig X --target
     /// X/target.yaml`; its camera is EuRoC's cam0 with a 3 ms time offset;
     /// of --config it reads the `images` key); or `replay` (a window of a
     /// real recording, --from, its IMU as recorded and a camera flown along
@@ -21,6 +21,11 @@ pub struct SimArgs {
     /// IMU and ground truth (e.g. a EuRoC Machine Hall flight).
     #[arg(long, value_name = "DIR", required_if_eq("scenario", "replay"))]
     from: Option<PathBuf>,
+    /// The target `rig` waves its rig before: Kalibr's target.yaml (an
+    /// aprilgrid, drawn as Kalibr prints it, or a checkerboard; default: a
+    /// checkerboard of 7 × 6 inner corners 8 cm apart).
+    #[arg(long, value_name = "YAML")]
+    target: Option<PathBuf>,
     /// Where `replay`'s window starts, after the recording's first IMU sample [s]
     /// (0: its start; later: an estimator starts in motion).
     #[arg(long, value_name = "SECONDS", default_value_t = 0.0)]
@@ -86,6 +91,9 @@ impl SimArgs {
     pub fn run(self) -> CliResult {
         if self.scenario != "replay" && (self.from.is_some() || self.start != 0.0) {
             return Err("sim: --from and --start are for the replay scenario".into());
+        }
+        if self.scenario != "rig" && self.target.is_some() {
+            return Err("sim: --target is for the rig scenario".into());
         }
         match self.scenario.as_str() {
             "rig" => return self.run_rig(),
@@ -158,10 +166,13 @@ impl SimArgs {
     /// `tumble sim rig`: the rig recording, its frames rendered with --images.
     fn run_rig(self) -> CliResult {
         let Some((cfg, out)) = self.camera_recording_config()? else { return Ok(()) };
-        let settings = tumble::sim::rig_recording::rig_settings(
+        let mut settings = tumble::sim::rig_recording::rig_settings(
             self.duration.unwrap_or(tumble::sim::target::RigSimSettings::default().duration_s),
             self.stereo_baseline.unwrap_or(0.0),
         );
+        if let Some(path) = &self.target {
+            settings.target = tumble::rig::Target::read(path)?;
+        }
         let images = self.images.then(|| cfg.images.unwrap_or_default());
         let start = std::time::Instant::now();
         let bar = RenderBar::new(images.is_some());

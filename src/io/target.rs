@@ -40,12 +40,22 @@ impl Target {
             None => Err(InputError::file(path, format!("missing {key}"))),
         };
         match y.target_type.trim_matches(['\'', '"']) {
-            "aprilgrid" => Ok(Target::AprilGrid {
-                cols: need_u(y.tagCols, "tagCols")?,
-                rows: need_u(y.tagRows, "tagRows")?,
-                size: need_f(y.tagSize, "tagSize", false)?,
-                spacing: need_f(y.tagSpacing, "tagSpacing", true)?,
-            }),
+            "aprilgrid" => {
+                let (cols, rows) = (need_u(y.tagCols, "tagCols")?, need_u(y.tagRows, "tagRows")?);
+                let family = crate::model::tag36h11::CODES.len();
+                if cols as usize * rows as usize > family {
+                    return Err(InputError::file(
+                        path,
+                        format!("tagCols × tagRows = {cols} × {rows} tags: AprilTag 36h11 has {family}"),
+                    ));
+                }
+                Ok(Target::AprilGrid {
+                    cols,
+                    rows,
+                    size: need_f(y.tagSize, "tagSize", false)?,
+                    spacing: need_f(y.tagSpacing, "tagSpacing", true)?,
+                })
+            }
             "checkerboard" => Ok(Target::Checkerboard {
                 cols: need_u(y.targetCols, "targetCols")?,
                 rows: need_u(y.targetRows, "targetRows")?,

@@ -15,6 +15,7 @@ mod imu_samples;
 pub mod noise;
 pub mod numeric;
 pub mod split;
+pub mod tag36h11;
 pub mod target;
 
 pub use imu_samples::ImuData;

@@ -141,6 +141,10 @@ pub struct DetectionStats {
     /// The images' size `[width, height]` \[px\] (all the same: an image of
     /// another size is refused).
     pub image_size: [u32; 2],
+    /// Width of the AprilGrid tags' black border, in cells (2: Kalibr's
+    /// print; 1: AprilTag's own tag images); None for a checkerboard, or
+    /// when no tag was found.
+    pub tag_border_cells: Option<usize>,
     /// Wall time \[s\].
     pub seconds: f64,
 }
@@ -157,6 +161,9 @@ impl DetectionStats {
             if v.off_layout > 0 {
                 s.push_str(&format!("; {} views off the target's layout left out", v.off_layout));
             }
+        }
+        if let Some(b) = self.tag_border_cells {
+            s.push_str(&format!("; tags printed with a {b}-cell black border"));
         }
         s
     }

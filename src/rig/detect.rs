@@ -9,6 +9,10 @@
 //!   ArUco's own corners, from the border's contour, lie a pixel or two inside
 //!   the tag and would be biased by that much. A corner the refinement cannot
 //!   place within its window is dropped.
+//! - **The tags' black border**: Kalibr prints 2 cells, AprilTag's and
+//!   OpenCV's own tag images 1, and a decoder set for one misreads the
+//!   other. Until images show tags each is tried; the one that finds more is
+//!   kept for the recording and reported.
 //! - **Which detected corner is which corner of the tag is not assumed.**
 //!   Printed grids and detectors differ in the tag's orientation and in the
 //!   order they list its corners. The tag centres do not depend on that order,
@@ -21,9 +25,10 @@
 //!   target file: when
 //!   the tag centres do not follow its layout (wrong `tagCols`, a different
 //!   grid), the detection is refused.
-//! - **Checkerboard**: OpenCV's `findChessboardCornersSB` (sub-pixel by
-//!   construction). A checkerboard's corner order is ambiguous under a 180°
-//!   turn. Each view takes the order closest to the previous view's, so the
+//! - **Checkerboard**: OpenCV's `findChessboardCornersSB`, each corner refined
+//!   to its X-junction by `cornerSubPix` (the detector's own corners are
+//!   about 0.01 px off on rendered boards). A checkerboard's corner order
+//!   is ambiguous under a 180° turn. Each view takes the order closest to the previous view's, so the
 //!   order stays continuous through a recording. The first view sets it; an
 //!   AprilGrid has no such ambiguity and is the better target.
 

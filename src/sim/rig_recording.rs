@@ -1,4 +1,5 @@
-//! `tumble sim rig`: a camera–IMU rig waved before a checkerboard on a wall
+//! `tumble sim rig`: a camera–IMU rig waved before a target on a wall (a
+//! checkerboard, or Kalibr's AprilGrid as Kalibr prints it)
 //! ([`super::target`]), written as the ASL folder `tumble calibrate-rig`
 //! reads, with the truth beside it. Without images each camera gets the
 //! target's corners (`camN/corners.csv`, projections plus the configured
@@ -13,19 +14,20 @@
 
 use super::images::{CameraFrames, Progress};
 use super::render::scene::{Plane, RenderScene};
-use super::render::texture::{paint_rect, Texture};
+use super::render::texture::Texture;
 use super::render::ImageSettings;
 use super::target::{rig_motion, simulate_rig, target_in_world, RigSimSettings, SimulatedRig, RIG_IMU_RATE_HZ};
 use super::writer::{camera_sensor_yaml, imu_sensor_yaml, write_text};
 use super::SimError;
+use crate::model::tag36h11;
 use crate::model::target::{CameraCorners, Target};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// The target of `tumble sim rig`: a checkerboard of 7 × 6 inner corners
-/// (8 × 7 squares of 8 cm, 0.64 × 0.56 m), OpenCV's and Kalibr's kind. An
-/// AprilGrid is not rendered (its tags' codes are not drawn here).
+/// (8 × 7 squares of 8 cm, 0.64 × 0.56 m), OpenCV's and Kalibr's kind (an
+/// AprilGrid is rendered too: [`rig_settings`]' caller may set `target`).
 pub const RIG_CHECKERBOARD: Target = Target::Checkerboard { cols: 7, rows: 6, col_spacing: 0.08, row_spacing: 0.08 };
 
 /// Absolute time of the recording's first IMU sample \[ns\]: the other scenarios' default.
@@ -47,9 +49,9 @@ pub fn rig_settings(duration_s: f64, stereo_baseline_m: f64) -> RigSimSettings {
 /// rendered frames. Returns the simulation (its corners are the exact
 /// projections when rendering).
 ///
-/// Errors: a recording under 12 s, a negative stereo baseline, images of a
-/// target other than a checkerboard, image settings out of range, a file
-/// not written.
+/// Errors: a recording under 12 s, a negative stereo baseline, images of an
+/// AprilGrid with more tags than its family, image settings out of range, a
+/// file not written.
 pub fn write_rig_recording(
     settings: &RigSimSettings,
     images: Option<&ImageSettings>,
@@ -88,8 +90,11 @@ fn check(s: &RigSimSettings, images: Option<&ImageSettings>) -> Result<(), SimEr
     }
     if let Some(images) = images {
         images.check()?;
-        if !matches!(s.target, Target::Checkerboard { .. }) {
-            return Err("rig: only a checkerboard is rendered (an AprilGrid's tag codes are not drawn)".into());
+        if let Target::AprilGrid { cols, rows, .. } = s.target {
+            let family = tag36h11::CODES.len();
+            if cols as usize * rows as usize > family {
+                return Err(format!("rig: an AprilGrid of {cols} × {rows} tags (AprilTag 36h11 has {family})").into());
+            }
         }
     }
     Ok(())
@@ -234,50 +239,109 @@ fn render_frames(
     Ok(())
 }
 
-/// Side of the checkerboard's texture \[texels\]: its squares' edges fall
-/// anywhere within texels, painted with their exact coverage.
+/// Side of a target's texture \[texels\] (the texels serve the
+/// footprint's units: the pattern itself is sampled exactly, [`Texture::printed`]).
 const BOARD_TEXELS: usize = 1024;
 
-/// Grey of the board's dark and light squares (of 1): printed black and white paper.
-const BOARD_GREYS: [f32; 2] = [0.08, 0.9];
+/// Grey of the board's paper and ink (of 1): black print on white paper.
+const BOARD_GREYS: [f32; 2] = [0.9, 0.08];
 
 /// The rig's scene: a room whose front wall stands 5 cm behind the target,
-/// and the checkerboard with a white margin of one square around its squares.
+/// and the target printed on a sheet with a white margin around it.
 fn rig_scene(s: &RigSimSettings, seed: u64) -> RenderScene {
     let half = [2.0, 3.0, 2.0];
     let centre = Vector3::new(s.distance_m + 0.05 - half[0], 0.0, 0.0);
     let mut scene = RenderScene::room(centre, half, seed);
-    if let Target::Checkerboard { cols, rows, col_spacing, row_spacing } = s.target {
-        scene.planes.push(checkerboard_plane(s, [cols as usize, rows as usize], [col_spacing, row_spacing]));
-    }
+    let (lo, hi, ink) = match s.target {
+        Target::Checkerboard { cols, rows, col_spacing, row_spacing } => {
+            checkerboard_ink([cols as usize, rows as usize], [col_spacing, row_spacing])
+        }
+        Target::AprilGrid { cols, rows, size, spacing } => aprilgrid_ink([cols as usize, rows as usize], size, spacing),
+    };
+    scene.planes.push(sheet(s, lo, hi, &ink));
     scene
 }
 
-/// The checkerboard of `inner` corners spaced `spacing` \[m\] as a plane in the
-/// world ([`target_in_world`]): squares `(inner + 1)`, the corner `(0, 0)`
-/// the first inner corner, a light margin of one square.
-fn checkerboard_plane(s: &RigSimSettings, inner: [usize; 2], spacing: [f64; 2]) -> Plane {
+/// The target's ink: rectangles `[x0, y0, x1, y1]` in the target's frame \[m\]
+/// with the ink each adds (1 black, −1 a white cell cut out of a black square).
+type Ink = Vec<([f64; 4], f32)>;
+
+/// A checkerboard of `inner` corners spaced `spacing` \[m\]: `inner + 1`
+/// squares a side, corner `(0, 0)` its first inner corner, square `(0, 0)`
+/// dark; the sheet's corners (a margin of one square).
+fn checkerboard_ink(inner: [usize; 2], spacing: [f64; 2]) -> ([f64; 2], [f64; 2], Ink) {
     let squares = inner.map(|n| n + 1);
-    // The plane spans [−2, n + 1] squares along each axis.
-    let extent = [0, 1].map(|a| (squares[a] + 2) as f64 * spacing[a]);
-    let texel = [0, 1].map(|a| BOARD_TEXELS as f64 / (squares[a] + 2) as f64);
-    let mut data = vec![BOARD_GREYS[1]; BOARD_TEXELS * BOARD_TEXELS];
+    let mut ink = Vec::new();
     for j in 0..squares[1] {
         for i in 0..squares[0] {
             if (i + j) % 2 == 0 {
-                let [x0, y0] = [(i + 1) as f64 * texel[0], (j + 1) as f64 * texel[1]];
-                let rect = [x0, y0, x0 + texel[0], y0 + texel[1]];
-                paint_rect(BOARD_TEXELS, BOARD_TEXELS, &mut data, rect, BOARD_GREYS[0]);
+                let [x0, y0] = [(i as f64 - 1.0) * spacing[0], (j as f64 - 1.0) * spacing[1]];
+                ink.push(([x0, y0, x0 + spacing[0], y0 + spacing[1]], 1.0));
             }
         }
     }
+    let lo = [-2.0 * spacing[0], -2.0 * spacing[1]];
+    let hi = [0, 1].map(|a| squares[a] as f64 * spacing[a]);
+    (lo, hi, ink)
+}
+
+/// Kalibr's AprilGrid of `tags` (columns, rows) tags of side `size` \[m\],
+/// `spacing` × `size` apart, as `kalibr_create_target_pdf` prints it: each
+/// AprilTag 36h11 (tag `row·cols + col` from the lower left) within its
+/// black border of [`tag36h11::KALIBR_BORDER_BITS`] cells, a black square
+/// of the gap's side at every crossing of the gaps (each tag corner an
+/// X-junction); the sheet's corners (a margin of one tag).
+fn aprilgrid_ink(tags: [usize; 2], size: f64, spacing: f64) -> ([f64; 2], [f64; 2], Ink) {
+    let gap = spacing * size;
+    let pitch = size + gap;
+    let mut ink = Vec::new();
+    // Every crossing of the gaps, the outer ones too, touches a tag's corner.
+    for r in 0..=tags[1] {
+        for c in 0..=tags[0] {
+            let [x, y] = [c as f64 * pitch - gap, r as f64 * pitch - gap];
+            ink.push(([x, y, x + gap, y + gap], 1.0));
+        }
+    }
+    let border = tag36h11::KALIBR_BORDER_BITS;
+    let cell = size / (2 * border + tag36h11::DATA_BITS) as f64;
+    for id in 0..tags[0] * tags[1] {
+        let [x0, y0] = [(id % tags[0]) as f64 * pitch, (id / tags[0]) as f64 * pitch];
+        ink.push(([x0, y0, x0 + size, y0 + size], 1.0));
+        for row in 0..tag36h11::DATA_BITS {
+            for col in 0..tag36h11::DATA_BITS {
+                if tag36h11::data_cell_is_white(id, row, col) == Some(true) {
+                    let x = x0 + (border + col) as f64 * cell;
+                    let y = y0 + (border + tag36h11::DATA_BITS - 1 - row) as f64 * cell;
+                    ink.push(([x, y, x + cell, y + cell], -1.0));
+                }
+            }
+        }
+    }
+    let lo = [-gap - size; 2];
+    let hi = tags.map(|n| n as f64 * pitch + size);
+    (lo, hi, ink)
+}
+
+/// The sheet from `lo` to `hi` in the target's frame \[m\], printed with
+/// `ink`, as a plane in the world ([`target_in_world`]).
+fn sheet(s: &RigSimSettings, lo: [f64; 2], hi: [f64; 2], ink: &Ink) -> Plane {
+    let extent = [hi[0] - lo[0], hi[1] - lo[1]];
+    let per_metre = [0, 1].map(|a| BOARD_TEXELS as f64 / extent[a]);
+    let texels: Ink = ink
+        .iter()
+        .map(|&([x0, y0, x1, y1], amount)| {
+            let (x, y) = (|x: f64| (x - lo[0]) * per_metre[0], |y: f64| (y - lo[1]) * per_metre[1]);
+            ([x(x0), y(y0), x(x1), y(y1)], amount)
+        })
+        .collect();
+    let [paper, black] = BOARD_GREYS;
     let (r_wt, t_wt) = target_in_world(s);
     Plane {
-        origin: r_wt * Vector3::new(-2.0 * spacing[0], -2.0 * spacing[1], 0.0) + t_wt,
+        origin: r_wt * Vector3::new(lo[0], lo[1], 0.0) + t_wt,
         u_axis: r_wt * Vector3::x(),
         v_axis: r_wt * Vector3::y(),
         size: extent,
-        texture: Arc::new(Texture::new(BOARD_TEXELS, BOARD_TEXELS, data)),
+        texture: Arc::new(Texture::printed(BOARD_TEXELS, BOARD_TEXELS, &texels, paper, black)),
         ring: None,
     }
 }
