@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 /// Nearest surface a ray may show \[m\] (the lens' own near limit).
-const NEAR_M: f64 = 0.02;
+pub(super) const NEAR_M: f64 = 0.02;
 
 /// The radiance one pixel sees along the camera-frame unit ray `ray`: the
 /// nearest surface's texture averaged over the pixel's footprint on it (mip

@@ -74,8 +74,9 @@ impl Default for ImageSettings {
 /// Most sub-exposure samples of one frame.
 const MAX_BLUR_SAMPLES: usize = 16;
 
-/// Nearest depth assumed when bounding the image motion over the exposure \[m\].
-const BLUR_DEPTH_M: f64 = 1.0;
+/// Spacing of the rays whose hits bound a frame's nearest surface \[px\]
+/// ([`nearest_surface_m`]).
+const DEPTH_PROBE_STEP_PX: usize = 16;
 
 impl ImageSettings {
     /// Check for values that cannot be rendered.
@@ -112,16 +113,33 @@ pub fn camera_pose(motion: &dyn Motion, body_from_camera: &Isometry3<f64>, t: f6
 }
 
 /// Sub-exposure samples for a frame at IMU time `t`: enough that the image
-/// moves at most [`ImageSettings::max_blur_step_px`] between two, bounded
-/// by the rotation rate and by the speed at [`BLUR_DEPTH_M`].
-fn blur_samples(motion: &dyn Motion, t: f64, focal_px: f64, s: &ImageSettings) -> usize {
+/// moves at most [`ImageSettings::max_blur_step_px`] between two. A ray
+/// turns at most at the rotation rate plus the speed over the distance of
+/// the point it shows, so the motion is bounded by the rates and the nearest
+/// surface in view, `nearest_m`.
+fn blur_samples(motion: &dyn Motion, t: f64, focal_px: f64, nearest_m: f64, s: &ImageSettings) -> usize {
     if s.exposure_s == 0.0 {
         return 1;
     }
     let k = motion.at(t.clamp(0.0, motion.duration()));
-    let rate = k.omega.norm() + k.velocity.norm() / BLUR_DEPTH_M;
+    let rate = k.omega.norm() + k.velocity.norm() / nearest_m;
     let moved_px = rate * s.exposure_s * focal_px;
     ((moved_px / s.max_blur_step_px).ceil() as usize).clamp(1, MAX_BLUR_SAMPLES)
+}
+
+/// The nearest surface the camera at `world_from_camera` shows \[m\]: the
+/// least hit distance over a grid of its rays [`DEPTH_PROBE_STEP_PX`] apart
+/// (the image's last row and column included; a surface's distance varies
+/// smoothly between them), infinite where they hit nothing.
+fn nearest_surface_m(scene: &scene::RenderScene, lens: &lens::RayTable, world_from_camera: &Isometry3<f64>) -> f64 {
+    let seen = scene.seen_from(world_from_camera);
+    let probes = |n: usize| (0..n).step_by(DEPTH_PROBE_STEP_PX).chain(std::iter::once(n.saturating_sub(1)));
+    probes(lens.height)
+        .flat_map(|j| probes(lens.width).map(move |i| j * lens.width + i))
+        .filter_map(|k| lens.rays.get(k).copied().flatten())
+        .filter_map(|ray| seen.hit(&ray, frame::NEAR_M))
+        .map(|hit| hit.distance_m)
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// One 8-bit frame (row-major) of a camera with rays `lens`, mounted at
@@ -139,7 +157,8 @@ pub fn render_frame(
     s: &ImageSettings,
     seed: u64,
 ) -> Vec<u8> {
-    let samples = blur_samples(motion, t, focal_px, s);
+    let nearest_m = nearest_surface_m(scene, lens, &camera_pose(motion, body_from_camera, t));
+    let samples = blur_samples(motion, t, focal_px, nearest_m, s);
     let mid_row = (lens.height as f64 - 1.0) * 0.5;
     let pose_at = |row: usize, k: usize| {
         let readout = (row as f64 - mid_row) * s.line_delay_s;
@@ -148,4 +167,51 @@ pub fn render_frame(
     };
     let radiance = frame::radiance_image(scene, lens, samples, &pose_at);
     frame::expose(&radiance, lens.width, gain, s, seed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::scene::{Plane, RenderScene};
+    use super::texture::Texture;
+    use super::*;
+    use nalgebra::{Matrix3, Vector3};
+    use std::sync::Arc;
+    use tumble_factors::camera::{CameraModel, Distortion};
+
+    /// A plane of a blank 16-texel texture.
+    fn plane(origin: [f64; 3], u_axis: [f64; 3], v_axis: [f64; 3], size: [f64; 2]) -> Plane {
+        Plane {
+            origin: origin.into(),
+            u_axis: u_axis.into(),
+            v_axis: v_axis.into(),
+            size,
+            texture: Arc::new(Texture::printed(16, 16, &[], 0.5, 0.5)),
+            ring: None,
+        }
+    }
+
+    #[test]
+    fn the_blur_is_bounded_by_the_nearest_surface_in_view() {
+        let model = CameraModel { fx: 458.0, fy: 458.0, cx: 376.0, cy: 240.0, distortion: Distortion::None };
+        let lens = lens::RayTable::new(&model, 752, 480);
+        // A camera at the origin looking along world +x (its y down = world −z).
+        let r = Matrix3::from_columns(&[-Vector3::y(), -Vector3::z(), Vector3::x()]);
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+        let pose = Isometry3::from_parts(Translation3::identity(), rot);
+        let wall = plane([2.0, -5.0, -5.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [10.0, 10.0]);
+        let mut scene = RenderScene { planes: vec![wall], walls: Vec::new(), background: 0.5 };
+        // The wall 2 m ahead is nearest where the optical axis meets it.
+        let d = nearest_surface_m(&scene, &lens, &pose);
+        assert!((d - 2.0).abs() < 1e-3, "{d}");
+        // A floor 0.6 m below comes nearest at the image's bottom edge:
+        // along the ray (0, 239/458, 1), 0.6 m down.
+        scene.planes.push(plane([0.0, -5.0, -0.6], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [10.0, 10.0]));
+        let slope: f64 = 239.0 / 458.0;
+        let expected = 0.6 * (1.0 + slope * slope).sqrt() / slope;
+        let d = nearest_surface_m(&scene, &lens, &pose);
+        assert!((d - expected).abs() < 2e-3, "{d} vs {expected}");
+        // Nothing in view: only the rotation blurs.
+        let away = Isometry3::from_parts(Translation3::new(3.0, 0.0, 0.0), rot);
+        assert_eq!(nearest_surface_m(&RenderScene { planes: Vec::new(), ..scene }, &lens, &away), f64::INFINITY);
+    }
 }
