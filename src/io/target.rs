@@ -42,19 +42,14 @@ impl Target {
         match y.target_type.trim_matches(['\'', '"']) {
             "aprilgrid" => {
                 let (cols, rows) = (need_u(y.tagCols, "tagCols")?, need_u(y.tagRows, "tagRows")?);
-                let family = crate::model::tag36h11::CODES.len();
-                if cols as usize * rows as usize > family {
-                    return Err(InputError::file(
-                        path,
-                        format!("tagCols × tagRows = {cols} × {rows} tags: AprilTag 36h11 has {family}"),
-                    ));
-                }
-                Ok(Target::AprilGrid {
+                let grid = Target::AprilGrid {
                     cols,
                     rows,
                     size: need_f(y.tagSize, "tagSize", false)?,
                     spacing: need_f(y.tagSpacing, "tagSpacing", true)?,
-                })
+                };
+                grid.check_tag_family().map_err(|e| InputError::file(path, format!("tagCols × tagRows: {e}")))?;
+                Ok(grid)
             }
             "checkerboard" => Ok(Target::Checkerboard {
                 cols: need_u(y.targetCols, "targetCols")?,

@@ -46,6 +46,18 @@ impl Target {
         }
     }
 
+    /// Whether the target can be printed: an AprilGrid needs no more tags
+    /// than AprilTag 36h11 has codes (the reason when it does).
+    pub fn check_tag_family(&self) -> Result<(), String> {
+        let family = super::tag36h11::CODES.len();
+        match *self {
+            Target::AprilGrid { cols, rows, .. } if cols as usize * rows as usize > family => {
+                Err(format!("an AprilGrid of {cols} × {rows} tags: AprilTag 36h11 has {family}"))
+            }
+            _ => Ok(()),
+        }
+    }
+
     /// Target-frame position \[m\] of corner `id` (z = 0): for an AprilGrid
     /// `id = 4·tag + corner` with Kalibr's layout (tag `row·cols + col`, corners
     /// counter-clockwise from the lower left: (0,0), (s,0), (s,s), (0,s));

@@ -90,12 +90,7 @@ fn check(s: &RigSimSettings, images: Option<&ImageSettings>) -> Result<(), SimEr
     }
     if let Some(images) = images {
         images.check()?;
-        if let Target::AprilGrid { cols, rows, .. } = s.target {
-            let family = tag36h11::CODES.len();
-            if cols as usize * rows as usize > family {
-                return Err(format!("rig: an AprilGrid of {cols} × {rows} tags (AprilTag 36h11 has {family})").into());
-            }
-        }
+        s.target.check_tag_family().map_err(|e| format!("rig: {e}"))?;
     }
     Ok(())
 }

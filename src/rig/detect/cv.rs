@@ -130,7 +130,7 @@ impl Detector {
         let mut ids = Vector::<i32>::new();
         let mut rejected = Vector::<Vector<Point2f>>::new();
         aruco::detect_markers(img, &self.dictionary, &mut corners, &mut ids, parameters, &mut rejected)?;
-        let criteria = TermCriteria::new(TermCriteria_Type::COUNT as i32 + TermCriteria_Type::EPS as i32, 40, 0.01)?;
+        let criteria = subpix_criteria()?;
         let mut tags = Vec::with_capacity(ids.len());
         let mut dropped = 0;
         for (id, quad) in ids.iter().zip(corners.iter()) {
@@ -181,8 +181,13 @@ fn refine_board_corners(img: &Mat, pts: &mut Vector<Point2f>, cols: usize) -> op
         }
     }
     let half = ((nearest / 3.0).floor() as i32).clamp(REFINE_HALF_WINDOW, MAX_HALF_WINDOW);
-    let criteria = TermCriteria::new(TermCriteria_Type::COUNT as i32 + TermCriteria_Type::EPS as i32, 40, 0.01)?;
+    let criteria = subpix_criteria()?;
     imgproc::corner_sub_pix(img, pts, Size::new(half, half), Size::new(-1, -1), criteria)
+}
+
+/// When `cornerSubPix` stops: after 40 iterations or a move below 0.01 px.
+fn subpix_criteria() -> opencv::Result<TermCriteria> {
+    TermCriteria::new(TermCriteria_Type::COUNT as i32 + TermCriteria_Type::EPS as i32, 40, 0.01)
 }
 
 /// Tags found in the images of a batch by the detection at `index` (of each image's list).
@@ -250,9 +255,7 @@ pub fn detect_camera(
         dropped: 0,
         order: None,
         image_size: first_size.unwrap_or([0, 0]),
-        tag_border_cells: border
-            .filter(|_| matches!(target, Target::AprilGrid { .. }))
-            .map(|b| TAG_BORDERS[b] as usize),
+        tag_border_cells: border.map(|b| TAG_BORDERS[b] as usize),
         seconds: 0.0,
     };
     let mut views: Vec<View> = frames.iter().map(|(t_ns, _)| View { t_ns: *t_ns, corners: Vec::new() }).collect();
