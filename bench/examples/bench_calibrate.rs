@@ -12,9 +12,8 @@ use tumble::io::{open_recording, AccelUnit, GyroUnit, RecordingOptions, TimeUnit
 const IMU_TK_SECONDS: f64 = 2.3;
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let repeat: usize =
-        args.iter().position(|a| a == "--repeat").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(5);
+    let usage = "usage: bench_calibrate [--repeat N (5)]";
+    let repeat = tumble_bench::numeric_args(usage, &[("--repeat", 5.0)])[0] as usize;
     let Some(dir) = tumble::io::datasets::dataset("imu_tk_xsens") else {
         return;
     };

@@ -42,9 +42,8 @@ fn track_all(
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let repeat: usize =
-        args.iter().position(|a| a == "--repeat").and_then(|i| args.get(i + 1)?.parse().ok()).unwrap_or(3);
+    let usage = "usage: bench_frontend [--repeat N (3)]";
+    let repeat = (tumble_bench::numeric_args(usage, &[("--repeat", 3.0)])[0] as usize).max(1);
     core::set_num_threads(1).expect("opencv threads");
     let Some(micro) = tumble::io::datasets::dataset("euroc/V1_01_easy_micro") else {
         return;

@@ -20,10 +20,9 @@ use tumble::vio::{read_eqvio, run, summarize, VioInput, VioOptions};
 const TARGET_REALTIME: f64 = 20.0;
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|i| args.get(i + 1));
-    let duration: f64 = value("--duration").and_then(|v| v.parse().ok()).unwrap_or(60.0);
-    let repeat: usize = value("--repeat").and_then(|v| v.parse().ok()).unwrap_or(1).max(1);
+    let usage = "usage: bench_vio [--duration S (60, at least 20)] [--repeat N (1)]";
+    let v = tumble_bench::numeric_args(usage, &[("--duration", 60.0), ("--repeat", 1.0)]);
+    let (duration, repeat) = (v[0], (v[1] as usize).max(1));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("thread pool");
     let cfg = SimConfig { duration_s: Some(duration.max(20.0)), ..SimConfig::default() };
     let sim = simulate(Scenario::Flight, &cfg, 11).expect("simulation");

@@ -75,6 +75,31 @@ impl Record {
     }
 }
 
+/// The numeric options of a benchmark's command line: for each `(flag,
+/// default)` the number after the flag, or the default. Prints `usage` and
+/// exits on `-h`/`--help`; exits with status 2, naming it, on any other
+/// argument, a flag without a value or a value that is not a number.
+pub fn numeric_args(usage: &str, flags: &[(&str, f64)]) -> Vec<f64> {
+    let mut values: Vec<f64> = flags.iter().map(|f| f.1).collect();
+    let mut args = std::env::args().skip(1);
+    let fail = |why: String| -> ! {
+        eprintln!("error: {why}\n{usage}");
+        std::process::exit(2)
+    };
+    while let Some(a) = args.next() {
+        if a == "-h" || a == "--help" {
+            println!("{usage}");
+            std::process::exit(0);
+        }
+        let Some(k) = flags.iter().position(|f| f.0 == a) else { fail(format!("unknown argument {a}")) };
+        match args.next().map(|v| v.parse::<f64>()) {
+            Some(Ok(v)) if v.is_finite() => values[k] = v,
+            _ => fail(format!("{a} needs a number")),
+        }
+    }
+    values
+}
+
 /// Peak resident set size of this process \[MB\] (Linux `VmHWM`).
 pub fn peak_rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
