@@ -11,6 +11,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::Duration;
 
 /// The scene a simulation's camera sees, as textured planes.
 pub fn render_scene(sim: &Simulation) -> RenderScene {
@@ -87,7 +90,7 @@ pub(crate) struct Progress<'a> {
     pub done: usize,
     /// Frames to write.
     pub total: usize,
-    /// Called with `(done, total)` after each batch.
+    /// Called with `(done, total)` as frames are written.
     pub report: &'a mut dyn FnMut(usize, usize),
 }
 
@@ -112,7 +115,7 @@ pub(crate) struct CameraFrames<'a> {
 impl CameraFrames<'_> {
     /// Render `frames` (the IMU time at the middle of each exposure \[s\] and
     /// the frame's stamp \[ns\]) into `dir/<stamp>.png`, rayon across
-    /// frames, a few per thread at a time with progress between.
+    /// frames, the progress reported while they render.
     pub fn render(&self, frames: &[(f64, i64)], dir: &Path, progress: &mut Progress) -> Result<(), SimError> {
         std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
         let c = self.camera;
@@ -147,13 +150,89 @@ impl CameraFrames<'_> {
                 .map_err(|e| format!("{}: {e}", path.display()))?;
             std::fs::write(&path, bytes).map_err(|e| format!("{}: {e}", path.display()))
         };
-        let chunk = 4 * rayon::current_num_threads();
-        for start in (0..frames.len()).step_by(chunk) {
-            let end = (start + chunk).min(frames.len());
-            (start..end).into_par_iter().map(frame).collect::<Result<Vec<()>, String>>()?;
-            progress.done += end - start;
-            (progress.report)(progress.done, progress.total);
-        }
+        let done = AtomicUsize::new(0);
+        let first = progress.done;
+        let rendered = while_reporting(
+            || {
+                (0..frames.len())
+                    .into_par_iter()
+                    .map(|k| {
+                        let r = frame(k);
+                        done.fetch_add(1, Ordering::Relaxed);
+                        r
+                    })
+                    .collect::<Result<Vec<()>, String>>()
+            },
+            || (progress.report)(first + done.load(Ordering::Relaxed), progress.total),
+        );
+        rendered?;
+        progress.done = first + frames.len();
+        (progress.report)(progress.done, progress.total);
         Ok(())
+    }
+}
+
+/// How often a long render reports its progress.
+const PROGRESS_PERIOD: Duration = Duration::from_millis(100);
+
+/// `work()` (parallel work on the current rayon pool) while the calling
+/// thread calls `report()` every [`PROGRESS_PERIOD`]: one parallel loop over
+/// every frame keeps both cores busy to the end (batches between reports
+/// left one idle while the other finished its batch's slowest frame). On a
+/// pool's own thread the caller runs queued work instead of sleeping, so a
+/// one-thread pool still makes progress. A panic in `work` is caught, so
+/// that the caller stops waiting, and raised again on the calling thread.
+fn while_reporting<T: Send>(work: impl FnOnce() -> T + Send, mut report: impl FnMut()) -> T {
+    let result = Mutex::new(None);
+    rayon::in_place_scope(|s| {
+        s.spawn(|_| {
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
+            *result.lock().unwrap_or_else(|e| e.into_inner()) = Some(r);
+        });
+        while result.lock().unwrap_or_else(|e| e.into_inner()).is_none() {
+            if rayon::yield_now() != Some(rayon::Yield::Executed) {
+                std::thread::sleep(PROGRESS_PERIOD);
+            }
+            report();
+        }
+    });
+    match result.into_inner().unwrap_or_else(|e| e.into_inner()).expect("the scope ran its work") {
+        Ok(r) => r,
+        Err(panic) => std::panic::resume_unwind(panic),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The work's result comes back and the caller reports while it runs,
+    /// from a plain thread and from the only thread of a one-thread pool
+    /// (which must run the work itself rather than wait for it).
+    #[test]
+    fn parallel_work_finishes_and_reports_from_any_thread() {
+        let work = || (0..64u64).into_par_iter().map(|k| k * k).sum::<u64>();
+        let slow = || {
+            std::thread::sleep(3 * PROGRESS_PERIOD);
+            work()
+        };
+        let mut reports = 0;
+        assert_eq!(while_reporting(slow, || reports += 1), 85_344);
+        assert!(reports >= 2, "{reports} reports over three periods");
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("pool");
+        assert_eq!(pool.install(|| while_reporting(work, || {})), 85_344);
+    }
+
+    /// A panic in the work reaches the caller (it used to leave the caller
+    /// waiting for a result that never came).
+    #[test]
+    fn a_panic_in_the_work_reaches_the_caller() {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let caught = std::panic::catch_unwind(|| while_reporting(|| -> u64 { panic!("a frame failed") }, || {}));
+            let _ = tx.send(caught.is_err());
+        });
+        let panicked = rx.recv_timeout(Duration::from_secs(10)).expect("the caller returned within 10 s");
+        assert!(panicked);
     }
 }

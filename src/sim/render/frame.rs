@@ -77,9 +77,11 @@ pub fn expose(radiance: &[f64], width: usize, gain: f64, s: &ImageSettings, seed
             let (x, y) = ((k % width) as f64 - cx, (k / width) as f64 - cy);
             let signal = (gain * l * (1.0 - s.vignetting * (x * x + y * y) / corner2)).max(0.0);
             let shot = if s.full_well_electrons > 0.0 { (signal / s.full_well_electrons).sqrt() } else { 0.0 };
-            let sigma = shot.hypot(s.read_noise_dn / 255.0);
+            let read = s.read_noise_dn / 255.0;
+            let sigma = (shot * shot + read * read).sqrt();
             let noise: f64 = StandardNormal.sample(&mut rng);
-            ((signal + sigma * noise) * 255.0).round().clamp(0.0, 255.0) as u8
+            // Rounded to the nearest grey level (`as` saturates at 0 and 255).
+            ((signal + sigma * noise) * 255.0 + 0.5) as u8
         })
         .collect()
 }

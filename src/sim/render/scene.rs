@@ -41,15 +41,6 @@ pub struct PlaneRing {
     pub outer: [f64; 2],
 }
 
-impl PlaneRing {
-    /// Whether the point `(a, b)` \[m, plane coordinates\] is on the ring.
-    fn holds(&self, a: f64, b: f64) -> bool {
-        let (x, y) = (a - self.centre[0], b - self.centre[1]);
-        let inside = |s: [f64; 2]| (x / s[0]).powi(2) + (y / s[1]).powi(2) < 1.0;
-        inside(self.outer) && !inside(self.inner)
-    }
-}
-
 /// A vertical wall on the ellipse `x²/a² + y²/b² = 1` about the world's z
 /// axis, from `z0` up `height` \[m\], seen from either side. Texture u runs
 /// with the angle θ of `(x/a, y/b)` (counter-clockwise from +x, the whole
@@ -219,7 +210,7 @@ impl RenderScene {
                     v: r * p.v_axis * sv,
                     v0: p.v_axis.dot(&(eye - p.origin)) * sv,
                     size: [p.size[0] * su, p.size[1] * sv],
-                    ring: p.ring,
+                    ring: p.ring.map(|r| SeenRing::new(&r, [su, sv])),
                     texels: [su, sv],
                 }
             })
@@ -228,11 +219,25 @@ impl RenderScene {
             .walls
             .iter()
             .map(|w| {
-                let [tu, tv] = w.texels_per_unit();
-                SeenWall { semi_axes: w.semi_axes, z: [w.z0, w.z0 + w.height], texels_per_unit: [tu, tv] }
+                let [a, b] = w.semi_axes;
+                let eye_unit = [eye.x / a, eye.y / b];
+                SeenWall {
+                    inverse_axes: [1.0 / a, 1.0 / b],
+                    semi_axes: w.semi_axes,
+                    z: [w.z0, w.z0 + w.height],
+                    texels_per_unit: w.texels_per_unit(),
+                    eye_unit,
+                    eye_c: eye_unit[0] * eye_unit[0] + eye_unit[1] * eye_unit[1] - 1.0,
+                }
             })
             .collect();
-        SeenPlanes { planes, walls, world_from_camera: world_from_camera.rotation, eye, first_wall: self.planes.len() }
+        SeenPlanes {
+            planes,
+            walls,
+            world_from_camera: world_from_camera.rotation.to_rotation_matrix(),
+            eye,
+            first_wall: self.planes.len(),
+        }
     }
 }
 
@@ -247,9 +252,39 @@ struct SeenPlane {
     v: Vector3<f64>,
     v0: f64,
     size: [f64; 2],
-    ring: Option<PlaneRing>,
+    ring: Option<SeenRing>,
     /// Level-0 texels per metre along u and v.
     texels: [f64; 2],
+}
+
+/// A [`PlaneRing`] in its plane's texels, for the test per ray.
+#[derive(Debug, Clone, Copy)]
+struct SeenRing {
+    /// Centre \[texels\].
+    centre: [f64; 2],
+    /// Reciprocal semi-axes of the inner and outer ellipse \[1/texels\].
+    inner: [f64; 2],
+    outer: [f64; 2],
+}
+
+impl SeenRing {
+    /// `ring` on a plane of `texels` per metre along u and v.
+    fn new(ring: &PlaneRing, texels: [f64; 2]) -> SeenRing {
+        let per_texel = |s: [f64; 2]| [1.0 / (s[0] * texels[0]), 1.0 / (s[1] * texels[1])];
+        SeenRing {
+            centre: [ring.centre[0] * texels[0], ring.centre[1] * texels[1]],
+            inner: per_texel(ring.inner),
+            outer: per_texel(ring.outer),
+        }
+    }
+
+    /// Whether the point `(a, b)` \[texels\] is on the ring: outside the
+    /// inner ellipse and inside the outer one.
+    fn holds(&self, a: f64, b: f64) -> bool {
+        let (x, y) = (a - self.centre[0], b - self.centre[1]);
+        let inside = |s: [f64; 2]| (x * s[0]).powi(2) + (y * s[1]).powi(2) < 1.0;
+        inside(self.outer) && !inside(self.inner)
+    }
 }
 
 /// A curved wall as the world holds it (it is intersected in the world frame).
@@ -258,6 +293,12 @@ struct SeenWall {
     semi_axes: [f64; 2],
     z: [f64; 2],
     texels_per_unit: [f64; 2],
+    /// The eye in the ellipse's unit-circle coordinates `(x/a, y/b)`, and
+    /// its squared norm less one (the ray's quadratic's constant term).
+    eye_unit: [f64; 2],
+    eye_c: f64,
+    /// `[1/a, 1/b]` of the semi-axes.
+    inverse_axes: [f64; 2],
 }
 
 /// Where a camera pose sees a scene's surfaces ([`RenderScene::seen_from`]).
@@ -265,7 +306,7 @@ struct SeenWall {
 pub struct SeenPlanes {
     planes: Vec<SeenPlane>,
     walls: Vec<SeenWall>,
-    world_from_camera: nalgebra::UnitQuaternion<f64>,
+    world_from_camera: nalgebra::Rotation3<f64>,
     eye: Vector3<f64>,
     first_wall: usize,
 }
@@ -298,19 +339,24 @@ impl SeenPlanes {
                 continue;
             }
             let (a, b) = (p.u.dot(ray) * t + p.u0, p.v.dot(ray) * t + p.v0);
-            let on_ring = |r: &PlaneRing| r.holds(a / p.texels[0], b / p.texels[1]);
+            let on_ring = |r: &SeenRing| r.holds(a, b);
             if (0.0..p.size[0]).contains(&a) && (0.0..p.size[1]).contains(&b) && p.ring.as_ref().is_none_or(on_ring) {
                 let (incidence, texels_per_m) = (cos.abs(), 0.5 * (p.texels[0] + p.texels[1]));
                 best = Some(Hit { plane: k, distance_m: t, incidence, uv: [a, b], texels_per_m });
             }
         }
         if !self.walls.is_empty() {
+            // The nearest wall first, its texture coordinates only then.
             let d = self.world_from_camera * ray;
+            let mut nearest = best.map_or(f64::INFINITY, |b| b.distance_m);
+            let mut wall = None;
             for (k, w) in self.walls.iter().enumerate() {
-                let nearest = best.map_or(f64::INFINITY, |b| b.distance_m);
-                if let Some(hit) = w.hit(&self.eye, &d, near, nearest) {
-                    best = Some(Hit { plane: self.first_wall + k, ..hit });
+                if let Some(t) = w.distance(self.eye.z, &d, near, nearest) {
+                    (nearest, wall) = (t, Some(k));
                 }
+            }
+            if let Some(k) = wall {
+                best = Some(Hit { plane: self.first_wall + k, ..self.walls[k].hit_at(self.eye.z, &d, nearest) });
             }
         }
         best
@@ -318,38 +364,44 @@ impl SeenPlanes {
 }
 
 impl SeenWall {
-    /// Where the world-frame unit ray `d` from `eye` first meets the wall
-    /// beyond `near` and before `nearest` \[m\] (`plane` left 0 for the
-    /// caller to set).
-    fn hit(&self, eye: &Vector3<f64>, d: &Vector3<f64>, near: f64, nearest: f64) -> Option<Hit> {
-        let [a, b] = self.semi_axes;
+    /// How far along the world-frame unit ray `d` from the eye (at height
+    /// `eye_z`) it first meets the wall beyond `near` and before `nearest` \[m\].
+    fn distance(&self, eye_z: f64, d: &Vector3<f64>, near: f64, nearest: f64) -> Option<f64> {
+        let [ia, ib] = self.inverse_axes;
+        let [ex, ey] = self.eye_unit;
         // |e + t·d|² = 1 in the ellipse's unit-circle coordinates: A t² + 2B t + C = 0.
-        let (ex, ey, dx, dy) = (eye.x / a, eye.y / b, d.x / a, d.y / b);
-        let (qa, qb, qc) = (dx * dx + dy * dy, ex * dx + ey * dy, ex * ex + ey * ey - 1.0);
-        let disc = qb * qb - qa * qc;
+        let (dx, dy) = (d.x * ia, d.y * ib);
+        let (qa, qb) = (dx * dx + dy * dy, ex * dx + ey * dy);
+        let disc = qb * qb - qa * self.eye_c;
         if qa <= 0.0 || disc < 0.0 {
             return None;
         }
-        let root = disc.sqrt();
-        [(-qb - root) / qa, (-qb + root) / qa].into_iter().find_map(|t| {
-            let z = eye.z + t * d.z;
-            if t <= near || t >= nearest || z < self.z[0] || z >= self.z[1] {
-                return None;
-            }
-            let (x, y) = (ex + t * dx, ey + t * dy);
-            // (x, y) = (cos θ, sin θ): the wall's normal there is along
-            // (x/a, y/b), and a radian of θ is |d(a cos θ, b sin θ)/dθ| metres.
-            let normal = Vector3::new(x / a, y / b, 0.0).normalize();
-            let theta = y.atan2(x).rem_euclid(2.0 * std::f64::consts::PI);
-            let metres_per_rad = (a * a * y * y + b * b * x * x).sqrt();
-            let [tu, tv] = self.texels_per_unit;
-            Some(Hit {
-                plane: 0,
-                distance_m: t,
-                incidence: normal.dot(d).abs(),
-                uv: [theta * tu, (z - self.z[0]) * tv],
-                texels_per_m: 0.5 * (tu / metres_per_rad + tv),
-            })
+        let (root, over) = (disc.sqrt(), 1.0 / qa);
+        [(-qb - root) * over, (-qb + root) * over].into_iter().find(|&t| {
+            let z = eye_z + t * d.z;
+            t > near && t < nearest && z >= self.z[0] && z < self.z[1]
         })
+    }
+
+    /// Where the world-frame unit ray `d` from the eye (at height `eye_z`)
+    /// meets the wall at distance `t` \[m\] (`plane` left 0 for the caller to set).
+    fn hit_at(&self, eye_z: f64, d: &Vector3<f64>, t: f64) -> Hit {
+        let [a, b] = self.semi_axes;
+        let ([ex, ey], [ia, ib]) = (self.eye_unit, self.inverse_axes);
+        let (dx, dy) = (d.x * ia, d.y * ib);
+        let (x, y, z) = (ex + t * dx, ey + t * dy, eye_z + t * d.z);
+        // (x, y) = (cos θ, sin θ): the wall's normal there is along
+        // (x/a, y/b), and a radian of θ is |d(a cos θ, b sin θ)/dθ| metres.
+        let normal = Vector3::new(x * ia, y * ib, 0.0).normalize();
+        let theta = y.atan2(x).rem_euclid(2.0 * std::f64::consts::PI);
+        let metres_per_rad = (a * a * y * y + b * b * x * x).sqrt();
+        let [tu, tv] = self.texels_per_unit;
+        Hit {
+            plane: 0,
+            distance_m: t,
+            incidence: normal.dot(d).abs(),
+            uv: [theta * tu, (z - self.z[0]) * tv],
+            texels_per_m: 0.5 * (tu / metres_per_rad + tv),
+        }
     }
 }

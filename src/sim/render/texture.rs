@@ -21,6 +21,7 @@ struct Level {
 }
 
 /// `⌊x⌋` as an integer (without a call into libm).
+#[inline(always)]
 fn floor_i(x: f64) -> isize {
     let t = x as isize;
     t - isize::from((t as f64) > x)
@@ -34,6 +35,7 @@ impl Level {
     }
 
     /// Bilinear interpolation between texel centres; `(x, y)` in this level's texels.
+    #[inline(always)]
     fn bilinear(&self, x: f64, y: f64) -> f64 {
         let (x, y) = (x - 0.5, y - 0.5);
         let (i, j) = (floor_i(x), floor_i(y));
@@ -238,9 +240,10 @@ impl Texture {
         let lod = lod_of(footprint).min((self.levels.len() - 1) as f64);
         let k = lod as usize;
         let f = lod - k as f64;
+        // Level k's coordinates are level 0's times 2⁻ᵏ, an exact product.
         let at = |k: usize| {
-            let s = (1u64 << k) as f64;
-            self.levels[k].bilinear(u / s, v / s)
+            let s = f64::from_bits((1023 - k as u64) << 52);
+            self.levels[k].bilinear(u * s, v * s)
         };
         if f < 1e-6 || k + 1 >= self.levels.len() {
             return at(k);
