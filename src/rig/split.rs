@@ -39,15 +39,14 @@ pub(super) fn check_halves(
         ));
         return Ok(());
     }
-    let mut halves = Vec::new();
-    for (h, range) in [0..n / 2, n / 2..n].into_iter().enumerate() {
-        progress(&format!("split check: joint solve on half {} ({} frames)", h + 1, range.len()));
-        let offset = joint.offset()?;
-        let half = start_from_solution(start, joint, range.clone(), offset)?;
-        let j = joint_solve(input, o, &half, gyro_integral, &mut |m: &str| progress(&format!("  {m}")))?;
+    // The halves are solved at once, one per core; their progress is
+    // reported afterwards, in order.
+    let solve_half = |h: usize, range: std::ops::Range<usize>| -> Result<(Vec<String>, Option<_>), RigError> {
+        let mut log = vec![format!("split check: joint solve on half {} ({} frames)", h + 1, range.len())];
+        let half = start_from_solution(start, joint, range.clone(), joint.offset()?)?;
+        let j = joint_solve(input, o, &half, gyro_integral, &mut |m: &str| log.push(format!("  {m}")))?;
         if !j.converged {
-            rig.notes.push(format!("the joint solve on half {} did not converge: σ not checked", h + 1));
-            return Ok(());
+            return Ok((log, None));
         }
         let cameras =
             (0..input.cameras.len()).map(|c| camera_result(input, o, &half, &j, c)).collect::<Result<_, _>>()?;
@@ -55,7 +54,20 @@ pub(super) fn check_halves(
         let span = |k: usize| start.frames[k].t - start.frames[0].t;
         let label =
             format!("frames {}–{} ({:.1}–{:.1} s)", range.start, range.end - 1, span(range.start), span(range.end - 1));
-        halves.push((label, HalfEstimate { cameras, time_offset }));
+        Ok((log, Some((label, HalfEstimate { cameras, time_offset }))))
+    };
+    let (first, second) = rayon::join(|| solve_half(0, 0..n / 2), || solve_half(1, n / 2..n));
+    let mut halves = Vec::new();
+    for (h, solved) in [first, second].into_iter().enumerate() {
+        let (log, estimate) = solved?;
+        log.iter().for_each(|m| progress(m));
+        match estimate {
+            Some(e) => halves.push(e),
+            None => {
+                rig.notes.push(format!("the joint solve on half {} did not converge: σ not checked", h + 1));
+                return Ok(());
+            }
+        }
     }
     let [(l1, a), (l2, b)]: [(String, HalfEstimate); 2] =
         halves.try_into().map_err(|_| RigError::Internal("two halves expected".into()))?;
