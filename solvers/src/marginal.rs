@@ -253,13 +253,12 @@ fn add_normal_equations(
         for (a, ka) in e.factor.keys().iter().enumerate() {
             let Some(&oa) = offsets.get(ka) else { continue };
             let ja = &wl.lin.jacobians[a];
-            let mut ga = g.rows_mut(oa, ja.ncols());
-            ga += ja.tr_mul(&wl.lin.residual);
+            // In place (`+= Jₐᵀ r`, `+= Jₐᵀ J_b`): no temporary per block.
+            g.rows_mut(oa, ja.ncols()).gemv_tr(1.0, ja, &wl.lin.residual, 1.0);
             for (b, kb) in e.factor.keys().iter().enumerate() {
                 let Some(&ob) = offsets.get(kb) else { continue };
                 let jb = &wl.lin.jacobians[b];
-                let mut blk = h.view_mut((oa, ob), (ja.ncols(), jb.ncols()));
-                blk += ja.tr_mul(jb);
+                h.view_mut((oa, ob), (ja.ncols(), jb.ncols())).gemm_tr(1.0, ja, jb, 1.0);
             }
         }
     }
