@@ -18,10 +18,6 @@ use tumble::allan::{allan_deviation_axes, AllanOptions, DeviationKind, TauGrid};
 use tumble::sim::{noise_series, AxisNoise, ImuModel};
 use tumble_bench::{median, peak_rss_mb};
 
-fn arg(args: &[String], name: &str, default: f64) -> f64 {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|v| v.parse().ok()).unwrap_or(default)
-}
-
 /// Read bandwidth of this machine \[bytes/s\]: summing a 512 MiB array (best of 3).
 fn read_bandwidth() -> f64 {
     let n = 64 << 20;
@@ -63,12 +59,13 @@ fn main() {
     unsafe {
         libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 20);
     }
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let n = arg(&args, "--samples", 3e6) as usize;
-    let n_taus = arg(&args, "--taus", 1000.0) as usize;
-    let repeat = arg(&args, "--repeat", 5.0).max(1.0) as usize;
-    let peer_axes = (arg(&args, "--peer-axes", 6.0) as usize).clamp(1, 6);
-    let no_peer = args.iter().any(|a| a == "--no-peer");
+    let usage =
+        "usage: bench_allan [--samples N (3000000)] [--taus N (1000)] [--repeat N (5)] [--peer-axes N (6)] [--no-peer]";
+    let flags = [("--samples", 3e6), ("--taus", 1000.0), ("--repeat", 5.0), ("--peer-axes", 6.0)];
+    let (v, switches) = tumble_bench::args_with_switches(usage, &flags, &["--no-peer"]);
+    let (n, n_taus) = (v[0] as usize, v[1] as usize);
+    let (repeat, peer_axes) = (v[2].max(1.0) as usize, (v[3] as usize).clamp(1, 6));
+    let no_peer = switches[0];
     let rate = 200.0;
     let tau0 = 1.0 / rate;
 

@@ -21,15 +21,11 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-fn arg(args: &[String], name: &str, default: f64) -> f64 {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|v| v.parse().ok()).unwrap_or(default)
-}
-
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let hours = arg(&args, "--hours", 4.0);
-    let rate = arg(&args, "--rate", 1000.0);
-    let repeat = arg(&args, "--repeat", 3.0).max(1.0) as usize;
+    let usage = "usage: bench_read_imu [--hours H (4)] [--rate HZ (1000)] [--repeat N (3)] [--no-peer]";
+    let flags = [("--hours", 4.0), ("--rate", 1000.0), ("--repeat", 3.0)];
+    let (v, switches) = tumble_bench::args_with_switches(usage, &flags, &["--no-peer"]);
+    let (hours, rate, repeat, no_peer) = (v[0], v[1], v[2].max(1.0) as usize, switches[0]);
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("../target/bench-data/static_{hours}h_{rate}hz"));
     let csv = dir.join("mav0/imu0/data.csv");
     if !csv.is_file() {
@@ -71,7 +67,7 @@ fn main() {
         "import time, pandas\np = {:?}\npandas.read_csv(p)\nts = []\nfor _ in range({repeat}):\n    t = time.perf_counter(); df = pandas.read_csv(p); ts.append(time.perf_counter() - t)\nts.sort(); print(ts[len(ts)//2], len(df), pandas.__version__)",
         csv.display().to_string()
     );
-    if args.iter().any(|a| a == "--no-peer") {
+    if no_peer {
         return;
     }
     match Command::new("python3").arg("-c").arg(&script).output() {

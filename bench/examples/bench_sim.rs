@@ -13,14 +13,10 @@ use std::process::Command;
 use std::time::Instant;
 use tumble::sim::{simulate_and_write, Scenario, SimConfig};
 
-fn arg(args: &[String], name: &str, default: f64) -> f64 {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|v| v.parse().ok()).unwrap_or(default)
-}
-
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let hours = arg(&args, "--hours", 4.0);
-    let repeat = arg(&args, "--repeat", 3.0).max(1.0) as usize;
+    let usage = "usage: bench_sim [--hours H (4)] [--repeat N (3)] [--no-peer]";
+    let (v, switches) = tumble_bench::args_with_switches(usage, &[("--hours", 4.0), ("--repeat", 3.0)], &["--no-peer"]);
+    let (hours, repeat, no_peer) = (v[0], v[1].max(1.0) as usize, switches[0]);
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/bench-data/sim");
     let cfg = SimConfig { duration_s: Some(hours * 3600.0), ..SimConfig::default() };
     let mut times = Vec::new();
@@ -46,7 +42,7 @@ fn main() {
         "tumble sim static ({hours} h, 200 Hz, full BMI055 model): {rows} rows, {:.0} MB written in {ours:.3} s (median of {repeat}; target < 2 s for 4 h)",
         bytes / 1e6
     );
-    if args.iter().any(|a| a == "--no-peer") {
+    if no_peer {
         return;
     }
     let out = root.join("python.csv");

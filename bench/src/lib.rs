@@ -80,7 +80,14 @@ impl Record {
 /// exits on `-h`/`--help`; exits with status 2, naming it, on any other
 /// argument, a flag without a value or a value that is not a number.
 pub fn numeric_args(usage: &str, flags: &[(&str, f64)]) -> Vec<f64> {
+    args_with_switches(usage, flags, &[]).0
+}
+
+/// [`numeric_args`], and for each of `switches` (flags without a value,
+/// such as `--no-peer`) whether it was given.
+pub fn args_with_switches(usage: &str, flags: &[(&str, f64)], switches: &[&str]) -> (Vec<f64>, Vec<bool>) {
     let mut values: Vec<f64> = flags.iter().map(|f| f.1).collect();
+    let mut given = vec![false; switches.len()];
     let mut args = std::env::args().skip(1);
     let fail = |why: String| -> ! {
         eprintln!("error: {why}\n{usage}");
@@ -91,13 +98,17 @@ pub fn numeric_args(usage: &str, flags: &[(&str, f64)]) -> Vec<f64> {
             println!("{usage}");
             std::process::exit(0);
         }
+        if let Some(k) = switches.iter().position(|s| *s == a) {
+            given[k] = true;
+            continue;
+        }
         let Some(k) = flags.iter().position(|f| f.0 == a) else { fail(format!("unknown argument {a}")) };
         match args.next().map(|v| v.parse::<f64>()) {
             Some(Ok(v)) if v.is_finite() => values[k] = v,
             _ => fail(format!("{a} needs a number")),
         }
     }
-    values
+    (values, given)
 }
 
 /// Peak resident set size of this process \[MB\] (Linux `VmHWM`).
