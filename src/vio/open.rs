@@ -109,6 +109,14 @@ impl VioInput {
                         String::new()
                     }
                 ));
+                if source.simulated_stereo_baseline_m.is_none() && baseline == 0.0 {
+                    notes.push(
+                        "camera: one, as the folder has no cam0 and cam1 sensor.yaml to place a second; \
+                         --simulate-stereo 0.11 simulates EuRoC's pair (far landmarks, as in a hall, get their \
+                         depths, and the path its scale, from the second camera: docs/vio.md)"
+                            .to_string(),
+                    );
+                }
                 let (input, smoothing) = VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?;
                 notes.extend(smoothing.into_iter().map(|n| format!("camera: {n}")));
                 input
