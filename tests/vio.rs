@@ -660,15 +660,7 @@ fn a_machine_hall_flight_with_two_cameras_and_another_flights_noise_keeps_its_sc
     let ds = tumble::io::asl::read_asl(&other, &Default::default()).unwrap();
     let mut opts = VioOptions::default();
     let truth = ds.groundtruth.as_ref().expect("V2_01's ground truth");
-    let (report, _) = tumble::allan::in_motion::run_allan_in_motion(
-        &ds.imu,
-        truth,
-        opts.noise.gravity,
-        &Default::default(),
-        &|_, _| {},
-    )
-    .unwrap();
-    let noise = report.kalibr.as_ref().expect("V2_01's noise identified").imu_noise();
+    let (noise, _) = tumble::allan::in_motion::noise_in_motion(&ds.imu, truth, opts.noise.gravity).unwrap();
     let source = tumble::vio::VioSource {
         simulate_camera: Some(1),
         simulated_stereo_baseline_m: Some(0.11),

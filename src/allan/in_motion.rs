@@ -230,3 +230,24 @@ pub fn run_allan_in_motion(
     );
     Ok((report, span))
 }
+
+/// The noise the IMU shows on its platform in use, as the VIO takes it
+/// (`tumble vio --noise` of `tumble allan --groundtruth`'s imu.yaml, each
+/// axis's own figures): [`run_allan_in_motion`] with the default options,
+/// reduced to its Kalibr coefficients. `gravity` \[m/s²\].
+pub fn noise_in_motion(
+    imu: &ImuRecording,
+    truth: &Trajectory,
+    gravity: f64,
+) -> Result<(crate::io::ImuNoise, MotionSpan), super::AllanError> {
+    let (report, span) = run_allan_in_motion(imu, truth, gravity, &Default::default(), &|_, _| {})?;
+    let noise = report.kalibr.as_ref().map(|k| k.imu_noise()).ok_or_else(|| {
+        super::AllanError::Invalid(format!(
+            "no noise identified in motion over {:.1}–{:.1} s: {}",
+            span.from_s,
+            span.to_s,
+            report.warnings.join("; ")
+        ))
+    })?;
+    Ok((noise, span))
+}
