@@ -110,12 +110,12 @@ impl VioInput {
                     }
                 ));
                 if source.simulated_stereo_baseline_m.is_none() && baseline == 0.0 {
-                    notes.push(
-                        "camera: one, as the folder has no cam0 and cam1 sensor.yaml to place a second; \
-                         --simulate-stereo 0.11 simulates EuRoC's pair (far landmarks, as in a hall, get their \
-                         depths, and the path its scale, from the second camera: docs/vio.md)"
-                            .to_string(),
-                    );
+                    notes.push(format!(
+                        "camera: one, as {} to place a second; --simulate-stereo 0.11 simulates EuRoC's pair \
+                         (far landmarks, as in a hall, get their depths, and the path its scale, from the second \
+                         camera: docs/vio.md)",
+                        missing_camera_poses(&ds.cameras)
+                    ));
                 }
                 let (input, smoothing) = VioInput::from_dataset_with_simulated_camera(ds, cal, &cam, seed)?;
                 notes.extend(smoothing.into_iter().map(|n| format!("camera: {n}")));
@@ -173,6 +173,20 @@ fn dataset_baseline(ds: &crate::io::asl::AslDataset) -> f64 {
     }
 }
 
+/// What keeps [`dataset_baseline`] from placing a second camera, for a note:
+/// the folder's camera poses (`camN/sensor.yaml`'s `T_BS`) that are missing.
+fn missing_camera_poses(cameras: &[crate::io::asl::Camera]) -> String {
+    let missing: Vec<&str> = ["cam0", "cam1"]
+        .into_iter()
+        .filter(|name| !cameras.iter().any(|c| c.name == *name && c.t_bs.is_some()))
+        .collect();
+    match missing.as_slice() {
+        [] => "the folder's two cameras are at one place".to_string(),
+        [one] => format!("the folder places no {one} (no {one}/sensor.yaml with its T_BS)"),
+        _ => "the folder places no camera (no cam0/ or cam1/sensor.yaml with its T_BS)".to_string(),
+    }
+}
+
 /// Whether `ds` has a second camera the frontend can match cam0's features
 /// into: `cam1/` with its intrinsics, both cameras' extrinsics and images.
 fn has_stereo_pair(ds: &crate::io::asl::AslDataset) -> bool {
@@ -180,5 +194,34 @@ fn has_stereo_pair(ds: &crate::io::asl::AslDataset) -> bool {
     match (cam("cam0"), cam("cam1")) {
         (Some(c0), Some(c1)) => c0.t_bs.is_some() && c1.t_bs.is_some() && c1.model.is_some() && !c1.frames.is_empty(),
         _ => false,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::asl::Camera;
+
+    fn camera(name: &str, placed: bool) -> Camera {
+        Camera {
+            name: name.to_string(),
+            model: None,
+            t_bs: placed.then(nalgebra::Isometry3::identity),
+            resolution: None,
+            rate_hz: None,
+            frames: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn the_one_camera_note_names_what_is_missing() {
+        assert!(missing_camera_poses(&[]).contains("no camera"));
+        assert!(missing_camera_poses(&[camera("cam0", false)]).contains("no camera"));
+        // A real monocular rig: cam0 placed, no cam1.
+        let mono = missing_camera_poses(&[camera("cam0", true)]);
+        assert!(mono.contains("no cam1/sensor.yaml"), "{mono}");
+        let unplaced = missing_camera_poses(&[camera("cam0", true), camera("cam1", false)]);
+        assert!(unplaced.contains("no cam1"), "{unplaced}");
+        assert!(missing_camera_poses(&[camera("cam0", true), camera("cam1", true)]).contains("at one place"));
     }
 }
