@@ -10,10 +10,13 @@
 //!
 //! `cargo run --release --example eval_euroc -- [--noise-from-static] [--zoh] [--fixed-noise] [--inverse-depth-only] [--mono] [--seed N]
 //! [--noise-in-flight] [--walk-scale G[,A]] [--online on|auto] [--blackout FROM,SECONDS] [--from SECONDS] [--only TEXT] [--out DIR]
-//! [--markdown]`
+//! [--keyframe-parallax PX] [--keyframe-min-interval S] [--markdown]`
 //!
 //! `--only` runs the cases whose name contains TEXT; `--out` writes each
-//! case's files and figures (as `tumble vio` does) into `DIR/<case>/`.
+//! case's files and figures (as `tumble vio` does) into `DIR/<case>/`;
+//! `--keyframe-parallax` and `--keyframe-min-interval` replace the keyframe
+//! policy's parallax threshold and shortest interval (as `tumble vio`'s
+//! flags of those names) in every case.
 //!
 //! Columns: ATE (position + yaw aligned), RPE over ~10 % of the path (mean
 //! translation error in % of the distance, rotation in degrees), rotation
@@ -56,6 +59,10 @@ struct Args {
     walk_scale: [f64; 2],
     cuts: Cuts,
     online: tumble::vio::Estimate,
+    /// `--keyframe-parallax` \[px\].
+    keyframe_parallax_px: Option<f64>,
+    /// `--keyframe-min-interval` \[s\].
+    keyframe_min_interval_s: Option<f64>,
 }
 
 impl Args {
@@ -75,7 +82,17 @@ impl Args {
             "--inverse-depth-only",
             "--markdown",
         ];
-        const VALUED: [&str; 7] = ["--seed", "--only", "--out", "--walk-scale", "--online", "--blackout", "--from"];
+        const VALUED: [&str; 9] = [
+            "--seed",
+            "--only",
+            "--out",
+            "--walk-scale",
+            "--online",
+            "--blackout",
+            "--from",
+            "--keyframe-parallax",
+            "--keyframe-min-interval",
+        ];
         let known = |i: usize, a: &str| {
             FLAGS.contains(&a) || VALUED.contains(&a) || (i > 0 && VALUED.contains(&args[i - 1].as_str()))
         };
@@ -90,6 +107,9 @@ impl Args {
             Ok(f) if f.is_none_or(|f| f.is_finite() && f >= 0.0) => f,
             _ => return Err("--from: expected a time in seconds (≥ 0)".into()),
         };
+        let number = |f: &str| value(f).map(|v| v.parse::<f64>().map_err(|_| format!("{f}: `{v}` is not a number")));
+        let keyframe_parallax_px = number("--keyframe-parallax").transpose()?;
+        let keyframe_min_interval_s = number("--keyframe-min-interval").transpose()?;
         let online = match value("--online").as_deref() {
             None | Some("on") => tumble::vio::Estimate::On,
             Some("auto") => tumble::vio::Estimate::Auto,
@@ -102,6 +122,8 @@ impl Args {
             walk_scale,
             cuts: Cuts { blackout, from },
             online,
+            keyframe_parallax_px,
+            keyframe_min_interval_s,
             flags: args,
         })
     }
@@ -122,6 +144,12 @@ fn main() {
     opts.noise.from_static = args.has("--noise-from-static");
     opts.noise.measure_in_motion = !args.has("--fixed-noise");
     opts.window.landmark_bearings = !args.has("--inverse-depth-only");
+    if let Some(px) = args.keyframe_parallax_px {
+        opts.window.keyframe_parallax_px = px;
+    }
+    if let Some(s) = args.keyframe_min_interval_s {
+        opts.window.keyframe_min_interval_s = s;
+    }
     if args.has("--zoh") {
         opts.noise.imu.scheme = tumble_factors::imu_preint::Scheme::ZeroOrderHold;
     }

@@ -88,7 +88,7 @@ impl VioAuditOptions {
     /// zero-order hold lags the motion by half a sample period, a time offset
     /// of the estimator's own that the audit would otherwise find;
     /// keyframes at least every [`AUDIT_KEYFRAME_PARALLAX_PX`] /
-    /// [`AUDIT_KEYFRAME_INTERVAL_S`] — more, shorter IMU factors carry the
+    /// [`AUDIT_KEYFRAME_INTERVAL_S`], with no shortest interval — more, shorter IMU factors carry the
     /// accelerometer–gyro offset into the χ² (with the estimator's default
     /// 20 px / 1 s a hidden 10 ms offset was missed); and the whole window
     /// solved at every frame, the estimator these figures were validated with.
@@ -97,6 +97,7 @@ impl VioAuditOptions {
         vio.solver.covariances = false;
         vio.window.keyframe_parallax_px = vio.window.keyframe_parallax_px.min(AUDIT_KEYFRAME_PARALLAX_PX);
         vio.window.keyframe_max_interval_s = vio.window.keyframe_max_interval_s.min(AUDIT_KEYFRAME_INTERVAL_S);
+        vio.window.keyframe_min_interval_s = 0.0;
         vio.window.solve_every_frame = true;
         vio.noise.imu.scheme = tumble_factors::imu_preint::Scheme::Midpoint;
         // The triad's single (largest-axis) noise figures, not the per-axis

@@ -78,6 +78,11 @@ pub struct EstimatorArgs {
     /// Longest time between keyframes [s] [default: 1].
     #[arg(long)]
     pub keyframe_interval: Option<f64>,
+    /// Shortest time between keyframes made by parallax [s]: fast motion
+    /// otherwise makes nearly every frame a keyframe (a frame that lost half
+    /// of the last keyframe's features is one regardless) [default: 0.15].
+    #[arg(long)]
+    pub keyframe_min_interval: Option<f64>,
     /// Feature observation noise [px] [default: 1].
     #[arg(long)]
     pub pixel_sigma: Option<f64>,
@@ -147,6 +152,7 @@ impl EstimatorArgs {
         set(&mut o.window.size, self.window);
         set(&mut o.window.keyframe_parallax_px, self.keyframe_parallax);
         set(&mut o.window.keyframe_max_interval_s, self.keyframe_interval);
+        set(&mut o.window.keyframe_min_interval_s, self.keyframe_min_interval);
         set(&mut o.noise.pixel_sigma, self.pixel_sigma);
         set(&mut o.gates.prediction_px, self.prediction_gate);
         set(&mut o.gates.triangulation_px, self.triangulation_gate);

@@ -1,7 +1,7 @@
 //! The keyframe policy: a frame becomes a keyframe when its features moved
 //! enough since the last keyframe (median parallax with the rotation taken
-//! out: only translation triangulates), when too long has passed, or when it
-//! shares too few features with the last keyframe.
+//! out: only translation triangulates) and not too soon after it, when too
+//! long has passed, or when it shares too few features with the last keyframe.
 
 use super::WindowOptions;
 use nalgebra::{Matrix3, Vector3};
@@ -49,7 +49,8 @@ impl FeatureMotion<'_> {
 pub(crate) const MIN_COMMON_FEATURES: usize = 10;
 
 /// Whether a frame becomes a keyframe: its median parallax to the last
-/// keyframe `parallax_px` reaches [`WindowOptions::keyframe_parallax_px`],
+/// keyframe `parallax_px` reaches [`WindowOptions::keyframe_parallax_px`]
+/// at least [`WindowOptions::keyframe_min_interval_s`] after it,
 /// `since_keyframe_s` reaches [`WindowOptions::keyframe_max_interval_s`], or
 /// it shares fewer than half of the last keyframe's `keyframe_features` (or
 /// fewer than [`MIN_COMMON_FEATURES`]): `common` of them.
@@ -60,7 +61,7 @@ pub(crate) fn is_keyframe(
     common: usize,
     keyframe_features: usize,
 ) -> bool {
-    parallax_px >= opts.keyframe_parallax_px
+    (parallax_px >= opts.keyframe_parallax_px && since_keyframe_s >= opts.keyframe_min_interval_s)
         || since_keyframe_s >= opts.keyframe_max_interval_s
         || common * 2 < keyframe_features
         || common < MIN_COMMON_FEATURES
@@ -115,9 +116,13 @@ mod tests {
     #[test]
     fn keyframe_decision() {
         let o = WindowOptions::default();
-        assert!(!is_keyframe(&o, 14.9, 0.5, 40, 50));
-        assert!(is_keyframe(&o, 15.0, 0.5, 40, 50), "parallax");
+        let px = o.keyframe_parallax_px;
+        assert!(!is_keyframe(&o, px - 0.1, 0.5, 40, 50));
+        assert!(is_keyframe(&o, px, 0.5, 40, 50), "parallax");
         assert!(is_keyframe(&o, 1.0, 1.0, 40, 50), "interval");
+        let soon = 0.5 * o.keyframe_min_interval_s;
+        assert!(!is_keyframe(&o, 10.0 * px, soon, 40, 50), "parallax, but too soon after the last keyframe");
+        assert!(is_keyframe(&o, 1.0, soon, 24, 50), "features lost, however soon");
         assert!(is_keyframe(&o, 1.0, 0.5, 24, 50), "fewer than half the features");
         assert!(is_keyframe(&o, 1.0, 0.5, 9, 12), "fewer than ten");
     }
