@@ -95,7 +95,7 @@ fn bad_images_are_refused_with_the_file_named() {
     // Not an image.
     let junk = dir.join("junk.png");
     std::fs::write(&junk, b"\x89PNG\r\n\x1a\n truncated").unwrap();
-    let err = track_camera(&[(0, junk.clone())], cam, None, &FrontendOptions::default(), &mut |_, _| {})
+    let err = track_camera(&[(0, junk.clone())], cam, None, &FrontendOptions::default(), None, &mut |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(err.contains("junk.png") && err.contains("not a readable image"), "{err}");
@@ -106,7 +106,7 @@ fn bad_images_are_refused_with_the_file_named() {
     let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
     let ds = read_asl(&micro, &Default::default()).unwrap();
     let frames = &ds.cameras[0].frames[..2];
-    let err = track_camera(frames, cam, Some([640, 480]), &FrontendOptions::default(), &mut |_, _| {})
+    let err = track_camera(frames, cam, Some([640, 480]), &FrontendOptions::default(), None, &mut |_, _| {})
         .unwrap_err()
         .to_string();
     assert!(err.contains("752×480") && err.contains("640×480"), "{err}");
@@ -569,17 +569,24 @@ struct RenderedTracking {
     stats: FrontendStats,
 }
 
-/// Track the first `seconds` of a 60 s simulated flight's cam0 frames (the
-/// pace of EuRoC's medium flights) rendered with
-/// `settings` (the room `tumble sim flight --images` renders) and compare
-/// every tracked position with the truth: a track's first position is cast
-/// onto the scene's planes from the true camera pose, and that point is
-/// projected into each later frame through the same lens.
-fn rendered_flight_tracking(settings: &tumble::sim::render::ImageSettings, seconds: f64) -> RenderedTracking {
+/// Track the first `seconds` of a simulated flight's cam0 frames rendered
+/// with `settings` (the room `tumble sim flight --images` renders; the
+/// flight's whole path in `flight_s`: 60 s is the pace of EuRoC's medium
+/// flights, 30 s twice as fast) and compare every tracked position with the
+/// truth: a track's first position is cast onto the scene's planes from the
+/// true camera pose, and that point is projected into each later frame
+/// through the same lens. With `gyro`, each frame's search starts where the
+/// simulated gyro's rotation since the last frame moves the features.
+fn rendered_flight_tracking(
+    settings: &tumble::sim::render::ImageSettings,
+    flight_s: f64,
+    seconds: f64,
+    gyro: &[bool],
+) -> Vec<RenderedTracking> {
     use opencv::core::{Mat, MatTraitManual, Scalar, CV_8UC1};
     use tumble::sim::render::{camera_pose, lens::RayTable, render_frame};
     use tumble::sim::{images::render_scene, simulate, Scenario, SimConfig};
-    let cfg = SimConfig { duration_s: Some(60.0), ..SimConfig::default() };
+    let cfg = SimConfig { duration_s: Some(flight_s), ..SimConfig::default() };
     let sim = simulate(Scenario::Flight, &cfg, 1).unwrap();
     let scene = render_scene(&sim);
     let c = &sim.config.camera;
@@ -588,12 +595,18 @@ fn rendered_flight_tracking(settings: &tumble::sim::render::ImageSettings, secon
     let lens = RayTable::new(&model, w, h);
     let focal = model.fx.max(model.fy);
     let body_from_camera = c.body_from_camera();
-    let mut tracker = KltTracker::new(model, FrontendOptions::default());
-    // Each track's point in the world (None: its first position hit nothing) and its length.
-    let mut points: HashMap<u64, (Option<nalgebra::Point3<f64>>, usize)> = HashMap::new();
-    let (mut errors, mut first_steps) = (Vec::new(), Vec::new());
-    let frames = sim.tracks.as_ref().unwrap().frames.iter().take_while(|&&t| t < seconds);
-    for (k, &stamp) in frames.enumerate() {
+    let frames: Vec<f64> = sim.tracks.as_ref().unwrap().frames.iter().copied().take_while(|&t| t < seconds).collect();
+    let stamps_ns: Vec<i64> = frames.iter().map(|t| (t * 1e9).round() as i64).collect();
+    let camera_from_imu = body_from_camera.rotation.to_rotation_matrix().inverse();
+    let turns = tumble::vio::frontend::gyro_rotations(&sim.imu.to_recording(), &camera_from_imu, &stamps_ns);
+    // Per tracker: each track's point in the world (None: its first position
+    // hit nothing) and its length; the errors; the errors after one step.
+    type Run = (KltTracker, HashMap<u64, (Option<nalgebra::Point3<f64>>, usize)>, Vec<f64>, Vec<f64>);
+    let mut runs: Vec<Run> = gyro
+        .iter()
+        .map(|_| (KltTracker::new(model, FrontendOptions::default()), HashMap::new(), Vec::new(), Vec::new()))
+        .collect();
+    for (k, &stamp) in frames.iter().enumerate() {
         let t = stamp + c.time_offset_s;
         let gain = 1.0 + settings.gain_jitter * (k as f64 * 2.4).sin();
         let pixels =
@@ -601,33 +614,40 @@ fn rendered_flight_tracking(settings: &tumble::sim::render::ImageSettings, secon
         let mut image = Mat::new_rows_cols_with_default(h as i32, w as i32, CV_8UC1, Scalar::all(0.0)).unwrap();
         image.data_bytes_mut().unwrap().copy_from_slice(&pixels);
         let world_from_camera = camera_pose(sim.motion.as_ref(), &body_from_camera, t);
-        for (id, uv) in tracker.track(&image).unwrap() {
-            let (point, length) = points.entry(id).or_insert_with(|| {
-                let [x, y] = model.unproject(uv).unwrap();
-                let ray = nalgebra::Vector3::new(x, y, 1.0).normalize();
-                let hit = scene.seen_from(&world_from_camera).hit(&ray, 0.05);
-                (hit.map(|hit| world_from_camera * nalgebra::Point3::from(ray * hit.distance_m)), 0)
-            });
-            *length += 1;
-            if *length == 1 {
-                continue;
-            }
-            if let Some(p) = point {
-                let q = world_from_camera.inverse() * *p;
-                let expect = model.project(&[q.x, q.y, q.z]).unwrap();
-                let error = ((expect[0] - uv[0]).powi(2) + (expect[1] - uv[1]).powi(2)).sqrt();
-                errors.push(error);
-                if *length == 2 {
-                    first_steps.push(error);
+        for ((tracker, points, errors, first_steps), &gyro) in runs.iter_mut().zip(gyro) {
+            let turn = turns[k].as_ref().filter(|_| gyro);
+            for (id, uv) in tracker.track_turned(&image, turn).unwrap() {
+                let (point, length) = points.entry(id).or_insert_with(|| {
+                    let [x, y] = model.unproject(uv).unwrap();
+                    let ray = nalgebra::Vector3::new(x, y, 1.0).normalize();
+                    let hit = scene.seen_from(&world_from_camera).hit(&ray, 0.05);
+                    (hit.map(|hit| world_from_camera * nalgebra::Point3::from(ray * hit.distance_m)), 0)
+                });
+                *length += 1;
+                if *length == 1 {
+                    continue;
+                }
+                if let Some(p) = point {
+                    let q = world_from_camera.inverse() * *p;
+                    let expect = model.project(&[q.x, q.y, q.z]).unwrap();
+                    let error = ((expect[0] - uv[0]).powi(2) + (expect[1] - uv[1]).powi(2)).sqrt();
+                    errors.push(error);
+                    if *length == 2 {
+                        first_steps.push(error);
+                    }
                 }
             }
         }
     }
-    errors.sort_by(|a, b| a.total_cmp(b));
-    first_steps.sort_by(|a, b| a.total_cmp(b));
-    let unplaced = points.values().filter(|p| p.0.is_none()).count();
-    let lengths = points.values().map(|p| p.1).collect();
-    RenderedTracking { errors, first_steps, lengths, unplaced, stats: tracker.stats() }
+    runs.into_iter()
+        .map(|(tracker, points, mut errors, mut first_steps)| {
+            errors.sort_by(|a, b| a.total_cmp(b));
+            first_steps.sort_by(|a, b| a.total_cmp(b));
+            let unplaced = points.values().filter(|p| p.0.is_none()).count();
+            let lengths = points.values().map(|p| p.1).collect();
+            RenderedTracking { errors, first_steps, lengths, unplaced, stats: tracker.stats() }
+        })
+        .collect()
 }
 
 /// The frontend on rendered frames of a flight in the simulated room, against
@@ -650,7 +670,7 @@ fn tracks_on_rendered_frames_follow_the_scene() {
         ..ImageSettings::default()
     };
     for (name, settings) in [("sharp", sharp), ("default camera", ImageSettings::default())] {
-        let r = rendered_flight_tracking(&settings, 10.0);
+        let r = rendered_flight_tracking(&settings, 60.0, 10.0, &[true]).remove(0);
         let e = &r.errors;
         let (median, p95) = (e[e.len() / 2], e[e.len() * 95 / 100]);
         let first_step = r.first_steps[r.first_steps.len() / 2];
@@ -673,6 +693,32 @@ fn tracks_on_rendered_frames_follow_the_scene() {
         assert!(beyond_1px <= 0.2, "{name}: {beyond_1px} of the positions beyond 1 px");
         assert!(mean_length >= 15.0 && r.stats.features_per_frame >= 120.0, "{name}: {}", r.stats.line());
     }
+}
+
+/// Twice EuRoC's pace (the 30 s flight, up to several rad/s: tens of pixels
+/// per frame), the default camera, its first 10 s: started where the gyro's
+/// rotation moves each feature, KLT keeps its tracks; started at the old
+/// places, most fail the forward–backward check within a few frames.
+#[test]
+fn the_gyro_keeps_tracks_through_fast_rotation() {
+    use tumble::sim::render::ImageSettings;
+    let runs = rendered_flight_tracking(&ImageSettings::default(), 30.0, 10.0, &[true, false]);
+    let summary = |r: &RenderedTracking, gyro: bool| {
+        let mean_length = r.lengths.iter().sum::<usize>() as f64 / r.lengths.len() as f64;
+        let median = r.errors[r.errors.len() / 2];
+        let beyond_1px = r.errors.iter().filter(|&&x| x > 1.0).count() as f64 / r.errors.len() as f64;
+        println!(
+            "fast flight, gyro prediction {gyro}: mean track {mean_length:.1} frames, error median {median:.3} px, \
+             {:.1} % beyond 1 px\n  {}",
+            100.0 * beyond_1px,
+            r.stats.line()
+        );
+        (mean_length, median, beyond_1px, r.stats.clone())
+    };
+    let (with, without) = (summary(&runs[0], true), summary(&runs[1], false));
+    assert!(with.0 >= 2.0 * without.0, "tracks {:.1} frames with the gyro, {:.1} without", with.0, without.0);
+    assert!(with.3.fb_ratio >= 0.95, "with the gyro: {}", with.3.line());
+    assert!(with.1 <= 0.3 && with.2 <= 0.2, "with the gyro: median {} px, {} beyond 1 px", with.1, with.2);
 }
 
 /// tumble's Shi–Tomasi detector finds OpenCV's `goodFeaturesToTrack` corners

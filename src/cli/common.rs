@@ -115,6 +115,10 @@ pub struct FrontendArgs {
     /// sensor.yaml extrinsics) and write tracks_cam1.csv with the same track ids.
     #[arg(long)]
     pub stereo: bool,
+    /// Start KLT at each feature's old place instead of where the gyro's
+    /// rotation since the last frame moves it (imu0's samples and the camera's T_BS).
+    #[arg(long)]
+    pub no_gyro_prediction: bool,
 }
 
 impl FrontendArgs {
@@ -127,6 +131,7 @@ impl FrontendArgs {
             ransac_threshold: self.ransac_threshold,
             equalize: self.equalize,
             stereo: self.stereo,
+            gyro_prediction: !self.no_gyro_prediction,
             ..Default::default()
         }
     }

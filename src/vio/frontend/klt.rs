@@ -129,14 +129,36 @@ impl KltTracker {
         Ok(pyr)
     }
 
-    /// Pyramidal KLT from `prev` to `img` (pyramids) with the forward–backward check; returns what survived.
-    fn klt(&mut self, prev: &Vector<Mat>, img: &Vector<Mat>, size: Size) -> Result<Vec<bool>, FrontendError> {
+    /// Where each feature should be after the camera turned by `rotation`
+    /// (`R_{c_now ← c_prev}`): its bearing turned and projected through the
+    /// lens; its old place when that leaves the image or the lens' domain.
+    fn predict(&self, rotation: &nalgebra::Rotation3<f64>, size: Size) -> Vector<Point2f> {
+        let (w, h) = (size.width as f64, size.height as f64);
+        let c = &self.camera;
+        let moved = |p: &Point2f| -> Option<Point2f> {
+            let [x, y] = c.unproject([p.x as f64, p.y as f64])?;
+            let b = rotation * nalgebra::Vector3::new(x, y, 1.0);
+            let [u, v] = c.project(&[b.x, b.y, b.z])?;
+            (u >= 0.0 && v >= 0.0 && u < w && v < h).then(|| Point2f::new(u as f32, v as f32))
+        };
+        self.pts.iter().map(|p| moved(p).unwrap_or(*p)).collect()
+    }
+
+    /// Pyramidal KLT from `prev` to `img` (pyramids) with the forward–backward
+    /// check, started where `rotation` moves each feature when given; returns what survived.
+    fn klt(
+        &mut self,
+        prev: &Vector<Mat>,
+        img: &Vector<Mat>,
+        size: Size,
+        rotation: Option<&nalgebra::Rotation3<f64>>,
+    ) -> Result<Vec<bool>, FrontendError> {
         let o = &self.opts;
         let win = Size::new(o.window, o.window);
         let prev_pts: Vector<Point2f> = self.pts.iter().copied().collect();
-        let mut next = Vector::<Point2f>::new();
+        let mut next = rotation.map_or_else(Vector::<Point2f>::new, |r| self.predict(r, size));
         let (status, back, status_b) =
-            klt_both_ways(prev, img, &prev_pts, &mut next, win, [o.pyramid_levels, 1], false)?;
+            klt_both_ways(prev, img, &prev_pts, &mut next, win, [o.pyramid_levels, 1], rotation.is_some())?;
         let (w, h) = (size.width as f32, size.height as f32);
         let mut keep = vec![false; self.pts.len()];
         for (i, k) in keep.iter_mut().enumerate() {
@@ -234,6 +256,19 @@ impl KltTracker {
 
     /// Track into the next image (8-bit grayscale); returns the features seen, `(track id, [u, v])`.
     pub fn track(&mut self, image: &Mat) -> Result<Vec<(u64, [f64; 2])>, FrontendError> {
+        self.track_turned(image, None)
+    }
+
+    /// [`KltTracker::track`], each feature's search started where the
+    /// camera's rotation since the last image moves it: `rotation` is
+    /// `R_{c_now ← c_prev}` (a bearing of the last image's camera frame in
+    /// this one's; [`gyro_rotations`](super::gyro_rotations) gives it from an
+    /// IMU). None: started at the old places.
+    pub fn track_turned(
+        &mut self,
+        image: &Mat,
+        rotation: Option<&nalgebra::Rotation3<f64>>,
+    ) -> Result<Vec<(u64, [f64; 2])>, FrontendError> {
         if image.empty() {
             return Err("empty image".into());
         }
@@ -255,7 +290,7 @@ impl KltTracker {
         let pyr = self.pyramid(&img)?;
         if let (Some(prev), false) = (self.prev.take(), self.pts.is_empty()) {
             let old = self.pts.clone();
-            let keep = self.klt(&prev, &pyr, img.size().map_err(cv)?)?;
+            let keep = self.klt(&prev, &pyr, img.size().map_err(cv)?, rotation)?;
             let old: Vec<Point2f> = old.iter().zip(&keep).filter(|(_, &k)| k).map(|(p, _)| *p).collect();
             self.retain(&keep);
             let keep = self.ransac(&old)?;
@@ -300,18 +335,22 @@ fn read_sized(path: &Path, resolution: Option<[u32; 2]>) -> Result<Mat, Frontend
 
 /// Track a camera's frames `(t[ns], image path)` in order; `progress(done, total)`
 /// is called after each frame. Images must all have `resolution` `[w, h]` when given.
+/// `rotations[k]`, when given, is the camera's rotation from frame `k − 1` to
+/// frame `k` ([`KltTracker::track_turned`]; [`gyro_rotations`](super::gyro_rotations)).
 pub fn track_camera(
     frames: &[(i64, std::path::PathBuf)],
     camera: CameraModel,
     resolution: Option<[u32; 2]>,
     opts: &FrontendOptions,
+    rotations: Option<&[Option<nalgebra::Rotation3<f64>>]>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<Observation>, FrontendStats), FrontendError> {
     let mut tracker = KltTracker::new(camera, opts.clone());
     let mut obs = Vec::new();
     for (k, (t, path)) in frames.iter().enumerate() {
         let img = read_sized(path, resolution)?;
-        let f = tracker.track(&img).map_err(|e| format!("{}: {e}", path.display()))?;
+        let turn = rotations.and_then(|r| r.get(k)).and_then(Option::as_ref);
+        let f = tracker.track_turned(&img, turn).map_err(|e| format!("{}: {e}", path.display()))?;
         obs.extend(f.into_iter().map(|(id, uv)| (*t, id, uv)));
         progress(k + 1, frames.len());
     }
@@ -568,6 +607,7 @@ pub fn match_stereo(
 /// (`frames`: `(t[ns], left image, right image if any)`; images must have the
 /// `resolutions` of their sensor.yaml when given). Returns the cam0
 /// observations, the cam1 observations (same track ids), and the statistics.
+/// `rotations`: cam0's rotation between consecutive frames, as for [`track_camera`].
 #[allow(clippy::type_complexity)]
 pub fn track_stereo(
     frames: &[(i64, std::path::PathBuf, Option<std::path::PathBuf>)],
@@ -575,6 +615,7 @@ pub fn track_stereo(
     resolutions: [Option<[u32; 2]>; 2],
     right_from_left: &nalgebra::Isometry3<f64>,
     opts: &FrontendOptions,
+    rotations: Option<&[Option<nalgebra::Rotation3<f64>>]>,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<(Vec<Observation>, Vec<Observation>, FrontendStats), FrontendError> {
     let mut tracker = KltTracker::new(cams[0], opts.clone());
@@ -583,7 +624,8 @@ pub fn track_stereo(
     let (mut obs0, mut obs1) = (Vec::new(), Vec::new());
     for (k, (t, left, right)) in frames.iter().enumerate() {
         let img = read_sized(left, resolutions[0])?;
-        let f = tracker.track(&img).map_err(|e| format!("{}: {e}", left.display()))?;
+        let turn = rotations.and_then(|r| r.get(k)).and_then(Option::as_ref);
+        let f = tracker.track_turned(&img, turn).map_err(|e| format!("{}: {e}", left.display()))?;
         if let Some(right) = right {
             let rimg = read_sized(right, resolutions[1])?;
             let m = match_stereo(&img, &rimg, &f, [&cams[0], &cams[1]], right_from_left, &depths, opts, &mut stereo)

@@ -11,6 +11,8 @@
 //! the corner detector ([`corners`]) are here without it.
 
 pub mod corners;
+pub mod prediction;
+pub use prediction::gyro_rotations;
 #[cfg(feature = "opencv")]
 mod klt;
 #[cfg(feature = "opencv")]
@@ -51,6 +53,12 @@ pub struct FrontendOptions {
     /// Also match each cam0 frame's features into cam1's image of the same
     /// time ([`track_asl_stereo`]); `track_asl_into` then writes `tracks_cam1.csv`.
     pub stereo: bool,
+    /// Start each feature's KLT where the gyro's rotation between the two
+    /// frames moves it ([`gyro_rotations`]; an ASL folder's IMU samples and
+    /// the camera's `T_BS`), instead of at its old place: in fast rotation
+    /// the image moves tens of pixels per frame, more than the pyramid
+    /// follows reliably. Off, or without the IMU or `T_BS`, KLT starts at the old place.
+    pub gyro_prediction: bool,
 }
 
 impl Default for FrontendOptions {
@@ -65,6 +73,7 @@ impl Default for FrontendOptions {
             ransac_threshold: 1.0,
             equalize: false,
             stereo: false,
+            gyro_prediction: true,
         }
     }
 }
@@ -211,15 +220,17 @@ pub fn track_asl(
             cam.frames.len()
         ));
     }
+    let stamps: Vec<i64> = frames.iter().map(|f| f.0).collect();
+    let rotations = frame_rotations(ds, cam, &stamps, opts, &mut warnings);
     #[cfg(feature = "opencv")]
     {
-        let (obs, mut stats) = track_camera(&frames, model, cam.resolution, opts, progress)?;
+        let (obs, mut stats) = track_camera(&frames, model, cam.resolution, opts, rotations.as_deref(), progress)?;
         stats.warnings.extend(warnings);
         Ok((obs, stats))
     }
     #[cfg(not(feature = "opencv"))]
     {
-        let _ = (model, opts, progress, warnings);
+        let _ = (model, opts, progress, warnings, rotations);
         Err(format!("{}: {NEEDS_OPENCV}", dir.display()).into())
     }
 }
@@ -265,10 +276,15 @@ pub fn track_asl_stereo(
         return Err(format!("{}: no cam0 images", ds.root.join(&c0.name).display()).into());
     }
     let unpaired = frames.iter().filter(|f| f.2.is_none()).count();
+    let stamps: Vec<i64> = frames.iter().map(|f| f.0).collect();
+    let mut warnings = Vec::new();
+    let rotations = frame_rotations(ds, c0, &stamps, opts, &mut warnings);
     #[cfg(feature = "opencv")]
     {
+        let resolutions = [c0.resolution, c1.resolution];
         let (o0, o1, mut stats) =
-            track_stereo(&frames, [m0, m1], [c0.resolution, c1.resolution], &right_from_left, opts, progress)?;
+            track_stereo(&frames, [m0, m1], resolutions, &right_from_left, opts, rotations.as_deref(), progress)?;
+        stats.warnings.extend(warnings);
         if unpaired > 0 {
             stats.warnings.push(format!("{unpaired} cam0 frames have no cam1 image at the same time: not matched"));
         }
@@ -276,9 +292,44 @@ pub fn track_asl_stereo(
     }
     #[cfg(not(feature = "opencv"))]
     {
-        let _ = (m0, m1, opts, progress, unpaired);
+        let _ = (m0, m1, opts, progress, unpaired, warnings, rotations);
         Err(format!("{}: {NEEDS_OPENCV}", ds.root.display()).into())
     }
+}
+
+/// The gyro's rotation of `cam` between its consecutive frames
+/// ([`gyro_rotations`]) when [`FrontendOptions::gyro_prediction`] asks for
+/// it; None, with a note in `warnings` saying why, when the folder cannot give it.
+fn frame_rotations(
+    ds: &crate::io::asl::AslDataset,
+    cam: &crate::io::asl::Camera,
+    stamps: &[i64],
+    opts: &FrontendOptions,
+    warnings: &mut Vec<String>,
+) -> Option<Vec<Option<nalgebra::Rotation3<f64>>>> {
+    if !opts.gyro_prediction {
+        return None;
+    }
+    let Some(body_from_camera) = cam.t_bs else {
+        warnings.push(format!(
+            "{}: no T_BS, so KLT starts at each feature's old place (no gyro prediction)",
+            ds.root.join(&cam.name).join("sensor.yaml").display()
+        ));
+        return None;
+    };
+    let body_from_imu = ds.imu_sensor.as_ref().map_or(nalgebra::Rotation3::identity(), |s| s.t_bs.rotation.into());
+    let camera_from_imu = body_from_camera.rotation.to_rotation_matrix().inverse() * body_from_imu;
+    let rotations = gyro_rotations(&ds.imu, &camera_from_imu, stamps);
+    let covered = rotations.iter().filter(|r| r.is_some()).count();
+    if covered + 1 < stamps.len() {
+        warnings.push(format!(
+            "{}: the gyro predicts the motion of {covered} of the {} frame pairs (the others are outside \
+             imu0's samples, or its rates are raw counts): there KLT starts at each feature's old place",
+            ds.root.join(&cam.name).display(),
+            stamps.len().saturating_sub(1)
+        ));
+    }
+    Some(rotations)
 }
 
 /// [`track_asl`], then write into `dir`: `tracks.csv`, `frontend.json` (the
