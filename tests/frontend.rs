@@ -767,3 +767,33 @@ fn image_folders_go_through_the_frontend() {
     let input = tumble::vio::VioInput::from_dataset(ds, None, Some(obs), false).unwrap();
     assert_eq!(input.frames.len(), stats.frames);
 }
+
+/// The gyro's prediction says where it cannot be made: a camera without its
+/// `T_BS`, and frames beyond the IMU's samples (KLT then starts at the old
+/// places there); with both, nothing is said.
+#[test]
+fn the_frontend_says_where_the_gyro_cannot_predict() {
+    let Some(micro) = common::shared("euroc/V1_01_easy_micro") else { return };
+    let ds = read_asl(&micro, &Default::default()).unwrap();
+    let warnings = |ds: &tumble::io::asl::AslDataset| {
+        track_asl(ds, 0, &FrontendOptions::default(), &mut |_, _| {}).unwrap().1.warnings
+    };
+    let all = warnings(&ds);
+    assert!(all.iter().all(|w| !w.contains("gyro")), "{all:?}");
+    let mut unplaced = ds.clone();
+    unplaced.cameras[0].t_bs = None;
+    let w = warnings(&unplaced);
+    assert!(w.iter().any(|w| w.contains("cam0/sensor.yaml: no T_BS") && w.contains("no gyro prediction")), "{w:?}");
+    let mut short = ds.clone();
+    // The samples up to the middle frame only.
+    let middle_s = (ds.cameras[0].frames[47].0 - ds.imu.t0_ns) as f64 * 1e-9;
+    let half = ds.imu.t.partition_point(|&t| t <= middle_s);
+    short.imu.t.truncate(half);
+    short.imu.gyro.truncate(half);
+    short.imu.accel.truncate(half);
+    let w = warnings(&short);
+    assert!(
+        w.iter().any(|w| w.contains("the gyro predicts the motion of") && w.contains("of the 94 frame pairs")),
+        "{w:?}"
+    );
+}
