@@ -30,13 +30,16 @@ struct Outcome {
 /// rendered recording's corners have no noise added; bounds: the mean
 /// offset 0.02 px and median 0.15 px, and no mislabelled view, an error over
 /// 1 px), then the calibration from them, which must converge.
-fn rendered_frames_calibrate(target: Option<tumble::rig::Target>, name: &str) -> Outcome {
+fn rendered_frames_calibrate(target: Option<tumble::rig::Target>, distorted: bool, name: &str) -> Outcome {
     let dir = std::env::temp_dir().join(format!("tumble_rig_images_{name}_{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     let mut settings = rig_settings(12.0, 0.0);
     settings.camera.rate_hz = 10.0;
     if let Some(t) = target {
         settings.target = t;
+    }
+    if !distorted {
+        settings.camera.distortion_coefficients = [0.0; 4];
     }
     let sim = write_rig_recording(&settings, Some(&ImageSettings::default()), 1, &dir, &mut |_, _| {}).unwrap();
     let opts = RigOptions::default();
@@ -104,7 +107,7 @@ fn rendered_frames_calibrate(target: Option<tumble::rig::Target>, name: &str) ->
 #[test]
 fn rendered_checkerboard_frames_calibrate_within_the_accuracy_promised() {
     use tumble::rig::accuracy;
-    let o = rendered_frames_calibrate(None, "checkerboard");
+    let o = rendered_frames_calibrate(None, true, "checkerboard");
     assert!(o.rotation.to_degrees() < accuracy::ROTATION_DEG, "{} rad", o.rotation);
     assert!(o.translation < accuracy::TRANSLATION_M, "{} m", o.translation);
     let focal = 458.654 * accuracy::FOCAL_RELATIVE;
@@ -123,9 +126,22 @@ fn rendered_checkerboard_frames_calibrate_within_the_accuracy_promised() {
 #[test]
 fn rendered_aprilgrid_frames_calibrate_to_the_truth() {
     let grid = tumble::rig::Target::AprilGrid { cols: 6, rows: 6, size: 0.088, spacing: 0.3 };
-    let o = rendered_frames_calibrate(Some(grid), "aprilgrid");
+    let o = rendered_frames_calibrate(Some(grid), true, "aprilgrid");
     assert_eq!(o.stats.tag_border_cells, Some(2));
     let vote = o.stats.order.expect("an AprilGrid's views vote");
     assert!(vote.agree as f64 >= 0.95 * vote.voters as f64, "{vote:?}");
+    assert!(o.z.iter().all(|z| z.abs() <= 4.0), "{:?}", o.z);
+}
+
+/// The checkerboard through a lens without distortion (EuRoC's cam0
+/// otherwise): every parameter within 4 σ of the truth (the bound).
+/// The checkerboard's bias through EuRoC's distortion (cx 3–7 σ, the test
+/// above) comes with the distortion: without it the same path is unbiased
+/// (docs/rig.md). Measured (release, 2026-12-05): 102 of 104 frames,
+/// corners' median 0.018 px; fx fy cx cy (+0.33, +0.32, +0.05, −0.06) px,
+/// `T_BC` within 0.016° and 1.6 mm; largest |z| 1.37.
+#[test]
+fn rendered_checkerboard_frames_without_distortion_calibrate_to_the_truth() {
+    let o = rendered_frames_calibrate(None, false, "checkerboard_pinhole");
     assert!(o.z.iter().all(|z| z.abs() <= 4.0), "{:?}", o.z);
 }
