@@ -26,7 +26,8 @@ struct Outcome {
 
 /// 12 s at 10 frames a second (120 frames, the default exposure, noise,
 /// vignetting and flicker) of the rig before `target` (default: the
-/// checkerboard): the detector's corners against the exact projections (the
+/// checkerboard), through EuRoC's cam0 with its distortion or, with
+/// `distorted` false, without it: the detector's corners against the exact projections (the
 /// rendered recording's corners have no noise added; bounds: the mean
 /// offset 0.02 px and median 0.15 px, and no mislabelled view, an error over
 /// 1 px), then the calibration from them, which must converge.
