@@ -74,10 +74,9 @@ mod tests {
         assert!(r[0].is_none() && r[2].is_none(), "{r:?}");
         let expect = Rotation3::new(-(c * Vector3::from(w)) * 0.05);
         let got = r[1].expect("covered");
-        // The angle between them from the difference's skew part (sin θ):
-        // the arccos of `angle_to` resolves no better than 3e-8 rad near the identity.
-        let d = (got.inverse() * expect).into_inner();
-        let angle = 0.5 * Vector3::new(d[(2, 1)] - d[(1, 2)], d[(0, 2)] - d[(2, 0)], d[(1, 0)] - d[(0, 1)]).norm();
+        // `so3_log` is accurate to rounding near the identity, where the
+        // arccos of `angle_to` resolves no better than 3e-8 rad.
+        let angle = tumble_solvers::lie::so3_log((got.inverse() * expect).matrix()).norm();
         assert!(angle < 1e-12, "{angle:e}: {got:?} vs {expect:?}");
         let raw = ImuRecording { gyro_units: Stored::RawCounts, ..imu };
         assert!(gyro_rotations(&raw, &c, &stamps).iter().all(Option::is_none));
