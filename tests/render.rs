@@ -8,7 +8,7 @@ mod common;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::sync::Arc;
 use tumble::factors::camera::{CameraModel, Distortion};
-use tumble::sim::render::frame::radiance_image;
+use tumble::sim::render::frame::{radiance_image, Exposure};
 use tumble::sim::render::lens::RayTable;
 use tumble::sim::render::scene::{Plane, RenderScene};
 use tumble::sim::render::texture::{paint_rect, Texture};
@@ -88,7 +88,7 @@ fn rendered_squares_lie_where_they_project() {
                 let reach = 0.3 * depth;
                 let centre = [rng.random_range(-reach..reach), rng.random_range(-0.5 * reach..0.5 * reach)];
                 let scene = wall_with_square(depth, centre, side);
-                let img = radiance_image(&scene, &lens, 1, &|_, _| Isometry3::identity());
+                let img = radiance_image(&scene, &lens, &Exposure::instant(&|_, _| Isometry3::identity()));
                 let truth = model.project(&[centre[0], centre[1], depth]).unwrap();
                 let c = dark_centroid(&img, 752, truth);
                 let e = [c[0] - truth[0], c[1] - truth[1]];
@@ -120,7 +120,7 @@ fn a_sub_pixel_move_moves_the_image_by_as_much() {
     let scene = wall_with_square(2.0, [0.0, 0.0], 0.05);
     let at = |dx: f64| {
         let pose = Isometry3::from_parts(Translation3::new(dx, 0.0, 0.0), UnitQuaternion::identity());
-        let img = radiance_image(&scene, &lens, 1, &|_, _| pose);
+        let img = radiance_image(&scene, &lens, &Exposure::instant(&|_, _| pose));
         dark_centroid(&img, 752, [model.cx, model.cy])
     };
     let c0 = at(0.0);

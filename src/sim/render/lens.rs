@@ -11,6 +11,8 @@ use tumble_factors::camera::CameraModel;
 /// Per-pixel rays of one camera, row-major.
 #[derive(Debug, Clone)]
 pub struct RayTable {
+    /// The lens model the rays come from.
+    pub model: CameraModel,
     /// Image width \[px\].
     pub width: usize,
     /// Image height \[px\].
@@ -48,7 +50,7 @@ impl RayTable {
                 rays.push(r);
             }
         }
-        RayTable { width, height, rays, spread }
+        RayTable { model: *model, width, height, rays, spread }
     }
 }
 

@@ -14,7 +14,8 @@
 //!   kept only where it projects back to the pixel within 10⁻⁶ px.
 //! - **Exposure** ([`frame`]): motion blur from sub-frame poses (as many as keep
 //!   the image from moving more than [`ImageSettings::max_blur_step_px`]
-//!   between two), an optional rolling shutter, the frame's gain, vignetting,
+//!   between two, counted per tile of pixels from the motion of what the
+//!   tile shows), an optional rolling shutter, the frame's gain, vignetting,
 //!   shot and read noise, 8-bit output.
 //!
 //! Times: an image stamped `t` is centred at IMU time `t + time_offset_s`
@@ -112,8 +113,10 @@ pub fn camera_pose(motion: &dyn Motion, body_from_camera: &Isometry3<f64>, t: f6
     Isometry3::from_parts(Translation3::from(k.position), rot) * body_from_camera
 }
 
-/// Sub-exposure samples for a frame at IMU time `t`: enough that the image
-/// moves at most [`ImageSettings::max_blur_step_px`] between two. A ray
+/// The most sub-exposure samples a pixel of the frame at IMU time `t` may
+/// need (each tile then takes what its own motion needs, see
+/// [`frame::radiance_image`]): enough that the image moves at most
+/// [`ImageSettings::max_blur_step_px`] between two. A ray
 /// turns at most at the rotation rate plus the speed over the distance of
 /// the point it shows, so the motion is bounded by the rates and the nearest
 /// surface in view, `nearest_m`.
@@ -160,12 +163,12 @@ pub fn render_frame(
     let nearest_m = nearest_surface_m(scene, lens, &camera_pose(motion, body_from_camera, t));
     let samples = blur_samples(motion, t, focal_px, nearest_m, s);
     let mid_row = (lens.height as f64 - 1.0) * 0.5;
-    let pose_at = |row: usize, k: usize| {
+    let pose_at = |row: usize, within: f64| {
         let readout = (row as f64 - mid_row) * s.line_delay_s;
-        let within = ((k as f64 + 0.5) / samples as f64 - 0.5) * s.exposure_s;
-        camera_pose(motion, body_from_camera, t + readout + within)
+        camera_pose(motion, body_from_camera, t + readout + within * s.exposure_s)
     };
-    let radiance = frame::radiance_image(scene, lens, samples, &pose_at);
+    let exposure = frame::Exposure { samples, max_step_px: s.max_blur_step_px, pose_at: &pose_at };
+    let radiance = frame::radiance_image(scene, lens, &exposure);
     frame::expose(&radiance, lens.width, gain, s, seed)
 }
 

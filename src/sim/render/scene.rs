@@ -333,8 +333,11 @@ impl SeenPlanes {
         let mut best: Option<Hit> = None;
         for (k, p) in self.planes.iter().enumerate() {
             let cos = p.normal.dot(ray);
+            // Behind the eye or parallel to the plane: no hit (and no division).
+            if p.distance * cos <= 0.0 {
+                continue;
+            }
             let t = p.distance / cos;
-            // A ray parallel to the plane gives an infinite or NaN t: no hit.
             if t.is_nan() || t <= near || best.is_some_and(|b| b.distance_m <= t) {
                 continue;
             }
