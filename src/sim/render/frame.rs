@@ -105,18 +105,14 @@ fn tile_samples(scene: &RenderScene, lens: &RayTable, e: &Exposure) -> (Vec<usiz
         }
     }
     let sweep_px = 0.5 * e.samples as f64 * e.max_step_px;
-    let reach = (sweep_px / TILE_PX as f64).ceil().clamp(1.0, tiles_x.max(tiles_y) as f64) as isize;
+    let reach = (sweep_px / TILE_PX as f64).ceil().clamp(1.0, tiles_x.max(tiles_y) as f64) as usize;
+    // The tiles within `reach` of tile `x` of `n` along one axis.
+    let span = |x: usize, n: usize| x.saturating_sub(reach)..=(x + reach).min(n - 1);
+    let own = &own;
     let dilated = (0..tiles_x * tiles_y)
         .map(|t| {
-            let (tx, ty) = ((t % tiles_x) as isize, (t / tiles_x) as isize);
-            let near =
-                |d: isize, n: usize, x: isize| (x + d >= 0 && ((x + d) as usize) < n).then_some((x + d) as usize);
-            (-reach..=reach)
-                .flat_map(|dy| (-reach..=reach).map(move |dx| (dx, dy)))
-                .filter_map(|(dx, dy)| Some(near(dy, tiles_y, ty)? * tiles_x + near(dx, tiles_x, tx)?))
-                .map(|n| own[n])
-                .max()
-                .unwrap_or(1)
+            let (tx, ty) = (t % tiles_x, t / tiles_x);
+            span(ty, tiles_y).flat_map(|y| span(tx, tiles_x).map(move |x| own[y * tiles_x + x])).max().unwrap_or(1)
         })
         .collect();
     (dilated, tiles_x)
