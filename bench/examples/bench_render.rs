@@ -47,10 +47,10 @@ fn main() {
             eprintln!("error: {e}");
             std::process::exit(1);
         }
-        let fps = frames as f64 / start.elapsed().as_secs_f64();
+        let seconds = start.elapsed().as_secs_f64();
+        let fps = frames as f64 / seconds;
         println!(
-            "{scenario:?}, {duration} s: {frames} frames rendered and written in {:.1} s: {fps:.1} frames/s vs target {TARGET_FPS:.0} → ratio {:.2}",
-            start.elapsed().as_secs_f64(),
+            "{scenario:?}, {duration} s: {frames} frames rendered and written in {seconds:.1} s: {fps:.1} frames/s vs target {TARGET_FPS:.0} → ratio {:.2}",
             fps / TARGET_FPS
         );
         one_core(&sim, &settings);
