@@ -98,13 +98,13 @@ fn rendered_frames_calibrate(target: Option<tumble::rig::Target>, distorted: boo
 /// A checkerboard: every parameter within the accuracy its verdict promises
 /// ("determined": 3σ within 0.15°, 1 cm, 0.5 % of the focal length, 3 px of
 /// principal point, 0.5 ms). Its normalized errors are not bounded here: on
-/// these clean frames (corners 0.02 px from their projections) they reach 5
+/// these clean frames (corners 0.02 px from their projections) they reach 4
 /// on cx, the σ from the corners' scatter being smaller than the errors the
 /// checkerboard's path still makes (docs/rig.md). Measured (release,
-/// 2026-12-04): 104 of 104
-/// frames, corners' mean offset (−0.0005, +0.0004) px, median 0.019 px,
-/// largest 0.081 px; errors 0.0125° and 0.96 mm of `T_BC`, fx fy cx cy
-/// (−0.14, −0.14, −0.30, +0.04) px, time offset −0.024 ms; z of cx −5.1.
+/// 2026-12-05): 104 of 104
+/// frames, corners' mean offset (−0.0004, +0.0003) px, median 0.019 px,
+/// largest 0.084 px; errors 0.0131° and 0.96 mm of `T_BC`, fx fy cx cy
+/// (−0.09, −0.10, −0.30, +0.03) px, time offset −0.014 ms; z of cx −4.1.
 #[test]
 fn rendered_checkerboard_frames_calibrate_within_the_accuracy_promised() {
     use tumble::rig::accuracy;

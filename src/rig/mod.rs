@@ -285,18 +285,26 @@ pub struct RigResult {
 
 /// How the rig's σ were found: each is the largest of the noise model's
 /// (the corners' scatter, the IMU's noise figures) and the cluster-robust
-/// ("sandwich") ones over blocks of consecutive frames, which also hold when
-/// the corners' errors are alike in neighbouring views (a detector's bias
-/// that depends on the view, a target that is not flat, a lens the model
-/// fits imperfectly) — errors the scatter alone does not show.
+/// ("sandwich") ones
+/// - over blocks of consecutive frames, which also hold when the corners'
+///   errors are alike in neighbouring views (a detector's bias that depends
+///   on the view, a lens the model fits imperfectly);
+/// - over the target's corners, which also hold when each corner's error is
+///   alike in every view (a target printed or mounted imperfectly, a
+///   detector's bias where a corner is usually seen) — errors common to every
+///   block and to both halves of a recording.
+///
+/// The scatter alone shows neither.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct SigmaSource {
     /// The partitions of the frames into blocks, finest first: ⌊√frames⌋
     /// frames per block (the batch-means rule), then
     /// [`COARSE_BLOCKS`] blocks (errors alike for seconds).
     pub partitions: Vec<BlockPartition>,
+    /// The target's corners seen: the clusters of the cluster-robust σ over corners.
+    pub corners: usize,
     /// The largest ratio of a cluster-robust σ to the noise model's, over the
-    /// estimated parameters and partitions (≈ 1 when the corners' errors are
+    /// estimated parameters and clusterings (≈ 1 when the corners' errors are
     /// independent).
     pub largest_ratio: f64,
 }

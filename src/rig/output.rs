@@ -216,10 +216,11 @@ pub fn summary_markdown(rig: &RigResult) -> String {
         q.partitions.iter().map(|p| format!("{} blocks of {} frames", p.blocks, p.block_frames)).collect();
     let _ = writeln!(
         s,
-        "σ: the largest of the noise model's and the cluster-robust ones over {}; the cluster-robust σ are up to {:.1}× the noise model's{}.",
-        partitions.join(" and "),
+        "σ: the largest of the noise model's and the cluster-robust ones over {} and over the target's {} corners; the cluster-robust σ are up to {:.1}× the noise model's{}.",
+        partitions.join(", "),
+        q.corners,
         q.largest_ratio,
-        if q.largest_ratio > 2.0 { " (the corners' errors are alike in neighbouring views)" } else { "" }
+        if q.largest_ratio > 2.0 { " (the corners' errors are alike between views)" } else { "" }
     );
     if let Some(split) = &rig.split {
         let _ = writeln!(

@@ -8,7 +8,7 @@ use super::{CameraResult, CornerResidual, Reprojection, RigError, RigInput, RigO
 use crate::model::geometry::to_nalgebra;
 use crate::model::geometry::{gravity_aligned, parts, pose, preintegrate};
 use nalgebra::{Matrix3, SVector, Vector1, Vector3, Vector6};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use tumble_factors::camera::CameraModel;
 use tumble_factors::imu_preint::PreintegrationParams;
@@ -397,11 +397,15 @@ pub(super) struct Joint {
     graph: Graph,
     corners: Vec<CornerEntry>,
     /// The covariances of `cov_keys`: the noise model's, then the
-    /// cluster-robust ones over each partition into blocks of frames.
+    /// cluster-robust ones over each partition into blocks of frames and
+    /// over the target's corners.
     covs: Vec<Covariances>,
     cov_keys: Vec<Key>,
-    /// The partitions of the cluster-robust covariances, as `covs[1..]`.
+    /// The partitions into blocks of frames of the cluster-robust
+    /// covariances, as `covs[1..]`; the last of `covs` is over the corners.
     partitions: Vec<super::BlockPartition>,
+    /// The target's corners seen (the clusters of the last covariance).
+    corner_clusters: usize,
     /// Every pass converged; iterations over all passes.
     pub converged: bool,
     iterations: usize,
@@ -429,10 +433,20 @@ impl Joint {
     }
 }
 
+/// The joint graph of one pass and what the covariances need of it.
+struct JointGraph {
+    graph: Graph,
+    /// The corner factors' entries.
+    corners: Vec<CornerEntry>,
+    /// The IMU factors' indices.
+    imu_factors: Vec<usize>,
+    /// Each factor's cluster label ([`ClusterLabels`]).
+    labels: Vec<Option<usize>>,
+}
+
 /// Stage 6 (one pass): the joint graph — IMU preintegration and bias walks
 /// between frames (preintegrated at `solution`'s biases), the target's
-/// gauge, every corner with its rate at exposure less `gyro_bias` — with the
-/// corners' entries and the IMU factors' indices.
+/// gauge, every corner with its rate at exposure less `gyro_bias`.
 fn joint_graph(
     input: &RigInput,
     start: &Start,
@@ -440,12 +454,14 @@ fn joint_graph(
     gyro_integral: &RateIntegral,
     gyro_bias: &[Vector3<f64>],
     gravity: Vector3<f64>,
-) -> Result<(Graph, Vec<CornerEntry>, Vec<usize>), RigError> {
+) -> Result<JointGraph, RigError> {
     let frames = &start.frames;
     let params = start.params;
     let mut graph = Graph::new();
     let mut corners = Vec::new();
     let mut imu_factors = Vec::new();
+    let mut labels = Vec::new();
+    let label = ClusterLabels::of(input);
     for k in 0..frames.len() - 1 {
         let b = solution.get::<Vector6<f64>>(B(k as u64))?;
         let bias = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
@@ -457,8 +473,10 @@ fn joint_graph(
         let dt = frames[k + 1].t - frames[k].t;
         let (f, noise) = bias_random_walk_axes(B(i), B(j), params.accel_walk().into(), params.gyro_walk().into(), dt)?;
         graph.add(f, noise);
+        labels.extend([Some(label.motion(k)); 2]);
     }
     graph.add(AutoDiff::new(TargetGauge::new(TARGET, &start.state.t_wt)), NoiseModel::isotropic(4, GAUGE_SIGMA)?);
+    labels.push(None);
     for (k, f) in frames.iter().enumerate() {
         let rate = gyro_integral.mean(f.t - 2.5e-3, f.t + 2.5e-3).unwrap_or_else(Vector3::zeros) - gyro_bias[k];
         for (c, cam) in input.cameras.iter().enumerate() {
@@ -473,10 +491,11 @@ fn joint_graph(
                     noise.clone(),
                     Huber(HUBER_SIGMAS),
                 );
+                labels.push(Some(label.corner(k, corner.id)));
             }
         }
     }
-    Ok((graph, corners, imu_factors))
+    Ok(JointGraph { graph, corners, imu_factors, labels })
 }
 
 /// The joint solve's starting values (intrinsics held where given, the
@@ -502,20 +521,45 @@ fn starting_values(o: &RigOptions, start: &Start) -> Values {
     values
 }
 
-/// A factor's cluster for the robust covariance: the first frame whose pose,
-/// velocity or bias it holds (a corner's frame, an IMU link's or a bias
-/// walk's first), grouped into blocks of frames afterwards
-/// ([`robust_partitions`]); the target's gauge is a cluster of its own.
-fn clusters(graph: &Graph) -> Vec<Option<usize>> {
-    graph
-        .entries()
-        .iter()
-        .map(|e| {
-            let per_frame = |k: &&Key| [X(0), V(0), B(0)].iter().any(|f| f.chr() == k.chr());
-            let frame = e.factor.keys().iter().find(per_frame)?;
-            Some(frame.index() as usize)
-        })
-        .collect()
+/// The fine clusters of the cluster-robust covariance: one per frame and
+/// target corner (that corner's factors in that frame, every camera's), and
+/// one per frame for the IMU link and bias walk that start there; the
+/// target's gauge is a cluster of its own. Grouped afterwards by blocks of
+/// frames or by corner ([`robust_partitions`]).
+#[derive(Debug, Clone, Copy)]
+struct ClusterLabels {
+    /// Labels per frame: every corner id, then the frame's motion.
+    stride: usize,
+}
+
+impl ClusterLabels {
+    fn of(input: &RigInput) -> ClusterLabels {
+        let ids = input.cameras.iter().flat_map(|c| &c.views).flat_map(|v| &v.corners).map(|c| c.id);
+        ClusterLabels { stride: ids.max().map_or(0, |m| m + 1) + 1 }
+    }
+
+    /// Corner `id` seen in frame `frame`.
+    fn corner(self, frame: usize, id: usize) -> usize {
+        frame * self.stride + id
+    }
+
+    /// The IMU's link and bias walk from frame `frame`.
+    fn motion(self, frame: usize) -> usize {
+        frame * self.stride + self.stride - 1
+    }
+
+    fn frame(self, label: usize) -> usize {
+        label / self.stride
+    }
+
+    /// The cluster of `label` when grouped by corner: the corner's id, or
+    /// (the IMU's factors, independent between frames) one past every id per frame.
+    fn by_corner(self, label: usize) -> usize {
+        match label % self.stride {
+            id if id + 1 < self.stride => id,
+            _ => self.stride + self.frame(label),
+        }
+    }
 }
 
 /// Blocks of the coarse partition of the cluster-robust covariance.
@@ -529,20 +573,43 @@ fn clusters(graph: &Graph) -> Vec<Option<usize>> {
 /// correlation and heterogeneity robust inference", study 4–16 groups).
 pub const COARSE_BLOCKS: usize = 8;
 
-/// The cluster-robust covariances over blocks of ⌊√N⌋ consecutive frames and
-/// over [`COARSE_BLOCKS`] blocks (when those are longer), from per-frame
-/// clusters.
-fn robust_partitions(cov: &RobustCovariances, frames: usize) -> (Vec<super::BlockPartition>, Vec<Covariances>) {
+/// The cluster-robust covariances over blocks of ⌊√N⌋ consecutive frames,
+/// over [`COARSE_BLOCKS`] blocks (when those are longer) and over the
+/// target's corners, from the fine clusters `labels` made, with the number
+/// of corners.
+///
+/// The corners' clusters hold when a corner's error is alike in every view
+/// that sees it: a target printed or mounted imperfectly (a square's edge
+/// off by a tenth of a millimetre, a board not flat), or a detector whose
+/// bias depends on where in the image, through which part of the lens, a
+/// corner is usually seen. Such errors are common to every block of frames
+/// — to both halves of the recording too — so neither the blocks nor a
+/// split shows them (OpenCV's `calibrateCameraRO` estimates them as
+/// per-corner offsets instead).
+fn robust_partitions(
+    cov: &RobustCovariances,
+    labels: ClusterLabels,
+    frames: usize,
+) -> (Vec<super::BlockPartition>, usize, Vec<Covariances>) {
     let fine = ((frames as f64).sqrt().floor() as usize).max(1);
     let coarse = frames.div_ceil(COARSE_BLOCKS);
     let mut partitions = Vec::new();
     let mut covs = Vec::new();
     for block_frames in std::iter::once(fine).chain((coarse > fine).then_some(coarse)) {
-        let (c, _) = cov.regrouped(|frame| frame / block_frames);
+        let (c, _) = cov.regrouped(|label| labels.frame(label) / block_frames);
         partitions.push(super::BlockPartition { block_frames, blocks: frames.div_ceil(block_frames) });
         covs.push(c);
     }
-    (partitions, covs)
+    let (c, _) = cov.regrouped(|label| labels.by_corner(label));
+    let corners: BTreeSet<usize> = cov
+        .influences
+        .iter()
+        .filter_map(|(l, _)| *l)
+        .map(|l| labels.by_corner(l))
+        .filter(|&c| c < labels.stride)
+        .collect();
+    covs.push(c);
+    (partitions, corners.len(), covs)
 }
 
 /// Whitened χ² per degree of freedom of the IMU factors `imu_factors` at `values`.
@@ -562,11 +629,12 @@ fn imu_chi2_per_dof(graph: &Graph, values: &Values, imu_factors: &[usize]) -> f6
 /// bias the first solve found; the covariances of the calibration.
 ///
 /// The σ are the largest of the noise model's and the cluster-robust ones
-/// over blocks of √N consecutive frames (batch means' rule) and over
-/// [`COARSE_BLOCKS`] blocks: corner errors that depend on the view's
-/// geometry (the detector's bias, the target's flatness, the lens model's
-/// misfit) are alike in neighbouring views, and the corners' scatter alone
-/// does not show them.
+/// over blocks of √N consecutive frames (batch means' rule), over
+/// [`COARSE_BLOCKS`] blocks and over the target's corners: corner errors
+/// that depend on the view's geometry (the detector's bias, the lens
+/// model's misfit) are alike in neighbouring views, those of the target
+/// itself (its print, its flatness) alike in every view, and the corners'
+/// scatter alone shows neither.
 pub(super) fn joint_solve(
     input: &RigInput,
     o: &RigOptions,
@@ -585,14 +653,15 @@ pub(super) fn joint_solve(
     let mut last = None;
     for pass in 0..2 {
         progress(&format!("joint solve {}: {} frames, {} cameras", pass + 1, frames.len(), n_cams));
-        let (graph, corners, imu_factors) = joint_graph(input, start, &solution, gyro_integral, &gyro_bias, gravity)?;
+        let JointGraph { graph, corners, imu_factors, labels } =
+            joint_graph(input, start, &solution, gyro_integral, &gyro_bias, gravity)?;
         let opts = LmOptions { max_iterations: o.max_iterations, log_iterations: false, ..LmOptions::default() };
         keys = (0..n_cams).flat_map(|c| [extrinsic(c), intrinsics(c)]).filter(|k| !solution.is_constant(*k)).collect();
         if o.estimate_time_offset {
             keys.push(OFFSET);
         }
         let (sol, summary, c) = Optimizer::new(opts)
-            .optimize_with_robust_covariances(&graph, &solution, &keys, &clusters(&graph))
+            .optimize_with_robust_covariances(&graph, &solution, &keys, &labels)
             .map_err(|e| RigError::Solver { what: "joint solve", source: e })?;
         progress(&format!(
             "  {} iterations, cost {:.4e} → {:.4e} ({:?}, {:.1} s)",
@@ -619,9 +688,20 @@ pub(super) fn joint_solve(
     }
     let (graph, corners, cov, imu_chi2_per_dof) = last.ok_or_else(|| RigError::Internal("no solve ran".into()))?;
     let cov = cov.map_err(|e| RigError::Solver { what: "covariances", source: e })?;
-    let (partitions, robust) = robust_partitions(&cov, frames.len());
+    let (partitions, corner_clusters, robust) = robust_partitions(&cov, ClusterLabels::of(input), frames.len());
     let covs = std::iter::once(cov.model).chain(robust).collect();
-    Ok(Joint { solution, graph, corners, covs, cov_keys: keys, partitions, converged, iterations, imu_chi2_per_dof })
+    Ok(Joint {
+        solution,
+        graph,
+        corners,
+        covs,
+        cov_keys: keys,
+        partitions,
+        corner_clusters,
+        converged,
+        iterations,
+        imu_chi2_per_dof,
+    })
 }
 
 /// Stage 7, one camera: its calibration with σ (the larger of the two
@@ -696,7 +776,8 @@ pub(super) fn results(
             }
         }
     }
-    let sigma_source = super::SigmaSource { partitions: joint.partitions.clone(), largest_ratio };
+    let sigma_source =
+        super::SigmaSource { partitions: joint.partitions.clone(), corners: joint.corner_clusters, largest_ratio };
     let (time_offset_s, time_offset_sigma_s) = joint.time_offset(start, o)?;
     let cameras =
         (0..input.cameras.len()).map(|c| camera_result(input, o, start, joint, c)).collect::<Result<Vec<_>, _>>()?;
