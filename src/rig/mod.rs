@@ -24,6 +24,7 @@
 //! ```
 
 mod calibrate;
+mod clusters;
 pub mod detect;
 #[doc(hidden)]
 pub mod init;
@@ -34,8 +35,8 @@ mod split;
 
 pub use crate::model::target::{CameraCorners, Corner, RigInput, Target, View};
 pub use calibrate::calibrate_rig;
+pub use clusters::COARSE_BLOCKS;
 pub use output::{summary_markdown, write_rig};
-pub use solve::COARSE_BLOCKS;
 
 use crate::error::OptionError;
 use nalgebra::{Isometry3, Matrix3, Vector3};
