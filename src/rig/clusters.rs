@@ -18,6 +18,7 @@ pub(super) struct ClusterLabels {
 }
 
 impl ClusterLabels {
+    /// The labels for `input`'s corners: room for every corner id it holds.
     pub(super) fn of(input: &RigInput) -> ClusterLabels {
         let ids = input.cameras.iter().flat_map(|c| &c.views).flat_map(|v| &v.corners).map(|c| c.id);
         ClusterLabels { stride: ids.max().map_or(0, |m| m + 1) + 1 }
