@@ -445,7 +445,8 @@ struct JointGraph {
 
 /// Stage 6 (one pass): the joint graph — IMU preintegration and bias walks
 /// between frames (preintegrated at `solution`'s biases), the target's
-/// gauge, every corner with its rate at exposure less `gyro_bias`.
+/// gauge, every corner with its rate at exposure less `gyro_bias` — each
+/// factor labelled by `label`.
 fn joint_graph(
     input: &RigInput,
     start: &Start,
@@ -453,6 +454,7 @@ fn joint_graph(
     gyro_integral: &RateIntegral,
     gyro_bias: &[Vector3<f64>],
     gravity: Vector3<f64>,
+    label: ClusterLabels,
 ) -> Result<JointGraph, RigError> {
     let frames = &start.frames;
     let params = start.params;
@@ -460,7 +462,6 @@ fn joint_graph(
     let mut corners = Vec::new();
     let mut imu_factors = Vec::new();
     let mut labels = Vec::new();
-    let label = ClusterLabels::of(input);
     for k in 0..frames.len() - 1 {
         let b = solution.get::<Vector6<f64>>(B(k as u64))?;
         let bias = (b.fixed_rows::<3>(0).into_owned(), b.fixed_rows::<3>(3).into_owned());
@@ -559,10 +560,11 @@ pub(super) fn joint_solve(
     let mut solution = starting_values(o, start);
     let (mut converged, mut iterations) = (true, 0);
     let mut last = None;
+    let cluster_labels = ClusterLabels::of(input);
     for pass in 0..2 {
         progress(&format!("joint solve {}: {} frames, {} cameras", pass + 1, frames.len(), n_cams));
         let JointGraph { graph, corners, imu_factors, labels } =
-            joint_graph(input, start, &solution, gyro_integral, &gyro_bias, gravity)?;
+            joint_graph(input, start, &solution, gyro_integral, &gyro_bias, gravity, cluster_labels)?;
         let opts = LmOptions { max_iterations: o.max_iterations, log_iterations: false, ..LmOptions::default() };
         keys = (0..n_cams).flat_map(|c| [extrinsic(c), intrinsics(c)]).filter(|k| !solution.is_constant(*k)).collect();
         if o.estimate_time_offset {
@@ -596,7 +598,7 @@ pub(super) fn joint_solve(
     }
     let (graph, corners, cov, imu_chi2_per_dof) = last.ok_or_else(|| RigError::Internal("no solve ran".into()))?;
     let cov = cov.map_err(|e| RigError::Solver { what: "covariances", source: e })?;
-    let (partitions, corner_clusters, robust) = robust_partitions(&cov, ClusterLabels::of(input), frames.len());
+    let (partitions, corner_clusters, robust) = robust_partitions(&cov, cluster_labels, frames.len());
     let covs = std::iter::once(cov.model).chain(robust).collect();
     Ok(Joint {
         solution,
