@@ -120,10 +120,10 @@ fn rendered_checkerboard_frames_calibrate_within_the_accuracy_promised() {
 /// Kalibr's AprilGrid as Kalibr prints it (EuRoC's 6 × 6 tags of 8.8 cm),
 /// its tags' 2-cell border recognised and their corner order agreed by every
 /// view that votes; the calibration within 4 σ of the truth on every
-/// parameter (the bound). Measured (release, 2026-12-04): all 120 frames
-/// (98 show the whole grid), corners' mean offset (+0.0009, −0.0009) px,
-/// median 0.029 px, largest 0.47 px; errors 0.0101° and 0.92 mm, fx fy cx cy
-/// (−0.17, −0.17, −0.01, +0.01) px, +0.010 ms; largest |z| 2.93.
+/// parameter (the bound). Measured (release, 2026-12-05): all 120 frames
+/// (98 show the whole grid), corners' mean offset (+0.0010, −0.0009) px,
+/// median 0.029 px, largest 0.45 px; errors 0.0104° and 0.93 mm, fx fy cx cy
+/// (−0.17, −0.16, −0.00, +0.01) px, +0.007 ms; largest |z| 2.97.
 #[test]
 fn rendered_aprilgrid_frames_calibrate_to_the_truth() {
     let grid = tumble::rig::Target::AprilGrid { cols: 6, rows: 6, size: 0.088, spacing: 0.3 };
@@ -139,8 +139,8 @@ fn rendered_aprilgrid_frames_calibrate_to_the_truth() {
 /// The checkerboard's bias through EuRoC's distortion (cx 3–7 σ, the test
 /// above) comes with the distortion: without it the same path is unbiased
 /// (docs/rig.md). Measured (release, 2026-12-05): 102 of 104 frames,
-/// corners' median 0.018 px; fx fy cx cy (+0.33, +0.32, +0.05, −0.06) px,
-/// `T_BC` within 0.016° and 1.6 mm; largest |z| 1.37.
+/// corners' median 0.018 px; fx fy cx cy (+0.36, +0.36, +0.05, −0.06) px,
+/// `T_BC` within 0.017° and 1.7 mm; largest |z| 1.61.
 #[test]
 fn rendered_checkerboard_frames_without_distortion_calibrate_to_the_truth() {
     let o = rendered_frames_calibrate(None, false, "checkerboard_pinhole");

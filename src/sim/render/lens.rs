@@ -6,6 +6,7 @@
 //! `u = i, v = j` and covers `[i − ½, i + ½) × [j − ½, j + ½)`.
 
 use nalgebra::Vector3;
+use rayon::prelude::*;
 use tumble_factors::camera::CameraModel;
 
 /// Per-pixel rays of one camera, row-major.
@@ -36,20 +37,18 @@ fn ray(model: &CameraModel, uv: [f64; 2]) -> Option<Vector3<f64>> {
 impl RayTable {
     /// The rays of a `width × height` image through `model`.
     pub fn new(model: &CameraModel, width: usize, height: usize) -> RayTable {
-        let mut rays = Vec::with_capacity(width * height);
-        let mut spread = Vec::with_capacity(width * height);
-        for j in 0..height {
-            for i in 0..width {
-                let (u, v) = (i as f64, j as f64);
-                let r = ray(model, [u, v]);
+        // Every pixel on its own: rows in parallel.
+        let (rays, spread) = (0..width * height)
+            .into_par_iter()
+            .map(|k| {
+                let (u, v) = ((k % width) as f64, (k / width) as f64);
                 let side = |du: f64, dv: f64| match (ray(model, [u - du, v - dv]), ray(model, [u + du, v + dv])) {
                     (Some(a), Some(b)) => a.angle(&b),
                     _ => 1.0 / model.fx.min(model.fy),
                 };
-                spread.push(side(0.5, 0.0).max(side(0.0, 0.5)));
-                rays.push(r);
-            }
-        }
+                (ray(model, [u, v]), side(0.5, 0.0).max(side(0.0, 0.5)))
+            })
+            .unzip();
         RayTable { model: *model, width, height, rays, spread }
     }
 }

@@ -11,13 +11,45 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
 
-/// One level of a pyramid: `width × height` texels, row-major, values in \[0, 1\].
+/// One level of a pyramid: `width × height` texels, row-major, values in
+/// \[0, 1\] held as multiples of [`TEXEL_STEP`] (16 bits: half the memory of
+/// `f32`, so twice the texels per cache line; the step is 1/257 of an 8-bit
+/// grey level).
 #[derive(Debug, Clone)]
 struct Level {
     width: usize,
     height: usize,
-    data: Vec<f32>,
+    data: Vec<u16>,
+}
+
+/// The value of one unit of a stored texel.
+const TEXEL_STEP: f32 = 1.0 / 65535.0;
+
+/// A value in \[0, 1\] as a stored texel (rounded to the nearest step).
+fn quantized(x: f32) -> u16 {
+    (x.clamp(0.0, 1.0) * 65535.0 + 0.5) as u16
+}
+
+/// A level from `width × height` values in \[0, 1\] (row-major).
+fn stored(width: usize, height: usize, values: &[f32]) -> Level {
+    Level { width, height, data: values.par_iter().map(|&x| quantized(x)).collect() }
+}
+
+/// Each texel of the next level of `values` (`width × height`, row-major):
+/// the mean of the 2 × 2 it covers, edges clamped. Returns its sides too.
+fn halved(width: usize, height: usize, values: &[f32]) -> (usize, usize, Vec<f32>) {
+    let (w, h) = ((width / 2).max(1), (height / 2).max(1));
+    let at = |i: usize, j: usize| values[j.min(height - 1) * width + i.min(width - 1)];
+    let data = (0..w * h)
+        .into_par_iter()
+        .map(|k| {
+            let (i, j) = (2 * (k % w), 2 * (k / w));
+            0.25 * (at(i, j) + at(i + 1, j) + at(i, j + 1) + at(i + 1, j + 1))
+        })
+        .collect();
+    (w, h, data)
 }
 
 /// `⌊x⌋` as an integer (without a call into libm).
@@ -31,7 +63,7 @@ impl Level {
     fn at(&self, i: isize, j: isize) -> f32 {
         let i = i.clamp(0, self.width as isize - 1) as usize;
         let j = j.clamp(0, self.height as isize - 1) as usize;
-        self.data[j * self.width + i]
+        f32::from(self.data[j * self.width + i]) * TEXEL_STEP
     }
 
     /// Bilinear interpolation between texel centres; `(x, y)` in this level's texels.
@@ -44,27 +76,13 @@ impl Level {
         let [a, b, c, d] = if i >= 0 && j >= 0 && i + 1 < w && j + 1 < h {
             let k = (j * w + i) as usize;
             let (top, bottom) = (&self.data[k..k + 2], &self.data[k + w as usize..k + w as usize + 2]);
-            [top[0], top[1], bottom[0], bottom[1]]
+            [top[0], top[1], bottom[0], bottom[1]].map(|t| f32::from(t) * TEXEL_STEP)
         } else {
             [self.at(i, j), self.at(i + 1, j), self.at(i, j + 1), self.at(i + 1, j + 1)]
         };
         let top = a + (b - a) * fx;
         let bottom = c + (d - c) * fx;
         f64::from(top + (bottom - top) * fy)
-    }
-
-    /// The next level: each texel the mean of the 2 × 2 it covers.
-    fn halved(&self) -> Level {
-        let (w, h) = ((self.width / 2).max(1), (self.height / 2).max(1));
-        let mut data = Vec::with_capacity(w * h);
-        for j in 0..h {
-            for i in 0..w {
-                let (i0, j0) = (2 * i as isize, 2 * j as isize);
-                let s = self.at(i0, j0) + self.at(i0 + 1, j0) + self.at(i0, j0 + 1) + self.at(i0 + 1, j0 + 1);
-                data.push(0.25 * s);
-            }
-        }
-        Level { width: w, height: h, data }
     }
 }
 
@@ -186,10 +204,12 @@ impl Texture {
     /// programming error: the scene builds its textures).
     pub fn new(width: usize, height: usize, data: Vec<f32>) -> Texture {
         assert!(width.is_power_of_two() && height.is_power_of_two() && data.len() == width * height);
-        let mut levels = vec![Level { width, height, data }];
-        while levels.last().is_some_and(|l| l.width > 1 || l.height > 1) {
-            let next = levels.last().map(Level::halved).expect("one level at least");
-            levels.push(next);
+        // Every level from the one below before it is stored: no rounding accumulates.
+        let mut levels = vec![stored(width, height, &data)];
+        let (mut w, mut h, mut values) = (width, height, data);
+        while w > 1 || h > 1 {
+            (w, h, values) = halved(w, h, &values);
+            levels.push(stored(w, h, &values));
         }
         Texture { levels, printed: None }
     }
@@ -240,15 +260,18 @@ impl Texture {
         let lod = lod_of(footprint).min((self.levels.len() - 1) as f64);
         let k = lod as usize;
         let f = lod - k as f64;
-        // Level k's coordinates are level 0's times 2⁻ᵏ, an exact product.
-        let at = |k: usize| {
-            let s = f64::from_bits((1023 - k as u64) << 52);
-            self.levels[k].bilinear(u * s, v * s)
-        };
         if f < 1e-6 || k + 1 >= self.levels.len() {
-            return at(k);
+            return self.bilinear_on(k, u, v);
         }
-        at(k) * (1.0 - f) + at(k + 1) * f
+        self.bilinear_on(k, u, v) * (1.0 - f) + self.bilinear_on(k + 1, u, v) * f
+    }
+
+    /// Level `k` read bilinearly at `(u, v)` \[level-0 texels\].
+    #[inline(always)]
+    fn bilinear_on(&self, k: usize, u: f64, v: f64) -> f64 {
+        // Level k's coordinates are level 0's times 2⁻ᵏ, an exact product.
+        let s = f64::from_bits((1023 - k as u64) << 52);
+        self.levels[k].bilinear(u * s, v * s)
     }
 }
 
@@ -266,19 +289,37 @@ fn lod_of(texels: f64) -> f64 {
 /// Paint the axis-aligned rectangle `[x0, x1) × [y0, y1)` (level-0 texels)
 /// with `value`, each texel blended by the fraction of it the rectangle
 /// covers: the texture holds the surface's exact mean per texel.
-pub fn paint_rect(width: usize, height: usize, data: &mut [f32], [x0, y0, x1, y1]: [f64; 4], value: f32) {
+pub fn paint_rect(width: usize, height: usize, data: &mut [f32], rect: [f64; 4], value: f32) {
+    paint_rows(width, 0..height, data, rect, value);
+}
+
+/// [`paint_rect`] on the texture's rows `rows` only, held in `strip`
+/// (`rows.len()` rows of `width` texels): each texel painted as the whole
+/// texture's would be.
+fn paint_rows(width: usize, rows: std::ops::Range<usize>, strip: &mut [f32], [x0, y0, x1, y1]: [f64; 4], value: f32) {
     let cover = |lo: f64, hi: f64, i: usize| (hi.min(i as f64 + 1.0) - lo.max(i as f64)).max(0.0);
     let (i0, i1) = (x0.floor().max(0.0) as usize, (x1.ceil().max(0.0) as usize).min(width));
-    let (j0, j1) = (y0.floor().max(0.0) as usize, (y1.ceil().max(0.0) as usize).min(height));
+    let j0 = (y0.floor().max(0.0) as usize).max(rows.start);
+    let j1 = (y1.ceil().max(0.0) as usize).min(rows.end);
+    if i0 >= i1 {
+        return;
+    }
+    let blend = |t: &mut f32, c: f32| *t = *t * (1.0 - c) + value * c;
     for j in j0..j1 {
         let cy = cover(y0, y1, j);
-        for i in i0..i1 {
-            let c = (cover(x0, x1, i) * cy) as f32;
-            let t = &mut data[j * width + i];
-            *t = *t * (1.0 - c) + value * c;
+        let row = &mut strip[(j - rows.start) * width..][i0..i1];
+        let last = row.len() - 1;
+        // The columns between the first and the last are covered whole.
+        let inner = cy as f32;
+        for (k, t) in row.iter_mut().enumerate() {
+            let c = if k == 0 || k == last { (cover(x0, x1, i0 + k) * cy) as f32 } else { inner };
+            blend(t, c);
         }
     }
 }
+
+/// Rows of the strips [`dead_leaves`] paints in parallel.
+const STRIP_ROWS: usize = 32;
 
 /// Fraction of [`dead_leaves`]' rectangles of any grey; the others are
 /// within [`WEAK_CONTRAST`] of the surface's base grey.
@@ -295,35 +336,68 @@ const WEAK_CONTRAST: f32 = 0.08;
 /// every scale, and a heavy-tailed gradient distribution (Lee, Mumford and
 /// Huang, "Occlusion models for natural images", IJCV 2001).
 pub fn dead_leaves(width: usize, height: usize, sides: [f64; 2], seed: u64) -> Texture {
+    let (base, leaves) = draw_leaves(width, height, sides, seed);
+    Texture::new(width, height, paint_leaves(width, height, base, &leaves))
+}
+
+/// A rectangle `[x0, y0, x1, y1]` \[level-0 texels\] and its grey.
+type Leaf = ([f64; 4], f32);
+
+/// [`dead_leaves`]' base grey and its rectangles in the order they are
+/// painted (the later over the earlier).
+fn draw_leaves(width: usize, height: usize, sides: [f64; 2], seed: u64) -> (f32, Vec<Leaf>) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let base: f32 = rng.random_range(0.35..0.75);
-    let mut data = vec![base; width * height];
     let [lo, hi] = sides;
     let hi = hi.min(width.max(height) as f64);
     // Mean area of a leaf, its two sides drawn independently from p(s) ∝ s⁻³ on
     // [lo, hi]: E[s]², E[s] = 2 / (1/lo + 1/hi).
     let mean_side = 2.0 / (1.0 / lo + 1.0 / hi);
     let mean_area = mean_side * mean_side;
-    let leaves = (6.0 * (width * height) as f64 / mean_area).ceil() as usize;
-    for _ in 0..leaves {
-        // Inverse CDF of p(s) ∝ s⁻³: 1/s² uniform between 1/hi² and 1/lo².
-        let side = |rng: &mut ChaCha8Rng| {
-            let q: f64 = rng.random_range(0.0..1.0);
-            (1.0 / (1.0 / (lo * lo) - q * (1.0 / (lo * lo) - 1.0 / (hi * hi)))).sqrt()
-        };
-        let (w, h) = (side(&mut rng), side(&mut rng));
-        let x = rng.random_range(-w..width as f64);
-        let y = rng.random_range(-h..height as f64);
-        // Most surfaces differ little from their neighbours (walls, floors,
-        // furniture of one material); a few stand out (posters, frames, shadows).
-        let value = if rng.random_bool(STRONG_LEAVES) {
-            rng.random_range(0.08f32..0.92)
-        } else {
-            (base + WEAK_CONTRAST * rng.random_range(-1.0f32..1.0)).clamp(0.0, 1.0)
-        };
-        paint_rect(width, height, &mut data, [x, y, x + w, y + h], value);
+    let count = (6.0 * (width * height) as f64 / mean_area).ceil() as usize;
+    let leaves = (0..count)
+        .map(|_| {
+            // Inverse CDF of p(s) ∝ s⁻³: 1/s² uniform between 1/hi² and 1/lo².
+            let side = |rng: &mut ChaCha8Rng| {
+                let q: f64 = rng.random_range(0.0..1.0);
+                (1.0 / (1.0 / (lo * lo) - q * (1.0 / (lo * lo) - 1.0 / (hi * hi)))).sqrt()
+            };
+            let (w, h) = (side(&mut rng), side(&mut rng));
+            let x = rng.random_range(-w..width as f64);
+            let y = rng.random_range(-h..height as f64);
+            // Most surfaces differ little from their neighbours (walls, floors,
+            // furniture of one material); a few stand out (posters, frames, shadows).
+            let value = if rng.random_bool(STRONG_LEAVES) {
+                rng.random_range(0.08f32..0.92)
+            } else {
+                (base + WEAK_CONTRAST * rng.random_range(-1.0f32..1.0)).clamp(0.0, 1.0)
+            };
+            ([x, y, x + w, y + h], value)
+        })
+        .collect();
+    (base, leaves)
+}
+
+/// `leaves` painted in order over a `width × height` surface of `base`
+/// grey ([`paint_rect`]). Strips of rows are painted in parallel, each with
+/// every leaf that reaches it in the order drawn: the same texels as
+/// painting the leaves one by one.
+fn paint_leaves(width: usize, height: usize, base: f32, leaves: &[Leaf]) -> Vec<f32> {
+    let strips = height.div_ceil(STRIP_ROWS);
+    let mut reaching: Vec<Vec<usize>> = vec![Vec::new(); strips];
+    for (k, (r, _)) in leaves.iter().enumerate() {
+        let first = (r[1].max(0.0) as usize / STRIP_ROWS).min(strips);
+        let end = (r[3].ceil().max(0.0) as usize).div_ceil(STRIP_ROWS).min(strips);
+        (first..end).for_each(|s| reaching[s].push(k));
     }
-    Texture::new(width, height, data)
+    let mut data = vec![base; width * height];
+    data.par_chunks_mut(STRIP_ROWS * width).zip(&reaching).enumerate().for_each(|(s, (strip, reach))| {
+        let rows = s * STRIP_ROWS..s * STRIP_ROWS + strip.len() / width;
+        for &(rect, value) in reach.iter().map(|&k| &leaves[k]) {
+            paint_rows(width, rows.clone(), strip, rect, value);
+        }
+    });
+    data
 }
 
 #[cfg(test)]
@@ -394,6 +468,29 @@ mod tests {
         assert_eq!(floor_i(2.0), 2);
     }
 
+    /// Painting in parallel strips, each texel's interior columns blended
+    /// at once, gives the texels of the plain rule: every leaf in turn, every
+    /// texel blended by the fraction of it the leaf covers.
+    #[test]
+    fn leaves_painted_in_strips_are_the_leaves_painted_one_by_one() {
+        let (width, height) = (256, 200);
+        let (base, leaves) = draw_leaves(width, height, [0.7, 90.0], 5);
+        let mut plain = vec![base; width * height];
+        let cover = |lo: f64, hi: f64, i: usize| (hi.min(i as f64 + 1.0) - lo.max(i as f64)).max(0.0);
+        for &([x0, y0, x1, y1], value) in &leaves {
+            for j in 0..height {
+                for i in 0..width {
+                    let c = (cover(x0, x1, i) * cover(y0, y1, j)) as f32;
+                    let t = &mut plain[j * width + i];
+                    *t = *t * (1.0 - c) + value * c;
+                }
+            }
+        }
+        let strips = paint_leaves(width, height, base, &leaves);
+        let differing = plain.iter().zip(&strips).filter(|(a, b)| a.to_bits() != b.to_bits()).count();
+        assert_eq!(differing, 0, "of {} texels, over {} leaves", width * height, leaves.len());
+    }
+
     #[test]
     fn dead_leaves_cover_the_texture_with_edges_at_every_scale() {
         let t = dead_leaves(256, 256, [3.0, 400.0], 3);
@@ -406,7 +503,7 @@ mod tests {
             let l = &t.levels[k];
             let strong = (1..l.width)
                 .flat_map(|i| (0..l.height).map(move |j| (i, j)))
-                .filter(|&(i, j)| (l.data[j * l.width + i] - l.data[j * l.width + i - 1]).abs() > 0.1)
+                .filter(|&(i, j)| (l.at(i as isize, j as isize) - l.at(i as isize - 1, j as isize)).abs() > 0.1)
                 .count();
             let fraction = strong as f64 / (l.width * l.height) as f64;
             assert!(fraction > 0.02 && fraction < 0.6, "level {k}: {fraction}");
