@@ -468,9 +468,9 @@ mod tests {
         assert_eq!(floor_i(2.0), 2);
     }
 
-    /// Painting in parallel strips, each texel's interior columns blended
-    /// at once, gives the texels of the plain rule: every leaf in turn, every
-    /// texel blended by the fraction of it the leaf covers.
+    /// Painting in parallel strips of rows, a leaf's inner columns blended
+    /// with one factor per row, gives the texels of the plain rule: every
+    /// leaf in turn, every texel blended by the fraction of it the leaf covers.
     #[test]
     fn leaves_painted_in_strips_are_the_leaves_painted_one_by_one() {
         let (width, height) = (256, 200);
