@@ -37,7 +37,7 @@ fn ray(model: &CameraModel, uv: [f64; 2]) -> Option<Vector3<f64>> {
 impl RayTable {
     /// The rays of a `width × height` image through `model`.
     pub fn new(model: &CameraModel, width: usize, height: usize) -> RayTable {
-        // Every pixel on its own: rows in parallel.
+        // Every pixel on its own, in parallel.
         let (rays, spread) = (0..width * height)
             .into_par_iter()
             .map(|k| {
