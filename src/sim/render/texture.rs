@@ -15,8 +15,7 @@ use rayon::prelude::*;
 
 /// One level of a pyramid: `width × height` texels, row-major, values in
 /// \[0, 1\] held as multiples of [`TEXEL_STEP`] (16 bits: half the memory of
-/// `f32`, so twice the texels per cache line; the step is 1/257 of an 8-bit
-/// grey level).
+/// `f32`; the step is 1/257 of an 8-bit grey level).
 #[derive(Debug, Clone)]
 struct Level {
     width: usize,
