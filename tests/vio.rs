@@ -683,6 +683,45 @@ fn a_machine_hall_flight_with_two_cameras_and_another_flights_noise_keeps_its_sc
     assert!(windows.normalized_error_rms.unwrap() < 2.0, "{}", windows.line());
 }
 
+/// The hall's single-camera windows are honest when the IMU is what the
+/// estimator is told: an IMU with V2_01's flight noise and nothing else
+/// (`ImuModel::with_noise_only`), flown along MH_03's ground truth smoothed
+/// by 50 ms, one simulated camera. On the real IMU the same setup's windows
+/// come to 1.39 σ RMS (the test above, one camera); here 0.82 σ RMS over
+/// seeds 1–3 0.72–0.97 (release, 2026-12-06), path within 0.25 %: what the
+/// real flight leaves uncovered is its IMU's, not the estimator's
+/// (docs/findings/vio.md). Bounds: RMS < 1.5, path within 1 %, no reset.
+#[test]
+fn a_halls_windows_with_one_camera_are_honest_when_the_imu_is_what_it_is_told() {
+    let (Some(seq), Some(other)) =
+        (common::shared("euroc/full_imu/MH_03_medium"), common::shared("euroc/full_imu/V2_01_easy"))
+    else {
+        return;
+    };
+    let flight = tumble::io::asl::read_asl(&other, &Default::default()).unwrap();
+    let mut opts = VioOptions::default();
+    let (noise, _) = tumble::allan::in_motion::noise_in_motion(
+        &flight.imu,
+        flight.groundtruth.as_ref().expect("V2_01's ground truth"),
+        opts.noise.gravity,
+    )
+    .unwrap();
+    let mut ds = tumble::io::asl::read_asl(&seq, &Default::default()).unwrap();
+    let path = tumble::sim::SmoothedReplay::new(ds.groundtruth.as_ref().expect("MH_03's ground truth"), 0.05).unwrap();
+    let model = tumble::sim::ImuModel::with_noise_only(&noise);
+    let (imu, truth) = path.simulate(&model, opts.noise.gravity, 1);
+    (ds.imu, ds.groundtruth) = (imu, Some(truth));
+    let cam = tumble::sim::CameraSettings::default();
+    let (input, _) = VioInput::from_dataset_with_simulated_camera(ds, None, &cam, 1).unwrap();
+    input.apply_noise(Some(noise), &mut opts.noise.imu);
+    let (_, s) = run_without_resets(&input, &opts, 10.0);
+    let (length, truth) = (s.distance_m, s.groundtruth_distance_m.expect("a ground truth"));
+    let windows = s.window_length.as_ref().expect("windows measured");
+    println!("path {length:.2} m of {truth:.2} m, ATE {:?}; {}", s.ate_rmse_m, windows.line());
+    assert!((length / truth - 1.0).abs() < 0.01, "path {length} m against {truth} m");
+    assert!(windows.normalized_error_rms.unwrap() < 1.5, "{}", windows.line());
+}
+
 /// A blackout in a real flight (V1_02's IMU, the simulated camera's features
 /// removed for 3 s from 30 s on): reported where it starts and ends, flown on
 /// the IMU alone without a reset, and once the features return the estimate

@@ -21,6 +21,7 @@ pub mod render;
 pub(crate) mod replay_bands;
 pub mod replay_recording;
 pub mod rig_recording;
+pub(crate) mod smoothed;
 pub mod target;
 pub(crate) mod writer;
 
@@ -29,6 +30,7 @@ pub use corridor::{Corridor, CorridorWalk};
 pub use imu::{noise_series, simulate_imu, AxisNoise, SimulatedImu};
 pub use model::{Effects, ImuModel, TemperatureTrace, TriadModel};
 pub use motion::{Kinematics, Loop, Motion, Static, Tumble, TumbleSettings};
+pub use smoothed::SmoothedReplay;
 pub use writer::{groundtruth, simulate_and_write, simulate_and_write_with, write_asl};
 
 use crate::error::InputError;
