@@ -1,7 +1,7 @@
 //! A recording's path flown again by an IMU that has exactly the noise the
 //! estimator is told: white noise and a bias random walk per axis from an
 //! `imu.yaml`, nothing else (no scale, misalignment, vibration or
-//! quantization: `ImuModel::with_noise_only`). It tells the estimator's own
+//! quantization: `ImuNoise::noise_only_model`). It tells the estimator's own
 //! inconsistency from the real sensor's unmodelled errors: run `tumble vio`
 //! on the real recording and on this one, with the same noise file and a
 //! simulated camera, and compare the windows' normalized length errors.
@@ -21,7 +21,7 @@
 use std::io::Write;
 use std::path::Path;
 use tumble::io::trajectory::write_asl_groundtruth;
-use tumble::sim::{ImuModel, SmoothedReplay};
+use tumble::sim::SmoothedReplay;
 
 /// Width of the Gaussian the ground truth is smoothed with \[s\].
 const SMOOTHING_S: f64 = 0.05;
@@ -34,7 +34,7 @@ fn run(src: &Path, out: &Path, noise: &Path, seed: u64) -> Result<(), String> {
     let gt = ds.groundtruth.ok_or_else(|| format!("{}: no ground truth", src.display()))?;
     let noise = tumble::io::ImuNoise::read(noise).map_err(|e| e.to_string())?;
     let path = SmoothedReplay::new(&gt, SMOOTHING_S).map_err(|e| format!("{}: {e}", src.display()))?;
-    let (imu, truth) = path.simulate(&ImuModel::with_noise_only(&noise), GRAVITY, seed);
+    let (imu, truth) = path.simulate(&noise.noise_only_model(), GRAVITY, seed);
     let mav = out.join("mav0");
     let io = |e: std::io::Error| format!("{}: {e}", out.display());
     std::fs::create_dir_all(mav.join("imu0")).map_err(io)?;

@@ -330,45 +330,6 @@ impl ImuModel {
         }
     }
 
-    /// An IMU at 200 Hz with the noise of `noise` and nothing else: white
-    /// noise and bias random walk per axis (the worst axis' figure on all
-    /// three where the file gives no axes), a small constant turn-on bias,
-    /// and every other effect off (no misalignment, scale, nonlinearity,
-    /// bias instability, temperature, g-sensitivity, quantization,
-    /// saturation or jitter). What an estimator told `noise` assumes the
-    /// sensor is; a real one against it shows what the model lacks.
-    pub fn with_noise_only(noise: &super::noise::ImuNoise) -> ImuModel {
-        let axes = noise.axes.unwrap_or(super::noise::ImuNoiseAxes {
-            accelerometer_noise_density: [noise.accelerometer_noise_density; 3],
-            accelerometer_random_walk: [noise.accelerometer_random_walk; 3],
-            gyroscope_noise_density: [noise.gyroscope_noise_density; 3],
-            gyroscope_random_walk: [noise.gyroscope_random_walk; 3],
-        });
-        let mut model = ImuModel::bmi055();
-        model.gyro.noise_density = axes.gyroscope_noise_density;
-        model.gyro.random_walk = axes.gyroscope_random_walk;
-        model.gyro.bias = [2e-3, -1e-3, 1e-3];
-        model.accel.noise_density = axes.accelerometer_noise_density;
-        model.accel.random_walk = axes.accelerometer_random_walk;
-        model.accel.bias = [0.05, -0.03, 0.04];
-        model.effects = Effects {
-            misalignment: false,
-            scale: false,
-            nonlinearity: false,
-            bias: true,
-            random_walk: true,
-            bias_instability: false,
-            white_noise: true,
-            temperature: false,
-            g_sensitivity: false,
-            quantization: false,
-            saturation: false,
-            bias_drift: false,
-            jitter: false,
-        };
-        model
-    }
-
     /// Check the model for values that cannot be simulated; the error names the field.
     pub fn check(&self) -> Result<(), ModelError> {
         if !(self.rate_hz.is_finite() && self.rate_hz > 0.0) {

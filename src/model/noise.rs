@@ -135,6 +135,33 @@ impl ImuNoise {
             }),
         }
     }
+    /// A simulator model at 200 Hz with this noise and nothing else: white
+    /// noise and bias random walk per axis (the Kalibr scalars on all three
+    /// where there are no [`ImuNoise::axes`]), a small constant turn-on
+    /// bias, and every other effect off (no misalignment, scale,
+    /// nonlinearity, bias instability, temperature, g-sensitivity,
+    /// quantization, saturation or jitter): what an estimator told this
+    /// noise assumes the sensor is. A real sensor against it shows what the
+    /// model lacks. [`ImuNoise::from_model`] reads the same figures back.
+    pub fn noise_only_model(&self) -> super::imu_model::ImuModel {
+        let axes = self.axes.unwrap_or(ImuNoiseAxes {
+            accelerometer_noise_density: [self.accelerometer_noise_density; 3],
+            accelerometer_random_walk: [self.accelerometer_random_walk; 3],
+            gyroscope_noise_density: [self.gyroscope_noise_density; 3],
+            gyroscope_random_walk: [self.gyroscope_random_walk; 3],
+        });
+        let mut model = super::imu_model::ImuModel::bmi055();
+        model.gyro.noise_density = axes.gyroscope_noise_density;
+        model.gyro.random_walk = axes.gyroscope_random_walk;
+        model.gyro.bias = [2e-3, -1e-3, 1e-3];
+        model.accel.noise_density = axes.accelerometer_noise_density;
+        model.accel.random_walk = axes.accelerometer_random_walk;
+        model.accel.bias = [0.05, -0.03, 0.04];
+        let none = super::imu_model::Effects::none();
+        model.effects = super::imu_model::Effects { bias: true, random_walk: true, white_noise: true, ..none };
+        model
+    }
+
     /// The noise of several recordings of one sensor taken together: each
     /// figure (per axis where every one has axes) the root mean square over
     /// `all` — the density whose variance is their mean, as pooling their

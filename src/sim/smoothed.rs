@@ -180,13 +180,14 @@ mod tests {
     #[test]
     fn a_noiseless_imu_along_it_integrates_back_to_its_path() {
         let m = SmoothedReplay::new(&circle(10.0), 0.05).unwrap();
-        let mut model = ImuModel::with_noise_only(&crate::io::ImuNoise {
+        let silent = crate::io::ImuNoise {
             accelerometer_noise_density: 0.0,
             accelerometer_random_walk: 0.0,
             gyroscope_noise_density: 0.0,
             gyroscope_random_walk: 0.0,
             axes: None,
-        });
+        };
+        let mut model = silent.noise_only_model();
         model.effects.bias = false;
         let (imu, truth) = m.simulate(&model, 9.81, 1);
         assert_eq!(imu.t_ns(0), m.t0_ns);
