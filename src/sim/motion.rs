@@ -618,6 +618,10 @@ mod tests {
 /// that a simulated camera can observe a real path: position linear, rotation
 /// slerp between samples; velocity, acceleration and rate by central
 /// differences. Time 0 is the recording's `t0_ns`.
+///
+/// For poses only: with positions linear between samples the acceleration
+/// is zero between them and an impulse at each, so never simulate an IMU
+/// along it — [`super::SmoothedReplay`] is the recording as a smooth motion.
 #[derive(Debug, Clone)]
 pub struct Replay {
     t: Vec<f64>,
