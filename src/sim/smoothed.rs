@@ -58,14 +58,35 @@ pub struct SmoothedReplay {
 
 impl SmoothedReplay {
     /// `tr` smoothed by a Gaussian of `sigma_s` \[s\]. Errors: a width that is
-    /// not positive, or a recording shorter than 1 s beyond the Gaussian's
-    /// reach at both ends.
+    /// not positive; positions or rotations not one per stamp; stamps out
+    /// of order, or further apart than the width (the mean there would rest
+    /// on a sample or two, or on none); a recording shorter than 1 s beyond
+    /// the Gaussian's reach at both ends.
     pub fn new(tr: &Trajectory, sigma_s: f64) -> Result<SmoothedReplay, SimError> {
         if !(sigma_s.is_finite() && sigma_s > 0.0) {
             return Err(format!("smoothing width must be positive, found {sigma_s} s").into());
         }
         let first = *tr.t_ns.first().ok_or("the trajectory is empty")?;
+        if tr.p.len() != tr.t_ns.len() || tr.q.len() != tr.t_ns.len() {
+            return Err(format!(
+                "the trajectory has {} stamps, {} positions and {} rotations",
+                tr.t_ns.len(),
+                tr.p.len(),
+                tr.q.len()
+            )
+            .into());
+        }
         let t: Vec<f64> = tr.t_ns.iter().map(|&t| (t - first) as f64 * 1e-9).collect();
+        if let Some(k) = t.windows(2).position(|w| !(w[1] > w[0] && w[1] - w[0] <= sigma_s)) {
+            return Err(format!(
+                "the trajectory's samples {k} and {} are {:.3} s apart at {:.3} s: they must be in order and at most \
+                 the smoothing width ({sigma_s} s) apart",
+                k + 1,
+                t[k + 1] - t[k],
+                t[k]
+            )
+            .into());
+        }
         let reach = REACH_SIGMAS * sigma_s;
         let duration = t[t.len() - 1] - 2.0 * reach;
         if duration < 1.0 {
@@ -207,5 +228,17 @@ mod tests {
         assert!(SmoothedReplay::new(&circle(1.5), 0.05).unwrap_err().to_string().contains("spans"));
         assert!(SmoothedReplay::new(&circle(10.0), 0.0).unwrap_err().to_string().contains("positive"));
         assert!(SmoothedReplay::new(&Trajectory::default(), 0.05).is_err());
+        let mut gap = circle(10.0);
+        gap.t_ns.drain(400..500);
+        gap.p.drain(400..500);
+        gap.q.drain(400..500);
+        let e = SmoothedReplay::new(&gap, 0.05).unwrap_err().to_string();
+        assert!(e.contains("samples 399 and 400 are 0.505 s apart at 1.995 s"), "{e}");
+        let mut short = circle(10.0);
+        short.q.pop();
+        assert!(SmoothedReplay::new(&short, 0.05).unwrap_err().to_string().contains("1999 rotations"));
+        let mut unordered = circle(10.0);
+        unordered.t_ns.swap(10, 11);
+        assert!(SmoothedReplay::new(&unordered, 0.05).unwrap_err().to_string().contains("in order"));
     }
 }
