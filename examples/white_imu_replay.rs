@@ -18,9 +18,9 @@
 //! cargo run --release -- vio white_mh03 --simulate-camera --mono --noise v2_01_flight/imu.yaml --out vio_white
 //! ```
 
-use std::io::Write;
 use std::path::Path;
 use tumble::io::trajectory::write_asl_groundtruth;
+use tumble::io::write_asl_imu;
 use tumble::sim::SmoothedReplay;
 
 /// Width of the Gaussian the ground truth is smoothed with \[s\].
@@ -36,17 +36,10 @@ fn run(src: &Path, out: &Path, noise: &Path, seed: u64) -> Result<(), String> {
     let path = SmoothedReplay::new(&gt, SMOOTHING_S).map_err(|e| format!("{}: {e}", src.display()))?;
     let (imu, truth) = path.simulate(&noise.noise_only_model(), GRAVITY, seed);
     let mav = out.join("mav0");
-    let io = |e: std::io::Error| format!("{}: {e}", out.display());
-    std::fs::create_dir_all(mav.join("imu0")).map_err(io)?;
-    std::fs::create_dir_all(mav.join("state_groundtruth_estimate0")).map_err(io)?;
-    let mut f = std::io::BufWriter::new(std::fs::File::create(mav.join("imu0/data.csv")).map_err(io)?);
-    writeln!(f, "#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],a_RS_S_y [m s^-2],a_RS_S_z [m s^-2]").map_err(io)?;
-    for i in 0..imu.len() {
-        let (g, a) = (imu.gyro[i], imu.accel[i]);
-        writeln!(f, "{},{},{},{},{},{},{}", imu.t_ns(i), g[0], g[1], g[2], a[0], a[1], a[2]).map_err(io)?;
-    }
-    f.flush().map_err(io)?;
-    write_asl_groundtruth(&mav.join("state_groundtruth_estimate0/data.csv"), &truth).map_err(|e| e.to_string())?;
+    write_asl_imu(&mav.join("imu0/data.csv"), &imu).map_err(|e| e.to_string())?;
+    let gt_dir = mav.join("state_groundtruth_estimate0");
+    std::fs::create_dir_all(&gt_dir).map_err(|e| format!("{}: {e}", gt_dir.display()))?;
+    write_asl_groundtruth(&gt_dir.join("data.csv"), &truth).map_err(|e| e.to_string())?;
     println!("{}: {} IMU samples along {}'s smoothed path", out.display(), imu.len(), src.display());
     Ok(())
 }

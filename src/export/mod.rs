@@ -324,22 +324,14 @@ impl ExportInputs {
     /// Continuous-time figures per axis `[x, y, z]`, inflated:
     /// (gyro noise, accel noise, gyro walk, accel walk).
     pub fn axes(&self) -> [[f64; 3]; 4] {
-        let n = &self.noise;
+        let a = self.noise.per_axis();
         let i = &self.inflation;
-        let (gn, an, gw, aw) = match &n.axes {
-            Some(a) => (
-                a.gyroscope_noise_density,
-                a.accelerometer_noise_density,
-                a.gyroscope_random_walk,
-                a.accelerometer_random_walk,
-            ),
-            None => (
-                [n.gyroscope_noise_density; 3],
-                [n.accelerometer_noise_density; 3],
-                [n.gyroscope_random_walk; 3],
-                [n.accelerometer_random_walk; 3],
-            ),
-        };
+        let (gn, an, gw, aw) = (
+            a.gyroscope_noise_density,
+            a.accelerometer_noise_density,
+            a.gyroscope_random_walk,
+            a.accelerometer_random_walk,
+        );
         [
             gn.map(|v| v * i.gyro_noise),
             an.map(|v| v * i.accel_noise),

@@ -33,6 +33,7 @@ pub use imu_text::{
     read_imu_text, read_imu_tk, recording_from_samples, AccelUnit, GyroUnit, ImuColumns, ImuTextFormat,
     STANDARD_GRAVITY,
 };
+pub use imu_write::write_asl_imu;
 pub use noise::{ImuNoise, ImuNoiseAxes};
 pub use recording::{open_recording, recognise_imu_tk_units, RecordingOptions};
 pub use table::TimeUnit;

@@ -135,6 +135,17 @@ impl ImuNoise {
             }),
         }
     }
+    /// The figures per axis: [`ImuNoise::axes`] where given, else the Kalibr
+    /// scalars (the worst axis') on all three.
+    pub fn per_axis(&self) -> ImuNoiseAxes {
+        self.axes.unwrap_or(ImuNoiseAxes {
+            accelerometer_noise_density: [self.accelerometer_noise_density; 3],
+            accelerometer_random_walk: [self.accelerometer_random_walk; 3],
+            gyroscope_noise_density: [self.gyroscope_noise_density; 3],
+            gyroscope_random_walk: [self.gyroscope_random_walk; 3],
+        })
+    }
+
     /// A simulator model at 200 Hz with this noise and nothing else: white
     /// noise and bias random walk per axis (the Kalibr scalars on all three
     /// where there are no [`ImuNoise::axes`]), a small constant turn-on
@@ -144,12 +155,7 @@ impl ImuNoise {
     /// noise assumes the sensor is. A real sensor against it shows what the
     /// model lacks. [`ImuNoise::from_model`] reads the same figures back.
     pub fn noise_only_model(&self) -> super::imu_model::ImuModel {
-        let axes = self.axes.unwrap_or(ImuNoiseAxes {
-            accelerometer_noise_density: [self.accelerometer_noise_density; 3],
-            accelerometer_random_walk: [self.accelerometer_random_walk; 3],
-            gyroscope_noise_density: [self.gyroscope_noise_density; 3],
-            gyroscope_random_walk: [self.gyroscope_random_walk; 3],
-        });
+        let axes = self.per_axis();
         let mut model = super::imu_model::ImuModel::bmi055();
         model.gyro.noise_density = axes.gyroscope_noise_density;
         model.gyro.random_walk = axes.gyroscope_random_walk;

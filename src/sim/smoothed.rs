@@ -115,20 +115,17 @@ impl SmoothedReplay {
         let sim = simulate_imu(self, model, g, seed, 1);
         let mut imu = sim.to_recording();
         imu.t0_ns = self.t0_ns;
-        let mut truth = Trajectory {
-            v: Some(Vec::with_capacity(sim.t.len())),
-            bias_gyro: Some(sim.bias_gyro.clone()),
-            bias_accel: Some(sim.bias_accel.clone()),
-            ..Trajectory::default()
-        };
+        let mut truth = Trajectory::default();
+        let mut v = Vec::with_capacity(sim.t.len());
         for (i, &t) in sim.t.iter().enumerate() {
             let k = self.at(t);
             let q = k.quaternion();
             truth.t_ns.push(imu.t_ns(i));
             truth.p.push(k.position.into());
             truth.q.push([q.w, q.i, q.j, q.k]);
-            truth.v.as_mut().expect("set above").push(k.velocity.into());
+            v.push(k.velocity.into());
         }
+        (truth.v, truth.bias_gyro, truth.bias_accel) = (Some(v), Some(sim.bias_gyro), Some(sim.bias_accel));
         (imu, truth)
     }
 
