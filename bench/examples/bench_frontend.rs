@@ -64,12 +64,16 @@ fn main() {
     core::copy_make_border(&images[0], &mut base, 160, 160, 240, 240, core::BORDER_REFLECT, core::Scalar::default())
         .expect("border");
     let (moving, _) = moving_window(&base, [752, 480], 300, [0.6, -0.3], 0.02).expect("window");
-    for equalize in [false, true] {
-        let opts = FrontendOptions { equalize, ..FrontendOptions::default() };
+    let variants = [
+        ("", FrontendOptions::default()),
+        (", frame to frame (--no-anchors)", FrontendOptions { anchored: false, ..FrontendOptions::default() }),
+        (", CLAHE", FrontendOptions { equalize: true, ..FrontendOptions::default() }),
+    ];
+    for (variant, opts) in &variants {
         for (name, frames) in [("V1_01 cam0, 95 real images", &images), ("moving 752×480 window, 300 frames", &moving)]
         {
-            let (fps, line) = track_all(frames, model, &opts, repeat);
-            println!("{name}{}:", if equalize { ", CLAHE" } else { "" });
+            let (fps, line) = track_all(frames, model, opts, repeat);
+            println!("{name}{variant}:");
             println!("  {line}");
             println!(
                 "  speed on one core: {fps:.0} frames/s vs target {TARGET_FPS:.0} → ratio {:.2}",

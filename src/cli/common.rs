@@ -119,6 +119,11 @@ pub struct FrontendArgs {
     /// rotation since the last frame moves it (imu0's samples and the camera's T_BS).
     #[arg(long)]
     pub no_gyro_prediction: bool,
+    /// Plain frame-to-frame KLT: do not hold each track to the patch where it
+    /// began (the default aligns that patch to every new image by an affine
+    /// warp, so that KLT's small errors do not add up along a track).
+    #[arg(long)]
+    pub no_anchors: bool,
 }
 
 impl FrontendArgs {
@@ -132,6 +137,7 @@ impl FrontendArgs {
             equalize: self.equalize,
             stereo: self.stereo,
             gyro_prediction: !self.no_gyro_prediction,
+            anchored: !self.no_anchors,
             ..Default::default()
         }
     }

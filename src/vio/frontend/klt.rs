@@ -1,5 +1,6 @@
 //! The KLT tracker on OpenCV (feature `opencv`).
 
+use super::anchor::Anchor;
 use super::corners::{CornerSearch, GrayImage, ShiTomasi};
 use super::FrontendError;
 use super::{FrontendOptions, FrontendStats, Observation, StereoStats};
@@ -37,6 +38,8 @@ pub struct KltTracker {
     pts: Vec<Point2f>,
     ids: Vec<u64>,
     ages: Vec<u32>,
+    /// Each feature's anchor ([`FrontendOptions::anchored`]; None: none yet).
+    anchors: Vec<Option<Anchor>>,
     next_id: u64,
     // Statistics.
     frames: usize,
@@ -47,6 +50,8 @@ pub struct KltTracker {
     fb_kept: u64,
     ransac_in: u64,
     ransac_kept: u64,
+    anchor_tried: u64,
+    anchor_held: u64,
     seconds: f64,
 }
 
@@ -62,6 +67,7 @@ impl KltTracker {
             pts: Vec::new(),
             ids: Vec::new(),
             ages: Vec::new(),
+            anchors: Vec::new(),
             next_id: 0,
             frames: 0,
             features: 0,
@@ -71,6 +77,8 @@ impl KltTracker {
             fb_kept: 0,
             ransac_in: 0,
             ransac_kept: 0,
+            anchor_tried: 0,
+            anchor_held: 0,
             seconds: 0.0,
         }
     }
@@ -86,6 +94,7 @@ impl KltTracker {
             tracks: self.next_id as usize,
             fb_ratio: ratio(self.fb_kept, self.klt_tracked),
             inlier_ratio: ratio(self.ransac_kept, self.ransac_in),
+            anchored_ratio: ratio(self.anchor_held, self.anchor_tried),
             ms_per_frame: 1e3 * self.seconds / self.frames.max(1) as f64,
             warnings: Vec::new(),
             stereo: None,
@@ -100,6 +109,7 @@ impl KltTracker {
                 self.pts[k] = self.pts[i];
                 self.ids[k] = self.ids[i];
                 self.ages[k] = self.ages[i];
+                self.anchors.swap(k, i);
                 k += 1;
             } else {
                 self.finished += 1;
@@ -109,6 +119,7 @@ impl KltTracker {
         self.pts.truncate(k);
         self.ids.truncate(k);
         self.ages.truncate(k);
+        self.anchors.truncate(k);
     }
 
     /// The image pyramid with derivatives, built once per image and used by both KLT passes.
@@ -178,6 +189,24 @@ impl KltTracker {
         Ok(keep)
     }
 
+    /// Each tracked feature moved onto its anchor's patch in `img` (the
+    /// image KLT just tracked into); where that fails, KLT's position stays
+    /// and a new anchor starts there ([`super::anchor`]).
+    fn hold_to_anchors(&mut self, img: &GrayImage) {
+        for (p, anchor) in self.pts.iter_mut().zip(&mut self.anchors) {
+            let klt = [p.x as f64, p.y as f64];
+            if let Some(a) = anchor.as_mut() {
+                self.anchor_tried += 1;
+                if let Some([u, v]) = a.align(img, klt) {
+                    self.anchor_held += 1;
+                    *p = Point2f::new(u as f32, v as f32);
+                    continue;
+                }
+            }
+            *anchor = Anchor::new(img, klt);
+        }
+    }
+
     /// RANSAC on the fundamental matrix between the undistorted old and new points.
     fn ransac(&mut self, old: &[Point2f]) -> Result<Vec<bool>, FrontendError> {
         let n = self.pts.len();
@@ -239,12 +268,7 @@ impl KltTracker {
 
     /// Up to `want` new Shi–Tomasi corners of `img` where `mask` is nonzero.
     fn detect(&mut self, img: &Mat, mask: &Mat, want: usize) -> Result<Vec<[f32; 2]>, FrontendError> {
-        // `track`'s image is its own continuous copy (or CLAHE's output): rows without padding.
-        let image = GrayImage {
-            pixels: img.data_bytes().map_err(cv)?,
-            width: img.cols() as usize,
-            height: img.rows() as usize,
-        };
+        let image = gray(img)?;
         let search = CornerSearch {
             mask: mask.data_bytes().map_err(cv)?,
             max_corners: want,
@@ -293,6 +317,9 @@ impl KltTracker {
             let keep = self.klt(&prev, &pyr, img.size().map_err(cv)?, rotation)?;
             let old: Vec<Point2f> = old.iter().zip(&keep).filter(|(_, &k)| k).map(|(p, _)| *p).collect();
             self.retain(&keep);
+            if self.opts.anchored {
+                self.hold_to_anchors(&gray(&img)?);
+            }
             let keep = self.ransac(&old)?;
             self.retain(&keep);
         }
@@ -301,7 +328,10 @@ impl KltTracker {
         let want = self.opts.max_features.saturating_sub(self.pts.len());
         if want > 0 {
             let corners = self.detect(&img, &mask, want)?;
+            let image = gray(&img)?;
             for [x, y] in corners {
+                let anchor = self.opts.anchored.then(|| Anchor::new(&image, [x as f64, y as f64])).flatten();
+                self.anchors.push(anchor);
                 self.pts.push(Point2f::new(x, y));
                 self.ids.push(self.next_id);
                 self.ages.push(1);
@@ -314,6 +344,12 @@ impl KltTracker {
         self.seconds += start.elapsed().as_secs_f64();
         Ok(self.ids.iter().zip(&self.pts).map(|(&id, p)| (id, [p.x as f64, p.y as f64])).collect())
     }
+}
+
+/// `track`'s image (its own continuous copy, or CLAHE's output: rows
+/// without padding) as the pure-Rust parts of the frontend see it.
+fn gray(img: &Mat) -> Result<GrayImage<'_>, FrontendError> {
+    Ok(GrayImage { pixels: img.data_bytes().map_err(cv)?, width: img.cols() as usize, height: img.rows() as usize })
 }
 
 /// [`read_gray`](crate::io::image::read_gray), refusing an image whose size is not `resolution` `[w, h]` (from sensor.yaml) when given.

@@ -10,6 +10,7 @@
 //! `cargo build --features opencv`). Options, statistics, the tracks file and
 //! the corner detector ([`corners`]) are here without it.
 
+pub mod anchor;
 pub mod corners;
 pub mod prediction;
 pub use prediction::gyro_rotations;
@@ -59,6 +60,12 @@ pub struct FrontendOptions {
     /// the image moves tens of pixels per frame, more than the pyramid
     /// follows reliably. Off, or without the IMU or `T_BS`, KLT starts at the old place.
     pub gyro_prediction: bool,
+    /// Hold each track to the patch where it began ([`anchor`]): after KLT,
+    /// the feature's first patch is aligned to the new image by an affine
+    /// warp, so that KLT's frame-to-frame errors do not add up along the
+    /// track. Where the alignment fails, KLT's position stays and the
+    /// track's anchor starts again there. Off: plain frame-to-frame KLT.
+    pub anchored: bool,
 }
 
 impl Default for FrontendOptions {
@@ -74,6 +81,7 @@ impl Default for FrontendOptions {
             equalize: false,
             stereo: false,
             gyro_prediction: true,
+            anchored: true,
         }
     }
 }
@@ -93,6 +101,9 @@ pub struct FrontendStats {
     pub fb_ratio: f64,
     /// Of the features entering RANSAC, the fraction it kept as inliers.
     pub inlier_ratio: f64,
+    /// Of the tracked features with an anchor, the fraction aligned to it
+    /// ([`FrontendOptions::anchored`]; NaN when off).
+    pub anchored_ratio: f64,
     /// Tracking time per frame, image decoding excluded \[ms\].
     pub ms_per_frame: f64,
     /// What the reader should know (skipped images, …).
@@ -160,9 +171,13 @@ impl StereoStats {
 impl FrontendStats {
     /// One line for the terminal.
     pub fn line(&self) -> String {
+        let anchored = match self.anchored_ratio.is_nan() {
+            true => String::new(),
+            false => format!(", {:.1} % held to their anchors", 100.0 * self.anchored_ratio),
+        };
         format!(
             "{} frames: {:.1} features/frame, mean track length {:.2} frames over {} tracks, \
-             forward–backward kept {:.1} %, RANSAC inliers {:.1} %, {:.2} ms/frame",
+             forward–backward kept {:.1} %{anchored}, RANSAC inliers {:.1} %, {:.2} ms/frame",
             self.frames,
             self.features_per_frame,
             self.mean_track_length,
