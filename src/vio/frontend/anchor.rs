@@ -56,12 +56,32 @@ pub struct Anchor {
     linear: nalgebra::Matrix2<f64>,
 }
 
-/// Bilinear sample of `img` at `(u, v)` (pixel centres at integers); None
-/// outside the image.
+/// Whether `(u, v)` (pixel centres at integers) has the four pixels a
+/// bilinear read needs inside `img`.
+#[inline]
+fn inside(img: &GrayImage, u: f64, v: f64) -> bool {
+    u >= 0.0 && v >= 0.0 && u < img.width as f64 - 1.0 && v < img.height as f64 - 1.0
+}
+
+/// Bilinear read of `img` at `(u, v)`, which must be [`inside`] (the
+/// indices are clamped against rounding at the last row and column), in
+/// single precision: the alignment's inner loop.
+#[inline]
+fn bilinear(img: &GrayImage, u: f32, v: f32) -> f32 {
+    let (x0, y0) = (u.floor(), v.floor());
+    let (fx, fy) = (u - x0, v - y0);
+    let (p, stride) = (img.pixels, img.width);
+    let i = (y0 as usize).min(img.height - 2) * stride + (x0 as usize).min(stride - 2);
+    let (a, b, c, d) = (p[i] as f32, p[i + 1] as f32, p[i + stride] as f32, p[i + stride + 1] as f32);
+    let top = a + fx * (b - a);
+    top + fy * (c + fx * (d - c) - top)
+}
+
+/// Bilinear sample of `img` at `(u, v)` in double precision (an anchor's
+/// template, read once); None outside the image.
 #[inline]
 fn sample(img: &GrayImage, u: f64, v: f64) -> Option<f64> {
-    let (w, h) = (img.width as f64, img.height as f64);
-    if !(u >= 0.0 && v >= 0.0 && u < w - 1.0 && v < h - 1.0) {
+    if !inside(img, u, v) {
         return None;
     }
     let (x0, y0) = (u.floor(), v.floor());
@@ -183,16 +203,14 @@ impl Anchor {
         let (a, b, c, d, tx, ty) = (warp[(0, 0)], warp[(0, 1)], warp[(1, 0)], warp[(1, 1)], warp[(0, 2)], warp[(1, 2)]);
         // The patch's image is the parallelogram of its four corners' images:
         // all inside, every sample is.
-        let (w, h) = (img.width as f64, img.height as f64);
-        for (x, y) in [(-r, -r), (r, -r), (-r, r), (r, r)] {
-            let (u, v) = (a * x + b * y + tx, c * x + d * y + ty);
-            if !(u >= 0.0 && v >= 0.0 && u < w - 1.0 && v < h - 1.0) {
-                return None;
-            }
+        if [(-r, -r), (r, -r), (-r, r), (r, r)]
+            .iter()
+            .any(|&(x, y)| !inside(img, a * x + b * y + tx, c * x + d * y + ty))
+        {
+            return None;
         }
         let (a, b, c, d) = (a as f32, b as f32, c as f32, d as f32);
         let (tx, ty) = (tx as f32, ty as f32);
-        let (p, stride) = (img.pixels, img.width);
         let ri = PATCH_RADIUS;
         let mut k = 0;
         let (mut sum, mut sum2) = (0.0f32, 0.0f32);
@@ -201,14 +219,7 @@ impl Anchor {
             // Along a row of the patch, the image position moves by (a, c) per sample.
             let (mut u, mut v) = (b * y + tx - a * ri as f32, d * y + ty - c * ri as f32);
             for _ in -ri..=ri {
-                // Inside the image (above), so the floor is in range; clamp against rounding.
-                let (x0, y0) = (u.floor(), v.floor());
-                let (fx, fy) = (u - x0, v - y0);
-                let i0 = (y0 as usize).min(img.height - 2) * stride + (x0 as usize).min(stride - 2);
-                let (q, r0, s0, t0) =
-                    (p[i0] as f32, p[i0 + 1] as f32, p[i0 + stride] as f32, p[i0 + stride + 1] as f32);
-                let top = q + fx * (r0 - q);
-                let value = top + fy * (s0 + fx * (t0 - s0) - top);
+                let value = bilinear(img, u, v);
                 out[k] = value;
                 sum += value;
                 sum2 += value * value;

@@ -266,16 +266,15 @@ impl KltTracker {
         Ok(mask)
     }
 
-    /// Up to `want` new Shi–Tomasi corners of `img` where `mask` is nonzero.
-    fn detect(&mut self, img: &Mat, mask: &Mat, want: usize) -> Result<Vec<[f32; 2]>, FrontendError> {
-        let image = gray(img)?;
+    /// Up to `want` new Shi–Tomasi corners of `image` where `mask` is nonzero.
+    fn detect(&mut self, image: &GrayImage, mask: &Mat, want: usize) -> Result<Vec<[f32; 2]>, FrontendError> {
         let search = CornerSearch {
             mask: mask.data_bytes().map_err(cv)?,
             max_corners: want,
             quality: self.opts.quality,
             min_distance: self.opts.min_distance,
         };
-        Ok(self.corners.detect(&image, &search))
+        Ok(self.corners.detect(image, &search))
     }
 
     /// Track into the next image (8-bit grayscale); returns the features seen, `(track id, [u, v])`.
@@ -312,13 +311,14 @@ impl KltTracker {
             false => image.try_clone().map_err(cv)?,
         };
         let pyr = self.pyramid(&img)?;
+        let image = gray(&img)?;
         if let (Some(prev), false) = (self.prev.take(), self.pts.is_empty()) {
             let old = self.pts.clone();
             let keep = self.klt(&prev, &pyr, img.size().map_err(cv)?, rotation)?;
             let old: Vec<Point2f> = old.iter().zip(&keep).filter(|(_, &k)| k).map(|(p, _)| *p).collect();
             self.retain(&keep);
             if self.opts.anchored {
-                self.hold_to_anchors(&gray(&img)?);
+                self.hold_to_anchors(&image);
             }
             let keep = self.ransac(&old)?;
             self.retain(&keep);
@@ -327,8 +327,7 @@ impl KltTracker {
         let mask = self.spread(img.rows(), img.cols())?;
         let want = self.opts.max_features.saturating_sub(self.pts.len());
         if want > 0 {
-            let corners = self.detect(&img, &mask, want)?;
-            let image = gray(&img)?;
+            let corners = self.detect(&image, &mask, want)?;
             for [x, y] in corners {
                 let anchor = self.opts.anchored.then(|| Anchor::new(&image, [x as f64, y as f64])).flatten();
                 self.anchors.push(anchor);
