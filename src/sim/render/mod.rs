@@ -10,6 +10,10 @@
 //!   surface's mean over the pixel's footprint, read from a mip pyramid of box
 //!   filters that keeps the texel-centre convention on every level, so
 //!   rendered edges and corners stay where they project (tests measure it).
+//!   A printed target's pattern is averaged exactly over a 2 px square of
+//!   the image, whatever the lens' magnification does across a corner
+//!   ([`frame`]; the square's preimage through the projective map its
+//!   corners' rays give, [`quad`]).
 //! - **Lens** ([`lens`]): every pixel's ray from `CameraModel::unproject`,
 //!   kept only where it projects back to the pixel within 10⁻⁶ px.
 //! - **Exposure** ([`frame`]): motion blur from sub-frame poses (as many as keep
@@ -24,6 +28,7 @@
 
 pub mod frame;
 pub mod lens;
+mod quad;
 pub mod scene;
 pub mod texture;
 

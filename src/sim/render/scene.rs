@@ -364,6 +364,18 @@ impl SeenPlanes {
         }
         best
     }
+
+    /// Where the unit camera-frame ray `ray` meets the plane of surface
+    /// `plane` (an index of [`RenderScene::planes`]) beyond `near` \[m\],
+    /// in its texture coordinates \[level-0 texels\], within the plane's
+    /// bounds or not; None for a wall, or a ray parallel to the plane or
+    /// meeting it behind.
+    pub fn uv_on(&self, plane: usize, ray: &Vector3<f64>, near: f64) -> Option<[f64; 2]> {
+        let p = self.planes.get(plane)?;
+        let cos = p.normal.dot(ray);
+        let t = p.distance / cos;
+        (p.distance * cos > 0.0 && t > near).then(|| [p.u.dot(ray) * t + p.u0, p.v.dot(ray) * t + p.v0])
+    }
 }
 
 impl SeenWall {

@@ -9,6 +9,7 @@
 //! `k` interpolates bilinearly about `u/2ᵏ − ½`. Box filters and a symmetric
 //! interpolation move no edge: a rendered edge or corner stays where it projects.
 
+use super::quad;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
@@ -94,14 +95,14 @@ pub struct Texture {
     printed: Option<Rectilinear>,
 }
 
-/// Width of the box a printed pattern is averaged over, in pixel
-/// footprints: a pixel's own box (σ 0.29 px) blurred by a lens' point spread
-/// of about half a pixel gives σ 0.58 px, a box of two footprints. The
-/// pyramid blurs the rest of the scene alike (its trilinear filter: σ 0.5–1
-/// footprint). A box of one footprint alone leaves a sharp edge's rendered
+/// Width of the square a printed pattern is averaged over, in pixels (on
+/// the image; [`Texture::sample`]'s fallback: in pixel footprints on the
+/// pattern): a pixel's own box (σ 0.29 px) blurred by a lens' point spread
+/// of about half a pixel gives σ 0.58 px, a box of two pixels. The pyramid
+/// blurs the rest of the scene alike (its trilinear filter: σ 0.5–1
+/// footprint). A box of one pixel alone leaves a sharp edge's rendered
 /// profile dependent on where it falls within a pixel (on a rendered
-/// AprilGrid, seed 1: focal length 2.6σ short; with two footprints 0.5–3.2σ
-/// short over 8 seeds, mean 1.8σ, most of it the estimator's own).
+/// AprilGrid, seed 1: focal length 2.6σ short).
 pub const PRINT_BLUR_FOOTPRINTS: f64 = 2.0;
 
 /// A pattern constant on the cells of a rectilinear grid (a printed target's
@@ -120,6 +121,8 @@ struct Rectilinear {
     ys: Vec<f64>,
     /// The integral from the origin to node `(i, j)`, row-major (`xs.len()` a row).
     sums: Vec<f64>,
+    /// Each cell's grey, row-major (`xs.len() − 1` a row).
+    values: Vec<f32>,
 }
 
 impl Rectilinear {
@@ -150,16 +153,85 @@ impl Rectilinear {
                 }
             }
         }
+        let values: Vec<f32> = cover.iter().map(|c| paper + (ink - paper) * c.clamp(0.0, 1.0)).collect();
         let mut sums = vec![0.0; (nx + 1) * (ny + 1)];
         for j in 0..ny {
             let mut row = 0.0;
             for i in 0..nx {
-                let value = paper + (ink - paper) * cover[j * nx + i].clamp(0.0, 1.0);
-                row += f64::from(value) * (xs[i + 1] - xs[i]) * (ys[j + 1] - ys[j]);
+                row += f64::from(values[j * nx + i]) * (xs[i + 1] - xs[i]) * (ys[j + 1] - ys[j]);
                 sums[(j + 1) * (nx + 1) + i + 1] = sums[j * (nx + 1) + i + 1] + row;
             }
         }
-        Rectilinear { xs, ys, sums }
+        Rectilinear { xs, ys, sums, values }
+    }
+
+    /// The grey of cell `(i, j)`.
+    fn cell_value(&self, i: usize, j: usize) -> f64 {
+        f64::from(self.values[j * (self.xs.len() - 1) + i])
+    }
+
+    /// The cell along one axis (`lines`) that holds `x` (the first or the
+    /// last beyond the pattern).
+    fn cell_at(lines: &[f64], x: f64) -> usize {
+        lines.partition_point(|l| *l <= x).clamp(1, lines.len() - 1) - 1
+    }
+
+    /// The cells the box `[lo, hi]` touches (columns, rows), if it lies
+    /// within the pattern.
+    fn cells_under(&self, lo: [f64; 2], hi: [f64; 2]) -> Option<[std::ops::RangeInclusive<usize>; 2]> {
+        let (w, h) = (self.xs[self.xs.len() - 1], self.ys[self.ys.len() - 1]);
+        let within = lo[0] >= 0.0 && lo[1] >= 0.0 && hi[0] <= w && hi[1] <= h;
+        within.then(|| {
+            [
+                Self::cell_at(&self.xs, lo[0])..=Self::cell_at(&self.xs, hi[0]),
+                Self::cell_at(&self.ys, lo[1])..=Self::cell_at(&self.ys, hi[1]),
+            ]
+        })
+    }
+
+    /// The one grey of every cell the box `[lo, hi]` touches, if they share
+    /// one (a box within the pattern).
+    fn one_grey_under(&self, lo: [f64; 2], hi: [f64; 2]) -> Option<f64> {
+        let [columns, rows] = self.cells_under(lo, hi)?;
+        let first = self.cell_value(*columns.start(), *rows.start());
+        let same = rows.flat_map(|j| columns.clone().map(move |i| (i, j))).all(|(i, j)| self.cell_value(i, j) == first);
+        same.then_some(first)
+    }
+
+    /// The mean over an image's square whose corners `(0, 0)`, `(1, 0)`,
+    /// `(1, 1)`, `(0, 1)` fall at `corners` on the pattern (level-0 texels),
+    /// the square seen through the projective map they give: each cell the
+    /// square's preimage touches weighted by the share of the *square* it
+    /// covers, so the average is uniform over the image, not over the
+    /// pattern. None where the preimage leaves the pattern or the map folds.
+    fn mean_over_square(&self, corners: [[f64; 2]; 4]) -> Option<f64> {
+        let (lo, hi) = corners.iter().fold(([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]), |(lo, hi), p| {
+            ([lo[0].min(p[0]), lo[1].min(p[1])], [hi[0].max(p[0]), hi[1].max(p[1])])
+        });
+        let [columns, rows] = self.cells_under(lo, hi)?;
+        // The cells' shares of the square add up to one: the mean is the
+        // first cell's grey plus each other grey's excess times its share
+        // (none where the square sees one grey: most of a target's pixels).
+        let base = self.cell_value(*columns.start(), *rows.start());
+        let mut to_square = None;
+        let mut excess = 0.0;
+        for j in rows {
+            for i in columns.clone() {
+                let grey = self.cell_value(i, j);
+                if grey == base {
+                    continue;
+                }
+                let m = match to_square {
+                    Some(m) => m,
+                    None => *to_square.insert(quad::square_to_quad(corners)?.try_inverse()?),
+                };
+                let (x, y) = ([self.xs[i], self.xs[i + 1]], [self.ys[j], self.ys[j + 1]]);
+                let cell = [[x[0], y[0]], [x[1], y[0]], [x[1], y[1]], [x[0], y[1]]].map(|p| quad::apply(&m, p));
+                let [Some(a), Some(b), Some(c), Some(d)] = cell else { return None };
+                excess += quad::area_in_unit_square([a, b, c, d]) * (grey - base);
+            }
+        }
+        Some(base + excess)
     }
 
     /// The integral over `[0, x] × [0, y]` (clamped to the pattern): bilinear
@@ -230,6 +302,29 @@ impl Texture {
             })
             .collect();
         Texture { printed: Some(pattern), ..Texture::new(width, height, data) }
+    }
+
+    /// Whether this is a printed pattern ([`Texture::printed`]).
+    pub fn is_printed(&self) -> bool {
+        self.printed.is_some()
+    }
+
+    /// A printed pattern's mean over a square of the image whose corners
+    /// (in the order `(0, 0)`, `(1, 0)`, `(1, 1)`, `(0, 1)` of the square)
+    /// fall at `corners` on the pattern \[level-0 texels\]: exact for a
+    /// square seen through a projective map (a pinhole on a plane; through
+    /// a distorting lens, to the distortion's bend over the square). Each
+    /// cell weighs by the share of the image square it covers. None for
+    /// any other texture, and where the square leaves the pattern.
+    pub fn mean_over_image_square(&self, corners: [[f64; 2]; 4]) -> Option<f64> {
+        self.printed.as_ref()?.mean_over_square(corners)
+    }
+
+    /// A printed pattern's grey over the box `[u0, v0, u1, v1]` (level-0
+    /// texels) where it is one grey all over the box; None elsewhere, and
+    /// for any other texture.
+    pub fn uniform_over(&self, [u0, v0, u1, v1]: [f64; 4]) -> Option<f64> {
+        self.printed.as_ref()?.one_grey_under([u0, v0], [u1, v1])
     }
 
     /// Width and height of level 0 \[texels\].
