@@ -13,7 +13,7 @@
 //!   A printed target's pattern is averaged exactly over a 2 px square of
 //!   the image, whatever the lens' magnification does across a corner
 //!   ([`frame`]; the square's preimage through the projective map its
-//!   corners' rays give, [`quad`]).
+//!   corners' rays give).
 //! - **Lens** ([`lens`]): every pixel's ray from `CameraModel::unproject`,
 //!   kept only where it projects back to the pixel within 10⁻⁶ px.
 //! - **Exposure** ([`frame`]): motion blur from sub-frame poses (as many as keep
