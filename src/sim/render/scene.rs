@@ -267,6 +267,27 @@ struct SeenRing {
     outer: [f64; 2],
 }
 
+impl SeenPlane {
+    /// How far along the unit camera-frame ray `ray` it meets this plane,
+    /// beyond `near` \[m\], and the cosine of the ray with the plane's
+    /// normal; None behind the eye or parallel (and no division then).
+    #[inline]
+    fn meet(&self, ray: &Vector3<f64>, near: f64) -> Option<(f64, f64)> {
+        let cos = self.normal.dot(ray);
+        if self.distance * cos <= 0.0 {
+            return None;
+        }
+        let t = self.distance / cos;
+        (t > near).then_some((t, cos))
+    }
+
+    /// The texture coordinates \[level-0 texels\] of the point `t` along `ray`.
+    #[inline]
+    fn uv_at(&self, ray: &Vector3<f64>, t: f64) -> [f64; 2] {
+        [self.u.dot(ray) * t + self.u0, self.v.dot(ray) * t + self.v0]
+    }
+}
+
 impl SeenRing {
     /// `ring` on a plane of `texels` per metre along u and v.
     fn new(ring: &PlaneRing, texels: [f64; 2]) -> SeenRing {
@@ -332,16 +353,11 @@ impl SeenPlanes {
     pub fn hit(&self, ray: &Vector3<f64>, near: f64) -> Option<Hit> {
         let mut best: Option<Hit> = None;
         for (k, p) in self.planes.iter().enumerate() {
-            let cos = p.normal.dot(ray);
-            // Behind the eye or parallel to the plane: no hit (and no division).
-            if p.distance * cos <= 0.0 {
+            let Some((t, cos)) = p.meet(ray, near) else { continue };
+            if best.is_some_and(|b| b.distance_m <= t) {
                 continue;
             }
-            let t = p.distance / cos;
-            if t.is_nan() || t <= near || best.is_some_and(|b| b.distance_m <= t) {
-                continue;
-            }
-            let (a, b) = (p.u.dot(ray) * t + p.u0, p.v.dot(ray) * t + p.v0);
+            let [a, b] = p.uv_at(ray, t);
             let on_ring = |r: &SeenRing| r.holds(a, b);
             if (0.0..p.size[0]).contains(&a) && (0.0..p.size[1]).contains(&b) && p.ring.as_ref().is_none_or(on_ring) {
                 let (incidence, texels_per_m) = (cos.abs(), 0.5 * (p.texels[0] + p.texels[1]));
@@ -372,9 +388,7 @@ impl SeenPlanes {
     /// meeting it behind.
     pub fn uv_on(&self, plane: usize, ray: &Vector3<f64>, near: f64) -> Option<[f64; 2]> {
         let p = self.planes.get(plane)?;
-        let cos = p.normal.dot(ray);
-        let t = p.distance / cos;
-        (p.distance * cos > 0.0 && t > near).then(|| [p.u.dot(ray) * t + p.u0, p.v.dot(ray) * t + p.v0])
+        p.meet(ray, near).map(|(t, _)| p.uv_at(ray, t))
     }
 }
 

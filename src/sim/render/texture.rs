@@ -239,7 +239,7 @@ impl Rectilinear {
     fn integral(&self, x: f64, y: f64) -> f64 {
         let locate = |lines: &[f64], x: f64| {
             let x = x.clamp(0.0, lines[lines.len() - 1]);
-            let i = lines.partition_point(|l| *l <= x).clamp(1, lines.len() - 1) - 1;
+            let i = Self::cell_at(lines, x);
             (i, (x - lines[i]) / (lines[i + 1] - lines[i]))
         };
         let ((i, fx), (j, fy)) = (locate(&self.xs, x), locate(&self.ys, y));
