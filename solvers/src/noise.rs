@@ -51,15 +51,14 @@ fn is_upper_triangular(w: &DMatrix<f64>) -> bool {
     n == w.ncols() && (0..n).all(|c| (c + 1..n).all(|r| w[(r, c)] == 0.0))
 }
 
-/// `x ← W x` for upper-triangular `W`, in place (row i only reads x\[k ≥ i\]).
+/// `x ← W x` for upper-triangular `W` (n × n, `x.len() == n`), in place:
+/// row i only reads x\[k ≥ i\], which are still the input's. Row i of W
+/// from its diagonal on is every n-th entry of W's column-major storage.
 fn upper_mul_in_place(w: &DMatrix<f64>, x: &mut [f64]) {
     let n = x.len();
+    let ws = w.as_slice();
     for i in 0..n {
-        let mut s = 0.0;
-        for (k, xk) in x.iter().enumerate().skip(i) {
-            s += w[(i, k)] * xk;
-        }
-        x[i] = s;
+        x[i] = x[i..].iter().zip(ws[i * (n + 1)..].iter().step_by(n)).map(|(xk, wik)| wik * xk).sum();
     }
 }
 
@@ -110,7 +109,7 @@ impl NoiseModel {
             NoiseModel::Isotropic { sigma, .. } => *r /= *sigma,
             NoiseModel::Diagonal(s) => r.component_div_assign(s),
             NoiseModel::SqrtInformation(w) => {
-                if is_upper_triangular(w) {
+                if is_upper_triangular(w) && w.nrows() == r.len() {
                     upper_mul_in_place(w, r.as_mut_slice());
                 } else {
                     *r = w * &*r
@@ -129,9 +128,10 @@ impl NoiseModel {
                 }
             }
             NoiseModel::SqrtInformation(w) => {
-                if is_upper_triangular(w) && w.nrows() == j.nrows() {
-                    for mut col in j.column_iter_mut() {
-                        upper_mul_in_place(w, col.as_mut_slice());
+                let n = j.nrows();
+                if is_upper_triangular(w) && w.nrows() == n && n > 0 {
+                    for col in j.as_mut_slice().chunks_exact_mut(n) {
+                        upper_mul_in_place(w, col);
                     }
                 } else {
                     *j = w * &*j
@@ -155,6 +155,22 @@ mod tests {
         m.whiten(&mut r);
         let maha = (r0.transpose() * cov.try_inverse().unwrap() * &r0)[0];
         assert_relative_eq!(r.norm_squared(), maha, epsilon = 1e-12);
+    }
+
+    #[test]
+    fn triangular_whitening_equals_the_matrix_product() {
+        let info = DMatrix::from_fn(6, 6, |i, j| if i == j { 4.0 + i as f64 } else { 0.3 / (1.0 + (i + j) as f64) });
+        let m = NoiseModel::from_information(&info).unwrap();
+        let NoiseModel::SqrtInformation(w) = &m else { panic!("full model") };
+        assert!(is_upper_triangular(w));
+        let j0 = DMatrix::from_fn(6, 12, |i, j| ((i * 12 + j) as f64 * 0.37).sin());
+        let mut j = j0.clone();
+        m.whiten_jacobian(&mut j);
+        assert_relative_eq!(j, w * &j0, epsilon = 1e-14);
+        let r0 = DVector::from_fn(6, |i, _| 1.0 - 0.3 * i as f64);
+        let mut r = r0.clone();
+        m.whiten(&mut r);
+        assert_relative_eq!(r, w * &r0, epsilon = 1e-14);
     }
 
     #[test]

@@ -269,8 +269,12 @@ impl Structure {
                     let (p, b) = plan.kept[k];
                     let o = self.kept_offsets[b] - g0;
                     let j = lins.jacobian(fi, p);
+                    // Literal row counts unroll the dot products: reprojections
+                    // (2), planar and 3-D pose-graph edges (3, 6).
                     match m {
                         2 => add_jtr(&mut g[o..], j, r, 2),
+                        3 => add_jtr(&mut g[o..], j, r, 3),
+                        6 => add_jtr(&mut g[o..], j, r, 6),
                         _ => add_jtr(&mut g[o..], j, r, m),
                     }
                 }
@@ -289,8 +293,9 @@ impl Structure {
                         _ => {
                             let (big, small) = (lins.jacobian(fi, p), lins.jacobian(fi, q));
                             match m {
-                                // Reprojections: two rows.
                                 2 => self.add_jtj(h, h0, pair, big, small, 2),
+                                3 => self.add_jtj(h, h0, pair, big, small, 3),
+                                6 => self.add_jtj(h, h0, pair, big, small, 6),
                                 _ => self.add_jtj(h, h0, pair, big, small, m),
                             }
                         }
