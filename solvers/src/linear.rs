@@ -15,12 +15,14 @@ use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
 };
+use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, Par, Side};
 use nalgebra::DMatrix;
 use smallvec::SmallVec;
 
 mod assembly;
+mod refactor;
 mod schur;
 use assembly::AssemblyPlan;
 use schur::SchurPlan;
@@ -31,7 +33,7 @@ pub enum LinearSolver {
     /// Dense Cholesky up to 200 unknowns, sparse above.
     #[default]
     Auto,
-    /// Always faer's supernodal sparse Cholesky.
+    /// Always faer's sparse Cholesky (supernodal or simplicial by the factor's density).
     SparseCholesky,
     /// Always nalgebra's dense Cholesky.
     DenseCholesky,
@@ -117,6 +119,22 @@ pub(crate) struct ReduceBuffers {
     pub w: Vec<f64>,
 }
 
+/// The work per entry of the factor (faer's measure: divisions and
+/// multiply–subtracts of the factorization over the factor's nonzeros) above
+/// which the supernodal factorization is used, the simplicial one below. On
+/// the benchmark pose graphs (`bench_solver`) a solve with the simplicial one
+/// took 0.70–0.84 × the supernodal one's time at ratios up to 9.8 (kitti_00,
+/// CSAIL, MIT, ais2klinik, intel), and the supernodal one 0.6–0.87 × the
+/// simplicial one's from 18.8 up (M3500, manhattan, parking-garage,
+/// city10000, sphere2500); this sits between the two. faer's own default,
+/// 40, put parking-garage (27) on the slower path.
+const SUPERNODAL_FLOPS_PER_ENTRY: f64 = 14.0;
+
+/// The ratio faer's [`SupernodalThreshold`] multiplies (its
+/// `CHOLESKY_SUPERNODAL_RATIO_FACTOR`): `SupernodalThreshold(1.0)` is 40
+/// operations per entry.
+const FAER_SUPERNODAL_RATIO_UNIT: f64 = 40.0;
+
 /// faer's sparse Cholesky on our pattern, whose blocks are already in a
 /// fill-reducing (block AMD) order: symbolic analysis once, then only numeric
 /// factorizations into reused buffers.
@@ -124,30 +142,31 @@ struct SparseFactor {
     symbolic: SymbolicCholesky<usize>,
     l_values: Vec<f64>,
     mem: MemBuffer,
+    /// `l_values` hold a factor: the last numeric factorization succeeded.
+    factored: bool,
 }
 
 impl SparseFactor {
     fn new(n: usize, col_ptr: &[usize], row_idx: &[usize]) -> Result<Self, SolveError> {
         let sym = SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx);
-        let symbolic =
-            // Supernodal always: with 3- to 9-wide variable blocks it beat the
-            // simplicial path on every benchmark graph (e.g. sphere2500 7×).
-            factorize_symbolic_cholesky(
-                sym,
-                Side::Upper,
-                SymmetricOrdering::Identity,
-                CholeskySymbolicParams {
-                    supernodal_flop_ratio_threshold: faer::sparse::linalg::SupernodalThreshold::FORCE_SUPERNODAL,
-                    ..Default::default()
-                },
-            )
-                .map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?;
+        let symbolic = factorize_symbolic_cholesky(
+            sym,
+            Side::Upper,
+            SymmetricOrdering::Identity,
+            CholeskySymbolicParams {
+                supernodal_flop_ratio_threshold: SupernodalThreshold(
+                    SUPERNODAL_FLOPS_PER_ENTRY / FAER_SUPERNODAL_RATIO_UNIT,
+                ),
+                ..Default::default()
+            },
+        )
+        .map_err(|e| SolveError::Singular(format!("symbolic factorization: {e:?}")))?;
         let req = symbolic
             .factorize_numeric_llt_scratch::<f64>(Par::Seq, Default::default())
             .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let mem = MemBuffer::try_new(req).map_err(|_| SolveError::Singular("out of memory".into()))?;
         let l_values = vec![0.0; symbolic.len_val()];
-        Ok(SparseFactor { symbolic, l_values, mem })
+        Ok(SparseFactor { symbolic, l_values, mem, factored: false })
     }
 
     /// Factorize `h` (upper CSC values on the structure's pattern), then solve
@@ -162,6 +181,7 @@ impl SparseFactor {
         let t = std::time::Instant::now();
         let n = col_ptr.len() - 1;
         let a = SparseColMatRef::new(SymbolicSparseColMatRef::new_checked(n, n, col_ptr, None, row_idx), h);
+        self.factored = false;
         self.symbolic
             .factorize_numeric_llt(
                 &mut self.l_values,
@@ -173,6 +193,7 @@ impl SparseFactor {
                 Default::default(),
             )
             .map_err(|e| SolveError::Singular(format!("sparse Cholesky: {e:?}")))?;
+        self.factored = true;
         let fact_s = t.elapsed().as_secs_f64();
         let t = std::time::Instant::now();
         let llt = LltRef::new(&self.symbolic, &self.l_values);
@@ -180,6 +201,15 @@ impl SparseFactor {
         let mut mem = MemBuffer::try_new(req).map_err(|_| SolveError::Singular("out of memory".into()))?;
         llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut mem));
         Ok((fact_s, t.elapsed().as_secs_f64()))
+    }
+
+    /// `v ← (L Lᵀ)⁻¹ v` with the held factor (`factored`).
+    fn apply_inverse(&mut self, v: &mut [f64]) {
+        let n = v.len();
+        let llt = LltRef::new(&self.symbolic, &self.l_values);
+        let rhs = faer::MatMut::from_column_major_slice_mut(v, n, 1);
+        // `mem` holds the larger of the factorization's and a one-column solve's scratch.
+        llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.mem));
     }
 }
 

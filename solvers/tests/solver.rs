@@ -351,6 +351,37 @@ fn parallel_solves_are_deterministic() {
     }
 }
 
+/// Reusing the last factorization (chord steps, the stationarity check by
+/// preconditioned conjugate gradients) ends at the same minimum as
+/// factorizing every solve, with fewer factorizations, on sparse pose graphs
+/// of several noise levels.
+#[test]
+fn reusing_the_factorization_reaches_the_same_minimum() {
+    let mut fewer = 0;
+    for (seed, sigma_rot) in [(3, 0.02), (11, 0.05), (17, 0.1)] {
+        let sim = tumble_factors::testing::simulate_helix(60, 5, 5.0, sigma_rot, 0.1, seed);
+        let solve = |reuse_factorization| {
+            let o =
+                LmOptions { reuse_factorization, linear_solver: LinearSolver::SparseCholesky, ..LmOptions::default() };
+            Optimizer::new(o).optimize(&sim.graph, &sim.initial).unwrap()
+        };
+        let ((a, sa), (b, sb)) = (solve(false), solve(true));
+        assert!(sa.converged() && sb.converged(), "{sa}\n{sb}");
+        assert_eq!(sa.factorizations, sa.linear_solves, "every solve factorizes without reuse");
+        assert!(sb.factorizations <= sa.factorizations);
+        fewer += usize::from(sb.factorizations < sa.factorizations);
+        assert_relative_eq!(sa.final_cost, sb.final_cost, max_relative = 1e-9);
+        for i in 0..sim.poses as u64 {
+            let (pa, pb) =
+                (a.get::<Isometry3F64>(X(i)).unwrap().params_dyn(), b.get::<Isometry3F64>(X(i)).unwrap().params_dyn());
+            let d = pa.iter().zip(&pb).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+            // 10⁻⁴ of the edges' translation σ (0.1): what a cost 10⁻¹⁰ from the minimum allows.
+            assert!(d < 1e-5, "pose {i}: {pa:?} vs {pb:?}");
+        }
+    }
+    assert!(fewer > 0, "no solve reused a factorization");
+}
+
 /// A factor that hides its constant Jacobians from the optimizer.
 struct Varying(LinearFactor);
 

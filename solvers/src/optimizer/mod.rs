@@ -17,6 +17,7 @@ use crate::values::Values;
 use crate::variable::DynVariable;
 use std::time::Instant;
 
+mod linear_step;
 mod minimizer;
 mod options;
 mod strategy;

@@ -126,6 +126,17 @@ pub struct LmOptions {
     /// with [`LmOptions::check_stationarity`], which checks the stops it
     /// proposes at the next linearization.
     pub stop_on_predicted_decrease: bool,
+    /// Reuse the last sparse factorization where the normal equations have
+    /// barely changed since (near a minimum): a step is first tried as the
+    /// chord step `δ = −P⁻¹g` with the old factor P, taken where it gains
+    /// as much as the exact step would to within the tolerances (else the
+    /// system is factorized), and the stationarity check solves by
+    /// conjugate gradients preconditioned with P, to a direct solve's
+    /// accuracy, factorizing only where they do not get there within a few
+    /// iterations. Either costs a few triangular solves instead of a
+    /// factorization. Only sparse systems without eliminated variables use
+    /// it; the stops are decided as without it.
+    pub reuse_factorization: bool,
 }
 
 impl Default for LmOptions {
@@ -149,6 +160,7 @@ impl Default for LmOptions {
             keep_largest_scale: true,
             trust_radius: true,
             stop_on_predicted_decrease: false,
+            reuse_factorization: true,
         }
     }
 }

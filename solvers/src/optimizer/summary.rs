@@ -53,8 +53,11 @@ pub struct Summary {
     pub final_cost: f64,
     /// Number of linearizations after the first.
     pub iterations: usize,
-    /// Number of linear solves (accepted and rejected steps).
+    /// Number of linear solves (accepted and rejected steps, stationarity checks).
     pub linear_solves: usize,
+    /// Of those, the solves that factorized the system; the others reused
+    /// the last factorization ([`LmOptions::reuse_factorization`](super::LmOptions::reuse_factorization)).
+    pub factorizations: usize,
     /// Why it stopped.
     pub termination: Termination,
     /// Free variables.
@@ -106,6 +109,7 @@ impl Summary {
             final_cost: 0.0,
             iterations: 0,
             linear_solves: 0,
+            factorizations: 0,
             termination: Termination::MaxIterations,
             variables: layout.kept_vars.len() + layout.elim_vars.len(),
             factors,
@@ -148,8 +152,8 @@ impl fmt::Display for Summary {
         writeln!(f, "  final cost   {:.6e}", self.final_cost)?;
         writeln!(
             f,
-            "  iterations {} ({} linear solves), termination: {:?} (scaled gradient {:.1e})",
-            self.iterations, self.linear_solves, self.termination, self.scaled_gradient
+            "  iterations {} ({} linear solves, {} factorizations), termination: {:?} (scaled gradient {:.1e})",
+            self.iterations, self.linear_solves, self.factorizations, self.termination, self.scaled_gradient
         )?;
         let checked = if self.gauss_newton_decrease.is_nan() {
             "not checked".to_string()

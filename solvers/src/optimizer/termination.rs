@@ -1,6 +1,7 @@
 //! When a solve may stop: the scaled gradient, the decrease still to come,
 //! and the check that a proposed stop is at a minimum.
 
+use super::linear_step::linear_step;
 use super::{LmOptions, Summary, Termination};
 use crate::linear::{Structure, System};
 
@@ -82,11 +83,7 @@ pub(super) fn check_stop(
         _ => {}
     }
     let tiny: Vec<f64> = diag.iter().map(|d| d * GAUSS_NEWTON_CHECK_DAMPING).collect();
-    summary.linear_solves += 1;
-    let solved = structure.solve(sys, Some(&tiny)).ok().and_then(|(delta, fs, ss, bs)| {
-        summary.time_factorize += fs;
-        summary.time_solve += ss;
-        summary.time_build += bs;
+    let solved = linear_step(structure, sys, Some(&tiny), o.reuse_factorization, summary).ok().and_then(|delta| {
         let d = predicted_decrease(&delta, g, &structure.h_times(sys, &delta));
         // ½ gᵀH⁻¹g is not negative: anything else is a numerically failed solve.
         (d.is_finite() && d >= 0.0).then(|| (d, delta.iter().map(|v| v * v).sum::<f64>().sqrt()))

@@ -1,0 +1,225 @@
+//! Solves without a new factorization. Near a minimum the normal equations
+//! change little from one iteration to the next, and the last sparse
+//! Cholesky factor P still solves them nearly: as the chord step `−P⁻¹g`, or
+//! as the preconditioner of conjugate gradients, which then reach a direct
+//! solve's accuracy in a few iterations. Each costs a pair of triangular
+//! solves and a product with H — a small part of a factorization. Where the
+//! old factor is not close enough, the caller factorizes.
+
+use super::{dot, SparseFactor, Structure, System};
+
+/// Conjugate-gradient iterations at most. One costs a pair of triangular
+/// solves with the factor and a product with H: 0.2–0.4 of a numeric
+/// factorization on the benchmark pose graphs (sphere2500, parking-garage),
+/// so an attempt that fails costs about one factorization at worst — and it
+/// gives up as soon as its rate shows it cannot succeed.
+const MAX_ITERATIONS: usize = 4;
+
+/// Converged when the residual's energy in the preconditioner's metric,
+/// `rᵀP⁻¹r`, has fallen to this fraction of the right-hand side's. With P
+/// close to the system (which the convergence shows), that is the step's
+/// squared relative error in the system's energy norm, and its model
+/// decrease is within 10⁻⁸ of the exact step's: the stationarity check
+/// compares that decrease with a tolerance, and a 10⁻⁸ relative error
+/// cannot move it across.
+const ENERGY_TOLERANCE: f64 = 1e-8;
+
+impl Structure {
+    /// Solve `(H + diag(damping)) δ = −g` as [`Structure::solve`] does, by
+    /// conjugate gradients preconditioned with the last numeric
+    /// factorization (of an earlier system on the same pattern). None where
+    /// there is none to use (a dense or Schur-complemented system, no
+    /// factorization yet, or the last one failed), or where CG does not
+    /// converge to [`ENERGY_TOLERANCE`] within [`MAX_ITERATIONS`]. Returns δ
+    /// and the CG iterations taken.
+    pub fn solve_with_last_factor(&mut self, sys: &System, damping: Option<&[f64]>) -> Option<(Vec<f64>, usize)> {
+        if self.dense || !self.elim_dims.is_empty() || self.n == 0 {
+            return None;
+        }
+        let mut factor = self.factor.take()?;
+        let solved = factor.factored.then(|| self.preconditioned_cg(&mut factor, sys, damping)).flatten();
+        self.factor = Some(factor);
+        solved
+    }
+
+    /// Conjugate gradients on `(H + diag(damping)) δ = −g` from δ = 0,
+    /// preconditioned with `factor` ([`Structure::solve_with_last_factor`]).
+    fn preconditioned_cg(
+        &self,
+        factor: &mut SparseFactor,
+        sys: &System,
+        damping: Option<&[f64]>,
+    ) -> Option<(Vec<f64>, usize)> {
+        let n = self.n;
+        let damped_h_times = |v: &[f64]| -> Vec<f64> {
+            let mut y = self.h_times(sys, v);
+            if let Some(d) = damping {
+                for (k, yk) in y.iter_mut().enumerate() {
+                    *yk += d[k] * v[k];
+                }
+            }
+            y
+        };
+        let mut x = vec![0.0; n];
+        let mut r: Vec<f64> = sys.g.iter().map(|v| -v).collect();
+        let mut z = r.clone();
+        factor.apply_inverse(&mut z);
+        let rz0 = dot(&r, &z);
+        if rz0 == 0.0 {
+            return Some((x, 0));
+        }
+        if rz0.is_nan() || rz0 < 0.0 {
+            return None;
+        }
+        let mut p = z.clone();
+        let mut rz = rz0;
+        for k in 1..=MAX_ITERATIONS {
+            let ap = damped_h_times(&p);
+            let pap = dot(&p, &ap);
+            if !(pap > 0.0 && pap.is_finite()) {
+                return None;
+            }
+            let alpha = rz / pap;
+            for i in 0..n {
+                x[i] += alpha * p[i];
+                r[i] -= alpha * ap[i];
+            }
+            z.copy_from_slice(&r);
+            factor.apply_inverse(&mut z);
+            let rz_next = dot(&r, &z);
+            let ratio = rz_next / rz0;
+            if !(ratio >= 0.0 && ratio.is_finite()) {
+                return None;
+            }
+            if ratio <= ENERGY_TOLERANCE {
+                return Some((x, k));
+            }
+            // Give up where the rate so far, kept up, would not get there.
+            if ratio.powf(MAX_ITERATIONS as f64 / k as f64) > ENERGY_TOLERANCE {
+                return None;
+            }
+            let beta = rz_next / rz;
+            for i in 0..n {
+                p[i] = z[i] + beta * p[i];
+            }
+            rz = rz_next;
+        }
+        None
+    }
+}
+
+impl Structure {
+    /// The chord step `δ = −P⁻¹g`, P the last numeric factorization (of an
+    /// earlier system on the same pattern), with `Hδ` (undamped) and the
+    /// Rayleigh quotient `μ = δᵀ(H + diag(damping))δ / δᵀPδ`: how the
+    /// current system compares with P along the step (1 where they agree;
+    /// the step's model decrease is then `1 − (μ − 1)²` of the best one's
+    /// along it). None where there is no factorization to use, as for
+    /// [`Structure::solve_with_last_factor`].
+    pub fn chord_step(&mut self, sys: &System, damping: Option<&[f64]>) -> Option<(Vec<f64>, Vec<f64>, f64)> {
+        if self.dense || !self.elim_dims.is_empty() || self.n == 0 {
+            return None;
+        }
+        let factor = self.factor.as_mut().filter(|f| f.factored)?;
+        let mut delta: Vec<f64> = sys.g.iter().map(|v| -v).collect();
+        factor.apply_inverse(&mut delta);
+        let hd = self.h_times(sys, &delta);
+        let damped: f64 = damping.map_or(0.0, |d| d.iter().zip(&delta).map(|(dk, x)| dk * x * x).sum());
+        // P δ = −g.
+        let pp = -dot(&delta, &sys.g);
+        let mu = (dot(&delta, &hd) + damped) / pp;
+        (pp > 0.0 && mu.is_finite() && delta.iter().all(|v| v.is_finite())).then_some((delta, hd, mu))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ENERGY_TOLERANCE, MAX_ITERATIONS};
+    use crate::linear::{LinearSolver, Role, Roles, Structure, System};
+
+    /// A chain of 3-dim blocks with loop closures, and on its pattern a
+    /// diagonally dominant (so positive-definite) H with pseudo-random
+    /// entries; `spread` scales their pseudo-random part.
+    fn chain(blocks: usize) -> Structure {
+        let mut roles: Vec<Roles> =
+            (1..blocks).map(|b| smallvec::smallvec![Role::Kept(b - 1), Role::Kept(b)]).collect();
+        roles.extend((0..blocks / 10).map(|k| smallvec::smallvec![Role::Kept(k), Role::Kept(blocks - 1 - 3 * k)]));
+        Structure::new(vec![3; blocks], Vec::new(), &roles, LinearSolver::SparseCholesky).unwrap()
+    }
+
+    fn system(s: &Structure, seed: f64, spread: f64) -> System {
+        let mut x = seed;
+        let mut next = || {
+            x = (x * 3.9 * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+            x - 0.5
+        };
+        let mut h = vec![0.0; s.nnz()];
+        let mut diag = vec![1.0; s.n];
+        for c in 0..s.n {
+            let range = s.col_ptr[c]..s.col_ptr[c + 1];
+            for (hp, &r) in h[range.clone()].iter_mut().zip(&s.row_idx[range]) {
+                if r != c {
+                    *hp = 1.0 + spread * next();
+                    diag[r] += hp.abs();
+                    diag[c] += hp.abs();
+                }
+            }
+        }
+        for (k, &p) in s.diag_positions.iter().enumerate() {
+            h[p] = diag[k];
+        }
+        let g = (0..s.n).map(|_| next()).collect();
+        System { h, g, hll: Vec::new(), gl: Vec::new(), hcl: Vec::new() }
+    }
+
+    fn relative_difference(a: &[f64], b: &[f64]) -> f64 {
+        let d: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum();
+        (d / b.iter().map(|y| y * y).sum::<f64>()).sqrt()
+    }
+
+    #[test]
+    fn conjugate_gradients_from_a_nearby_factor_match_a_new_factorization() {
+        let mut s = chain(200);
+        let (near, far) = (system(&s, 0.31, 0.0), system(&s, 0.31, 0.02));
+        assert!(s.solve_with_last_factor(&near, None).is_none(), "no factorization yet");
+        s.solve(&near, None).unwrap();
+        // The nearby system differs by up to 1 % in each off-diagonal entry.
+        let (cg, iterations) = s.solve_with_last_factor(&far, None).expect("converges from a nearby factor");
+        assert!((1..=MAX_ITERATIONS).contains(&iterations));
+        let damping = vec![0.5; s.n];
+        let (cg_damped, _) = s.solve_with_last_factor(&far, Some(&damping)).expect("damped too");
+        let mut fresh = chain(200);
+        let direct = fresh.solve(&far, None).unwrap().0;
+        let direct_damped = fresh.solve(&far, Some(&damping)).unwrap().0;
+        // The model decrease −gᵀδ − ½δᵀHδ to 10⁻⁸ (ENERGY_TOLERANCE) of the exact one's.
+        let decrease = |delta: &[f64], damping: &[f64]| {
+            let hd = s.h_times(&far, delta);
+            let quad: f64 = delta.iter().zip(&hd).zip(damping).map(|((x, y), d)| x * (y + d * x)).sum();
+            -delta.iter().zip(&far.g).map(|(x, g)| x * g).sum::<f64>() - 0.5 * quad
+        };
+        let none = vec![0.0; s.n];
+        for (cg, direct, d) in [(&cg, &direct, &none), (&cg_damped, &direct_damped, &damping)] {
+            let (a, b) = (decrease(cg, d), decrease(direct, d));
+            assert!(b > 0.0 && (b - a) / b <= ENERGY_TOLERANCE && a <= b * (1.0 + 1e-12), "{a} vs {b}");
+            assert!(relative_difference(cg, direct) < 1e-4, "{}", relative_difference(cg, direct));
+        }
+        // An unrelated system is refused, not solved loosely.
+        assert!(s.solve_with_last_factor(&system(&s, 0.77, 1.5), None).is_none());
+    }
+
+    #[test]
+    fn the_chord_step_of_the_factored_system_is_its_solution() {
+        let mut s = chain(120);
+        let sys = system(&s, 0.43, 0.5);
+        assert!(s.chord_step(&sys, None).is_none(), "no factorization yet");
+        let direct = s.solve(&sys, None).unwrap().0;
+        let (delta, hd, mu) = s.chord_step(&sys, None).unwrap();
+        assert!((mu - 1.0).abs() < 1e-10, "μ = {mu}");
+        assert!(relative_difference(&delta, &direct) < 1e-12);
+        assert!(relative_difference(&hd, &s.h_times(&sys, &delta)) == 0.0);
+        // A system twice the factored one along every direction: μ = 2.
+        let double = System { h: sys.h.iter().map(|v| 2.0 * v).collect(), ..system(&s, 0.43, 0.5) };
+        let (_, _, mu) = s.chord_step(&double, None).unwrap();
+        assert!((mu - 2.0).abs() < 1e-10, "μ = {mu}");
+    }
+}
