@@ -4,7 +4,7 @@
 //! (W is the square-root information).
 
 use crate::error::NoiseError;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 /// A Gaussian noise model for one factor.
 #[derive(Clone, Debug, PartialEq)]
@@ -59,6 +59,22 @@ fn upper_mul_in_place(w: &DMatrix<f64>, x: &mut [f64]) {
     let ws = w.as_slice();
     for i in 0..n {
         x[i] = x[i..].iter().zip(ws[i * (n + 1)..].iter().step_by(n)).map(|(xk, wik)| wik * xk).sum();
+    }
+}
+
+/// `J ← W J` for an N × N `W` and a column-major `j` of N rows, N columns at
+/// a time as fixed-size products (vectorized, unrolled: the 3- and 6-row
+/// pose-graph edges), the remaining columns one by one.
+fn mul_in_place_by_blocks<const N: usize>(w: &DMatrix<f64>, j: &mut [f64]) {
+    let w = SMatrix::<f64, N, N>::from_column_slice(w.as_slice());
+    let mut blocks = j.chunks_exact_mut(N * N);
+    for block in &mut blocks {
+        let product = w * SMatrix::<f64, N, N>::from_column_slice(block);
+        block.copy_from_slice(product.as_slice());
+    }
+    for col in blocks.into_remainder().chunks_exact_mut(N) {
+        let product = w * SVector::<f64, N>::from_column_slice(col);
+        col.copy_from_slice(product.as_slice());
     }
 }
 
@@ -129,7 +145,11 @@ impl NoiseModel {
             }
             NoiseModel::SqrtInformation(w) => {
                 let n = j.nrows();
-                if is_upper_triangular(w) && w.nrows() == n && n > 0 {
+                if w.nrows() == n && n == 6 {
+                    mul_in_place_by_blocks::<6>(w, j.as_mut_slice());
+                } else if w.nrows() == n && n == 3 {
+                    mul_in_place_by_blocks::<3>(w, j.as_mut_slice());
+                } else if is_upper_triangular(w) && w.nrows() == n && n > 0 {
                     for col in j.as_mut_slice().chunks_exact_mut(n) {
                         upper_mul_in_place(w, col);
                     }
@@ -158,19 +178,24 @@ mod tests {
     }
 
     #[test]
-    fn triangular_whitening_equals_the_matrix_product() {
-        let info = DMatrix::from_fn(6, 6, |i, j| if i == j { 4.0 + i as f64 } else { 0.3 / (1.0 + (i + j) as f64) });
-        let m = NoiseModel::from_information(&info).unwrap();
-        let NoiseModel::SqrtInformation(w) = &m else { panic!("full model") };
-        assert!(is_upper_triangular(w));
-        let j0 = DMatrix::from_fn(6, 12, |i, j| ((i * 12 + j) as f64 * 0.37).sin());
-        let mut j = j0.clone();
-        m.whiten_jacobian(&mut j);
-        assert_relative_eq!(j, w * &j0, epsilon = 1e-14);
-        let r0 = DVector::from_fn(6, |i, _| 1.0 - 0.3 * i as f64);
-        let mut r = r0.clone();
-        m.whiten(&mut r);
-        assert_relative_eq!(r, w * &r0, epsilon = 1e-14);
+    fn whitening_equals_the_matrix_product() {
+        // 3 and 6 rows take fixed-size blocks (7 and 13 columns leave a
+        // remainder), 4 rows the triangular loop.
+        for (n, cols) in [(3, 7), (6, 12), (6, 13), (4, 9)] {
+            let info =
+                DMatrix::from_fn(n, n, |i, j| if i == j { 4.0 + i as f64 } else { 0.3 / (1.0 + (i + j) as f64) });
+            let m = NoiseModel::from_information(&info).unwrap();
+            let NoiseModel::SqrtInformation(w) = &m else { panic!("full model") };
+            assert!(is_upper_triangular(w));
+            let j0 = DMatrix::from_fn(n, cols, |i, j| ((i * cols + j) as f64 * 0.37).sin());
+            let mut j = j0.clone();
+            m.whiten_jacobian(&mut j);
+            assert_relative_eq!(j, w * &j0, epsilon = 1e-14);
+            let r0 = DVector::from_fn(n, |i, _| 1.0 - 0.3 * i as f64);
+            let mut r = r0.clone();
+            m.whiten(&mut r);
+            assert_relative_eq!(r, w * &r0, epsilon = 1e-14);
+        }
     }
 
     #[test]

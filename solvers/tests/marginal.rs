@@ -1,7 +1,7 @@
 //! Marginalization and covariance recovery against dense references.
 
 use approx::assert_relative_eq;
-use nalgebra::{DMatrix, DVector, Vector1, Vector2, Vector3};
+use nalgebra::{DMatrix, DVector, SVector, Vector1, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use tumble_solvers::testing::LinearFactor;
 use tumble_solvers::*;
@@ -181,40 +181,48 @@ fn marginalization_survives_unconstrained_and_badly_scaled_variables() {
     assert!(matches!(r, Err(SolveError::Singular(_))), "{:?}", r.map(|m| m.prior));
 }
 
-/// Marginal covariance equals the block of the dense inverse of JᵀJ.
+/// Marginal covariance equals the block of the dense inverse of JᵀJ, with
+/// 3- and 6-dimensional variables (the assembly forms square blocks of
+/// those sizes as fixed-size products) and a 4-dimensional one (dot products).
 #[test]
 fn covariance_equals_dense_inverse() {
+    covariance_equals_dense_inverse_of::<3>();
+    covariance_equals_dense_inverse_of::<4>();
+    covariance_equals_dense_inverse_of::<6>();
+}
+
+fn covariance_equals_dense_inverse_of<const D: usize>() {
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);
     let n = 4;
     let mut g = Graph::new();
     let mut j_rows: Vec<DMatrix<f64>> = Vec::new();
     for i in 0..n {
         for k in i..n.min(i + 2) {
-            let a = DMatrix::from_fn(3, 3, |_, _| rng.random::<f64>() - 0.5) + DMatrix::identity(3, 3);
-            let c = DMatrix::from_fn(3, 3, |_, _| rng.random::<f64>() - 0.5);
-            let mut row = DMatrix::zeros(3, 3 * n);
+            let a = DMatrix::from_fn(D, D, |_, _| rng.random::<f64>() - 0.5) + DMatrix::identity(D, D);
+            let c = DMatrix::from_fn(D, D, |_, _| rng.random::<f64>() - 0.5);
+            let mut row = DMatrix::zeros(D, D * n);
             if k == i {
-                g.add(LinearFactor::new(vec![X(i as u64)], vec![a.clone()], DVector::zeros(3)), NoiseModel::Unit);
-                row.view_mut((0, 3 * i), (3, 3)).copy_from(&a);
+                g.add(LinearFactor::new(vec![X(i as u64)], vec![a.clone()], DVector::zeros(D)), NoiseModel::Unit);
+                row.view_mut((0, D * i), (D, D)).copy_from(&a);
             } else {
                 g.add(
-                    LinearFactor::new(vec![X(i as u64), X(k as u64)], vec![a.clone(), c.clone()], DVector::zeros(3)),
+                    LinearFactor::new(vec![X(i as u64), X(k as u64)], vec![a.clone(), c.clone()], DVector::zeros(D)),
                     NoiseModel::Unit,
                 );
-                row.view_mut((0, 3 * i), (3, 3)).copy_from(&a);
-                row.view_mut((0, 3 * k), (3, 3)).copy_from(&c);
+                row.view_mut((0, D * i), (D, D)).copy_from(&a);
+                row.view_mut((0, D * k), (D, D)).copy_from(&c);
             }
             j_rows.push(row);
         }
     }
-    let mut j = DMatrix::zeros(3 * j_rows.len(), 3 * n);
+    let mut j = DMatrix::zeros(D * j_rows.len(), D * n);
     for (r, row) in j_rows.iter().enumerate() {
-        j.view_mut((3 * r, 0), (3, 3 * n)).copy_from(row);
+        j.view_mut((D * r, 0), (D, D * n)).copy_from(row);
     }
     let dense = (j.transpose() * &j).try_inverse().unwrap();
     let mut v = Values::new();
     for i in 0..n {
-        v.insert(X(i as u64), Vector3::new(0.0, 0.0, 0.0));
+        v.insert(X(i as u64), SVector::<f64, D>::zeros());
     }
     let keys: Vec<Key> = (0..n as u64).map(X).collect();
     let cov = covariances(&g, &v, &keys).unwrap();
@@ -222,19 +230,18 @@ fn covariance_equals_dense_inverse() {
         for b in 0..n {
             assert_relative_eq!(
                 cov.block(X(a as u64), X(b as u64)).unwrap(),
-                dense.view((3 * a, 3 * b), (3, 3)).into_owned(),
+                dense.view((D * a, D * b), (D, D)).into_owned(),
                 epsilon = 1e-10
             );
         }
     }
     // A joint selection in another order is the dense inverse's rows and columns.
     let joint = cov.joint(&[X(2), X(0)]).unwrap();
-    let idx: Vec<usize> = (6..9).chain(0..3).collect();
-    assert_relative_eq!(joint, DMatrix::from_fn(6, 6, |r, c| dense[(idx[r], idx[c])]), epsilon = 1e-10);
+    let idx: Vec<usize> = (2 * D..3 * D).chain(0..D).collect();
+    assert_relative_eq!(joint, DMatrix::from_fn(2 * D, 2 * D, |r, c| dense[(idx[r], idx[c])]), epsilon = 1e-10);
     assert!(cov.joint(&[X(n as u64)]).is_none());
 }
 
-/// A point `(x, y)` of the line `y = a + b·x` (`X(0)` = `[a, b]`), σ 0.1.
 fn add_line_point(g: &mut Graph, x: f64, y: f64) {
     g.add(
         LinearFactor::new(vec![X(0)], vec![DMatrix::from_row_slice(1, 2, &[1.0, x])], DVector::from_element(1, -y)),

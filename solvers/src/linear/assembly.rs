@@ -9,6 +9,7 @@
 
 use super::{dot, ElimPlan, Structure, System};
 use crate::linearized::{split_at_ends, Linearized};
+use nalgebra::SMatrix;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -166,6 +167,20 @@ impl Structure {
         self.jtj_visit(pair, big, small, m, |pos, v| h[pos - h0] += v);
     }
 
+    /// [`Structure::add_jtj`] for square M × M Jacobian blocks (a pose-graph
+    /// edge between two poses of the residual's dimension): the block is one
+    /// fixed-size product, vectorized, instead of M² dot products.
+    #[inline(always)]
+    fn add_jtj_square<const M: usize>(&self, h: &mut [f64], h0: usize, pair: usize, big: &[f64], small: &[f64]) {
+        let product =
+            SMatrix::<f64, M, M>::from_column_slice(big).transpose() * SMatrix::<f64, M, M>::from_column_slice(small);
+        for (r, base, n) in self.pair_rows(pair) {
+            for (c, hv) in h[base - h0..base - h0 + n].iter_mut().enumerate() {
+                *hv += product[(r, c)];
+            }
+        }
+    }
+
     /// Mark the factors whose JᵀJ never changes (see [`crate::Factor::constant_jacobians`]).
     pub fn set_constant_hessians(&mut self, constant: &[bool]) {
         for (plan, &c) in self.plans.iter_mut().zip(constant) {
@@ -292,10 +307,10 @@ impl Structure {
                         }
                         _ => {
                             let (big, small) = (lins.jacobian(fi, p), lins.jacobian(fi, q));
-                            match m {
-                                2 => self.add_jtj(h, h0, pair, big, small, 2),
-                                3 => self.add_jtj(h, h0, pair, big, small, 3),
-                                6 => self.add_jtj(h, h0, pair, big, small, 6),
+                            match (m, big.len(), small.len()) {
+                                (2, ..) => self.add_jtj(h, h0, pair, big, small, 2),
+                                (3, 9, 9) => self.add_jtj_square::<3>(h, h0, pair, big, small),
+                                (6, 36, 36) => self.add_jtj_square::<6>(h, h0, pair, big, small),
                                 _ => self.add_jtj(h, h0, pair, big, small, m),
                             }
                         }
