@@ -13,7 +13,8 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::amd;
 use faer::sparse::linalg::cholesky::{
-    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw,
+    SymmetricOrdering,
 };
 use faer::sparse::linalg::SupernodalThreshold;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
@@ -144,6 +145,13 @@ struct SparseFactor {
     mem: MemBuffer,
     /// `l_values` hold a factor: the last numeric factorization succeeded.
     factored: bool,
+    /// The factor is supernodal (many operations per entry, see
+    /// [`SUPERNODAL_FLOPS_PER_ENTRY`]): a factorization costs many solves
+    /// with it, and reusing it for a step or a check pays
+    /// ([`Structure::chord_step`]). A simplicial factor costs about as much
+    /// to compute as a few solves, so a failed reuse wastes what a
+    /// successful one saves (MIT and ais2klinik were 15–25 % slower).
+    worth_reusing: bool,
 }
 
 impl SparseFactor {
@@ -166,7 +174,8 @@ impl SparseFactor {
             .or(symbolic.solve_in_place_scratch::<f64>(1, Par::Seq));
         let mem = MemBuffer::try_new(req).map_err(|_| SolveError::Singular("out of memory".into()))?;
         let l_values = vec![0.0; symbolic.len_val()];
-        Ok(SparseFactor { symbolic, l_values, mem, factored: false })
+        let worth_reusing = matches!(symbolic.raw(), SymbolicCholeskyRaw::Supernodal(_));
+        Ok(SparseFactor { symbolic, l_values, mem, factored: false, worth_reusing })
     }
 
     /// Factorize `h` (upper CSC values on the structure's pattern), then solve

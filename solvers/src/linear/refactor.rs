@@ -29,7 +29,8 @@ impl Structure {
     /// conjugate gradients preconditioned with the last numeric
     /// factorization (of an earlier system on the same pattern). None where
     /// there is none to use (a dense or Schur-complemented system, no
-    /// factorization yet, or the last one failed), or where CG does not
+    /// factorization yet, the last one failed, or a simplicial factor, cheap
+    /// to recompute: `SparseFactor::worth_reusing`), or where CG does not
     /// converge to [`ENERGY_TOLERANCE`] within [`MAX_ITERATIONS`]. Returns δ
     /// and the CG iterations taken.
     pub fn solve_with_last_factor(&mut self, sys: &System, damping: Option<&[f64]>) -> Option<(Vec<f64>, usize)> {
@@ -37,7 +38,8 @@ impl Structure {
             return None;
         }
         let mut factor = self.factor.take()?;
-        let solved = factor.factored.then(|| self.preconditioned_cg(&mut factor, sys, damping)).flatten();
+        let usable = factor.factored && factor.worth_reusing;
+        let solved = usable.then(|| self.preconditioned_cg(&mut factor, sys, damping)).flatten();
         self.factor = Some(factor);
         solved
     }
@@ -120,7 +122,7 @@ impl Structure {
         if self.dense || !self.elim_dims.is_empty() || self.n == 0 {
             return None;
         }
-        let factor = self.factor.as_mut().filter(|f| f.factored)?;
+        let factor = self.factor.as_mut().filter(|f| f.factored && f.worth_reusing)?;
         let mut delta: Vec<f64> = sys.g.iter().map(|v| -v).collect();
         factor.apply_inverse(&mut delta);
         let hd = self.h_times(sys, &delta);
@@ -137,14 +139,13 @@ mod tests {
     use super::{ENERGY_TOLERANCE, MAX_ITERATIONS};
     use crate::linear::{LinearSolver, Role, Roles, Structure, System};
 
-    /// A chain of 3-dim blocks with loop closures, and on its pattern a
-    /// diagonally dominant (so positive-definite) H with pseudo-random
-    /// entries; `spread` scales their pseudo-random part.
-    fn chain(blocks: usize) -> Structure {
+    /// A grid of 6-dim blocks, `blocks / 12` rows of 12 (a pose graph's
+    /// shape: neighbours in a row and across rows), factored supernodally.
+    fn grid(blocks: usize) -> Structure {
         let mut roles: Vec<Roles> =
             (1..blocks).map(|b| smallvec::smallvec![Role::Kept(b - 1), Role::Kept(b)]).collect();
-        roles.extend((0..blocks / 10).map(|k| smallvec::smallvec![Role::Kept(k), Role::Kept(blocks - 1 - 3 * k)]));
-        Structure::new(vec![3; blocks], Vec::new(), &roles, LinearSolver::SparseCholesky).unwrap()
+        roles.extend((12..blocks).map(|b| smallvec::smallvec![Role::Kept(b - 12), Role::Kept(b)]));
+        Structure::new(vec![6; blocks], Vec::new(), &roles, LinearSolver::SparseCholesky).unwrap()
     }
 
     fn system(s: &Structure, seed: f64, spread: f64) -> System {
@@ -179,16 +180,17 @@ mod tests {
 
     #[test]
     fn conjugate_gradients_from_a_nearby_factor_match_a_new_factorization() {
-        let mut s = chain(200);
+        let mut s = grid(240);
         let (near, far) = (system(&s, 0.31, 0.0), system(&s, 0.31, 0.02));
         assert!(s.solve_with_last_factor(&near, None).is_none(), "no factorization yet");
         s.solve(&near, None).unwrap();
+        assert!(s.factor.as_ref().unwrap().worth_reusing, "a supernodal factor");
         // The nearby system differs by up to 1 % in each off-diagonal entry.
         let (cg, iterations) = s.solve_with_last_factor(&far, None).expect("converges from a nearby factor");
         assert!((1..=MAX_ITERATIONS).contains(&iterations));
         let damping = vec![0.5; s.n];
         let (cg_damped, _) = s.solve_with_last_factor(&far, Some(&damping)).expect("damped too");
-        let mut fresh = chain(200);
+        let mut fresh = grid(240);
         let direct = fresh.solve(&far, None).unwrap().0;
         let direct_damped = fresh.solve(&far, Some(&damping)).unwrap().0;
         // The model decrease −gᵀδ − ½δᵀHδ to 10⁻⁸ (ENERGY_TOLERANCE) of the exact one's.
@@ -209,7 +211,7 @@ mod tests {
 
     #[test]
     fn the_chord_step_of_the_factored_system_is_its_solution() {
-        let mut s = chain(120);
+        let mut s = grid(144);
         let sys = system(&s, 0.43, 0.5);
         assert!(s.chord_step(&sys, None).is_none(), "no factorization yet");
         let direct = s.solve(&sys, None).unwrap().0;
