@@ -28,20 +28,28 @@ impl Structure {
     /// Solve `(H + diag(damping)) δ = −g` as [`Structure::solve`] does, by
     /// conjugate gradients preconditioned with the last numeric
     /// factorization (of an earlier system on the same pattern). None where
-    /// there is none to use (a dense or Schur-complemented system, no
-    /// factorization yet, the last one failed, or a simplicial factor, cheap
-    /// to recompute: `SparseFactor::worth_reusing`), or where CG does not
+    /// there is none to use (`last_factor_reusable`), or where CG does not
     /// converge to [`ENERGY_TOLERANCE`] within [`MAX_ITERATIONS`]. Returns δ
     /// and the CG iterations taken.
     pub fn solve_with_last_factor(&mut self, sys: &System, damping: Option<&[f64]>) -> Option<(Vec<f64>, usize)> {
-        if self.dense || !self.elim_dims.is_empty() || self.n == 0 {
+        if !self.last_factor_reusable() {
             return None;
         }
         let mut factor = self.factor.take()?;
-        let usable = factor.factored && factor.worth_reusing;
-        let solved = usable.then(|| self.preconditioned_cg(&mut factor, sys, damping)).flatten();
+        let solved = self.preconditioned_cg(&mut factor, sys, damping);
         self.factor = Some(factor);
         solved
+    }
+
+    /// Whether the last factorization may serve another system on this
+    /// pattern: a sparse system without eliminated blocks, whose factor
+    /// holds a successful factorization and is supernodal
+    /// (`SparseFactor::worth_reusing`).
+    fn last_factor_reusable(&self) -> bool {
+        !self.dense
+            && self.elim_dims.is_empty()
+            && self.n > 0
+            && self.factor.as_ref().is_some_and(|f| f.factored && f.worth_reusing)
     }
 
     /// Conjugate gradients on `(H + diag(damping)) δ = −g` from δ = 0,
@@ -108,9 +116,7 @@ impl Structure {
         }
         None
     }
-}
 
-impl Structure {
     /// The chord step `δ = −P⁻¹g`, P the last numeric factorization (of an
     /// earlier system on the same pattern), with `Hδ` (undamped) and the
     /// Rayleigh quotient `μ = δᵀ(H + diag(damping))δ / δᵀPδ`: how the
@@ -119,10 +125,10 @@ impl Structure {
     /// along it). None where there is no factorization to use, as for
     /// [`Structure::solve_with_last_factor`].
     pub fn chord_step(&mut self, sys: &System, damping: Option<&[f64]>) -> Option<(Vec<f64>, Vec<f64>, f64)> {
-        if self.dense || !self.elim_dims.is_empty() || self.n == 0 {
+        if !self.last_factor_reusable() {
             return None;
         }
-        let factor = self.factor.as_mut().filter(|f| f.factored && f.worth_reusing)?;
+        let factor = self.factor.as_mut()?;
         let mut delta: Vec<f64> = sys.g.iter().map(|v| -v).collect();
         factor.apply_inverse(&mut delta);
         let hd = self.h_times(sys, &delta);

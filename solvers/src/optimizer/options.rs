@@ -134,8 +134,9 @@ pub struct LmOptions {
     /// conjugate gradients preconditioned with P, to a direct solve's
     /// accuracy, factorizing only where they do not get there within a few
     /// iterations. Either costs a few triangular solves instead of a
-    /// factorization. Only sparse systems without eliminated variables use
-    /// it; the stops are decided as without it.
+    /// factorization. Only sparse systems without eliminated variables whose
+    /// factor is supernodal (costly to recompute) use it; the stops are
+    /// decided as without it.
     pub reuse_factorization: bool,
 }
 
