@@ -12,6 +12,7 @@ use crate::variable::DynVariable;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
 use faer::sparse::linalg::amd;
+use faer::sparse::linalg::cholesky::supernodal::SupernodalLltRef;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymbolicCholeskyRaw,
     SymmetricOrdering,
@@ -210,6 +211,29 @@ impl SparseFactor {
         let mut mem = MemBuffer::try_new(req).map_err(|_| SolveError::Singular("out of memory".into()))?;
         llt.solve_in_place_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut mem));
         Ok((fact_s, t.elapsed().as_secs_f64()))
+    }
+
+    /// `v ← L⁻¹ v` with the held supernodal factor (`factored` and
+    /// `worth_reusing`), whose order is the system's (no permutation): the
+    /// first half of [`SparseFactor::apply_inverse`], [`SparseFactor::backward`]
+    /// the second.
+    fn forward(&mut self, v: &mut [f64]) {
+        if let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() {
+            let n = v.len();
+            let llt = SupernodalLltRef::new(sym, &self.l_values);
+            let rhs = faer::MatMut::from_column_major_slice_mut(v, n, 1);
+            llt.l_solve_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.mem));
+        }
+    }
+
+    /// `v ← L⁻ᵀ v`, as [`SparseFactor::forward`].
+    fn backward(&mut self, v: &mut [f64]) {
+        if let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() {
+            let n = v.len();
+            let llt = SupernodalLltRef::new(sym, &self.l_values);
+            let rhs = faer::MatMut::from_column_major_slice_mut(v, n, 1);
+            llt.l_transpose_solve_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.mem));
+        }
     }
 
     /// `v ← (L Lᵀ)⁻¹ v` with the held factor (`factored`).

@@ -82,6 +82,14 @@ impl Linearized {
     pub fn cost(&self) -> f64 {
         0.5 * self.rho.iter().sum::<f64>()
     }
+
+    /// The Gauss–Newton model's value at a zero step, `½ Σ ‖r‖²` over the
+    /// whitened (and, under a robust loss, reweighted) residuals the normal
+    /// equations are assembled from: the cost without robust losses. No
+    /// step's model decrease exceeds it.
+    pub fn model_value(&self) -> f64 {
+        0.5 * (0..self.rows.len()).map(|fi| self.residual(fi).iter().map(|v| v * v).sum::<f64>()).sum::<f64>()
+    }
 }
 
 fn gather<'a>(vars: &'a [Box<dyn DynVariable>], idx: &[usize]) -> smallvec::SmallVec<[&'a dyn DynVariable; 4]> {

@@ -183,18 +183,19 @@ impl<'a> Minimizer<'a> {
             chord_allowed &= chord.is_none();
             let (delta, hd) = match chord {
                 Some(step) => step,
-                None => match linear_step(&mut self.structure, &self.sys, damping.as_deref(), false, &mut self.summary)
-                {
-                    Ok(d) => {
-                        let hd = self.structure.h_times(&self.sys, &d);
-                        (d, hd)
+                None => {
+                    match linear_step(&mut self.structure, &self.sys, damping.as_deref(), None, &mut self.summary) {
+                        Ok(d) => {
+                            let hd = self.structure.h_times(&self.sys, &d);
+                            (d, hd)
+                        }
+                        Err(e) if strategy.undamped() => return Err(e),
+                        Err(_) => match strategy.grow(o) {
+                            Ok(()) => continue,
+                            Err(DampingExhausted) => return Ok(Outcome::Stop(Termination::NoProgress)),
+                        },
                     }
-                    Err(e) if strategy.undamped() => return Err(e),
-                    Err(_) => match strategy.grow(o) {
-                        Ok(()) => continue,
-                        Err(DampingExhausted) => return Ok(Outcome::Stop(Termination::NoProgress)),
-                    },
-                },
+                }
             };
             let scaled_len = delta.iter().zip(&p.diag).map(|(v, d)| v * v * d).sum::<f64>().sqrt();
             let mu = delta.iter().zip(&hd).map(|(a, b)| a * b).sum::<f64>() / (scaled_len * scaled_len);
@@ -252,7 +253,8 @@ impl<'a> Minimizer<'a> {
     /// [`CHORD_MAX_LOSS`]. None to factorize.
     fn chord_step(&mut self, p: &Point, damping: Option<&[f64]>) -> Option<(Vec<f64>, Vec<f64>)> {
         let t = Instant::now();
-        let step = self.structure.chord_step(&self.sys, damping);
+        let mu_max = 1.0 + CHORD_MAX_LOSS.sqrt();
+        let step = self.structure.chord_step(&self.sys, damping, (self.lins.model_value(), mu_max));
         self.summary.time_solve += t.elapsed().as_secs_f64();
         let (delta, hd, mu) = step?;
         let predicted = predicted_decrease(&delta, &p.g, &hd);
