@@ -148,10 +148,12 @@ struct SparseFactor {
     factored: bool,
     /// The factor is supernodal (many operations per entry, see
     /// [`SUPERNODAL_FLOPS_PER_ENTRY`]): a factorization costs many solves
-    /// with it, and reusing it for a step or a check pays
+    /// with it, and trying it for every step pays
     /// ([`Structure::chord_step`]). A simplicial factor costs about as much
-    /// to compute as a few solves, so a failed reuse wastes what a
-    /// successful one saves (MIT and ais2klinik were 15–25 % slower).
+    /// to compute as a few solves, so failed chord tries waste what the
+    /// successful ones save (MIT and ais2klinik were 15–25 % slower); it
+    /// serves the stationarity check only, whose system is the nearest to
+    /// the factored one ([`Structure::solve_with_last_factor`]).
     worth_reusing: bool,
 }
 

@@ -38,7 +38,7 @@ impl Structure {
         damping: Option<&[f64]>,
         enough: f64,
     ) -> Option<(Vec<f64>, usize)> {
-        if !self.last_factor_reusable() {
+        if !self.last_factor_reusable(false) {
             return None;
         }
         let mut factor = self.factor.take()?;
@@ -49,13 +49,13 @@ impl Structure {
 
     /// Whether the last factorization may serve another system on this
     /// pattern: a sparse system without eliminated blocks, whose factor
-    /// holds a successful factorization and is supernodal
-    /// (`SparseFactor::worth_reusing`).
-    fn last_factor_reusable(&self) -> bool {
+    /// holds a successful factorization and, where `supernodal` is asked
+    /// (the chord steps), is supernodal (`SparseFactor::worth_reusing`).
+    fn last_factor_reusable(&self, supernodal: bool) -> bool {
         !self.dense
             && self.elim_dims.is_empty()
             && self.n > 0
-            && self.factor.as_ref().is_some_and(|f| f.factored && f.worth_reusing)
+            && self.factor.as_ref().is_some_and(|f| f.factored && (f.worth_reusing || !supernodal))
     }
 
     /// Conjugate gradients on `(H + diag(damping)) δ = −g` from δ = 0,
@@ -149,7 +149,7 @@ impl Structure {
         damping: Option<&[f64]>,
         (model_value, mu_max): (f64, f64),
     ) -> Option<(Vec<f64>, Vec<f64>, f64)> {
-        if !self.last_factor_reusable() {
+        if !self.last_factor_reusable(true) {
             return None;
         }
         let factor = self.factor.as_mut()?;
@@ -262,6 +262,24 @@ mod tests {
         // What is left is measured in P's metric, which is within a few % of H's here.
         let left = exact - decrease(&step);
         assert!((0.0..=1.1 * enough).contains(&left), "{left} left of {exact}, {enough} asked");
+    }
+
+    #[test]
+    fn a_simplicial_factor_serves_the_check_but_not_chord_steps() {
+        // A chain of 3-dim blocks: few operations per entry, a simplicial factor.
+        let roles: Vec<Roles> = (1..200).map(|b| smallvec::smallvec![Role::Kept(b - 1), Role::Kept(b)]).collect();
+        let mut s = Structure::new(vec![3; 200], Vec::new(), &roles, LinearSolver::SparseCholesky).unwrap();
+        let (near, far) = (system(&s, 0.29, 0.0), system(&s, 0.29, 0.02));
+        s.solve(&near, None).unwrap();
+        assert!(!s.factor.as_ref().unwrap().worth_reusing, "a simplicial factor");
+        let direct = Structure::new(vec![3; 200], Vec::new(), &roles, LinearSolver::SparseCholesky)
+            .unwrap()
+            .solve(&far, None)
+            .unwrap()
+            .0;
+        let (cg, _) = s.solve_with_last_factor(&far, None, 0.0).expect("the check's solve");
+        assert!(relative_difference(&cg, &direct) < 1e-4, "{}", relative_difference(&cg, &direct));
+        assert!(s.chord_step(&far, None, (f64::INFINITY, f64::INFINITY)).is_none(), "no chord steps");
     }
 
     #[test]

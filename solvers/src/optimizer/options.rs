@@ -131,12 +131,13 @@ pub struct LmOptions {
     /// chord step `δ = −P⁻¹g` with the old factor P, taken where it gains
     /// as much as the exact step would to within the tolerances (else the
     /// system is factorized), and the stationarity check solves by
-    /// conjugate gradients preconditioned with P, to a direct solve's
-    /// accuracy, factorizing only where they do not get there within a few
-    /// iterations. Either costs a few triangular solves instead of a
-    /// factorization. Only sparse systems without eliminated variables whose
-    /// factor is supernodal (costly to recompute) use it; the stops are
-    /// decided as without it.
+    /// conjugate gradients preconditioned with P, to the accuracy its
+    /// decision needs, factorizing only where they do not get there within a
+    /// few iterations. Either costs a few triangular solves instead of a
+    /// factorization. Sparse systems without eliminated variables use it:
+    /// the check with any factor, the chord steps only with a supernodal
+    /// one (costly to recompute, where a failed try is cheap beside it);
+    /// the stops are decided as without it.
     pub reuse_factorization: bool,
 }
 
