@@ -114,21 +114,25 @@ impl SparseFactor {
     /// first half of [`SparseFactor::apply_inverse`], [`SparseFactor::backward`]
     /// the second.
     pub(super) fn forward(&mut self, v: &mut [f64]) {
-        if let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() {
-            let n = v.len();
-            let llt = SupernodalLltRef::new(sym, &self.l_values);
-            let rhs = faer::MatMut::from_column_major_slice_mut(v, n, 1);
-            llt.l_solve_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.mem));
-        }
+        self.supernodal_solve(v, |llt, rhs, stack| llt.l_solve_with_conj(Conj::No, rhs, Par::Seq, stack));
     }
 
     /// `v ← L⁻ᵀ v`, as [`SparseFactor::forward`].
     pub(super) fn backward(&mut self, v: &mut [f64]) {
+        self.supernodal_solve(v, |llt, rhs, stack| llt.l_transpose_solve_with_conj(Conj::No, rhs, Par::Seq, stack));
+    }
+
+    /// Run `solve` on `v` with the supernodal factor and the factor's scratch
+    /// (nothing for a simplicial factor).
+    fn supernodal_solve(
+        &mut self,
+        v: &mut [f64],
+        solve: impl FnOnce(SupernodalLltRef<'_, usize, f64>, faer::MatMut<'_, f64>, &mut MemStack),
+    ) {
         if let SymbolicCholeskyRaw::Supernodal(sym) = self.symbolic.raw() {
             let n = v.len();
-            let llt = SupernodalLltRef::new(sym, &self.l_values);
             let rhs = faer::MatMut::from_column_major_slice_mut(v, n, 1);
-            llt.l_transpose_solve_with_conj(Conj::No, rhs, Par::Seq, MemStack::new(&mut self.mem));
+            solve(SupernodalLltRef::new(sym, &self.l_values), rhs, MemStack::new(&mut self.mem));
         }
     }
 
