@@ -136,8 +136,9 @@ pub struct LmOptions {
     /// few iterations. Either costs a few triangular solves instead of a
     /// factorization. Sparse systems without eliminated variables use it:
     /// the check with any factor, the chord steps only with a supernodal
-    /// one (costly to recompute, where a failed try is cheap beside it);
-    /// the stops are decided as without it.
+    /// one (costly to recompute, where a failed try is cheap beside it).
+    /// The stops are decided as without it, the decrease to come known to
+    /// 10⁻³ of the tolerance it is compared with.
     pub reuse_factorization: bool,
 }
 
