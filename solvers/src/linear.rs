@@ -565,7 +565,7 @@ impl Structure {
             }
             let factor = self.factor.as_mut().expect("set above");
             let mut rhs = faer::Mat::<f64>::from_fn(self.n, 1, |i, _| x[i]);
-            let (fs, ss) = factor.factor_solve(&self.col_ptr, &self.row_idx, h, rhs.as_mut())?;
+            let (fs, ss) = factor.factor_solve(h, rhs.as_mut())?;
             fact_s = fs;
             solve_s = ss;
             for (i, xi) in x.iter_mut().enumerate() {
@@ -691,7 +691,7 @@ impl Structure {
         let mut factor = SparseFactor::new(self.n, &self.col_ptr, &self.row_idx)?;
         let mut rhs = faer::Mat::<f64>::from_fn(self.n, cols.len(), |i, j| if i == cols[j] { 1.0 } else { 0.0 });
         factor
-            .factor_solve(&self.col_ptr, &self.row_idx, &h, rhs.as_mut())
+            .factor_solve(&h, rhs.as_mut())
             .map_err(|_| SolveError::Singular("information matrix is singular (unobservable variables?)".into()))?;
         for j in 0..cols.len() {
             for i in 0..self.n {
