@@ -22,6 +22,7 @@ mod cholesky;
 mod refactor;
 mod schur;
 use assembly::AssemblyPlan;
+pub(crate) use assembly::PARALLEL_MIN_FACTORS;
 use cholesky::SparseFactor;
 use schur::SchurPlan;
 

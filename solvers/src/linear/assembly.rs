@@ -15,7 +15,9 @@ use std::ops::Range;
 
 /// Factors below which the assembly runs on the calling thread, in one chunk:
 /// a VIO window's few hundred factors cost less than waking the thread pool.
-pub(super) const PARALLEL_MIN_FACTORS: usize = 4096;
+/// Below it a solve does not keep the pool awake either
+/// ([`crate::LmOptions::keep_threads_awake`]): its passes are too short.
+pub(crate) const PARALLEL_MIN_FACTORS: usize = 4096;
 /// Chunks each part of the system is cut into when it is filled in parallel.
 pub(super) const CHUNKS: usize = 64;
 

@@ -10,13 +10,14 @@ use crate::error::SolveError;
 use crate::graph::Graph;
 use crate::key::Key;
 use crate::layout::{Layout, Role};
-use crate::linear::{Structure, System};
+use crate::linear::{Structure, System, PARALLEL_MIN_FACTORS};
 use crate::linearized::{linearize_all, Linearized};
 use crate::marginal::{covariances_of_system, robust_covariances_of_system, Covariances, RobustCovariances};
 use crate::values::Values;
 use crate::variable::DynVariable;
 use std::time::Instant;
 
+mod awake;
 mod linear_step;
 mod minimizer;
 mod options;
@@ -33,7 +34,7 @@ type CovarianceResult = Result<Covariances, SolveError>;
 
 /// What is computed at the solution from the optimizer's last linearization
 /// (covariances of some kind), by [`Optimizer::optimize_impl`].
-type AtSolution<'a, R> = &'a dyn Fn(&Layout, &mut Structure, &System, &Linearized) -> Result<R, SolveError>;
+type AtSolution<'a, R> = &'a (dyn Fn(&Layout, &mut Structure, &System, &Linearized) -> Result<R, SolveError> + Sync);
 
 /// The solution, its summary and, when asked for, what was computed at it.
 type Solved<R> = (Values, Summary, Option<Result<R, SolveError>>);
@@ -127,14 +128,32 @@ impl Optimizer {
             .map(|(v, s, c)| (v, s, c.unwrap_or_else(|| Err(SolveError::Config("no covariance requested".into())))))
     }
 
-    fn optimize_impl<R>(
+    /// The solve, on a pool kept awake where [`LmOptions::keep_threads_awake`]
+    /// applies.
+    fn optimize_impl<R: Send>(
+        &self,
+        graph: &Graph,
+        initial: &Values,
+        at_solution: Option<AtSolution<R>>,
+    ) -> Result<Solved<R>, SolveError> {
+        self.options.validate()?;
+        let large = graph.entries().len() >= PARALLEL_MIN_FACTORS;
+        if self.options.keep_threads_awake && large {
+            awake::run_keeping_pool_awake(|| self.solve(graph, initial, at_solution))
+        } else {
+            self.solve(graph, initial, at_solution)
+        }
+    }
+
+    /// Minimize from `initial` (the options validated), then compute
+    /// `at_solution` from the last linearization.
+    fn solve<R>(
         &self,
         graph: &Graph,
         initial: &Values,
         at_solution: Option<AtSolution<R>>,
     ) -> Result<Solved<R>, SolveError> {
         let o = &self.options;
-        o.validate()?;
         let t0 = Instant::now();
         let layout = Layout::new(graph, initial, &o.eliminate)?;
         let vars: Vec<Box<dyn DynVariable>> =

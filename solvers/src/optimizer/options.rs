@@ -140,6 +140,17 @@ pub struct LmOptions {
     /// The stops are decided as without it, the decrease to come known to
     /// 10⁻³ of the tolerance it is compared with.
     pub reuse_factorization: bool,
+    /// On graphs of 4096 factors or more, whose linearization and assembly
+    /// run in parallel passes of milliseconds between serial
+    /// factorizations, keep rayon's other threads polling for the solve's
+    /// work instead of sleeping between passes: waking them took 1–3 ms on
+    /// two-vCPU virtual machines, as long as a pass (parking-garage and
+    /// city10000 solve 10–20 % faster there, sphere2500 3–12 %). They use
+    /// their cores until the solve ends, yielding them to any other
+    /// runnable thread. Only where the solve is called from outside rayon's
+    /// pool, the pool has more than one thread and no other solve keeps it
+    /// awake. Turn it off to leave the cores idle between passes.
+    pub keep_threads_awake: bool,
 }
 
 impl Default for LmOptions {
@@ -164,6 +175,7 @@ impl Default for LmOptions {
             trust_radius: true,
             stop_on_predicted_decrease: false,
             reuse_factorization: true,
+            keep_threads_awake: true,
         }
     }
 }
