@@ -145,9 +145,9 @@ pub struct LmOptions {
     /// factorizations, keep rayon's other threads polling for the solve's
     /// work instead of sleeping between passes: waking them took 1–3 ms on
     /// two-vCPU virtual machines, as long as a pass (parking-garage and
-    /// city10000 solve 10–20 % faster there, sphere2500 3–12 %). They use
-    /// their cores until the solve ends, yielding them to any other
-    /// runnable thread. Only where the solve is called from outside rayon's
+    /// city10000 solve 10–20 % faster there, sphere2500 3–12 %). Between
+    /// polls they nap 50 µs, leaving their cores to any other thread, until
+    /// the solve ends. Only where the solve is called from outside rayon's
     /// pool, the pool has more than one thread and no other solve keeps it
     /// awake. Turn it off to leave the cores idle between passes.
     pub keep_threads_awake: bool,
