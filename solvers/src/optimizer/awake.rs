@@ -15,7 +15,7 @@
 //! napping [`POLL_INTERVAL`] between polls: its core stays free for any
 //! other thread, and the naps are too short for the core to be given up.
 
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 /// A poller's nap between polls. Short beside a parallel pass (2–3.5 ms on
@@ -62,15 +62,14 @@ pub(super) fn run_keeping_pool_awake<R: Send>(solve: impl FnOnce() -> R + Send) 
     }
     let _release = Release;
     let stop = AtomicBool::new(false);
-    let solver_thread = AtomicUsize::new(usize::MAX);
     rayon::scope(|scope| {
-        solver_thread.store(rayon::current_thread_index().unwrap_or(usize::MAX), Ordering::Release);
-        let _stop = StopOnDrop(&stop);
+        let (stop, solver_thread) = (&stop, rayon::current_thread_index());
+        let _stop = StopOnDrop(stop);
         for _ in 1..rayon::current_num_threads() {
-            scope.spawn(|_| {
+            scope.spawn(move |_| {
                 // The solve's own thread may take this job up while it waits
                 // for a parallel pass: it must return to the solve at once.
-                if rayon::current_thread_index() == Some(solver_thread.load(Ordering::Acquire)) {
+                if rayon::current_thread_index() == solver_thread {
                     return;
                 }
                 while !stop.load(Ordering::Acquire) {
