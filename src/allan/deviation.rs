@@ -106,25 +106,33 @@ impl DeviationKind {
 }
 
 /// The phase x(0..=n) of a series y(0..n) with its mean removed, in units of
-/// samples × y: x(0) = 0, x(i+1) = x(i) + (y(i) − ȳ), carried with two-sum
-/// compensation so each value is the rounded exact sum.
+/// samples × y: x(0) = 0, x(i+1) = x(i) + (y(i) − ȳ), each value the rounded
+/// exact sum ([`running_sums`]).
 pub fn phase_of(y: &[f64]) -> Vec<f64> {
     let mean = mean_compensated(y);
-    let mut x = Vec::new();
-    crate::io::mem::reserve_huge(&mut x, y.len() + 1);
-    x.push(0.0);
-    // Running sum `hi` with its accumulated rounding error `lo` (Knuth's
-    // two-sum per step); each output is the rounded value of hi + lo.
+    running_sums(y.len(), |i| y[i] - mean)
+}
+
+/// The running sums p(0) = 0, p(k) = Σ_{i<k} v(i), k = 0 … len, each the
+/// rounded value of a sum carried in two parts: the running sum `hi` and its
+/// accumulated rounding error `lo`, from Knuth's two-sum at every step
+/// (Ogita, Rump & Oishi's Sum2: as accurate as summing in twice the
+/// precision). Only the add into `hi` is on the loop's dependency chain —
+/// four times shorter than Kahan's compensation, where every add is.
+fn running_sums(len: usize, v: impl Fn(usize) -> f64) -> Vec<f64> {
+    let mut p = Vec::new();
+    crate::io::mem::reserve_huge(&mut p, len + 1);
+    p.push(0.0);
     let (mut hi, mut lo) = (0.0f64, 0.0f64);
-    for &v in y {
-        let d = v - mean;
+    for i in 0..len {
+        let d = v(i);
         let s = hi + d;
         let bb = s - hi;
         lo += (hi - (s - bb)) + (d - bb);
         hi = s;
-        x.push(hi + lo);
+        p.push(hi + lo);
     }
-    x
+    p
 }
 
 /// Mean with Neumaier compensation.
@@ -259,7 +267,7 @@ pub struct RateCorrelation<'a> {
     x: &'a [f64],
     /// R(δ) = Σ_j y(j) y(j+δ), δ = 0 … max_lag (R(0) exact).
     r: Vec<f64>,
-    /// p0(k) = Σ_{δ=1}^{k} R(δ), p1(k) = Σ_{δ=1}^{k} δ·R(δ) (compensated).
+    /// p0(k) = Σ_{δ=1}^{k} R(δ), p1(k) = Σ_{δ=1}^{k} δ·R(δ) ([`running_sums`]).
     p0: Vec<f64>,
     p1: Vec<f64>,
     /// Bound on the absolute round-off of any R(δ), δ ≥ 1.
@@ -317,25 +325,19 @@ impl<'a> RateCorrelation<'a> {
         let seen = lags.iter().zip(&exact).skip(1).map(|(&lag, e)| (buf[lag] - e).abs()).fold(0.0, f64::max);
         buf[0] = exact[0];
         let r_error = (10.0 * seen).max(f64::EPSILON * exact[0] * (nfft as f64).log2().sqrt());
-        let prefix = |len: usize, f: &(dyn Fn(usize) -> f64 + Sync)| -> Vec<f64> {
-            let mut p = Vec::new();
-            crate::io::mem::reserve_huge(&mut p, len + 1);
-            let mut sum = Kahan::default();
-            p.push(0.0);
-            for k in 1..=len {
-                sum.add(f(k));
-                p.push(sum.value());
-            }
-            p
-        };
         // Only up to the largest m ≤ max_lag/2 is ever used at the ends.
         let ends = (max_lag / 2 + 1).min(n);
         let ((p0, p1), (head_sq, tail_sq)) = rayon::join(
-            || rayon::join(|| prefix(max_lag, &|k| buf[k]), || prefix(max_lag, &|k| k as f64 * buf[k])),
             || {
                 rayon::join(
-                    || prefix(ends, &|k| (x[k] - x[0]).powi(2)),
-                    || prefix(ends, &|k| (x[n - k] - x[n]).powi(2)),
+                    || running_sums(max_lag, |k| buf[k + 1]),
+                    || running_sums(max_lag, |k| (k + 1) as f64 * buf[k + 1]),
+                )
+            },
+            || {
+                rayon::join(
+                    || running_sums(ends, |k| (x[k + 1] - x[0]).powi(2)),
+                    || running_sums(ends, |k| (x[n - 1 - k] - x[n]).powi(2)),
                 )
             },
         );
@@ -480,21 +482,22 @@ fn sum4(from: usize, to: usize, f: impl Fn(usize) -> f64) -> f64 {
     s
 }
 
-/// Σ f(i) for i < n with Kahan compensation, in four interleaved lanes
-/// (independent dependency chains, so it runs at the speed of a plain sum).
+/// Σ f(i) for i < n with Kahan compensation, in [`DOT_LANES`] interleaved
+/// lanes: each lane's compensated add is a chain of four dependent adds, so
+/// enough independent lanes let it run at the speed of the loads.
 fn dot_compensated(n: usize, f: impl Fn(usize) -> f64) -> f64 {
-    let mut s = [0.0f64; 4];
-    let mut c = [0.0f64; 4];
-    let full = n / 4 * 4;
+    let mut s = [0.0f64; DOT_LANES];
+    let mut c = [0.0f64; DOT_LANES];
+    let full = n / DOT_LANES * DOT_LANES;
     let mut i = 0;
     while i < full {
-        for k in 0..4 {
+        for k in 0..DOT_LANES {
             let v = f(i + k) - c[k];
             let t = s[k] + v;
             c[k] = (t - s[k]) - v;
             s[k] = t;
         }
-        i += 4;
+        i += DOT_LANES;
     }
     for j in full..n {
         let v = f(j) - c[0];
@@ -503,16 +506,17 @@ fn dot_compensated(n: usize, f: impl Fn(usize) -> f64) -> f64 {
         s[0] = t;
     }
     // Combine the lanes with their compensations.
-    let mut total = 0.0f64;
-    let mut comp = 0.0f64;
-    for v in s.iter().chain(c.iter().map(|x| -x).collect::<Vec<_>>().iter()) {
-        let y = v - comp;
-        let t = total + y;
-        comp = (t - total) - y;
-        total = t;
+    let mut total = Kahan::default();
+    for k in 0..DOT_LANES {
+        total.add(s[k]);
+        total.add(-c[k]);
     }
-    total
+    total.value()
 }
+
+/// Lanes of [`dot_compensated`]: four-add chains of four cycles each need 16
+/// lanes to issue one element per cycle.
+const DOT_LANES: usize = 16;
 
 /// Smallest length ≥ n of the form 2^a·3^b (fast for the FFT).
 fn fast_len(n: usize) -> usize {
@@ -556,7 +560,8 @@ pub fn variances(
         None
     };
     let scale = if d == 2 { 2.0 } else { 6.0 };
-    ms.par_iter()
+    let r: Vec<_> = ms
+        .par_iter()
         .map(|&m| {
             let out = match &corr {
                 Some(c) if m >= DIRECT_BELOW => match c.overlapping_sum(m, d) {
@@ -571,7 +576,8 @@ pub fn variances(
             progress();
             out
         })
-        .collect()
+        .collect();
+    r
 }
 
 #[cfg(test)]

@@ -22,7 +22,13 @@ pub fn noise_id(x: &[f64], m: usize, dmax: usize) -> Option<i32> {
     }
     // 2²⁰ averages pin the lag-1 autocorrelation to ±0.001; more add nothing.
     let n = ((x.len() - 1) / m).min(1 << 20);
-    let mut series: Vec<f64> = (0..n).map(|k| (x[(k + 1) * m] - x[k * m]) / m as f64).collect();
+    // The sums of m samples (the autocorrelation does not see the scale of
+    // the averages), in huge pages: a buffer of a million values costs more
+    // in page faults than in sums otherwise.
+    let mut series = Vec::new();
+    crate::io::mem::reserve_huge(&mut series, n);
+    let ends = x[..=n * m].iter().step_by(m);
+    series.extend(ends.clone().zip(ends.skip(1)).map(|(a, b)| b - a));
     detrend(&mut series);
     let mut d = 0usize;
     loop {
@@ -32,31 +38,55 @@ pub fn noise_id(x: &[f64], m: usize, dmax: usize) -> Option<i32> {
             let a = -(2.0 * rho).round() as i32 - 2 * d as i32;
             return Some(a.clamp(-(2 * dmax as i32) + 2, 2));
         }
-        series = series.windows(2).map(|w| w[1] - w[0]).collect();
+        difference_in_place(&mut series);
         d += 1;
     }
 }
 
+/// Σ f(i, v(i)) over the slice in four interleaved accumulators
+/// (independent dependency chains: the sums below run at the speed of their
+/// loads, not of the adder's latency).
+fn lane_sum(v: &[f64], f: impl Fn(usize, f64) -> f64) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let chunks = v.chunks_exact(4);
+    let tail = chunks.remainder();
+    for (c, chunk) in chunks.enumerate() {
+        for (k, (a, &y)) in acc.iter_mut().zip(chunk).enumerate() {
+            *a += f(4 * c + k, y);
+        }
+    }
+    let head = v.len() - tail.len();
+    let rest: f64 = tail.iter().enumerate().map(|(k, &y)| f(head + k, y)).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
+}
+
+/// Removes the least-squares line from `v`.
 fn detrend(v: &mut [f64]) {
     let n = v.len() as f64;
     let tm = (n - 1.0) / 2.0;
-    let mean = v.iter().sum::<f64>() / n;
-    let (mut sxy, mut sxx) = (0.0, 0.0);
-    for (i, &y) in v.iter().enumerate() {
-        let dt = i as f64 - tm;
-        sxy += dt * (y - mean);
-        sxx += dt * dt;
-    }
+    let mean = lane_sum(v, |_, y| y) / n;
+    let sxy = lane_sum(v, |i, y| (i as f64 - tm) * (y - mean));
+    // Σ (i − tm)² over i < n.
+    let sxx = n * (n * n - 1.0) / 12.0;
     let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
     for (i, y) in v.iter_mut().enumerate() {
         *y -= mean + b * (i as f64 - tm);
     }
 }
 
+/// v(i) ← v(i+1) − v(i); one element shorter.
+fn difference_in_place(v: &mut Vec<f64>) {
+    for i in 1..v.len() {
+        v[i - 1] = v[i] - v[i - 1];
+    }
+    v.pop();
+}
+
+/// The lag-1 autocorrelation of `v` about its mean (0 for a constant series).
 fn lag1_acf(v: &[f64]) -> f64 {
-    let mean = v.iter().sum::<f64>() / v.len() as f64;
-    let num: f64 = v.windows(2).map(|w| (w[0] - mean) * (w[1] - mean)).sum();
-    let den: f64 = v.iter().map(|&y| (y - mean) * (y - mean)).sum();
+    let mean = lane_sum(v, |_, y| y) / v.len() as f64;
+    let num = lane_sum(&v[1..], |i, y| (v[i] - mean) * (y - mean));
+    let den = lane_sum(v, |_, y| (y - mean) * (y - mean));
     if den > 0.0 {
         num / den
     } else {
