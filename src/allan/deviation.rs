@@ -347,8 +347,9 @@ impl<'a> RateCorrelation<'a> {
     /// Σ over the edge outputs of the order-d filter at spacing m (where the
     /// kernel hangs over an end): the record's ends held constant, i.e. the
     /// phase clamped to x(0) before the start and to x(N) after the end.
-    /// Outputs with a single phase point inside come from prefix sums.
-    fn edges(&self, m: usize, d: usize) -> f64 {
+    /// Outputs with a single phase point inside come from prefix sums; for
+    /// d = 2 those with two inside are `pairs` (from [`Self::pair_edges`]).
+    fn edges(&self, m: usize, d: usize, pairs: f64) -> f64 {
         let x = self.x;
         let n = x.len() - 1;
         let c = coefficients(d);
@@ -358,10 +359,7 @@ impl<'a> RateCorrelation<'a> {
         // Right: output i with b terms inside, i ∈ [N − b·m, N − (b−1)·m − 1].
         s += c[0] * c[0] * self.tail_sq[m];
         if d == 2 {
-            // Two phase points inside: Σ (c_a·x(j) + c_b·x(j+m) + offset)², vectorized.
-            s += pair_sq(&x[1..m], &x[m + 1..2 * m], c[1], c[2], -(c[1] + c[2]) * x0);
-            s += pair_sq(&x[n + 1 - 2 * m..n - m], &x[n + 1 - m..n], c[0], c[1], -(c[0] + c[1]) * xn);
-            return s;
+            return s + pairs;
         }
         for b in 1..d {
             let jmax = if b == 1 { m - 1 } else { m };
@@ -380,11 +378,41 @@ impl<'a> RateCorrelation<'a> {
         s
     }
 
+    /// The order-2 edge outputs with two phase points inside, for each m of
+    /// `ms` that has a correlation-path sum (0 for the others): Σ (c₁·x(j) +
+    /// c₂·x(j+m) + offset)² at the left end and its mirror at the right,
+    /// summed for batches of neighbouring m together ([`edge_sums`]).
+    fn pair_edges(&self, ms: &[usize]) -> Vec<f64> {
+        use super::edge_sums::{pair_sums, End, BATCH};
+        use rayon::prelude::*;
+        let x = self.x;
+        let n = x.len() - 1;
+        let c = coefficients(2);
+        let mut valid: Vec<usize> = ms.iter().copied().filter(|&m| self.has_sum(m, 2)).collect();
+        valid.sort_unstable();
+        valid.dedup();
+        let sums: Vec<f64> = valid
+            .par_chunks(BATCH)
+            .flat_map_iter(|batch| {
+                let left = pair_sums(x, batch, End::Left, c[1], c[2], -(c[1] + c[2]) * x[0]);
+                let right = pair_sums(x, batch, End::Right, c[1], c[0], -(c[0] + c[1]) * x[n]);
+                left.into_iter().zip(right).map(|(l, r)| l + r)
+            })
+            .collect();
+        ms.iter().map(|m| valid.binary_search(m).map_or(0.0, |i| sums[i])).collect()
+    }
+
+    /// Whether the correlations reach the order-d kernel at m.
+    fn has_sum(&self, m: usize, d: usize) -> bool {
+        m > 0 && d * m <= self.r.len() && d * m < self.x.len()
+    }
+
     /// The overlapping order-d variance sum for m, with its error bound, or
-    /// None if the kernel is longer than the computed correlations.
-    fn overlapping_sum(&self, m: usize, d: usize) -> Option<(f64, f64, usize)> {
+    /// None if the kernel is longer than the computed correlations; `pairs`
+    /// as in [`Self::edges`].
+    fn overlapping_sum(&self, m: usize, d: usize, pairs: f64) -> Option<(f64, f64, usize)> {
         let n = self.x.len() - 1;
-        if d * m > self.r.len() || n < d * m || m == 0 {
+        if !self.has_sum(m, d) {
             return None;
         }
         let w = block_weights(d);
@@ -409,58 +437,9 @@ impl<'a> RateCorrelation<'a> {
             let prefix1_mag = self.p1[hi].abs() + self.p1[lo - 1].abs();
             bound += 2.0 * f64::EPSILON * (kmax * prefix_mag + slope.abs() * (prefix1_mag + base * prefix_mag));
         }
-        let s = total - self.edges(m, d);
+        let s = total - self.edges(m, d, pairs);
         Some((s, bound, n + 1 - d * m))
     }
-}
-
-/// Σ (ca·a(i) + cb·b(i) + offset)² over two equally long slices: the edge
-/// terms' inner loop (a quarter of an Allan sweep's time). With fused
-/// multiply-adds on 256-bit vectors where the CPU has them (checked at run
-/// time: the binary stays portable), else in eight lanes the compiler turns
-/// into SSE2.
-fn pair_sq(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-        // SAFETY: the CPU supports AVX2 and FMA, checked just above.
-        return unsafe { pair_sq_fma(a, b, ca, cb, offset) };
-    }
-    pair_sq_portable(a, b, ca, cb, offset)
-}
-
-/// [`pair_sq`] compiled for AVX2 with fused multiply-adds.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-unsafe fn pair_sq_fma(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
-    let mut acc = [0.0f64; 16];
-    let mut ca16 = a.chunks_exact(16);
-    let mut cb16 = b.chunks_exact(16);
-    for (u, v) in (&mut ca16).zip(&mut cb16) {
-        for k in 0..16 {
-            let w = u[k].mul_add(ca, v[k].mul_add(cb, offset));
-            acc[k] = w.mul_add(w, acc[k]);
-        }
-    }
-    acc.iter().sum::<f64>() + pair_sq_portable(ca16.remainder(), cb16.remainder(), ca, cb, offset)
-}
-
-/// [`pair_sq`] in eight independent lanes.
-fn pair_sq_portable(a: &[f64], b: &[f64], ca: f64, cb: f64, offset: f64) -> f64 {
-    let mut acc = [0.0f64; 8];
-    let mut ca8 = a.chunks_exact(8);
-    let mut cb8 = b.chunks_exact(8);
-    for (u, v) in (&mut ca8).zip(&mut cb8) {
-        for k in 0..8 {
-            let w = ca * u[k] + cb * v[k] + offset;
-            acc[k] += w * w;
-        }
-    }
-    let mut s: f64 = acc.iter().sum();
-    for (u, v) in ca8.remainder().iter().zip(cb8.remainder()) {
-        let w = ca * u + cb * v + offset;
-        s += w * w;
-    }
-    s
 }
 
 /// Σ f(i) for from ≤ i < to in four interleaved accumulators (independent
@@ -559,12 +538,16 @@ pub fn variances(
     } else {
         None
     };
+    let pairs = match &corr {
+        Some(c) if d == 2 => c.pair_edges(ms),
+        _ => vec![0.0; ms.len()],
+    };
     let scale = if d == 2 { 2.0 } else { 6.0 };
-    let r: Vec<_> = ms
-        .par_iter()
-        .map(|&m| {
+    ms.par_iter()
+        .zip(pairs)
+        .map(|(&m, pairs)| {
             let out = match &corr {
-                Some(c) if m >= DIRECT_BELOW => match c.overlapping_sum(m, d) {
+                Some(c) if m >= DIRECT_BELOW => match c.overlapping_sum(m, d, pairs) {
                     Some((s, err, count)) if s > 0.0 && err <= CORRELATION_TOLERANCE * s => {
                         let mf = m as f64;
                         Some((s / (scale * mf * mf * count as f64), count))
@@ -576,8 +559,7 @@ pub fn variances(
             progress();
             out
         })
-        .collect();
-    r
+        .collect()
 }
 
 #[cfg(test)]
@@ -605,9 +587,12 @@ mod tests {
         let y = series(20_000);
         let x = phase_of(&y);
         for kind in [DeviationKind::Oadev, DeviationKind::Ohdev] {
-            let corr = RateCorrelation::new(&x, kind.difference_order() * 6000);
-            for m in [1, 2, 16, 17, 100, 999, 3000, 6000] {
-                let (s, _, count) = corr.overlapping_sum(m, kind.difference_order()).unwrap();
+            let d = kind.difference_order();
+            let corr = RateCorrelation::new(&x, d * 6000);
+            let ms = [1, 2, 16, 17, 100, 999, 3000, 6000];
+            let pairs = if d == 2 { corr.pair_edges(&ms) } else { vec![0.0; ms.len()] };
+            for (&m, pairs) in ms.iter().zip(pairs) {
+                let (s, _, count) = corr.overlapping_sum(m, d, pairs).unwrap();
                 let scale = if kind.difference_order() == 2 { 2.0 } else { 6.0 };
                 let v = s / (scale * (m * m) as f64 * count as f64);
                 let (vd, cd) = variance_direct(&x, m, kind).unwrap();

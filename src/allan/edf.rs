@@ -27,8 +27,7 @@ pub fn noise_id(x: &[f64], m: usize, dmax: usize) -> Option<i32> {
     // in page faults than in sums otherwise.
     let mut series = Vec::new();
     crate::io::mem::reserve_huge(&mut series, n);
-    let ends = x[..=n * m].iter().step_by(m);
-    series.extend(ends.clone().zip(ends.skip(1)).map(|(a, b)| b - a));
+    series.extend((0..n).map(|k| x[(k + 1) * m] - x[k * m]));
     detrend(&mut series);
     let mut d = 0usize;
     loop {

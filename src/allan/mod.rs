@@ -28,6 +28,7 @@
 pub mod deviation;
 pub(crate) mod disturbance;
 pub mod edf;
+mod edge_sums;
 #[doc(hidden)]
 pub mod identify;
 pub mod in_motion;
