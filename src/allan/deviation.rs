@@ -107,7 +107,8 @@ impl DeviationKind {
 
 /// The phase x(0..=n) of a series y(0..n) with its mean removed, in units of
 /// samples × y: x(0) = 0, x(i+1) = x(i) + (y(i) − ȳ), each value the rounded
-/// exact sum ([`running_sums`]).
+/// sum carried with Knuth's two-sum compensation (as if in twice the
+/// precision).
 pub fn phase_of(y: &[f64]) -> Vec<f64> {
     let mean = mean_compensated(y);
     running_sums(y.len(), |i| y[i] - mean)
