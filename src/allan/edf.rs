@@ -23,8 +23,8 @@ pub fn noise_id(x: &[f64], m: usize, dmax: usize) -> Option<i32> {
     // 2²⁰ averages pin the lag-1 autocorrelation to ±0.001; more add nothing.
     let n = ((x.len() - 1) / m).min(1 << 20);
     // The sums of m samples (the autocorrelation does not see the scale of
-    // the averages), in huge pages: a buffer of a million values costs more
-    // in page faults than in sums otherwise.
+    // the averages), in huge pages where the system has them: up to a
+    // million values, faulted in by a few 2 MiB pages instead of 2048.
     let mut series = Vec::new();
     crate::io::mem::reserve_huge(&mut series, n);
     series.extend((0..n).map(|k| x[(k + 1) * m] - x[k * m]));
