@@ -607,7 +607,7 @@ mod tests {
     fn variances_agree_with_the_direct_sums_to_their_tolerance_on_a_drifting_series() {
         // A large offset, a strong random walk and a quadratic drift: the
         // correlation path's cancellation is worst here, and any τ it cannot
-        // vouch for to CORRELATION_TOLERANCE must come from the direct sum.
+        // vouch for to 10⁻⁸ must come from the direct sum.
         let n = 60_000;
         let mut rw = 0.0;
         let y: Vec<f64> = series(n)
@@ -630,7 +630,8 @@ mod tests {
                 };
                 let (v, count) = v.unwrap();
                 assert_eq!(count, cd);
-                assert!(((v - vd) / vd).abs() < CORRELATION_TOLERANCE, "{kind:?} m={m}: {v} vs {vd}");
+                // The accuracy docs/allan.md promises, whatever the constant.
+                assert!(((v - vd) / vd).abs() < 1e-8, "{kind:?} m={m}: {v} vs {vd}");
             }
         }
     }
