@@ -445,7 +445,7 @@ impl<'a> RateCorrelation<'a> {
 
 /// Σ f(i) for from ≤ i < to in four interleaved accumulators (independent
 /// dependency chains: several times faster than one running sum).
-fn sum4(from: usize, to: usize, f: impl Fn(usize) -> f64) -> f64 {
+pub(crate) fn sum4(from: usize, to: usize, f: impl Fn(usize) -> f64) -> f64 {
     let mut acc = [0.0f64; 4];
     let mut i = from;
     while i + 4 <= to {

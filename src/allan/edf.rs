@@ -10,6 +10,7 @@
 //! (bias instability, B), −2 random-walk frequency (rate random walk, K),
 //! −3 and −4 for the Hadamard variance only.
 
+use super::deviation::sum4;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 /// Power-law noise exponent α identified at cluster size m from the lag-1
@@ -42,29 +43,12 @@ pub fn noise_id(x: &[f64], m: usize, dmax: usize) -> Option<i32> {
     }
 }
 
-/// Σ f(i, v(i)) over the slice in four interleaved accumulators
-/// (independent dependency chains: the sums below run at the speed of their
-/// loads, not of the adder's latency).
-fn lane_sum(v: &[f64], f: impl Fn(usize, f64) -> f64) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let chunks = v.chunks_exact(4);
-    let tail = chunks.remainder();
-    for (c, chunk) in chunks.enumerate() {
-        for (k, (a, &y)) in acc.iter_mut().zip(chunk).enumerate() {
-            *a += f(4 * c + k, y);
-        }
-    }
-    let head = v.len() - tail.len();
-    let rest: f64 = tail.iter().enumerate().map(|(k, &y)| f(head + k, y)).sum();
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + rest
-}
-
 /// Removes the least-squares line from `v`.
 fn detrend(v: &mut [f64]) {
     let n = v.len() as f64;
     let tm = (n - 1.0) / 2.0;
-    let mean = lane_sum(v, |_, y| y) / n;
-    let sxy = lane_sum(v, |i, y| (i as f64 - tm) * (y - mean));
+    let mean = sum4(0, v.len(), |i| v[i]) / n;
+    let sxy = sum4(0, v.len(), |i| (i as f64 - tm) * (v[i] - mean));
     // Σ (i − tm)² over i < n.
     let sxx = n * (n * n - 1.0) / 12.0;
     let b = if sxx > 0.0 { sxy / sxx } else { 0.0 };
@@ -83,9 +67,9 @@ fn difference_in_place(v: &mut Vec<f64>) {
 
 /// The lag-1 autocorrelation of `v` about its mean (0 for a constant series).
 fn lag1_acf(v: &[f64]) -> f64 {
-    let mean = lane_sum(v, |_, y| y) / v.len() as f64;
-    let num = lane_sum(&v[1..], |i, y| (v[i] - mean) * (y - mean));
-    let den = lane_sum(v, |_, y| (y - mean) * (y - mean));
+    let mean = sum4(0, v.len(), |i| v[i]) / v.len() as f64;
+    let num = sum4(1, v.len(), |i| (v[i - 1] - mean) * (v[i] - mean));
+    let den = sum4(0, v.len(), |i| (v[i] - mean) * (v[i] - mean));
     if den > 0.0 {
         num / den
     } else {
